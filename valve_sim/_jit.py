@@ -1,0 +1,20 @@
+"""Compile the numerical kernels with numba when it is installed.
+
+The kernels are plain Python; numba only makes them fast enough for real time
+(a 1 ms tick is 100 RK4 steps). Without numba they run unchanged, slowly.
+"""
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised only on machines without numba
+    njit = None
+
+
+def jit(function):
+    """numba.njit if available, else the function itself.
+
+    error_model="numpy": a division by zero gives inf (caught by the state check)
+    instead of a Python exception, which keeps branches out of the inner loop.
+    """
+    if njit is None:
+        return function
+    return njit(cache=True, nogil=True, error_model="numpy", inline="always")(function)

@@ -1,0 +1,52 @@
+"""Hydrostatic bearing flow of Eq. (12) and the fit of its coefficients K_1..K_3.
+
+Each of the n bearings that carry the main valve is an orifice (diameter d_b,
+discharge coefficient C_b) feeding a pocket, in series with the laminar flow
+through the bearing land clearance from the pocket to the pilot chamber:
+
+    q_1 = K_b sqrt(p_s - p_r) = G (p_r - p_p),   K_b = pi/4 C_b d_b^2 sqrt(2/rho),
+    G = w c^3 / (12 mu l)   (land of width w, flow length l, radial clearance c).
+
+With z = 1 - p_p/p_s and qhat = q_1 / (K_b sqrt(p_s)) this is
+qhat^2 + lam qhat - z = 0, lam = K_b / (G sqrt(p_s)), so the total bearing flow is
+
+    q_n = K_b sqrt(p_s) f(z),  f(z) = n (sqrt(lam^2 + 4 z) - lam) / 2.
+
+Eq. (12) approximates f by K_1 z + K_2 z^2 + K_3 z^3; lam depends on p_s, so the
+fit is made at the design pressure (the paper fits at its operating point too).
+"""
+import math
+
+import numpy as np
+
+
+def land_conductance(width, length, clearance, viscosity):
+    """G = w c^3 / (12 mu l): laminar conductance of a bearing land [m^3/(s Pa)]."""
+    return width * clearance ** 3 / (12.0 * viscosity * length)
+
+
+def bearing_flow_function(z, lam, count):
+    """f(z) of the exact series model: total bearing flow / (K_b sqrt(p_s)) [-]."""
+    z = np.asarray(z, dtype=float)
+    return count * (np.sqrt(lam * lam + 4.0 * z) - lam) / 2.0
+
+
+def fit_bearing_coefficients(orifice_diameter, discharge_coefficient, density, conductance,
+                             design_pressure, count=4, z_max=1.0, samples=201):
+    """Least-squares K_1, K_2, K_3 of Eq. (12) for the series bearing model.
+
+    orifice_diameter d_b [m], discharge_coefficient C_b [-], density rho [kg/m^3],
+    conductance G of one bearing land [m^3/(s Pa)], design_pressure p_s [Pa],
+    count: number of bearings. The fit minimises the relative error over
+    z = 1 - p_p/p_s in [0.01 z_max, z_max]: the flow matters in proportion to itself.
+    Returns (K_1, K_2, K_3, lam, max_relative_error on [0.05 z_max, z_max]).
+    """
+    gain = math.pi / 4.0 * discharge_coefficient * orifice_diameter ** 2 * math.sqrt(2.0 / density)
+    lam = gain / (conductance * math.sqrt(design_pressure))
+    z = np.linspace(0.01 * z_max, z_max, samples)
+    exact = bearing_flow_function(z, lam, count)
+    basis = np.column_stack([z, z ** 2, z ** 3])
+    k, *_ = np.linalg.lstsq(basis / exact[:, None], np.ones_like(z), rcond=None)
+    relative_error = np.abs(basis @ k / exact - 1.0)
+    error = float(np.max(relative_error[z >= 0.05 * z_max]))
+    return float(k[0]), float(k[1]), float(k[2]), lam, error

@@ -1,0 +1,194 @@
+"""The paper's six step-response measures, as ../shared/spec/metrics.md defines them.
+
+This is the only implementation: the command line, the live analyser and bag
+analysis all call step_measures() and StepDetector.
+
+Inputs are sampled waveforms: time t [s], supply pressure p_s [Pa, gauge],
+main-valve displacement x [m], and t_step [s], the time at which the inlet-flow
+step took effect in the model (the last sample computed with the old flow).
+
+How overshoot peaks are found (so that pilot-stage ripple is never taken for a
+peak): the deviation e = direction * (p_s - p_inf) is split into lobes with a
+hysteresis band of PEAK_BAND times the largest deviation in the window. A lobe
+starts when e rises above +band and ends when e falls below -band; the k-th
+overshoot is the extreme of the k-th lobe. Ripple much smaller than the band
+cannot start or end a lobe. The extreme's time and value are refined by a
+least-squares parabola through the lobe samples within PEAK_FIT_DEPTH of the
+extreme, which makes the result nearly independent of the sample rate
+(1 kHz from the node, 10 kHz offline).
+"""
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MEASURE_NAMES = ("P_o_percent", "P_1_percent", "T_1_ms", "r_d", "T_d_ms", "T_s_ms")
+WINDOW = 1.0             # [s] analysis window after the step (metrics.md)
+SETTLED_SPAN = 0.05      # [s] p_inf and x_inf are means over the window's last 50 ms
+SETTLING_BAND = 0.05     # settling band: +-5 % of the main-valve step width
+PEAK_BAND = 0.1          # lobe hysteresis, fraction of the largest deviation
+PEAK_FIT_DEPTH = 0.2     # parabola fit over samples within 20 % of the lobe's extreme
+
+
+@dataclass
+class StepMeasures:
+    """The six measures of one step; a value of None comes with its reason."""
+
+    values: dict
+    reasons: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict)
+
+    def as_dict(self):
+        """JSON-ready: the six names (None where undefined), 'reasons' and 'details'."""
+        return {**{name: self.values.get(name) for name in MEASURE_NAMES},
+                "reasons": dict(self.reasons), "details": dict(self.details)}
+
+
+def _interpolate(t, signal, time):
+    return float(np.interp(time, t, signal))
+
+
+def _refined_extreme(t, e, start, stop):
+    """(time, deviation) of the extreme of e[start:stop], refined by a parabola fit."""
+    i = start + int(np.argmax(e[start:stop]))
+    peak = e[i]
+    near = np.arange(start, stop)[e[start:stop] >= peak - PEAK_FIT_DEPTH * abs(peak)]
+    if len(near) < 3:
+        near = np.arange(max(i - 1, start), min(i + 2, stop))
+    if len(near) >= 3:
+        tc = t[near] - t[i]
+        a, b, c = np.polyfit(tc, e[near], 2)
+        if a < 0.0:
+            vertex = -b / (2.0 * a)
+            if tc[0] <= vertex <= tc[-1]:
+                return t[i] + vertex, c - b * b / (4.0 * a)
+    return t[i], peak
+
+
+def _lobes(e, band):
+    """(start, stop) index ranges where e stays above -band after rising above +band."""
+    lobes, start, above = [], None, False
+    for i, value in enumerate(e):
+        if not above and value > band:
+            above, start = True, i
+        elif above and value < -band:
+            lobes.append((start, i))
+            above = False
+    if above:
+        lobes.append((start, len(e)))
+    return lobes
+
+
+def _settling_time(t, x, x_0, x_inf, t_step):
+    """Time after t_step from which x stays within x_inf +- 5 % of |x_inf - x_0| [s], or a reason."""
+    width = abs(x_inf - x_0)
+    if width == 0.0:
+        return None, "the main valve did not move (zero step width)"
+    outside = np.flatnonzero(np.abs(x - x_inf) > SETTLING_BAND * width)
+    if len(outside) == 0:
+        return 0.0, None
+    last = outside[-1]
+    if last >= len(x) - 1:
+        return None, "the main valve does not settle inside the window"
+    # Interpolate the final entry into the band between samples last and last + 1.
+    bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
+    fraction = (x[last] - bound) / (x[last] - x[last + 1])
+    return t[last] + fraction * (t[last + 1] - t[last]) - t_step, None
+
+
+def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
+    """The six measures of the step at t_step [s] (metrics.md), as StepMeasures.
+
+    t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
+    arrays. direction: +1 for a rising inlet flow (overshoot peaks are maxima),
+    -1 for a falling one (they are minima; P_1 is then negative). window [s]:
+    normally WINDOW; a shorter one (a truncated recording) is reported in details.
+    """
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(supply_pressure, dtype=float)
+    x = np.asarray(main_valve_displacement, dtype=float)
+    values, reasons = dict.fromkeys(MEASURE_NAMES), {}
+    if not (len(t) == len(p) == len(x)) or len(t) < 3:
+        reasons.update(dict.fromkeys(MEASURE_NAMES, "fewer than 3 samples"))
+        return StepMeasures(values, reasons)
+    if not (t[0] <= t_step < t[-1]):
+        reasons.update(dict.fromkeys(MEASURE_NAMES, f"step time {t_step:.6f} s outside the samples"))
+        return StepMeasures(values, reasons)
+    end = min(t_step + window, t[-1])
+    inside = (t >= t_step) & (t <= end)
+    tw, pw, xw = t[inside], p[inside], x[inside]
+    settled = tw >= end - SETTLED_SPAN
+    p_0, x_0 = _interpolate(t, p, t_step), _interpolate(t, x, t_step)
+    p_inf, x_inf = float(np.mean(pw[settled])), float(np.mean(xw[settled]))
+    details = {"t_step": t_step, "window_s": end - t_step, "p_0": p_0, "p_inf": p_inf,
+               "x_0": x_0, "x_inf": x_inf, "direction": direction}
+    if end - t_step < window:
+        details["note"] = f"window truncated to {end - t_step:.3f} s of the {window:.3f} s defined"
+    if p_0 == 0.0:
+        reasons.update(dict.fromkeys(MEASURE_NAMES, "supply pressure before the step is zero"))
+        return StepMeasures(values, reasons, details)
+
+    values["P_o_percent"] = (p_inf - p_0) / p_0 * 100.0
+    values["T_s_ms"], reason = _settling_time(tw, xw, x_0, x_inf, t_step)
+    if reason:
+        reasons["T_s_ms"] = reason
+    else:
+        values["T_s_ms"] *= 1e3
+
+    e = direction * (pw - p_inf)
+    largest = float(np.max(e))
+    if largest <= 0.0:
+        reasons.update({name: "no overshoot above the settled pressure"
+                        for name in ("P_1_percent", "T_1_ms", "r_d", "T_d_ms")})
+        return StepMeasures(values, reasons, details)
+    lobes = _lobes(e, PEAK_BAND * largest)
+    t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
+    values["P_1_percent"] = direction * e_1 / p_0 * 100.0
+    values["T_1_ms"] = (t_1 - t_step) * 1e3
+    details.update(t_1=t_1, p_1=p_inf + direction * e_1)
+    if len(lobes) < 2:
+        reasons.update({name: "no second overshoot (the response does not swing back above the settled value)"
+                        for name in ("r_d", "T_d_ms")})
+        return StepMeasures(values, reasons, details)
+    t_2, e_2 = _refined_extreme(tw, e, *lobes[1])
+    values["r_d"] = e_2 / e_1
+    values["T_d_ms"] = (t_2 - t_1) * 1e3
+    details.update(t_2=t_2, p_2=p_inf + direction * e_2)
+    return StepMeasures(values, reasons, details)
+
+
+class StepDetector:
+    """Finds steps in an inlet-flow signal, one sample at a time.
+
+    A step is a change of more than `threshold` [m^3/s] from the current level;
+    it is dated at the last sample before the change (where the model state was
+    still computed with the old flow). Changes within `merge_time` [s] of a step
+    belong to it (a ramp or a noisy edge), so they move the level but do not
+    start a new step. Feed samples with update(); it returns a step or None.
+    """
+
+    def __init__(self, threshold=1e-6, merge_time=0.05):
+        self.threshold = threshold
+        self.merge_time = merge_time
+        self.level = None
+        self.previous_time = None
+        self.last_step_time = -math.inf
+
+    def update(self, time, flow):
+        """Feed one sample; returns (t_step, flow_before, direction) when a step starts."""
+        step = None
+        if self.level is None:
+            self.level = flow
+        elif abs(flow - self.level) > self.threshold:
+            if time - self.last_step_time > self.merge_time:
+                step = (self.previous_time, self.level, 1 if flow > self.level else -1)
+                self.last_step_time = self.previous_time
+            self.level = flow
+        self.previous_time = time
+        return step
+
+
+def detect_steps(t, inlet_flow, threshold=1e-6, merge_time=0.05):
+    """All steps [(t_step, flow_before, direction)] of a sampled inlet flow [m^3/s]."""
+    detector = StepDetector(threshold, merge_time)
+    return [step for step in map(detector.update, t, inlet_flow) if step]

@@ -1,0 +1,159 @@
+"""Exact steady state of the valve for a constant inlet flow.
+
+At steady state every chamber's net flow and every net force vanish (Eqs. 1-7
+with all time derivatives zero). The solution is found by Newton's method
+(scipy.optimize.root) on those balances, started from an estimate that follows
+the valve's own logic (poppet force balance -> p_s, main-valve force balance ->
+p_p, pilot flow -> p_c and y, the rest through the main valve). If that fails,
+Newton restarts from a pseudo-transient: the model integrated with a small supply
+volume V_s and added valve damping, which change how fast the valve settles but
+not where. Either valve may rest on its seat or end stop; then its
+position is fixed there and its force balance is replaced by the contact condition.
+"""
+import numpy as np
+from scipy.optimize import root
+
+from valve_sim.integrator import IntegrationError, advance
+from valve_sim.model import P_C, P_M, P_P, P_S, X, Y, coefficients, derivatives, flows, net_forces
+
+PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5   # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
+PSEUDO_TRANSIENT_TIME = 0.3             # [s]
+PSEUDO_TRANSIENT_STEP = 5e-6            # [s]
+PSEUDO_TRANSIENT_DAMPING = (200.0, 50.0)  # [N s/m] added to main valve and poppet
+TOLERANCE = 1e-10                       # relative residual of flows and forces
+
+
+class SteadyStateError(RuntimeError):
+    """No steady state could be found."""
+
+
+def _residuals(state, inlet_flow, c, flow_scale, force_scale):
+    """Scaled flow imbalances of chambers s, m, p, c and net forces on x and y."""
+    rates = np.empty(8)
+    derivatives(state, inlet_flow, c, rates)
+    force_x, force_y = net_forces(state, c)
+    return np.array([
+        rates[P_S] / c.supply_compliance_inv / flow_scale,
+        rates[P_M] / c.intermediate_compliance_inv / flow_scale,
+        rates[P_P] / c.pilot_compliance_inv / flow_scale,
+        rates[P_C] / c.poppet_chamber_compliance_inv / flow_scale,
+        force_x / force_scale,
+        force_y / force_scale,
+    ])
+
+
+def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
+    """Solve the balances from guess; a valve whose fixed position is not None rests there."""
+    pressure_scale = max(guess[P_S], 1e5)
+    flow_scale = max(inlet_flow, 1e-7)
+    force_scale = c.back_area * pressure_scale
+    free, equations, scale = [P_S, P_M, P_P, P_C], [0, 1, 2, 3], [pressure_scale] * 4
+    for index, equation, fixed, stroke in ((X, 4, fixed_x, c.main_valve_stroke), (Y, 5, fixed_y, c.poppet_stroke)):
+        if fixed is None:
+            free.append(index)
+            equations.append(equation)
+            scale.append(stroke)
+    scale = np.array(scale)
+
+    def compose(u):
+        state = np.zeros(8)
+        state[X] = fixed_x or 0.0
+        state[Y] = fixed_y or 0.0
+        state[free] = u * scale
+        return state
+
+    def residual(u):
+        return _residuals(compose(u), inlet_flow, c, flow_scale, force_scale)[equations]
+
+    solution = root(residual, np.asarray(guess)[free] / scale, method="hybr", options={"xtol": 1e-13})
+    return compose(solution.x), np.max(np.abs(residual(solution.x)))
+
+
+def _contacts(position, stroke):
+    """Contact modes to try for one valve, the one the pseudo-transient suggests first."""
+    modes = [None, 0.0, stroke]
+    likely = 0.0 if position <= 0.0 else stroke if position >= stroke else None
+    modes.remove(likely)
+    return [likely] + modes
+
+
+def _contact_is_consistent(state, c):
+    """A valve inside its stroke is free; one at a stop is pushed into it."""
+    force_x, force_y = net_forces(state, c)
+    slack = 1e-9 * c.back_area * max(state[P_S], 1.0)
+    for position, force, stroke in ((state[X], force_x, c.main_valve_stroke), (state[Y], force_y, c.poppet_stroke)):
+        if position < 0.0 or position > stroke:
+            return False
+        if position == 0.0 and force > slack or position == stroke and force < -slack:
+            return False
+    return True
+
+
+def _estimate(inlet_flow, c):
+    """Open-valve estimate of the steady state from the valve's design logic."""
+    state = np.zeros(8)
+    p_s = c.pilot_spring_stiffness * c.pilot_spring_preload / c.rod_area
+    p_m = 0.6 * p_s
+    p_p = (c.supply_force_area * p_s + c.intermediate_force_area * p_m
+           - c.main_spring_stiffness * c.main_spring_preload) / c.back_area
+    state[[P_S, P_M, P_P, P_C]] = p_s, p_m, min(max(p_p, 0.0), p_s), 0.0
+    q_n = flows(state, c)[2]
+    p_c = max(state[P_P] - (q_n / c.damping_orifice_gain) ** 2, 0.1 * state[P_P])
+    state[P_C] = p_c
+    q_pilot = min(q_n + c.rod_leakage_conductance * (p_s - p_c), inlet_flow)
+    state[Y] = min(q_pilot / (c.poppet_gain * np.sqrt(max(p_c, 1.0))), c.poppet_stroke)
+    q_main = inlet_flow - q_pilot
+    state[X] = min(max(q_main, 0.0) / (c.second_throttle_gain * np.sqrt(max(p_m, 1.0))), c.main_valve_stroke)
+    return state
+
+
+def _pseudo_transient(params, inlet_flow, c):
+    """State after integrating a fast-settling, damped copy of the model from the empty valve."""
+    fast = c._replace(supply_compliance_inv=params["bulk_modulus"] / PSEUDO_TRANSIENT_SUPPLY_VOLUME,
+                      main_valve_damping=c.main_valve_damping + PSEUDO_TRANSIENT_DAMPING[0],
+                      pilot_poppet_damping=c.pilot_poppet_damping + PSEUDO_TRANSIENT_DAMPING[1])
+    state = np.zeros(8)
+    steps = int(round(PSEUDO_TRANSIENT_TIME / PSEUDO_TRANSIENT_STEP))
+    try:
+        advance(state, np.full(steps, float(inlet_flow)), fast, PSEUDO_TRANSIENT_STEP)
+    except IntegrationError as error:
+        raise SteadyStateError(f"no steady state at {inlet_flow:g} m^3/s: {error}") from error
+    return state
+
+
+def _solve_from(guess, inlet_flow, c):
+    """Newton from guess over the contact modes; (state, residual), state None if none fits."""
+    best = (None, np.inf)
+    for fixed_x in _contacts(guess[X], c.main_valve_stroke):
+        for fixed_y in _contacts(guess[Y], c.poppet_stroke):
+            candidate, error = _newton(guess, inlet_flow, c, fixed_x, fixed_y)
+            if error < TOLERANCE and _contact_is_consistent(candidate, c):
+                return candidate, error
+            best = (None, min(best[1], error))
+    return best
+
+
+def steady_state(params, inlet_flow):
+    """Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
+
+    params: validated parameter dict. inlet_flow = 0 gives the empty, closed valve.
+    Raises SteadyStateError when no consistent steady state is found.
+    """
+    if not np.isfinite(inlet_flow) or inlet_flow < 0.0:
+        raise SteadyStateError(f"inlet flow must be finite and >= 0 m^3/s, got {inlet_flow}")
+    if inlet_flow == 0.0:
+        return np.zeros(8)
+    c = coefficients(params)
+    state, error = _solve_from(_estimate(inlet_flow, c), inlet_flow, c)
+    if state is None:
+        state, error = _solve_from(_pseudo_transient(params, inlet_flow, c), inlet_flow, c)
+    if state is None:
+        raise SteadyStateError(
+            f"no consistent steady state at inlet flow {inlet_flow:g} m^3/s "
+            f"(smallest relative residual {error:.2e}); check the parameters")
+    return state
+
+
+def steady_flows(params, state):
+    """Flows (q_m1, q_m2, q_n, q_c, q_s, q_p) [m^3/s] at a state, for reports and tests."""
+    return flows(np.asarray(state, dtype=float), coefficients(params))
