@@ -1,0 +1,45 @@
+"""The `valve-sim` command line: simulate, study, analyse, demo.
+
+Each subcommand lives in its own module with add_arguments(parser) and
+run(args) -> exit code; this file only wires them together and turns the
+project's errors into one clear line on stderr and exit code 1.
+"""
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS = {
+    "simulate": ("valve_sim.simulate_command", "run the valve model offline for one inlet-flow step"),
+    "study": ("valve_sim.study", "the paper's parameter study (Figures 6-13, Table 3)"),
+    "analyse": ("valve_sim.bag_analysis", "step measures of a recorded rosbag2 MCAP file"),
+    "demo": ("valve_sim.demo", "valve_node + analyser_node over DDS: the paper's step, recorded and measured"),
+}
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(prog="valve-sim", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        module = importlib.import_module(module_name)
+        sub = commands.add_parser(name, help=help_text, description=module.__doc__.splitlines()[0])
+        module.add_arguments(sub)
+        sub.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv=None):
+    from valve_sim.errors import USER_ERRORS
+
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except USER_ERRORS as error:
+        print(f"valve-sim {args.command}: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"valve-sim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

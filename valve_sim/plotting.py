@@ -1,0 +1,61 @@
+"""Figures: the paper's Figure 5 (step response) and the parameter-study plots.
+
+Matplotlib with the Agg backend: files only, no display needed.
+"""
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (backend first)
+
+from valve_sim.measures import MEASURE_NAMES  # noqa: E402
+
+MEASURE_LABELS = {
+    "P_o_percent": "P_o, pressure increment [%]",
+    "P_1_percent": "P_1, pressure overshoot [%]",
+    "T_1_ms": "T_1, peak rising time [ms]",
+    "r_d": "r_d, damping ratio [-]",
+    "T_d_ms": "T_d, period of damped vibration [ms]",
+    "T_s_ms": "T_s, settling time [ms]",
+}
+
+
+def _measure_text(measures):
+    lines = []
+    for name in MEASURE_NAMES:
+        value = measures.get(name)
+        lines.append(f"{name} = {value:.4g}" if value is not None else f"{name}: none")
+    return "\n".join(lines)
+
+
+def plot_step_response(path, time, supply_pressure, main_valve_displacement, poppet_displacement,
+                       t_step, measures=None, title="Step response (paper Figure 5)"):
+    """Figure 5: p_s/p_0, x/x_0 and y/y_0 against time after the step; writes a PNG to path.
+
+    time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
+    StepMeasures.as_dict() to print beside the curves (optional).
+    """
+    import numpy as np
+
+    time = np.asarray(time, dtype=float)
+    before = int(np.searchsorted(time, t_step, side="right")) - 1
+    before = max(before, 0)
+    figure, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8), constrained_layout=True)
+    curves = (
+        (supply_pressure, "P = p_s / p_s(t_step) [-]", "tab:blue"),
+        (main_valve_displacement, "X = x / x(t_step) [-]", "tab:red"),
+        (poppet_displacement, "Y = y / y(t_step) [-]", "tab:green"),
+    )
+    for axis, (signal, label, colour) in zip(axes, curves):
+        signal = np.asarray(signal, dtype=float)
+        reference = signal[before] if signal[before] != 0.0 else 1.0
+        axis.plot(time, signal / reference, color=colour, linewidth=0.9)
+        axis.axvline(t_step, color="0.6", linestyle=":", linewidth=0.8)
+        axis.set_ylabel(label)
+        axis.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title(title)
+    if measures:
+        axes[0].text(0.99, 0.05, _measure_text(measures), transform=axes[0].transAxes, ha="right", va="bottom",
+                     fontsize=8, family="monospace", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.8"})
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
