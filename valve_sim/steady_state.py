@@ -157,3 +157,68 @@ def steady_state(params, inlet_flow):
 def steady_flows(params, state):
     """Flows (q_m1, q_m2, q_n, q_c, q_s, q_p) [m^3/s] at a state, for reports and tests."""
     return flows(np.asarray(state, dtype=float), coefficients(params))
+
+
+def cracking_pressure(params):
+    """Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
+
+    At that point the main valve rests at x = 0 with zero net force, no flow
+    passes the main throttles (so p_m = p_s) and all inlet flow goes through the
+    pilot stage. Solved by Newton's method on the pilot-chamber and poppet-chamber
+    balances and the two force balances, in p_s, p_p, p_c and y.
+    """
+    c = coefficients(params)
+    guess = _estimate(1e-5, c)
+    pressure_scale = max(guess[P_S], 1e5)
+    scale = np.array([pressure_scale, pressure_scale, pressure_scale, c.poppet_stroke])
+
+    def compose(u):
+        state = np.zeros(8)
+        state[[P_S, P_P, P_C, Y]] = u * scale
+        state[P_M] = state[P_S]
+        return state
+
+    def residual(u):
+        return _residuals(compose(u), 0.0, c, 1e-5, c.back_area * pressure_scale)[[2, 3, 4, 5]]
+
+    solution = root(residual, guess[[P_S, P_P, P_C, Y]] / scale, method="hybr", options={"xtol": 1e-13})
+    state = compose(solution.x)
+    if not solution.success or np.max(np.abs(residual(solution.x))) > TOLERANCE or not 0.0 < state[Y] < c.poppet_stroke:
+        raise SteadyStateError("no cracking point found: the pilot stage cannot hold the main valve at its seat "
+                               "with these parameters")
+    return float(state[P_S])
+
+
+def preload_for_cracking_pressure(params, pressure):
+    """Pilot spring preload y_0 [m] that makes the main valve crack at pressure [Pa].
+
+    What a technician does with the adjusting screw. The cracking pressure rises
+    almost linearly with y_0 (poppet balance A_s p_s ~ k_p (y + y_0)), so a few
+    secant steps from that estimate converge; raises ParameterError if the preload
+    would leave its limits.
+    """
+    from valve_sim.parameters import SPECS, ParameterError, validate
+
+    spec = SPECS["pilot_spring_preload"]
+    trial = dict(params)
+
+    def error(preload):
+        trial["pilot_spring_preload"] = preload
+        return cracking_pressure(trial) - pressure
+
+    slope = coefficients(params).rod_area / params["pilot_spring_stiffness"]   # dy_0/dp [m/Pa]
+    y0 = params["pilot_spring_preload"]
+    e0 = error(y0)
+    for _ in range(20):
+        y1 = y0 - e0 * slope
+        if not spec.minimum <= y1 <= spec.maximum:
+            raise ParameterError(
+                f"preset pressure {pressure:g} Pa needs pilot_spring_preload (y_0) = {y1:g} m, "
+                f"outside its limits [{spec.minimum:g}, {spec.maximum:g}] m")
+        e1 = error(y1)
+        if abs(e1) < 1e-9 * pressure:
+            return validate(trial)["pilot_spring_preload"]
+        if e1 != e0:
+            slope = (y1 - y0) / (e1 - e0)
+        y0, e0 = y1, e1
+    raise SteadyStateError(f"could not find a preload for a cracking pressure of {pressure:g} Pa")
