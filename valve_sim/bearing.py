@@ -50,3 +50,25 @@ def fit_bearing_coefficients(orifice_diameter, discharge_coefficient, density, c
     relative_error = np.abs(basis @ k / exact - 1.0)
     error = float(np.max(relative_error[z >= 0.05 * z_max]))
     return float(k[0]), float(k[1]), float(k[2]), lam, error
+
+
+# The bearing design behind K_1..K_3 in config/reference.yaml (docs/model.md):
+# four bearings, each a 0.78 mm orifice feeding a pocket whose land (9 mm wide,
+# 0.8 mm flow length, 15 um radial clearance) drains to the pilot chamber; fitted
+# at the 7 MPa preset. tests check that the parameter file holds this fit.
+REFERENCE_BEARING = {
+    "count": 4,
+    "orifice_diameter": 0.78e-3,   # d_b [m]
+    "land_width": 9e-3,            # w [m]
+    "land_length": 0.8e-3,         # l [m]
+    "clearance": 15e-6,            # c [m]
+    "design_pressure": 7e6,        # p_s [Pa]
+}
+
+
+def reference_bearing_fit(discharge_coefficient=0.67, density=988.0, viscosity=0.5482e-3):
+    """fit_bearing_coefficients() for REFERENCE_BEARING with the Table 1 fluid and C_b."""
+    b = REFERENCE_BEARING
+    conductance = land_conductance(b["land_width"], b["land_length"], b["clearance"], viscosity)
+    return fit_bearing_coefficients(b["orifice_diameter"], discharge_coefficient, density, conductance,
+                                    b["design_pressure"], b["count"])

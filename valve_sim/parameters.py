@@ -212,13 +212,17 @@ def read_parameter_file(path, node_name=NODE_NAME):
 
 
 def load_parameters(path=None, overrides=None):
-    """Validated model parameters from a parameter file (default config/reference.yaml).
+    """Validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
-    Run-time settings in the file (SETTINGS: step_size, publish_rate, ...) are
-    checked and returned separately; any other key is an error. overrides (name or
-    paper symbol -> value) apply to either. Returns (params, settings).
+    path: a ROS 2 parameter file that sets some or all parameters (like a second
+    --params-file for the node); the rest keep their reference values. Run-time
+    settings in either file (SETTINGS: step_size, publish_rate, ...) are checked
+    and returned separately; any other key is an error. overrides (name or paper
+    symbol -> value) are applied last. Returns (params, settings).
     """
-    raw = read_parameter_file(path or config_path("reference.yaml"))
+    raw = read_parameter_file(config_path("reference.yaml"))
+    if path is not None:
+        raw.update(read_parameter_file(path))
     raw.update(overrides or {})
     settings = {name: check_value(name, raw.pop(name)) for name in list(raw) if name in SETTING_SPECS}
     params = {resolve_name(name): value for name, value in raw.items()}

@@ -59,3 +59,56 @@ def plot_step_response(path, time, supply_pressure, main_valve_displacement, pop
                      fontsize=8, family="monospace", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.8"})
     figure.savefig(path, dpi=120)
     plt.close(figure)
+
+
+def plot_sensitivity(path, symbol, series, title):
+    """Figures 6, 7, 9-12: the six measures against the variation of one parameter.
+
+    series: {variation_percent: measures dict}; missing measures are left out.
+    """
+    figure, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
+    percents = sorted(series)
+    for axis, name in zip(axes.flat, MEASURE_NAMES):
+        points = [(p, series[p][name]) for p in percents if series[p][name] is not None]
+        if points:
+            axis.plot(*zip(*points), "o-", color="tab:blue")
+        axis.set_title(MEASURE_LABELS[name], fontsize=9)
+        axis.set_xlabel(f"variation of {symbol} [%]")
+        axis.grid(True, alpha=0.3)
+    figure.suptitle(f"{title}: effect of {symbol}")
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def plot_poppet_waveforms(path, waveforms, t_step):
+    """Figure 8: pilot poppet displacement y against time for the m_p variations.
+
+    waveforms: {variation_percent: (time [s], y [m])}.
+    """
+    figure, axis = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    for percent in sorted(waveforms):
+        time, y = waveforms[percent]
+        window = (time >= t_step - 0.01) & (time <= t_step + 0.1)
+        axis.plot((time[window] - t_step) * 1e3, y[window] * 1e6, linewidth=0.9, label=f"m_p {percent:+d} %")
+    axis.set_xlabel("time after the step [ms]")
+    axis.set_ylabel("poppet displacement y [um]")
+    axis.set_title("Figure 8: pilot poppet displacement for the m_p variations")
+    axis.grid(True, alpha=0.3)
+    axis.legend()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def plot_pressure_increment(path, series):
+    """Figure 13: P_o against the variations of d_c and k_p. series: {symbol: {percent: P_o}}."""
+    figure, axis = plt.subplots(figsize=(6, 4.5), constrained_layout=True)
+    for symbol, values in series.items():
+        points = [(p, v) for p, v in sorted(values.items()) if v is not None]
+        axis.plot(*zip(*points), "o-", label=symbol)
+    axis.set_xlabel("variation [%]")
+    axis.set_ylabel(MEASURE_LABELS["P_o_percent"])
+    axis.set_title("Figure 13: pressure increment against d_c and k_p")
+    axis.grid(True, alpha=0.3)
+    axis.legend()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
