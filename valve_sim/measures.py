@@ -11,7 +11,7 @@ How overshoot peaks are found (so that pilot-stage ripple is never taken for a
 peak): the deviation e = direction * (p_s - p_inf) is split into lobes with a
 hysteresis band of PEAK_BAND times the largest deviation in the window. A lobe
 starts when e rises above +band and ends when e falls below -band; the k-th
-overshoot is the extreme of the k-th lobe. Ripple much smaller than the band
+overshoot is the extreme of the k-th lobe (a lobe must begin with a rise). Ripple much smaller than the band
 cannot start or end a lobe. The extreme's time and value are refined by a
 least-squares parabola through the lobe samples within PEAK_FIT_DEPTH of the
 extreme, which makes the result nearly independent of the sample rate
@@ -66,10 +66,16 @@ def _refined_extreme(t, e, start, stop):
 
 
 def _lobes(e, band):
-    """(start, stop) index ranges where e stays above -band after rising above +band."""
-    lobes, start, above = [], None, False
+    """(start, stop) index ranges where e stays above -band after rising above +band.
+
+    Only a rise counts: samples that start above +band (a response that begins
+    above its settled value) open no lobe until e has been below +band once.
+    """
+    lobes, start, above, armed = [], None, False, False
     for i, value in enumerate(e):
-        if not above and value > band:
+        if not armed:
+            armed = value <= band
+        elif not above and value > band:
             above, start = True, i
         elif above and value < -band:
             lobes.append((start, i))
@@ -88,8 +94,8 @@ def _settling_time(t, x, x_0, x_inf, t_step):
     if len(outside) == 0:
         return 0.0, None
     last = outside[-1]
-    if last >= len(x) - 1:
-        return None, "the main valve does not settle inside the window"
+    if last >= len(x) - 1 or t[last] >= t[-1] - SETTLED_SPAN:
+        return None, "the main valve does not settle inside the window (still outside the band in its last 50 ms)"
     # Interpolate the final entry into the band between samples last and last + 1.
     bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
     fraction = (x[last] - bound) / (x[last] - x[last + 1])
@@ -137,11 +143,11 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
 
     e = direction * (pw - p_inf)
     largest = float(np.max(e))
-    if largest <= 0.0:
-        reasons.update({name: "no overshoot above the settled pressure"
+    lobes = _lobes(e, PEAK_BAND * largest) if largest > 0.0 else []
+    if not lobes:
+        reasons.update({name: "no overshoot: the pressure never rises above its settled value"
                         for name in ("P_1_percent", "T_1_ms", "r_d", "T_d_ms")})
         return StepMeasures(values, reasons, details)
-    lobes = _lobes(e, PEAK_BAND * largest)
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
     values["P_1_percent"] = direction * e_1 / p_0 * 100.0
     values["T_1_ms"] = (t_1 - t_step) * 1e3
