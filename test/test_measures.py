@@ -99,6 +99,14 @@ def test_no_overshoot_and_bad_input():
     assert "outside" in outside.reasons["T_1_ms"]
 
 
+def test_pressure_still_rising_at_the_window_end_is_no_peak():
+    t = np.arange(0.0, 1.3, 1e-4)
+    p = P0 + np.clip(t - T_STEP, 0.0, None) * 1e6          # ramps up to the end: no settling, no peak
+    x = np.full_like(t, X0)
+    result = step_measures(t, p, x, T_STEP)
+    assert result.values["T_1_ms"] is None and "no overshoot peak" in result.reasons["T_1_ms"]
+
+
 def test_truncated_window_is_reported():
     t, p, x = synthetic()
     keep = t < T_STEP + 0.6

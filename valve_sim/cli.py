@@ -1,4 +1,4 @@
-"""The `valve-sim` command line: simulate, study, analyse, demo.
+"""The `valve-sim` command line: simulate, study, operating-point, analyse, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -11,6 +11,7 @@ import sys
 SUBCOMMANDS = {
     "simulate": ("valve_sim.simulate_command", "run the valve model offline for one inlet-flow step"),
     "study": ("valve_sim.study", "the paper's parameter study (Figures 6-13, Table 3)"),
+    "operating-point": ("valve_sim.operating_point", "exact steady state, flows, forces and linear modes at a flow"),
     "analyse": ("valve_sim.bag_analysis", "step measures of a recorded rosbag2 MCAP file"),
     "demo": ("valve_sim.demo", "valve_node + analyser_node over DDS: the paper's step, recorded and measured"),
 }

@@ -144,8 +144,10 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     e = direction * (pw - p_inf)
     largest = float(np.max(e))
     lobes = _lobes(e, PEAK_BAND * largest) if largest > 0.0 else []
+    # An extreme on the window's last sample is a pressure still moving, not a peak.
+    lobes = [(start, stop) for start, stop in lobes if start + int(np.argmax(e[start:stop])) < len(e) - 1]
     if not lobes:
-        reasons.update({name: "no overshoot: the pressure never rises above its settled value"
+        reasons.update({name: "no overshoot peak inside the window (the pressure never swings above its settled value)"
                         for name in ("P_1_percent", "T_1_ms", "r_d", "T_d_ms")})
         return StepMeasures(values, reasons, details)
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])

@@ -1,0 +1,33 @@
+"""Linear modes of the valve about a steady state: how fast and how damped it rings.
+
+The Jacobian of the model's right-hand side is taken by central differences
+(steps scaled per state) at the exact steady state; its complex eigenvalues
+lambda give the modes: frequency |Im lambda| / 2 pi and damping ratio
+-Re lambda / |lambda|. Used to check stability margins (docs/model.md).
+"""
+import numpy as np
+
+from valve_sim.model import coefficients, state_derivative
+from valve_sim.steady_state import steady_state
+
+STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])   # typical size of each state
+
+
+def jacobian(params, state, inlet_flow, relative_step=1e-6):
+    """d(state_dot)/d(state) [8 x 8] at state for inlet flow [m^3/s]."""
+    c = coefficients(params)
+    matrix = np.empty((8, 8))
+    for j in range(8):
+        delta = np.zeros(8)
+        delta[j] = STATE_SCALE[j] * relative_step
+        matrix[:, j] = (state_derivative(state + delta, inlet_flow, c)
+                        - state_derivative(state - delta, inlet_flow, c)) / (2.0 * delta[j])
+    return matrix
+
+
+def oscillatory_modes(params, inlet_flow):
+    """[(frequency [Hz], damping ratio [-])] of the oscillatory modes at the steady state, slowest first."""
+    state = steady_state(params, inlet_flow)
+    eigenvalues = np.linalg.eigvals(jacobian(params, state, inlet_flow))
+    modes = [(abs(e.imag) / (2 * np.pi), -e.real / abs(e)) for e in eigenvalues if e.imag > 1e-6]
+    return sorted(modes)
