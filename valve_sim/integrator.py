@@ -22,20 +22,21 @@ class IntegrationError(RuntimeError):
 
 
 @jit
+def rest_on_stops(state, position, velocity, stroke):
+    """Inelastic contact: a body that passed its seat (0) or end stop (stroke) rests on it."""
+    if state[position] <= 0.0:
+        state[position] = 0.0
+        state[velocity] = max(state[velocity], 0.0)
+    elif state[position] >= stroke:
+        state[position] = stroke
+        state[velocity] = min(state[velocity], 0.0)
+
+
+@jit
 def enforce_stops(state, c):
-    """Inelastic contact: a valve that passed its seat or end stop rests on it."""
-    if state[X] <= 0.0:
-        state[X] = 0.0
-        state[X_DOT] = max(state[X_DOT], 0.0)
-    elif state[X] >= c.main_valve_stroke:
-        state[X] = c.main_valve_stroke
-        state[X_DOT] = min(state[X_DOT], 0.0)
-    if state[Y] <= 0.0:
-        state[Y] = 0.0
-        state[Y_DOT] = max(state[Y_DOT], 0.0)
-    elif state[Y] >= c.poppet_stroke:
-        state[Y] = c.poppet_stroke
-        state[Y_DOT] = min(state[Y_DOT], 0.0)
+    """Keep the main valve and the poppet between their seats and end stops."""
+    rest_on_stops(state, X, X_DOT, c.main_valve_stroke)
+    rest_on_stops(state, Y, Y_DOT, c.poppet_stroke)
 
 
 @jit
