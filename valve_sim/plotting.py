@@ -64,7 +64,8 @@ def plot_step_response(path, time, supply_pressure, main_valve_displacement, pop
 def plot_sensitivity(path, symbol, series, title):
     """Figures 6, 7, 9-12: the six measures against the variation of one parameter.
 
-    series: {variation_percent: measures dict}; missing measures are left out.
+    series: {variation_percent: measures dict}; undefined measures are named on the plot
+    (their reasons are in the measures' "reasons").
     """
     figure, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
     percents = sorted(series)
@@ -72,6 +73,10 @@ def plot_sensitivity(path, symbol, series, title):
         points = [(p, series[p][name]) for p in percents if series[p][name] is not None]
         if points:
             axis.plot(*zip(*points), "o-", color="tab:blue")
+        missing = [p for p in percents if series[p][name] is None]
+        if missing:
+            axis.text(0.02, 0.02, "undefined at " + ", ".join(f"{p:+d} %" for p in missing),
+                      transform=axis.transAxes, fontsize=8, color="tab:red")
         axis.set_title(MEASURE_LABELS[name], fontsize=9)
         axis.set_xlabel(f"variation of {symbol} [%]")
         axis.grid(True, alpha=0.3)
