@@ -51,7 +51,8 @@ def test_simulate_from_a_closed_valve_with_a_ramp():
     (("--set", "nonsense=1"), "unknown parameter 'nonsense'"),
     (("--set", "m_m"), "NAME=VALUE"),
     (("--params", "/nonexistent/params.yaml"), "cannot read parameter file"),
-    (("--initial-flow", "-5L/min"), "flow must be finite and >= 0"),
+    (("--initial-flow=-5L/min",), "flow must be finite and >= 0"),
+    (("--final-flow", "lots"), "not a flow"),
     (("--step-size", "1e-3"), "step size"),
     (("--set", "step_size=1e-4"), "diverged"),
 ])
@@ -77,3 +78,9 @@ def test_study_writes_the_papers_tables_and_figures(tmp_path):
     assert list(table3[0]) == ["measure", "table1", "table2", "relative_change_percent"]
     for number in (6, 7, 8, 9, 10, 11, 12, 13):
         assert len(list(tmp_path.glob(f"figure{number:02d}_*.png"))) == 1
+
+
+def test_operating_point_reports_balances_and_modes():
+    out = valve_sim("operating-point", "--flow", "5L/min").stdout
+    assert "cracking pressure" in out and "p_s 7.0000" in out
+    assert "linear modes" in out and "zeta" in out

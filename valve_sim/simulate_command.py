@@ -7,6 +7,7 @@ Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 import csv
 import json
 import math
+from argparse import ArgumentTypeError
 
 from valve_sim.errors import InputFileError
 from valve_sim.measures import MEASURE_NAMES, step_measures
@@ -28,9 +29,9 @@ def flow_value(text):
     try:
         value = float(number) * factor
     except ValueError:
-        raise ValueError(f"not a flow: {text!r} (use e.g. 5L/min or 8.33e-5)") from None
+        raise ArgumentTypeError(f"not a flow: {text!r} (use e.g. 5L/min or 8.33e-5)") from None
     if not math.isfinite(value) or value < 0.0:
-        raise ValueError(f"flow must be finite and >= 0, got {text!r}")
+        raise ArgumentTypeError(f"flow must be finite and >= 0, got {text!r}")
     return value
 
 
@@ -38,11 +39,11 @@ def assignment(text):
     """'NAME=VALUE' -> (NAME, float) for --set."""
     name, separator, value = text.partition("=")
     if not separator:
-        raise ValueError(f"expected NAME=VALUE, got {text!r}")
+        raise ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
     try:
         return name.strip(), float(value)
     except ValueError:
-        raise ValueError(f"value of {name.strip()!r} is not a number: {value!r}") from None
+        raise ArgumentTypeError(f"value of {name.strip()!r} is not a number: {value!r}") from None
 
 
 def add_parameter_arguments(parser):
