@@ -84,3 +84,13 @@ def test_operating_point_reports_balances_and_modes():
     out = valve_sim("operating-point", "--flow", "5L/min").stdout
     assert "cracking pressure" in out and "p_s 7.0000" in out
     assert "linear modes" in out and "zeta" in out
+
+
+def test_offline_bag_analyses_to_the_offline_measures(tmp_path):
+    bag = tmp_path / "run.mcap"
+    direct = json.loads(valve_sim("simulate", "--json", "--mcap", str(bag)).stdout)
+    (step,) = json.loads(valve_sim("analyse", str(bag), "--json").stdout)["steps"]
+    assert step["t_step"] == pytest.approx(0.25)
+    assert step["T_1_ms"] == pytest.approx(direct["T_1_ms"], abs=0.2)     # 1 kHz bag vs 10 kHz samples
+    for name in ("P_o_percent", "P_1_percent", "r_d", "T_d_ms", "T_s_ms"):
+        assert step[name] == pytest.approx(direct[name], rel=0.02), name

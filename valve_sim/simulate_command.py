@@ -9,7 +9,6 @@ import json
 import math
 from argparse import ArgumentTypeError
 
-from valve_sim.errors import InputFileError
 from valve_sim.measures import MEASURE_NAMES, step_measures
 from valve_sim.model import STATE_NAMES
 from valve_sim.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
@@ -82,7 +81,8 @@ def add_arguments(parser):
     parser.add_argument("--csv", metavar="FILE", help="write the waveforms as CSV (SI units)")
     parser.add_argument("--plot", metavar="FILE.png", help="draw the paper's Figure 5")
     parser.add_argument("--mcap", metavar="FILE.mcap",
-                        help="write the run as a rosbag2 MCAP file in valve_node's topic layout")
+                        help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
+                             "(1 kHz ticks, absolute pressures with 101325 Pa ambient)")
 
 
 def _scenario(args):
@@ -130,12 +130,12 @@ def run(args):
                            waveforms["main_valve_displacement"], waveforms["poppet_displacement"],
                            scenario.step_time, measures.as_dict())
     if args.mcap:
-        from valve_sim.bag import write_simulation_bag
+        from valve_sim.valve_topics import write_simulation_bag
 
-        try:
-            write_simulation_bag(args.mcap, waveforms, params)
-        except OSError as error:
-            raise InputFileError(f"cannot write {args.mcap}: {error.strerror}") from error
+        # valve_node's 1 kHz ticks where the samples allow it, else every sample.
+        ratio = 1e-3 / args.record_interval
+        interval = 1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
+        write_simulation_bag(args.mcap, waveforms, publish_interval=interval)
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:
