@@ -1,0 +1,341 @@
+"""analyser_node: records valve_node's topics to MCAP as rosbag2 does, and measures every inlet-flow step live.
+
+  sub  every topic of the parameter `topics` (relative names resolve in the node's
+       namespace), serialized, of whatever type the graph reports for it
+  pub  step_measures   diagnostic_msgs/msg/DiagnosticArray, reliable, transient local:
+       one message per measured step, header.stamp = t_step, one DiagnosticStatus
+       (name "valve_analyser: step measures", hardware_id = the bag file name,
+       level OK, or WARN when a measure is undefined) with one KeyValue per measure
+       (P_o_percent ... T_s_ms: the number, or "none"), "<measure>_reason" for
+       each undefined one, and t_step_s, direction (+1 / -1), flow_before_m3_s,
+       window_s and note (a truncated window).
+  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "valve_analyser:
+       recording": the file, the messages recorded per topic and, for a topic with
+       one publisher, the messages lost on the way (gaps in its publication
+       sequence numbers); WARN while a topic has no message yet or once any was lost.
+
+One recording per run: output_dir/valve_<date>-<time>.mcap, and beside it
+<same name>.measures.json ({"bag", "steps"}, step_analysis.MeasuresFile), to
+which each step is appended.
+
+How nothing is lost. Subscriptions are reliable with a deep queue (queue_depth
+per topic, 1 s at 1 kHz by default), filled by the middleware's own threads. The
+executor never runs them (their callback group is closed to it): a timer every
+drain_period takes all waiting messages of every topic in one go, writes them and
+feeds the analysis; taking them directly costs a fraction of a callback per
+message. Every flush_interval the open chunk is completed and handed to the
+operating system, so a hard kill loses at most that much. SIGINT and SIGTERM
+end the spin; the node then takes what is still queued, measures (and
+publishes) the open steps on what it has, and closes the file.
+"""
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.callback_groups import CallbackGroup
+from rclpy.exceptions import ParameterException
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rclpy.signals import SignalHandlerOptions
+
+from valve_sim.bag import BagWriter
+from valve_sim.errors import InputFileError
+from valve_sim.measures import MEASURE_NAMES
+from valve_sim.parameters import SETTING_SPECS, ParameterError, ParameterSpec
+from valve_sim.ros_parameters import declare_double
+from valve_sim.signals import REQUIRED, ROLE, Extractor, Joiner, SignalMap
+from valve_sim.step_analysis import MeasuresFile, StepAnalysis
+from valve_sim.valve_topics import message_class
+
+NODE_NAME = "valve_analyser"
+DEFAULT_TOPICS = ["inlet_flow", "applied_inlet_flow", "supply_pressure", "intermediate_pressure", "pilot_pressure",
+                  "poppet_chamber_pressure", "joint_states", "/diagnostics"]
+MEASURES_STATUS = "valve_analyser: step measures"
+RECORDING_STATUS = "valve_analyser: recording"
+MEASURES_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DISCOVERY_PERIOD = 0.1   # [s] how often topics not yet seen are looked for (as rosbag2 does)
+SOURCE = "valve_sim analyser_node"
+DOUBLE_PARAMETERS = (
+    ParameterSpec("step_threshold", "dq_step", "m^3/s", 0.0, 1.0,
+                  "smallest change of the applied inlet flow taken as a step", SOURCE),
+    ParameterSpec("step_merge_time", "t_merge", "s", 0.0, 10.0,
+                  "changes this soon after a step belong to it (a ramp, a noisy edge)", SOURCE),
+    ParameterSpec("drain_period", "t_drain", "s", 1e-3, 0.1,
+                  "period of taking the queued messages, writing and analysing them", SOURCE),
+    ParameterSpec("flush_interval", "t_flush", "s", 0.05, 60.0,
+                  "longest time recorded data waits before its chunk is handed to the operating system", SOURCE),
+)
+DOUBLE_DEFAULTS = {"step_threshold": 1e-6, "step_merge_time": 0.05, "drain_period": 0.005, "flush_interval": 1.0}
+
+
+class RecorderGroup(CallbackGroup):
+    """A callback group the executor never runs: the recorder takes its subscriptions' messages itself."""
+
+    def can_execute(self, entity):
+        return False
+
+    def beginning_execution(self, entity):
+        return False
+
+    def ending_execution(self, entity):
+        pass
+
+
+@dataclass
+class RecordedTopic:
+    """A subscribed topic: subscription, type, bag channel (from the first message), extractor, counters."""
+
+    subscription: object
+    type_name: str
+    extractor: Extractor = None
+    channel: int = None
+    count: int = 0
+    single_publisher: bool = False   # then gaps in the publication sequence numbers are lost messages
+    last_sequence: int = None
+    lost: int = 0
+
+
+def qos_offer(qos):
+    """An rclpy QoSProfile as the offer dict of valve_sim.bag.qos_profiles_yaml()."""
+    return {"history": qos.history.name.lower(), "depth": qos.depth, "reliability": qos.reliability.name.lower(),
+            "durability": qos.durability.name.lower(), "deadline_ns": qos.deadline.nanoseconds,
+            "lifespan_ns": qos.lifespan.nanoseconds, "liveliness": qos.liveliness.name.lower(),
+            "liveliness_lease_duration_ns": qos.liveliness_lease_duration.nanoseconds,
+            "avoid_ros_namespace_conventions": qos.avoid_ros_namespace_conventions}
+
+
+def measures_message(record, hardware_id):
+    """The step_measures DiagnosticArray of a step record (valve_sim.step_analysis)."""
+    def number(value):
+        return "none" if value is None else repr(float(value))
+
+    values = {"t_step_s": number(record["t_step"]), "direction": str(record["direction"]),
+              "flow_before_m3_s": number(record["flow_before"]), "window_s": number(record["details"].get("window_s"))}
+    values.update({name: number(record[name]) for name in MEASURE_NAMES})
+    values.update({f"{name}_reason": reason for name, reason in record["reasons"].items()})
+    if "note" in record["details"]:
+        values["note"] = record["details"]["note"]
+    summary = ", ".join(f"{name} = {record[name]:.4g}" for name in MEASURE_NAMES if record[name] is not None)
+    status = DiagnosticStatus(
+        level=DiagnosticStatus.WARN if record["reasons"] else DiagnosticStatus.OK, name=MEASURES_STATUS,
+        hardware_id=hardware_id, message=f"step {'up' if record['direction'] > 0 else 'down'}: {summary}",
+        values=[KeyValue(key=key, value=value) for key, value in values.items()])
+    array = DiagnosticArray(status=[status])
+    array.header.stamp.sec, array.header.stamp.nanosec = divmod(round(record["t_step"] * 1e9), 1_000_000_000)
+    return array
+
+
+def measures_from_message(array):
+    """{measure name: float or None} of a step_measures DiagnosticArray."""
+    values = {pair.key: pair.value for pair in array.status[0].values}
+    return {name: None if values[name] == "none" else float(values[name]) for name in MEASURE_NAMES}
+
+
+class ValveAnalyser(Node):
+    """Records the configured topics to one MCAP file and measures every step of the applied inlet flow."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        settings = self._declare_parameters()
+        self.signal_map = SignalMap(
+            topics={role: self.resolve_topic_name(settings[f"{role}_topic"]) for role in REQUIRED},
+            joints={role: settings[f"{role}_joint"] for role in REQUIRED if ROLE[role].joint},
+            ambient_pressure=settings["ambient_pressure"])
+        self.wanted = dict.fromkeys([self.resolve_topic_name(t) for t in settings["topics"]]
+                                    + list(self.signal_map.topics.values()))
+        self.bag = BagWriter(self._new_bag_path(Path(settings["output_dir"])))
+        self.measures = MeasuresFile(self.bag.path.with_suffix(".measures.json"), self.bag.path.name)
+        self.joiner = Joiner()
+        self.analysis = StepAnalysis(settings["step_threshold"], settings["step_merge_time"])
+        self.flush_interval = settings["flush_interval"]
+        self.last_flush = self.last_loss_warning = time.monotonic()
+        self.recorded = {}
+        self.queue = QoSProfile(depth=settings["queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        self.recorder_group = RecorderGroup()
+        self.measures_publisher = self.create_publisher(DiagnosticArray, "step_measures", MEASURES_QOS)
+        self.status_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(DISCOVERY_PERIOD, self._discover)
+        self.create_timer(settings["drain_period"], self.drain)
+        self.create_timer(1.0, self._publish_status)
+        self.get_logger().info(f"recording {', '.join(self.wanted)} to {self.bag.path}")
+
+    def _declare_parameters(self):
+        """Declare the parameters (all read-only: restart to change); returns {name: value}."""
+        def declare(name, default, description, **constraints):
+            descriptor = ParameterDescriptor(name=name, description=description, read_only=True, **constraints)
+            return self.declare_parameter(name, default, descriptor).value
+
+        settings = {
+            "topics": declare("topics", DEFAULT_TOPICS, "topics to record (relative names resolve in the "
+                              "node's namespace); the analysed topics are always recorded"),
+            "output_dir": declare("output_dir", ".", "folder of the recordings (created if missing)"),
+            "queue_depth": declare("queue_depth", 1000, "reliable subscription queue per topic [messages]",
+                                   integer_range=[IntegerRange(from_value=10, to_value=1_000_000, step=1)]),
+            "ambient_pressure": declare_double(self, SETTING_SPECS["ambient_pressure"], 101325.0, read_only=True),
+        }
+        for spec in DOUBLE_PARAMETERS:
+            settings[spec.name] = declare_double(self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True)
+        for name in REQUIRED:
+            role = ROLE[name]
+            settings[f"{name}_topic"] = declare(f"{name}_topic", role.topic, f"topic of the {role.meaning}")
+            if role.joint:
+                settings[f"{name}_joint"] = declare(f"{name}_joint", role.joint,
+                                                    f"JointState joint of the {role.meaning}")
+        return settings
+
+    @staticmethod
+    def _new_bag_path(folder):
+        """A new file name in folder (created); raises InputFileError if it cannot be written."""
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise InputFileError(f"output_dir {folder} cannot be created: {error.strerror}") from error
+        stem = time.strftime("valve_%Y%m%d-%H%M%S")
+        path, k = folder / f"{stem}.mcap", 1
+        while path.exists():
+            k += 1
+            path = folder / f"{stem}_{k}.mcap"
+        return path
+
+    def _discover(self):
+        """Subscribe to each wanted topic once the graph knows its type; note who publishes what."""
+        types = dict(self.get_topic_names_and_types())
+        for topic in [t for t in self.wanted if t not in self.recorded and t in types]:
+            type_name = types[topic][0]
+            try:
+                message_type = message_class(type_name)
+            except (ImportError, AttributeError, ValueError) as error:
+                self.get_logger().error(f"cannot record {topic}: no message type {type_name} ({error})")
+                self.wanted.pop(topic)
+                continue
+            self.recorded[topic] = RecordedTopic(
+                self.create_subscription(message_type, topic, lambda _: None, self.queue,
+                                         callback_group=self.recorder_group, raw=True),
+                type_name, self._extractor(topic, type_name))
+        for topic, recorded in self.recorded.items():
+            recorded.single_publisher = self.count_publishers(topic) == 1
+
+    def _extractor(self, topic, type_name):
+        """The Extractor of an analysed topic; None for the others, or (logged) for a type it cannot read."""
+        roles = self.signal_map.roles_of(topic)
+        try:
+            return Extractor(topic, type_name, roles, self.signal_map) if roles else None
+        except InputFileError as error:
+            self.get_logger().error(f"{error}: {topic} is recorded but not analysed")
+            return None
+
+    def drain(self):
+        """Take every queued message of every topic: write it, and analyse those of the signals."""
+        for topic, recorded in self.recorded.items():
+            subscription = recorded.subscription
+            with subscription.handle:
+                while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+                    self._record(topic, recorded, *taken)
+        if time.monotonic() - self.last_flush >= self.flush_interval:
+            self.bag.flush()
+            self.last_flush = time.monotonic()
+
+    def _record(self, topic, recorded, data, info):
+        if recorded.channel is None:
+            offers = [qos_offer(endpoint.qos_profile) for endpoint in self.get_publishers_info_by_topic(topic)]
+            recorded.channel = self.bag.add_topic(topic, recorded.type_name, offers)
+        self.bag.write(recorded.channel, data, info["received_timestamp"], info["source_timestamp"])
+        recorded.count += 1
+        sequence = info["publication_sequence_number"]
+        if recorded.single_publisher and recorded.last_sequence is not None and sequence > recorded.last_sequence + 1:
+            recorded.lost += sequence - recorded.last_sequence - 1
+            self._warn_lost(topic, recorded.lost)
+        recorded.last_sequence = sequence
+        if recorded.extractor:
+            message = deserialize_message(data, recorded.subscription.msg_type)
+            for role, time_ns, value in recorded.extractor.samples(message, info["received_timestamp"]):
+                self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
+
+    def _warn_lost(self, topic, lost):
+        """Log lost messages at most once a second (rclpy's own throttling inspects the stack: too slow here)."""
+        if time.monotonic() - self.last_loss_warning >= 1.0:
+            self.last_loss_warning = time.monotonic()
+            self.get_logger().warn(f"{topic}: {lost} message(s) lost so far before reaching the analyser "
+                                   "(gaps in the publication sequence numbers)")
+
+    def _measured(self, records):
+        """Append step records to the JSON file and publish them."""
+        for record in records:
+            self.measures.append(record)
+            message = measures_message(record, self.bag.path.name)
+            self.get_logger().info(message.status[0].message)
+            self.measures_publisher.publish(message)
+
+    def _publish_status(self):
+        """The recording status on /diagnostics: WARN while a topic has no message or when some were lost."""
+        counts = {topic: (self.recorded[topic].count if topic in self.recorded else 0) for topic in self.wanted}
+        lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
+        waiting = [topic for topic, count in counts.items() if count == 0]
+        values = {"file": str(self.bag.path), "messages": str(self.bag.message_count),
+                  "steps measured": str(self.measures.count),
+                  **{f"messages {topic}": str(count) for topic, count in counts.items()},
+                  **{f"lost {topic}": str(count) for topic, count in lost.items()}}
+        message = (f"no messages yet on {', '.join(waiting)}" if waiting else
+                   f"{sum(lost.values())} message(s) lost before reaching the analyser" if lost else
+                   f"recording to {self.bag.path.name}")
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if waiting or lost else DiagnosticStatus.OK, name=RECORDING_STATUS,
+            hardware_id=self.bag.path.name, message=message,
+            values=[KeyValue(key=key, value=value) for key, value in values.items()])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.status_publisher.publish(array)
+
+    def close(self):
+        """Take what is still queued, measure the open steps on what there is, close the file."""
+        self.drain()
+        self._measured(self.analysis.add_rows(self.joiner.finish()) + self.analysis.finish())
+        self.bag.close()
+        self.get_logger().info(f"closed {self.bag.path}: {self.bag.message_count} messages, "
+                               f"{self.measures.count} steps measured")
+
+
+def record(stop):
+    """Run a ValveAnalyser until the event stop is set, then close its recording."""
+    node = ValveAnalyser()
+    try:
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+        node.close()
+    finally:
+        node.destroy_node()
+
+
+def main(args=None):
+    """Run analyser_node until SIGINT or SIGTERM; returns the exit code.
+
+    The signals only set a flag that ends the spin loop, so the node closes its
+    file with the middleware still up (the last measures are still published).
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: stop.set())
+    try:
+        record(stop)
+    except (InputFileError, ParameterError, ParameterException, OSError) as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(str(error))
+        return 1
+    finally:
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

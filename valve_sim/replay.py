@@ -1,0 +1,46 @@
+"""Publish a simulated run as valve_node would, tick by tick: a known load for the analyser's tests and bench.
+
+Every tick publishes valve_topics.tick_messages() of one waveform sample, paced at
+the tick period on the monotonic clock (a late tick is published at once, so the
+count is exact and the mean rate holds). Publishers are reliable, KEEP_LAST
+with QUEUE_DEPTH: a reliable writer drops its oldest unacknowledged sample when
+its queue is full, so the depth must cover the longest stall of the machine (a
+loaded 2-core machine stalls for a few hundred ms at times). wait_for_subscribers()
+before publish() makes sure that nothing published is lost to discovery.
+"""
+import time
+
+from valve_sim.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, message_class, tick_messages
+
+QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
+
+
+class Replay:
+    """valve_node's tick publishers on a given rclpy node."""
+
+    def __init__(self, node, ambient_pressure=101325.0):
+        self.node, self.ambient_pressure = node, ambient_pressure
+        self.publishers = {topic: node.create_publisher(message_class(TOPIC_TYPES[topic]), topic, QUEUE_DEPTH)
+                           for topic in TICK_TOPICS}
+        self.published = dict.fromkeys(TICK_TOPICS, 0)
+
+    def wait_for_subscribers(self, count=1, timeout=60.0):
+        """Wait until every publisher is matched with count subscribers; raises TimeoutError."""
+        deadline = time.monotonic() + timeout
+        while any(p.get_subscription_count() < count for p in self.publishers.values()):
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"not {count} subscriber(s) for every valve topic within {timeout:g} s")
+            time.sleep(0.01)
+
+    def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
+        """Publish every every-th sample of waveforms, one tick each period [s], stamped start_time_ns + model time."""
+        started = time.monotonic()
+        for tick, index in enumerate(range(0, len(waveforms.time), every)):
+            delay = started + tick * period - time.monotonic()
+            if delay > 0.0:
+                time.sleep(delay)
+            time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
+            for topic, message in tick_messages(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
+                                                self.ambient_pressure):
+                self.publishers[topic].publish(message)
+                self.published[topic] += 1
