@@ -1,0 +1,289 @@
+#!/usr/bin/env python3
+"""Benchmark valve_node at 1 kHz with 10 us steps (issue 3).
+
+    python bench/bench_node.py [--duration 60] [--json out/bench_node.json] [--rt-priority 50]
+
+Starts valve_node and a bare rclpy echo node, each in its own process, on a
+private ROS domain (localhost only), and measures from this process:
+
+- on-time ticks: (ticks - late) / (ticks + missed), from the node's diagnostics
+  (late: started more than half a period after its timer slot; missed: a slot
+  without a tick), and the looser share of slots that got a tick at all;
+- tick compute time: p50 and p99 of each 1-s diagnostics window; the worst
+  window's p99 bounds the p99 of the whole run from above;
+- latency: from publishing an inlet_flow (a value never sent before) to receiving
+  the first supply_pressure message of the tick that applied it (the tick is
+  found on applied_inlet_flow by its value and stamp); floor: the round trip
+  of a Float64 through the bare echo node, measured in the same run;
+- the node's resident memory (psutil) after 10 s and at the end.
+
+Prints a table and writes the figures as JSON. Targets (issue 3): on-time
+>= 99.9 %, compute p99 <= 0.5 ms, latency p99 <= 3 ms, memory growth a few MB.
+--rt-priority P runs valve_node and the echo node under SCHED_FIFO priority P
+and this measuring process at P - 1 (needs the privilege), as a test rig would
+run its nodes. The load
+average at start and end is reported: other work on the machine shows in every
+figure here.
+"""
+import argparse
+import json
+import os
+import random
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+FLOW = 5.0e-3 / 60.0          # [m^3/s] 5 L/min
+FLOW_INCREMENT = 1e-12        # [m^3/s] makes every probe value unique, negligible for the valve
+PROBE_PERIOD = 0.01           # [s] an inlet probe and an echo probe alternate: 50 Hz each
+WARM_UP = 3.0                 # [s] discovery and first ticks, not measured
+MEMORY_EARLY = 10.0           # [s] first resident-memory reading
+STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec) in little-endian CDR
+
+
+def run_echo():
+    """The floor: a bare rclpy node that republishes echo_in on echo_out."""
+    import rclpy
+    from std_msgs.msg import Float64
+
+    rclpy.init()
+    node = rclpy.create_node("echo")
+    publisher = node.create_publisher(Float64, "echo_out", 10)
+    node.create_subscription(Float64, "echo_in", publisher.publish, 10)
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        rclpy.try_shutdown()
+
+
+class Bench:
+    """The measuring node: probes, receive times and the node's diagnostics."""
+
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import FluidPressure, JointState
+        from std_msgs.msg import Float64
+
+        self.node = node
+        self.Float64 = Float64
+        self.inlet = node.create_publisher(Float64, "inlet_flow", 10)
+        self.echo = node.create_publisher(Float64, "echo_in", 10)
+        self.inlet_sent = {}      # flow value -> send time [ns]
+        self.echo_sent = {}       # sequence number -> send time [ns]
+        self.echo_trips = []      # [ns]
+        self.applied = {}         # flow value -> first stamp that applied it
+        self.pressure_received = {}   # stamp -> receive time [ns]
+        self.diagnostics = []     # (receive time [s], {key: value})
+        self.probes = 0
+        self.measuring = False
+        node.create_subscription(JointState, "applied_inlet_flow", self._on_applied, 1000)
+        # Raw CDR: only the stamp is needed, read straight from the bytes (less load on this process).
+        node.create_subscription(FluidPressure, "supply_pressure", self._on_pressure, 1000, raw=True)
+        node.create_subscription(Float64, "echo_out", self._on_echo, 100)
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        node.create_timer(PROBE_PERIOD, self._probe)
+
+    def _probe(self):
+        if not self.measuring:
+            return
+        self.probes += 1
+        if self.probes % 2:
+            flow = FLOW + self.probes * FLOW_INCREMENT
+            self.inlet_sent[flow] = time.monotonic_ns()
+            self.inlet.publish(self.Float64(data=flow))
+        else:
+            self.echo_sent[float(self.probes)] = time.monotonic_ns()
+            self.echo.publish(self.Float64(data=float(self.probes)))
+
+    def _on_applied(self, message):
+        flow = message.velocity[0]
+        if flow in self.inlet_sent and flow not in self.applied:
+            self.applied[flow] = (message.header.stamp.sec, message.header.stamp.nanosec)
+
+    def _on_pressure(self, data):
+        """Receive time of a raw supply_pressure message, by its header stamp (after the CDR header)."""
+        if self.measuring:
+            self.pressure_received[STAMP.unpack_from(data, 4)] = time.monotonic_ns()
+
+    def _on_echo(self, message):
+        sent = self.echo_sent.get(message.data)
+        if sent is not None:
+            self.echo_trips.append(time.monotonic_ns() - sent)
+
+    def _on_diagnostics(self, message):
+        for status in message.status:
+            if status.hardware_id == "/relief_valve":
+                self.diagnostics.append((time.monotonic(), {kv.key: kv.value for kv in status.values}))
+
+    def latencies_ns(self):
+        """inlet_flow publish -> receipt of the supply pressure of the tick that applied it [ns]."""
+        return [self.pressure_received[stamp] - self.inlet_sent[flow]
+                for flow, stamp in self.applied.items() if stamp in self.pressure_received]
+
+
+def percentiles_ms(values_ns):
+    import numpy as np
+
+    if len(values_ns) == 0:
+        return {"count": 0}
+    values = np.asarray(values_ns) / 1e6
+    p50, p99 = np.percentile(values, [50, 99])
+    return {"count": len(values), "p50_ms": p50, "p99_ms": p99, "max_ms": values.max()}
+
+
+def tick_figures(diagnostics):
+    """On-time share and compute-time figures from the diagnostics of the measured span."""
+    import numpy as np
+
+    first, last = diagnostics[0][1], diagnostics[-1][1]
+    counts = {key: int(last[key]) - int(first[key])
+              for key in ("ticks", "late_ticks", "missed_ticks", "skipped_ticks")}
+    windows = [values for _, values in diagnostics[1:]]
+    p50s = [float(w["tick_compute_p50_ms"]) for w in windows]
+    p99s = [float(w["tick_compute_p99_ms"]) for w in windows]
+    on_time = counts["ticks"] - counts["late_ticks"]
+    return {
+        **counts,
+        "on_time_percent": 100.0 * on_time / (counts["ticks"] + counts["missed_ticks"]),
+        "slots_served_percent": 100.0 * counts["ticks"] / (counts["ticks"] + counts["missed_ticks"]),
+        "compute_p50_ms": float(np.median(p50s)),
+        "compute_p99_ms_median_window": float(np.median(p99s)),
+        "compute_p99_ms_worst_window": max(p99s),
+        "compute_max_ms": max(float(w["tick_compute_max_ms"]) for w in windows),
+        "real_time_factor_min": min(float(w["real_time_factor"]) for w in windows),
+        "integration_failures": int(last["integration_failures"]),
+    }
+
+
+def start(command, env):
+    return subprocess.Popen(command, env=env, cwd=REPO)
+
+
+def stop(process):
+    import signal
+
+    process.send_signal(signal.SIGINT)
+    try:
+        return process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        return process.wait()
+
+
+def measure(duration, rt_priority, env):
+    """Run the node, the echo and the probes for duration [s]; returns the figures."""
+    import psutil
+    import rclpy
+
+    scheduler = ["chrt", "--fifo", str(rt_priority)] if rt_priority else []
+    if rt_priority:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority - 1))
+    load_at_start = os.getloadavg()
+    valve = start([*scheduler, sys.executable, "-m", "valve_sim.valve_node", "--ros-args",
+                   "-p", "publish_rate:=1000.0", "-p", "step_size:=1.0e-5", "-p", "input_timeout:=0.0"], env)
+    echo = start([*scheduler, sys.executable, __file__, "--echo"], env)
+    rclpy.init()
+    node = rclpy.create_node("bench")
+    bench = Bench(node)
+    memory = {}
+    try:
+        started = time.monotonic()
+        while time.monotonic() - started < WARM_UP or not bench.diagnostics:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        bench.measuring = True
+        bench.diagnostics = bench.diagnostics[-1:]
+        measured_from = time.monotonic()
+        while (elapsed := time.monotonic() - measured_from) < duration:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if "after_10s_mb" not in memory and elapsed >= min(MEMORY_EARLY, duration / 2):
+                memory["after_10s_mb"] = psutil.Process(valve.pid).memory_info().rss / 2**20
+                memory["after_10s_at_s"] = round(elapsed, 1)
+        memory["at_end_mb"] = psutil.Process(valve.pid).memory_info().rss / 2**20
+        memory["at_end_s"] = round(elapsed, 1)
+        bench.measuring = False
+        settle = time.monotonic()
+        while time.monotonic() - settle < 1.5:   # the last answers and diagnostics
+            rclpy.spin_once(node, timeout_sec=0.1)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+        exit_codes = {"valve_node": stop(valve), "echo": stop(echo)}
+    return {
+        "duration_s": duration,
+        "publish_rate_hz": 1000.0,
+        "step_size_s": 1e-5,
+        "ticks": tick_figures(bench.diagnostics),
+        "latency": percentiles_ms(bench.latencies_ns()),
+        "latency_probes_sent": len(bench.inlet_sent),
+        "echo_round_trip": percentiles_ms(bench.echo_trips),
+        "memory": {**memory, "growth_mb": memory["at_end_mb"] - memory["after_10s_mb"]},
+        "exit_codes": exit_codes,
+        "scheduler": f"SCHED_FIFO {rt_priority}" if rt_priority else "normal",
+        "cpus": os.cpu_count(),
+        "load_average_at_start": load_at_start,
+        "load_average_at_end": os.getloadavg(),
+    }
+
+
+def table(figures):
+    ticks, latency, echo, memory = figures["ticks"], figures["latency"], figures["echo_round_trip"], figures["memory"]
+    rows = [
+        ("on-time ticks", f"{ticks['on_time_percent']:.3f} %", ">= 99.9 %",
+         f"{ticks['ticks']} ticks, {ticks['late_ticks']} late, {ticks['missed_ticks']} missed, "
+         f"{ticks['skipped_ticks']} skipped"),
+        ("timer slots with a tick", f"{ticks['slots_served_percent']:.3f} %", "",
+         "ticks started within a period of their slot, late or not"),
+        ("tick compute p50", f"{ticks['compute_p50_ms']:.3f} ms", "", "median of 1-s windows"),
+        ("tick compute p99", f"{ticks['compute_p99_ms_worst_window']:.3f} ms", "<= 0.5 ms",
+         f"worst 1-s window (median window {ticks['compute_p99_ms_median_window']:.3f} ms); "
+         f"max {ticks['compute_max_ms']:.2f} ms"),
+        ("latency inlet -> pressure p50", f"{latency.get('p50_ms', float('nan')):.3f} ms", "",
+         f"{latency['count']} of {figures['latency_probes_sent']} probes"),
+        ("latency inlet -> pressure p99", f"{latency.get('p99_ms', float('nan')):.3f} ms", "<= 3 ms",
+         f"max {latency.get('max_ms', float('nan')):.2f} ms"),
+        ("floor: echo round trip p50", f"{echo.get('p50_ms', float('nan')):.3f} ms", "", f"{echo['count']} probes"),
+        ("floor: echo round trip p99", f"{echo.get('p99_ms', float('nan')):.3f} ms", "",
+         f"max {echo.get('max_ms', float('nan')):.2f} ms"),
+        (f"resident memory at {memory['after_10s_at_s']:g} s", f"{memory['after_10s_mb']:.1f} MB", "", ""),
+        (f"resident memory at {memory['at_end_s']:g} s", f"{memory['at_end_mb']:.1f} MB",
+         "growth: a few MB", f"growth {memory['growth_mb']:+.2f} MB"),
+    ]
+    width = max(len(row[0]) for row in rows)
+    lines = [f"valve_node benchmark: {figures['duration_s']:g} s at {figures['publish_rate_hz']:g} Hz, "
+             f"steps of {figures['step_size_s'] * 1e6:g} us, scheduler {figures['scheduler']}, "
+             f"{figures['cpus']} CPUs, load average (1 min) {figures['load_average_at_start'][0]:.2f} at start, "
+             f"{figures['load_average_at_end'][0]:.2f} at end",
+             f"{'measure':<{width}}  {'value':>12}  {'target':<16}  notes"]
+    lines += [f"{name:<{width}}  {value:>12}  {target:<16}  {notes}" for name, value, target, notes in rows]
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=60.0, help="measured time [s] (default 60)")
+    parser.add_argument("--json", type=Path, default=REPO / "out" / "bench_node.json", help="JSON output file")
+    parser.add_argument("--rt-priority", type=int, default=0,
+                        help="run the nodes under SCHED_FIFO with this priority (this process one lower)")
+    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.echo:
+        return run_echo()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 101)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    os.environ.update(env)
+    figures = measure(args.duration, args.rt_priority, env)
+    print(table(figures))
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(figures, indent=2, default=float) + "\n")
+    print(f"figures written to {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,96 @@
+"""RealTimeModel: stepping against a clock in whole steps, catch-up limit, trial, roll-back."""
+import numpy as np
+import pytest
+
+from valve_sim.integrator import IntegrationError, advance
+from valve_sim.model import P_S, coefficients
+from valve_sim.parameters import load_parameters
+from valve_sim.realtime_model import RealTimeModel, step_ns
+from valve_sim.simulation import LITRE_PER_MINUTE
+from valve_sim.steady_state import steady_state
+
+FLOW = 5.0 * LITRE_PER_MINUTE
+START_NS = 1_000_000_000_000   # any clock time; the model time is anchored to it
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return load_parameters()[0]
+
+
+@pytest.fixture
+def model(reference):
+    model = RealTimeModel(reference, 1e-5, FLOW)
+    model.start(START_NS)
+    return model
+
+
+def test_starts_at_the_exact_steady_state(model, reference):
+    assert np.array_equal(model.state, steady_state(reference, FLOW))
+    assert RealTimeModel(reference, 1e-5, 0.0).state.tolist() == [0.0] * 8
+
+
+def test_runs_from_the_closed_valve(reference):
+    model = RealTimeModel(reference, 1e-5, 0.0)
+    model.start(START_NS)
+    model.advance_to(START_NS + 300_000_000, FLOW, max_lag_ns=10**9)
+    assert np.all(np.isfinite(model.state)) and model.state[P_S] > 0.0
+
+
+def test_model_time_follows_an_irregular_clock_without_drift(model, reference):
+    """Clock ticks of 1.000123 ms: whole 10 us steps, the remainder carried, same result as one run."""
+    offline = steady_state(reference, FLOW)
+    now_ns, steps = START_NS, 0
+    for _ in range(500):
+        now_ns += 1_000_123
+        steps += model.advance_to(now_ns, 2 * FLOW, max_lag_ns=10**9).steps
+        assert 0 <= now_ns - model.time_ns < 10_000
+    assert steps == (now_ns - START_NS) // 10_000
+    assert model.time_ns == START_NS + steps * 10_000
+    advance(offline, np.full(steps, 2 * FLOW), coefficients(reference), 1e-5)
+    assert np.array_equal(model.state, offline), "chunked stepping equals one offline run, bit for bit"
+
+
+def test_lag_beyond_the_catch_up_limit_is_skipped(model):
+    progress = model.advance_to(START_NS + 1_000_000_000, FLOW, max_lag_ns=50_000_000)
+    assert progress.skipped_ns == 950_000_000
+    assert progress.steps == 5000
+    assert model.time_ns == START_NS + 1_000_000_000
+
+
+def test_divergence_leaves_state_and_model_time_unchanged(model):
+    state = model.state.copy()
+    with pytest.raises(IntegrationError):
+        model.advance_to(START_NS + 100_000_000, 1.0, max_lag_ns=10**9)   # 60 000 L/min
+    assert np.array_equal(model.state, state)
+    assert model.time_ns == START_NS
+    model.hold_until(START_NS + 1_234_567)
+    assert model.time_ns == START_NS + 1_230_000 and np.array_equal(model.state, state)
+
+
+def test_trial_refuses_a_diverging_step_size_without_touching_the_model(model, reference):
+    state = model.state.copy()
+    model.trial(reference, 1e-5, FLOW)
+    with pytest.raises(IntegrationError):
+        model.trial(reference, 1e-4, FLOW)
+    assert np.array_equal(model.state, state) and model.step_size == 1e-5
+
+
+def test_roll_back_returns_to_the_parameters_before_the_last_change(model, reference):
+    assert not model.roll_back(), "nothing to roll back to before any change"
+    heavier = {**reference, "main_valve_mass": reference["main_valve_mass"] * 2}
+    model.retune(heavier, 2e-5)
+    assert (model.params, model.step_size) == (heavier, 2e-5)
+    assert model.roll_back()
+    assert (model.params, model.step_size) == (reference, 1e-5)
+    assert not model.roll_back(), "one level only"
+
+
+def test_reset_goes_to_the_steady_state_of_the_given_flow(model, reference):
+    model.advance_to(START_NS + 10_000_000, 4 * FLOW, max_lag_ns=10**9)
+    model.reset(4 * FLOW)
+    assert model.state[P_S] == steady_state(reference, 4 * FLOW)[P_S]
+
+
+def test_step_size_is_kept_on_a_nanosecond_grid():
+    assert step_ns(1e-5) == 10_000 and step_ns(1e-7) == 100 and step_ns(1e-12) == 1

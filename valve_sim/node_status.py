@@ -1,0 +1,128 @@
+"""Health counters of valve_node and the /diagnostics status built from them.
+
+Counters run from node start. Each report (1 Hz) also covers the window since the
+previous one: the real-time factor (model time advanced / steady time elapsed)
+and the tick compute time (p50, p99, max) of the ticks in that window.
+"""
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+NS_PER_S = 1e9
+
+
+@dataclass
+class Counters:
+    """Events since node start. A late tick ran more than half a period after it was due;
+    a missed tick never ran (its time was integrated by the next one); skipped time was
+    not integrated at all because the lag exceeded the catch-up limit."""
+
+    ticks: int = 0
+    late_ticks: int = 0
+    missed_ticks: int = 0
+    skipped_ticks: int = 0
+    skipped_time_s: float = 0.0
+    rejected_inputs: int = 0
+    rejected_parameter_changes: int = 0
+    integration_failures: int = 0
+
+
+@dataclass(frozen=True)
+class InputReport:
+    """The inlet-flow input as diagnostics show it: flow [m^3/s], age [s], stale or not."""
+
+    inlet_flow: float
+    seconds_since_input: float
+    stale: bool
+
+
+class NodeStatus:
+    """Counters plus the per-window figures of the diagnostics report."""
+
+    def __init__(self, steady_now_ns):
+        self.counters = Counters()
+        self.last_failure = ""
+        self._reported = Counters()
+        self._durations_ns = []
+        self._window = (steady_now_ns, None)   # (steady time, model time) at the last report
+
+    def tick_done(self, compute_ns):
+        """Count a tick that took compute_ns [ns] of wall time."""
+        self.counters.ticks += 1
+        self._durations_ns.append(compute_ns)
+
+    def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings):
+        """DiagnosticArray for the window that ends now; starts the next window.
+
+        stamp: header stamp (builtin_interfaces Time); name: the node's full name;
+        model_time_ns: model time [ns] or None before the first tick; inputs:
+        InputReport; settings: {name: value} shown as they are (units in the names).
+        """
+        counters, previous = self.counters, self._reported
+        status = DiagnosticStatus(name=f"{name}: valve model", hardware_id=name)
+        status.level, status.message = self._summary(counters, previous, inputs)
+        values = {
+            "real_time_factor": self._real_time_factor(steady_now_ns, model_time_ns),
+            **self._compute_times(),
+            **{field.name: getattr(counters, field.name) for field in fields(Counters)},
+            "last_integration_failure": self.last_failure,
+            "inlet_flow_m3_s": inputs.inlet_flow,
+            "seconds_since_input": inputs.seconds_since_input,
+            "input_stale": inputs.stale,
+            "model_time_s": None if model_time_ns is None else model_time_ns / NS_PER_S,
+            **settings,
+        }
+        status.values = [KeyValue(key=key, value=_text(value)) for key, value in values.items()]
+        self._reported = replace(counters)
+        self._durations_ns = []
+        self._window = (steady_now_ns, model_time_ns)
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = stamp
+        return array
+
+    def _summary(self, counters, previous, inputs):
+        """(level, message): ERROR on a divergence in the window, WARN on stale input or skipped time."""
+        problems, level = [], DiagnosticStatus.OK
+        failures = counters.integration_failures - previous.integration_failures
+        if failures:
+            level = DiagnosticStatus.ERROR
+            problems.append(f"integration diverged {failures}x, state held: {self.last_failure}")
+        if inputs.stale:
+            level = max(level, DiagnosticStatus.WARN)
+            problems.append(f"input stale: no inlet_flow for {inputs.seconds_since_input:.1f} s, "
+                            f"holding {inputs.inlet_flow:g} m^3/s")
+        skipped = counters.skipped_ticks - previous.skipped_ticks
+        if skipped:
+            level = max(level, DiagnosticStatus.WARN)
+            problems.append(f"{skipped} tick periods skipped (lag beyond the catch-up limit)")
+        late = counters.late_ticks - previous.late_ticks
+        if late:
+            problems.append(f"{late} late ticks")
+        return level, "; ".join(problems) or "running"
+
+    def _real_time_factor(self, steady_now_ns, model_time_ns):
+        steady_start, model_start = self._window
+        if model_start is None or model_time_ns is None or steady_now_ns <= steady_start:
+            return None
+        return (model_time_ns - model_start) / (steady_now_ns - steady_start)
+
+    def _compute_times(self):
+        """Tick compute time p50, p99 and max of the window [ms] (None without ticks)."""
+        names = ("tick_compute_p50_ms", "tick_compute_p99_ms", "tick_compute_max_ms")
+        if not self._durations_ns:
+            return dict.fromkeys(names)
+        durations = np.asarray(self._durations_ns) / 1e6
+        p50, p99 = np.percentile(durations, [50, 99])
+        return dict(zip(names, (p50, p99, durations.max())))
+
+
+def _text(value):
+    """A diagnostics value as text: numbers with full precision, booleans as true/false."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if value is None:
+        return ""
+    if isinstance(value, float) or isinstance(value, np.floating):
+        return repr(float(value))
+    return str(value)

@@ -1,0 +1,381 @@
+"""valve_node: the virtual relief valve as a real-time ROS 2 node.
+
+Topic and service names are relative, so namespaces and remapping work:
+
+  sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s]
+  pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
+                                sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
+                                                            gauge pressure + ambient_pressure
+  pub  joint_states             sensor_msgs/JointState      main_valve, pilot_poppet:
+                                                            position [m], velocity [m/s]
+  pub  applied_inlet_flow       sensor_msgs/JointState      inlet_flow: velocity = q_in [m^3/s]
+                                                            applied over the tick ending at the stamp
+  pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
+  srv  ~/reset                  std_srvs/Trigger            exact steady state of the current inlet flow
+
+All messages of one tick carry the model time of the state as header.stamp.
+The model itself (valve_sim.realtime_model) has no ROS in it; this module only
+adapts it: parameters, topics, the tick timer and the reset service.
+See docs/valve_node.md for the behaviour in detail.
+"""
+import gc
+import math
+import signal
+import sys
+import time
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import FluidPressure, JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from valve_sim.integrator import IntegrationError
+from valve_sim.model import P_C, P_S, X, X_DOT, Y, Y_DOT, STATE_NAMES
+from valve_sim.node_status import InputReport, NodeStatus
+from valve_sim.parameters import (
+    NODE_NAME, PARAMETERS, SETTING_SPECS, SETTINGS, SPECS, ParameterError, check_value, load_parameters, validate)
+from valve_sim.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
+from valve_sim.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
+from valve_sim.ros_parameters import declare_double, integers_as_doubles, value_problem
+from valve_sim.simulation import LITRE_PER_MINUTE
+from valve_sim.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
+
+# Settings that config/reference.yaml may leave out.
+DEFAULT_SETTINGS = {
+    "step_size": 1e-5,
+    "publish_rate": 1000.0,
+    "initial_inlet_flow": 5.0 * LITRE_PER_MINUTE,
+    "input_timeout": 1.0,
+    "ambient_pressure": 101325.0,
+}
+READ_ONLY = ("initial_inlet_flow",)   # only the start (and a parameter file) use it
+CATCH_UP_LIMIT_PERIODS = 50    # a tick integrates at most this many tick periods of lag
+LATE_FRACTION = 0.5            # a tick is late if it starts this fraction of a period after its slot
+STATE_QUEUE_DEPTH = 100        # 0.1 s of 1 kHz state messages
+VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
+VALVE_SPECS = {**SPECS, **SETTING_SPECS, PRESET_PRESSURE.name: PRESET_PRESSURE}   # all double parameters
+
+
+def stamp(time_ns):
+    """builtin_interfaces/Time of a time in integer nanoseconds."""
+    return Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
+
+
+class ReliefValveNode(Node):
+    """The valve model on a timer at publish_rate, fed by inlet_flow, publishing its state."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        params, self.settings = self._declare_parameters()
+        self.model = RealTimeModel(params, self.settings["step_size"], self.settings["initial_inlet_flow"])
+        self.inlet_flow = self.settings["initial_inlet_flow"]   # [m^3/s], last good input
+        self.applied_flow = self.inlet_flow                     # [m^3/s], over the last tick
+        self.last_input_ns = None
+        self.input_stale = False
+        self.status = NodeStatus(time.monotonic_ns())
+        self._restoring = False
+        self._previous_slot_ns = None
+        self._create_outputs()
+        self.create_subscription(Float64, "inlet_flow", self._on_inlet_flow, 10)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._tick_timer = self._create_tick_timer()
+        self.add_pre_set_parameters_callback(self._complete_parameter_change)
+        self.add_on_set_parameters_callback(self._check_parameter_change)
+        self.add_post_set_parameters_callback(self._apply_parameter_change)
+        self.get_logger().info(
+            f"valve at the steady state of {self.inlet_flow:g} m^3/s: p_s = {self.model.state[P_S]:.6g} Pa "
+            f"(gauge); {self.settings['publish_rate']:g} Hz, steps of {self.settings['step_size']:g} s")
+
+    # --- parameters -------------------------------------------------------------------------
+
+    def _declare_parameters(self):
+        """Declare all parameters, defaults from config/reference.yaml; returns (params, settings)."""
+        reference, reference_settings = load_parameters()
+        defaults = {**reference, **DEFAULT_SETTINGS, **reference_settings}
+        values = {spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
+                  for spec in PARAMETERS + SETTINGS}
+        params = validate({name: values[name] for name in SPECS})
+        settings = {name: values[name] for name in SETTING_SPECS}
+        return self._declare_preset_pressure(params), settings
+
+    def _declare_preset_pressure(self, params):
+        """Declare preset_pressure, by default the cracking pressure; an override sets the preload."""
+        cracking = cracking_pressure(params)
+        preset = declare_double(self, PRESET_PRESSURE, cracking)
+        if preset == cracking:
+            return params
+        preload = preload_for_cracking_pressure(params, preset)
+        self.set_parameters([Parameter("pilot_spring_preload", value=preload)])
+        return {**params, "pilot_spring_preload": preload}
+
+    def set_parameters_atomically(self, parameter_list):
+        """Node.set_parameters_atomically, which both parameter services call.
+
+        Checks each value against its spec first, for a reason with symbol, limits
+        and unit, and counts and logs every refusal.
+        """
+        problems = (value_problem(VALVE_SPECS[p.name], p) for p in parameter_list if p.name in VALVE_SPECS)
+        reason = next(filter(None, problems), None)
+        try:
+            result = (SetParametersResult(successful=False, reason=reason) if reason
+                      else super().set_parameters_atomically(parameter_list))
+        except ParameterNotDeclaredException as error:
+            self._count_refusal(str(error))
+            raise
+        if not result.successful:
+            self._count_refusal(result.reason)
+        return result
+
+    def _count_refusal(self, reason):
+        self.status.counters.rejected_parameter_changes += 1
+        self.get_logger().warn(f"parameter change refused: {reason}")
+
+    def _complete_parameter_change(self, parameters):
+        """Pre-set callback: integers taken as doubles, and the dependent parameter added."""
+        parameters = integers_as_doubles(parameters, VALVE_SPECS)
+        try:
+            dependent = dependent_change(self.model.params, {p.name: p.value for p in parameters})
+        except VALUE_ERRORS:
+            return parameters   # the on-set callback refuses the change and says why
+        return parameters + [Parameter(name, Parameter.Type.DOUBLE, value) for name, value in dependent.items()]
+
+    def _check_parameter_change(self, parameters):
+        """On-set callback: validate the merged set and trial-integrate it from the current state."""
+        changes = {p.name: p.value for p in parameters if p.name in VALVE_SPECS}
+        if not changes or self._restoring:
+            return SetParametersResult(successful=True)
+        try:
+            params, settings = self._merged(changes)
+            check_preset(params, changes)
+            self.model.trial(params, settings["step_size"], self.inlet_flow)
+        except IntegrationError as error:
+            return SetParametersResult(successful=False, reason=(
+                f"the integration would diverge (trial of {TRIAL_STEPS} steps from the current state): {error}"))
+        except (ParameterError, SteadyStateError) as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameter_change(self, parameters):
+        """Post-set callback: the accepted change takes effect from the next tick."""
+        changes = {p.name: p.value for p in parameters if p.name in VALVE_SPECS}
+        if not changes or self._restoring:
+            return
+        params, settings = self._merged(changes)
+        rate_changed = settings["publish_rate"] != self.settings["publish_rate"]
+        self.model.retune(params, settings["step_size"])
+        self.settings = settings
+        if rate_changed:
+            self.destroy_timer(self._tick_timer)
+            self._tick_timer = self._create_tick_timer()
+        self.get_logger().info(f"parameters set: {changes}")
+
+    def _merged(self, changes):
+        """(params, settings) with changes applied, checked; raises ParameterError."""
+        settings = {**self.settings,
+                    **{name: check_value(name, value) for name, value in changes.items() if name in SETTING_SPECS}}
+        return merged_parameters(self.model.params, changes), settings
+
+    def _restore_parameters(self):
+        """Report the rolled-back model parameters and step size as the node's parameter values."""
+        in_use = {**self.model.params, "step_size": self.model.step_size}
+        changed = [Parameter(name, value=value) for name, value in in_use.items()
+                   if self.get_parameter(name).value != value]
+        if not changed:
+            return
+        self._restoring = True
+        try:
+            super().set_parameters_atomically(changed)
+        finally:
+            self._restoring = False
+
+    # --- stepping ---------------------------------------------------------------------------
+
+    def _create_tick_timer(self):
+        self._previous_slot_ns = None
+        return self.create_timer(1.0 / self.settings["publish_rate"], self._tick)
+
+    def _tick(self):
+        """Advance the model to the clock and publish its state."""
+        started = time.perf_counter_ns()
+        now_ns = self.get_clock().now().nanoseconds
+        if self.model.time_ns is None or now_ns < self.model.time_ns:
+            self._start(now_ns)
+            self._publish_state()
+        else:
+            self._count_lateness(now_ns)
+            if self._advance(now_ns):
+                self._publish_state()
+        self.status.tick_done(time.perf_counter_ns() - started)
+
+    def _start(self, now_ns):
+        """Anchor the model time to the clock: at the first tick, or when the clock jumped back."""
+        if self.model.time_ns is not None:
+            self.get_logger().warn(f"clock jumped back by {(self.model.time_ns - now_ns) / NS_PER_S:g} s; "
+                                   "model time restarts from the clock")
+        self.model.start(now_ns)
+        self.last_input_ns = self.last_input_ns or now_ns
+        self._previous_slot_ns = None
+
+    def _count_lateness(self, now_ns):
+        """Count this tick as late, and the timer slots that passed without a tick as missed."""
+        period_ns = self._tick_timer.timer_period_ns
+        slot_ns = now_ns + self._tick_timer.time_until_next_call() - period_ns
+        if now_ns - slot_ns > LATE_FRACTION * period_ns:
+            self.status.counters.late_ticks += 1
+        if self._previous_slot_ns is not None:
+            self.status.counters.missed_ticks += max(round((slot_ns - self._previous_slot_ns) / period_ns) - 1, 0)
+        self._previous_slot_ns = slot_ns
+
+    def _advance(self, now_ns):
+        """Integrate up to now_ns; False if it diverged (then nothing is published)."""
+        period_ns = self._tick_timer.timer_period_ns
+        try:
+            progress = self.model.advance_to(now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns)
+        except IntegrationError as error:
+            self._recover(now_ns, error)
+            return False
+        self.applied_flow = self.inlet_flow
+        if progress.skipped_ns:
+            counters = self.status.counters
+            counters.skipped_ticks += max(round(progress.skipped_ns / period_ns), 1)
+            counters.skipped_time_s += progress.skipped_ns / NS_PER_S
+            self.get_logger().warn(f"{progress.skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit "
+                                   f"{CATCH_UP_LIMIT_PERIODS} tick periods)", throttle_duration_sec=1.0)
+        return True
+
+    def _recover(self, now_ns, error):
+        """After a divergence: hold the last good state, undo the last parameter change."""
+        self.status.counters.integration_failures += 1
+        self.status.last_failure = str(error)
+        self.get_logger().error(f"{error} The last good state is held.", throttle_duration_sec=1.0)
+        if self.model.roll_back():
+            self.get_logger().error("parameters rolled back to the ones in use before the last change")
+            self._restore_parameters()
+        self.model.hold_until(now_ns)
+
+    # --- inputs and outputs -----------------------------------------------------------------
+
+    def _create_outputs(self):
+        """Publishers and the messages they reuse every tick."""
+        self._pressures = []
+        for name in STATE_NAMES[P_S:P_C + 1]:
+            message = FluidPressure(variance=0.0)
+            message.header.frame_id = name
+            self._pressures.append((message, self.create_publisher(FluidPressure, name, STATE_QUEUE_DEPTH)))
+        self._joints = JointState(name=["main_valve", "pilot_poppet"])
+        self._joints.header.frame_id = "joint_states"
+        self._joints_publisher = self.create_publisher(JointState, "joint_states", STATE_QUEUE_DEPTH)
+        self._applied = JointState(name=["inlet_flow"])
+        self._applied.header.frame_id = "applied_inlet_flow"
+        self._applied_publisher = self.create_publisher(JointState, "applied_inlet_flow", STATE_QUEUE_DEPTH)
+        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+    def _publish_state(self):
+        """Publish the state of the model time, all messages with the same stamp."""
+        state, header_stamp = self.model.state, stamp(self.model.time_ns)
+        ambient = self.settings["ambient_pressure"]
+        for index, (message, publisher) in enumerate(self._pressures):
+            message.header.stamp = header_stamp
+            message.fluid_pressure = float(state[index]) + ambient
+            publisher.publish(message)
+        self._joints.header.stamp = header_stamp
+        self._joints.position = [float(state[X]), float(state[Y])]
+        self._joints.velocity = [float(state[X_DOT]), float(state[Y_DOT])]
+        self._joints_publisher.publish(self._joints)
+        self._applied.header.stamp = header_stamp
+        self._applied.velocity = [self.applied_flow]
+        self._applied_publisher.publish(self._applied)
+
+    def _on_inlet_flow(self, message):
+        """Take a finite, non-negative inlet flow [m^3/s]; reject and count anything else."""
+        flow = message.data
+        if math.isfinite(flow) and flow >= 0.0:
+            self.inlet_flow = flow
+            self.last_input_ns = self.get_clock().now().nanoseconds
+            return
+        self.status.counters.rejected_inputs += 1
+        self.get_logger().warn(f"inlet_flow {flow!r} rejected (must be finite and >= 0 m^3/s); "
+                               f"holding {self.inlet_flow:g} m^3/s", throttle_duration_sec=1.0)
+
+    def _on_reset(self, request, response):
+        """~/reset: re-initialise at the exact steady state of the current inlet flow."""
+        try:
+            self.model.reset(self.inlet_flow)
+        except SteadyStateError as error:
+            response.success, response.message = False, str(error)
+            return response
+        time_ns = self.model.time_ns or 0
+        response.success = True
+        response.message = (f"re-initialised at model time {time_ns // NS_PER_S}.{time_ns % NS_PER_S:09d} s "
+                            f"at the steady state of {self.inlet_flow:g} m^3/s: "
+                            f"p_s = {self.model.state[P_S]:.6g} Pa (gauge)")
+        self.get_logger().info(response.message)
+        return response
+
+    def _publish_diagnostics(self):
+        now = self.get_clock().now()
+        inputs = self._input_report(now.nanoseconds)
+        if inputs.stale and not self.input_stale:
+            self.get_logger().warn(f"no inlet_flow for {inputs.seconds_since_input:.1f} s: input stale, "
+                                   f"holding {self.inlet_flow:g} m^3/s")
+        elif self.input_stale and not inputs.stale:
+            self.get_logger().info("inlet_flow received again: input fresh")
+        self.input_stale = inputs.stale
+        settings = {"publish_rate_hz": self.settings["publish_rate"], "step_size_s": self.model.step_size,
+                    "input_timeout_s": self.settings["input_timeout"]}
+        self._diagnostics.publish(self.status.report(
+            now.to_msg(), self.get_fully_qualified_name(), time.monotonic_ns(), self.model.time_ns,
+            inputs, settings))
+
+    def _input_report(self, now_ns):
+        """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
+        age = 0.0 if self.last_input_ns is None else max(now_ns - self.last_input_ns, 0) / NS_PER_S
+        timeout = self.settings["input_timeout"]
+        return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
+
+
+STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def main(args=None):
+    """Run valve_node until SIGINT or SIGTERM; returns the exit code.
+
+    Both signals raise KeyboardInterrupt in the spinning thread, which ends the
+    node cleanly (rclpy's own handlers shut the context down under a running
+    executor, which can surface as an error in the middle of spin()).
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+    node = None
+    try:
+        node = ReliefValveNode()
+        gc.freeze()   # start-up objects stay out of the garbage collector's scans: shorter pauses
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    except STARTUP_ERRORS as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {error}")
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
