@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from valve_sim.integrator import IntegrationError, advance
-from valve_sim.model import P_C, P_M, P_P, P_S, X, X_DOT, Y, Y_DOT, coefficients, flows, net_forces, state_derivative
+from valve_sim.model import P_C, P_M, P_S, X, X_DOT, Y, Y_DOT, coefficients, flows, net_forces, state_derivative
 from valve_sim.parameters import load_parameters
 from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state

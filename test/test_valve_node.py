@@ -20,7 +20,6 @@ from valve_sim.model import P_S, X
 from valve_sim.parameters import SPECS, config_path, load_parameters
 from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
-from valve_sim.valve_node import DEFAULT_SETTINGS
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -47,6 +46,11 @@ def reference():
 
 
 @pytest.fixture(scope="module")
+def reference_settings():
+    return load_parameters()[1]
+
+
+@pytest.fixture(scope="module")
 def valve_process(context, tmp_path_factory):
     """The shared wall-clock node and a probe connected to it; checks a clean SIGINT exit at the end."""
     log = tmp_path_factory.mktemp("valve_node") / "valve_node.log"
@@ -63,13 +67,13 @@ def valve_process(context, tmp_path_factory):
 
 
 @pytest.fixture
-def valve(valve_process, reference):
+def valve(valve_process, reference, reference_settings):
     """The probe, with the node at the reference parameters, 5 L/min and its steady state."""
     process, probe = valve_process
     yield probe
     assert process.poll() is None, "valve_node died"
     assert probe.non_finite == 0, "a NaN or inf was published"
-    defaults = {**reference, **{name: DEFAULT_SETTINGS[name] for name in RETUNABLE_SETTINGS}}
+    defaults = {**reference, **{name: reference_settings[name] for name in RETUNABLE_SETTINGS}}
     current = probe.get_parameters(*defaults)
     changed = {name: value for name, value in defaults.items() if current[name] != value}
     if changed:

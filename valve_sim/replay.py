@@ -1,6 +1,6 @@
 """Publish a simulated run as valve_node would, tick by tick: a known load for the analyser's tests and bench.
 
-Every tick publishes valve_topics.tick_messages() of one waveform sample, paced at
+Every tick publishes valve_topics.TickMessages filled with one waveform sample, paced at
 the tick period on the monotonic clock (a late tick is published at once, so the
 count is exact and the mean rate holds). Publishers are reliable, KEEP_LAST
 with QUEUE_DEPTH: a reliable writer drops its oldest unacknowledged sample when
@@ -10,7 +10,7 @@ before publish() makes sure that nothing published is lost to discovery.
 """
 import time
 
-from valve_sim.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, message_class, tick_messages
+from valve_sim.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
 
@@ -35,12 +35,13 @@ class Replay:
     def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
         """Publish every every-th sample of waveforms, one tick each period [s], stamped start_time_ns + model time."""
         started = time.monotonic()
+        messages = TickMessages()
         for tick, index in enumerate(range(0, len(waveforms.time), every)):
             delay = started + tick * period - time.monotonic()
             if delay > 0.0:
                 time.sleep(delay)
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
-            for topic, message in tick_messages(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
+            for topic, message in messages.fill(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
                                                 self.ambient_pressure):
                 self.publishers[topic].publish(message)
                 self.published[topic] += 1

@@ -25,7 +25,6 @@ import sys
 import time
 
 import rclpy
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -33,40 +32,26 @@ from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from valve_sim.integrator import IntegrationError
-from valve_sim.model import P_C, P_S, X, X_DOT, Y, Y_DOT, STATE_NAMES
+from valve_sim.model import P_S
 from valve_sim.node_status import InputReport, NodeStatus
 from valve_sim.parameters import (
     NODE_NAME, PARAMETERS, SETTING_SPECS, SETTINGS, SPECS, ParameterError, check_value, load_parameters, validate)
 from valve_sim.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
 from valve_sim.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
 from valve_sim.ros_parameters import declare_double, integers_as_doubles, value_problem
-from valve_sim.simulation import LITRE_PER_MINUTE
 from valve_sim.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
+from valve_sim.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
-# Settings that config/reference.yaml may leave out.
-DEFAULT_SETTINGS = {
-    "step_size": 1e-5,
-    "publish_rate": 1000.0,
-    "initial_inlet_flow": 5.0 * LITRE_PER_MINUTE,
-    "input_timeout": 1.0,
-    "ambient_pressure": 101325.0,
-}
 READ_ONLY = ("initial_inlet_flow",)   # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50    # a tick integrates at most this many tick periods of lag
 LATE_FRACTION = 0.5            # a tick is late if it starts this fraction of a period after its slot
-STATE_QUEUE_DEPTH = 100        # 0.1 s of 1 kHz state messages
+STATE_QUEUE_DEPTH = 1000       # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {**SPECS, **SETTING_SPECS, PRESET_PRESSURE.name: PRESET_PRESSURE}   # all double parameters
-
-
-def stamp(time_ns):
-    """builtin_interfaces/Time of a time in integer nanoseconds."""
-    return Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
 
 
 class ReliefValveNode(Node):
@@ -100,7 +85,7 @@ class ReliefValveNode(Node):
     def _declare_parameters(self):
         """Declare all parameters, defaults from config/reference.yaml; returns (params, settings)."""
         reference, reference_settings = load_parameters()
-        defaults = {**reference, **DEFAULT_SETTINGS, **reference_settings}
+        defaults = {**reference, **reference_settings}
         values = {spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
                   for spec in PARAMETERS + SETTINGS}
         params = validate({name: values[name] for name in SPECS})
@@ -265,35 +250,17 @@ class ReliefValveNode(Node):
     # --- inputs and outputs -----------------------------------------------------------------
 
     def _create_outputs(self):
-        """Publishers and the messages they reuse every tick."""
-        self._pressures = []
-        for name in STATE_NAMES[P_S:P_C + 1]:
-            message = FluidPressure(variance=0.0)
-            message.header.frame_id = name
-            self._pressures.append((message, self.create_publisher(FluidPressure, name, STATE_QUEUE_DEPTH)))
-        self._joints = JointState(name=["main_valve", "pilot_poppet"])
-        self._joints.header.frame_id = "joint_states"
-        self._joints_publisher = self.create_publisher(JointState, "joint_states", STATE_QUEUE_DEPTH)
-        self._applied = JointState(name=["inlet_flow"])
-        self._applied.header.frame_id = "applied_inlet_flow"
-        self._applied_publisher = self.create_publisher(JointState, "applied_inlet_flow", STATE_QUEUE_DEPTH)
+        """Publishers of the tick topics and the messages they reuse every tick."""
+        self._tick_messages = TickMessages()
+        self._tick_publishers = {topic: self.create_publisher(message_class(TOPIC_TYPES[topic]), topic,
+                                                              STATE_QUEUE_DEPTH) for topic in TICK_TOPICS}
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
-        state, header_stamp = self.model.state, stamp(self.model.time_ns)
-        ambient = self.settings["ambient_pressure"]
-        for index, (message, publisher) in enumerate(self._pressures):
-            message.header.stamp = header_stamp
-            message.fluid_pressure = float(state[index]) + ambient
-            publisher.publish(message)
-        self._joints.header.stamp = header_stamp
-        self._joints.position = [float(state[X]), float(state[Y])]
-        self._joints.velocity = [float(state[X_DOT]), float(state[Y_DOT])]
-        self._joints_publisher.publish(self._joints)
-        self._applied.header.stamp = header_stamp
-        self._applied.velocity = [self.applied_flow]
-        self._applied_publisher.publish(self._applied)
+        for topic, message in self._tick_messages.fill(self.model.time_ns, self.model.state, self.applied_flow,
+                                                       self.settings["ambient_pressure"]):
+            self._tick_publishers[topic].publish(message)
 
     def _on_inlet_flow(self, message):
         """Take a finite, non-negative inlet flow [m^3/s]; reject and count anything else."""

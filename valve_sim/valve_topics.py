@@ -34,22 +34,37 @@ def message_class(type_name):
     return getattr(importlib.import_module(f"{package}.{namespace}"), name)
 
 
-def tick_messages(time_ns, state, applied_flow, ambient_pressure):
-    """[(topic, message)] of one valve_node tick: state (8 model states, SI, gauge) at time_ns [ns]."""
-    messages = []
-    for index, name in enumerate(PRESSURE_TOPICS):
-        message = FluidPressure(fluid_pressure=float(state[index]) + ambient_pressure, variance=0.0)
-        message.header.frame_id = name
-        messages.append((name, message))
-    joints = JointState(name=["main_valve", "pilot_poppet"], position=[float(state[X]), float(state[Y])],
-                        velocity=[float(state[X_DOT]), float(state[Y_DOT])])
-    joints.header.frame_id = "joint_states"
-    applied = JointState(name=["inlet_flow"], velocity=[float(applied_flow)])
-    applied.header.frame_id = "applied_inlet_flow"
-    messages += [("joint_states", joints), ("applied_inlet_flow", applied)]
-    for _, message in messages:
-        message.header.stamp.sec, message.header.stamp.nanosec = divmod(time_ns, NS_PER_S)
-    return messages
+class TickMessages:
+    """The messages of one valve_node tick, allocated once and refilled every tick.
+
+    fill() writes the state (8 model states, SI, gauge pressures) at time_ns [ns]
+    into them and returns [(topic, message)]. valve_node publishes these; the
+    offline bag writer and the replay publisher write them: one layout for all.
+    """
+
+    def __init__(self):
+        self._messages = []
+        for name in PRESSURE_TOPICS:
+            message = FluidPressure(variance=0.0)
+            message.header.frame_id = name
+            self._messages.append((name, message))
+        self._joints = JointState(name=["main_valve", "pilot_poppet"])
+        self._joints.header.frame_id = "joint_states"
+        self._applied = JointState(name=["inlet_flow"])
+        self._applied.header.frame_id = "applied_inlet_flow"
+        self._messages += [("joint_states", self._joints), ("applied_inlet_flow", self._applied)]
+
+    def fill(self, time_ns, state, applied_flow, ambient_pressure):
+        """The tick's [(topic, message)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
+        for index in range(len(PRESSURE_TOPICS)):
+            self._messages[index][1].fluid_pressure = float(state[index]) + ambient_pressure
+        self._joints.position = [float(state[X]), float(state[Y])]
+        self._joints.velocity = [float(state[X_DOT]), float(state[Y_DOT])]
+        self._applied.velocity = [float(applied_flow)]
+        sec, nanosec = divmod(time_ns, NS_PER_S)
+        for _, message in self._messages:
+            message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
+        return self._messages
 
 
 def write_simulation_bag(path, waveforms, ambient_pressure=101325.0, publish_interval=1e-3, start_time_ns=0):
@@ -68,6 +83,7 @@ def write_simulation_bag(path, waveforms, ambient_pressure=101325.0, publish_int
         raise ParameterError(f"publish interval {publish_interval:g} s is not a whole multiple of the "
                              f"waveforms' sample interval {record_interval:g} s")
     bag = BagWriter(path)
+    tick = TickMessages()
     try:
         for topic, type_name in TOPIC_TYPES.items():
             bag.add_topic("/" + topic, type_name)
@@ -80,7 +96,7 @@ def write_simulation_bag(path, waveforms, ambient_pressure=101325.0, publish_int
                 command_ns = time_ns if previous is None else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
                 bag.write_message("/inlet_flow", Float64(data=flow), command_ns, command_ns)
                 commanded = flow
-            for topic, message in tick_messages(time_ns, waveforms.states[index], flow, ambient_pressure):
+            for topic, message in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
                 bag.write_message("/" + topic, message, time_ns, time_ns)
         return len(indices)
     finally:
