@@ -7,3 +7,25 @@ import random
 os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+import pytest  # noqa: E402  (after the environment is set)
+
+
+@pytest.fixture(scope="module")
+def context():
+    """An rclpy context of its own for a test module (nodes in the test process)."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield context
+    context.try_shutdown()
+
+
+@pytest.fixture(scope="session")
+def reference():
+    """The validated parameters of config/reference.yaml."""
+    from valve_sim.parameters import load_parameters
+
+    return load_parameters()[0]

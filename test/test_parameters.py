@@ -9,11 +9,6 @@ from valve_sim.parameters import (
     SPECS, ParameterError, config_path, load_parameters, read_parameter_file, resolve_name, scaled, validate)
 
 
-@pytest.fixture(scope="module")
-def reference():
-    return load_parameters()[0]
-
-
 def test_reference_file_holds_every_parameter_and_the_step_size():
     raw = read_parameter_file(config_path("reference.yaml"))
     assert set(SPECS) <= set(raw)

@@ -6,25 +6,12 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from valve_sim.parameters import SPECS, ParameterError, load_parameters
+from valve_sim.parameters import SPECS, ParameterError
 from valve_sim.ros_parameters import declare_double, descriptor, integers_as_doubles, value_problem
 from valve_sim.steady_state import cracking_pressure
 from valve_sim.retuning import check_preset, dependent_change
 
 MASS = SPECS["main_valve_mass"]
-
-
-@pytest.fixture(scope="module")
-def context():
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    context.try_shutdown()
-
-
-@pytest.fixture(scope="module")
-def reference():
-    return load_parameters()[0]
 
 
 def node_with(context, **overrides):

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
 
 from valve_harness import PRESSURE_TOPICS, Probe, start_node, stop_node
 from valve_sim.measures import MEASURE_NAMES, detect_steps, step_measures
@@ -30,19 +29,6 @@ PERIOD_NS = 1_000_000         # 1 kHz
 WINDOW_NS = 1_000_000_000     # measures need 1 s after the step
 SIM_NAMESPACE = "/sim"        # the simulated-time node; the wall-clock one runs in /
 RETUNABLE_SETTINGS = ("step_size", "publish_rate", "input_timeout", "ambient_pressure")
-
-
-@pytest.fixture(scope="module")
-def context():
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    context.try_shutdown()
-
-
-@pytest.fixture(scope="module")
-def reference():
-    return load_parameters()[0]
 
 
 @pytest.fixture(scope="module")
