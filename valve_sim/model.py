@@ -33,8 +33,6 @@ STATE_NAMES = (
     "main_valve_displacement", "main_valve_velocity", "poppet_displacement", "poppet_velocity",
 )
 P_S, P_M, P_P, P_C, X, X_DOT, Y, Y_DOT = range(8)
-PRESSURES = slice(P_S, P_C + 1)
-FLOW_NAMES = ("q_m1", "q_m2", "q_n", "q_c", "q_s", "q_p")
 
 # Derived constants of Eqs. (5), (8), (9), (16), in the form the kernels use.
 Coefficients = namedtuple("Coefficients", (

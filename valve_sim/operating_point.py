@@ -17,9 +17,9 @@ def add_arguments(parser):
 
 def report(params, inlet_flow):
     c = coefficients(params)
-    p_s, p_m, p_p, p_c, x, _, y, _ = steady_state(params, inlet_flow)
-    q_m1, q_m2, q_n, q_c, q_s, q_p = (q / LITRE_PER_MINUTE for q in flows(
-        steady_state(params, inlet_flow), c))
+    state = steady_state(params, inlet_flow)
+    p_s, p_m, p_p, p_c, x, _, y, _ = state
+    _, q_m2, _, q_c, q_s, q_p = (q / LITRE_PER_MINUTE for q in flows(state, c))
     print(f"inlet flow {inlet_flow / LITRE_PER_MINUTE:.3f} L/min ({inlet_flow:.4e} m^3/s)")
     print(f"  pressures [MPa]  p_s {p_s / 1e6:.4f}  p_m {p_m / 1e6:.4f}  p_p {p_p / 1e6:.4f}  p_c {p_c / 1e6:.4f}")
     print(f"  openings [um]    x {x * 1e6:.2f}  (first throttle x + h = {(x + c.first_throttle_clearance) * 1e6:.2f})"

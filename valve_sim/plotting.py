@@ -6,6 +6,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
+import numpy as np  # noqa: E402
 
 from valve_sim.measures import MEASURE_NAMES  # noqa: E402
 
@@ -34,8 +35,6 @@ def plot_step_response(path, time, supply_pressure, main_valve_displacement, pop
     time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
     StepMeasures.as_dict() to print beside the curves (optional).
     """
-    import numpy as np
-
     time = np.asarray(time, dtype=float)
     before = int(np.searchsorted(time, t_step, side="right")) - 1
     before = max(before, 0)

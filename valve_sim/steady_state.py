@@ -15,6 +15,7 @@ from scipy.optimize import root
 
 from valve_sim.integrator import IntegrationError, advance
 from valve_sim.model import P_C, P_M, P_P, P_S, X, Y, coefficients, derivatives, flows, net_forces
+from valve_sim.parameters import SPECS, ParameterError, validate
 
 PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5   # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
 PSEUDO_TRANSIENT_TIME = 0.3             # [s]
@@ -154,11 +155,6 @@ def steady_state(params, inlet_flow):
     return state
 
 
-def steady_flows(params, state):
-    """Flows (q_m1, q_m2, q_n, q_c, q_s, q_p) [m^3/s] at a state, for reports and tests."""
-    return flows(np.asarray(state, dtype=float), coefficients(params))
-
-
 def cracking_pressure(params):
     """Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
 
@@ -197,8 +193,6 @@ def preload_for_cracking_pressure(params, pressure):
     secant steps from that estimate converge; raises ParameterError if the preload
     would leave its limits.
     """
-    from valve_sim.parameters import SPECS, ParameterError, validate
-
     spec = SPECS["pilot_spring_preload"]
     trial = dict(params)
 
