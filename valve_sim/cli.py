@@ -6,6 +6,7 @@ project's errors into one clear line on stderr and exit code 1.
 """
 import argparse
 import importlib
+import os
 import sys
 
 SUBCOMMANDS = {
@@ -34,6 +35,9 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
+    except BrokenPipeError:   # the reader went away (e.g. `| head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except USER_ERRORS as error:
         print(f"valve-sim {args.command}: error: {error}", file=sys.stderr)
         return 1
