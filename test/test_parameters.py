@@ -6,7 +6,7 @@ import pytest
 from valve_sim.bearing import reference_bearing_fit
 from valve_sim.paper import TABLE2_CHANGES
 from valve_sim.parameters import (
-    SPECS, ParameterError, config_path, load_parameters, read_parameter_file, resolve_name, scaled, validate)
+    SPECS, STANDARD_ATMOSPHERE, ParameterError, config_path, load_parameters, read_parameter_file, resolve_name, scaled, validate)
 
 
 def test_reference_file_holds_every_parameter_and_the_step_size():
@@ -14,6 +14,7 @@ def test_reference_file_holds_every_parameter_and_the_step_size():
     assert set(SPECS) <= set(raw)
     params, settings = load_parameters()
     assert settings["step_size"] == 1e-5
+    assert settings["ambient_pressure"] == STANDARD_ATMOSPHERE   # the default of every wire reader and writer
     assert all(isinstance(value, float) for value in params.values())
 
 

@@ -28,9 +28,10 @@ from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from valve_sim.valve_topics import PRESSURE_TOPICS
+
 REPO = Path(__file__).resolve().parent.parent
 NODE_NAME = "relief_valve"
-PRESSURE_TOPICS = ("supply_pressure", "intermediate_pressure", "pilot_pressure", "poppet_chamber_pressure")
 TIMEOUT = 60.0   # [s] for anything that waits: start-up, discovery, a service answer
 
 

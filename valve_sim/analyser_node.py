@@ -49,7 +49,7 @@ from rclpy.signals import SignalHandlerOptions
 from valve_sim.bag import BagWriter
 from valve_sim.errors import InputFileError
 from valve_sim.measures import MEASURE_NAMES
-from valve_sim.parameters import SETTING_SPECS, ParameterError, ParameterSpec
+from valve_sim.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE, ParameterError, ParameterSpec
 from valve_sim.ros_parameters import declare_double
 from valve_sim.signals import REQUIRED, ROLE, Extractor, Joiner, SignalMap
 from valve_sim.step_analysis import MeasuresFile, StepAnalysis
@@ -180,7 +180,7 @@ class ValveAnalyser(Node):
             "output_dir": declare("output_dir", ".", "folder of the recordings (created if missing)"),
             "queue_depth": declare("queue_depth", 1000, "reliable subscription queue per topic [messages]",
                                    integer_range=[IntegerRange(from_value=10, to_value=1_000_000, step=1)]),
-            "ambient_pressure": declare_double(self, SETTING_SPECS["ambient_pressure"], 101325.0, read_only=True),
+            "ambient_pressure": declare_double(self, SETTING_SPECS["ambient_pressure"], STANDARD_ATMOSPHERE, read_only=True),
         }
         for spec in DOUBLE_PARAMETERS:
             settings[spec.name] = declare_double(self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True)

@@ -14,6 +14,7 @@ import numpy as np
 
 from valve_sim.bag import BagReader
 from valve_sim.errors import InputFileError
+from valve_sim.parameters import STANDARD_ATMOSPHERE
 from valve_sim.measures import MEASURE_NAMES, WINDOW, StepMeasures, step_measures
 from valve_sim.signals import CLOCKS, REQUIRED, ROLES, Extractor, Joiner, SignalMap, seconds
 from valve_sim.step_analysis import StepAnalysis, step_record
@@ -130,9 +131,9 @@ def add_arguments(parser):
         if role.joint:
             parser.add_argument(f"--joint-{option}", metavar="NAME", default=role.joint,
                                 help=f"JointState joint name of the {role.meaning} (default {role.joint})")
-    parser.add_argument("--ambient-pressure", type=float, default=101325.0, metavar="PA",
+    parser.add_argument("--ambient-pressure", type=float, default=STANDARD_ATMOSPHERE, metavar="PA",
                         help="subtracted from the recorded pressure to get gauge pressure; 0 for a gauge sensor "
-                             "(default 101325)")
+                             f"(default {STANDARD_ATMOSPHERE:g})")
     parser.add_argument("--clock", choices=CLOCKS, default="header",
                         help="time of a sample: its header stamp, or its receive time (needed for Float64 topics)")
     parser.add_argument("--step-threshold", type=float, default=1e-6, metavar="Q",

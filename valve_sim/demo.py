@@ -18,10 +18,10 @@ import time
 from pathlib import Path
 
 from valve_sim.measures import MEASURE_NAMES
-from valve_sim.simulation import LITRE_PER_MINUTE
+from valve_sim.paper import REFERENCE_SCENARIO
 
-INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE    # [m^3/s]
-FINAL_FLOW = 20.0 * LITRE_PER_MINUTE     # [m^3/s]
+INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow   # [m^3/s] 5 L/min
+FINAL_FLOW = REFERENCE_SCENARIO.final_flow       # [m^3/s] 20 L/min
 HOLD_TIME = 1.0             # [s] at the initial flow, once everything is recorded
 AFTER_MEASURES = 0.2        # [s] still recorded after the measures arrived
 COMMAND_PERIOD = 0.02       # [s] inlet_flow is published at 50 Hz (valve_node's input timeout is 1 s)

@@ -91,6 +91,10 @@ PARAMETERS = (
     ParameterSpec("orifice_transition_pressure", "dp_tr", "Pa", 1.0, 1e6, "pressure drop below which orifice laws turn linear (closed-valve start under fixed-step RK4)", OURS),
 )
 
+# [Pa] the tank's absolute pressure by default: the ambient_pressure of config/reference.yaml,
+# and the default of every reader and writer of absolute pressures on the wire.
+STANDARD_ATMOSPHERE = 101325.0
+
 # Run-time settings that share the parameter files with the model parameters.
 SETTINGS = (
     ParameterSpec("step_size", "dt", "s", 1e-7, 1e-4, "fixed RK4 integration step (the paper's is 10 us)", "paper, Method for Simulation"),

@@ -10,6 +10,7 @@ before publish() makes sure that nothing published is lost to discovery.
 """
 import time
 
+from valve_sim.parameters import STANDARD_ATMOSPHERE
 from valve_sim.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
@@ -18,7 +19,7 @@ QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
 class Replay:
     """valve_node's tick publishers on a given rclpy node."""
 
-    def __init__(self, node, ambient_pressure=101325.0):
+    def __init__(self, node, ambient_pressure=STANDARD_ATMOSPHERE):
         self.node, self.ambient_pressure = node, ambient_pressure
         self.publishers = {topic: node.create_publisher(message_class(TOPIC_TYPES[topic]), topic, QUEUE_DEPTH)
                            for topic in TICK_TOPICS}

@@ -24,6 +24,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from valve_sim.errors import InputFileError
+from valve_sim.parameters import STANDARD_ATMOSPHERE
 
 FLUID_PRESSURE = "sensor_msgs/msg/FluidPressure"
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -60,7 +61,7 @@ class SignalMap:
 
     topics: dict = field(default_factory=lambda: {role.name: "/" + role.topic for role in ROLES})
     joints: dict = field(default_factory=lambda: {role.name: role.joint for role in ROLES if role.joint})
-    ambient_pressure: float = 101325.0
+    ambient_pressure: float = STANDARD_ATMOSPHERE
     clock: str = "header"
 
     def roles_of(self, topic):

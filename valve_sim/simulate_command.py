@@ -54,12 +54,13 @@ def add_parameter_arguments(parser):
 
 
 def load_from_arguments(args):
-    """(params, step_size) from --params, --set and --step-size."""
+    """(params, settings) from --params, --set and --step-size (which overrides settings["step_size"])."""
     params, settings = load_parameters(args.params, dict(args.set))
-    step_size = args.step_size if getattr(args, "step_size", None) else settings.get("step_size", 1e-5)
-    if not 1e-7 <= step_size <= 1e-4:
-        raise ParameterError(f"step size {step_size:g} s is outside [1e-07, 0.0001] s")
-    return params, step_size
+    if getattr(args, "step_size", None):
+        settings["step_size"] = args.step_size
+    if not 1e-7 <= settings["step_size"] <= 1e-4:
+        raise ParameterError(f"step size {settings['step_size']:g} s is outside [1e-07, 0.0001] s")
+    return params, settings
 
 
 def add_arguments(parser):
@@ -82,7 +83,7 @@ def add_arguments(parser):
     parser.add_argument("--plot", metavar="FILE.png", help="draw the paper's Figure 5")
     parser.add_argument("--mcap", metavar="FILE.mcap",
                         help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
-                             "(1 kHz ticks, absolute pressures with 101325 Pa ambient)")
+                             "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)")
 
 
 def _scenario(args):
@@ -113,7 +114,8 @@ def print_table(measures):
 
 
 def run(args):
-    params, step_size = load_from_arguments(args)
+    params, settings = load_from_arguments(args)
+    step_size = settings["step_size"]
     scenario = _scenario(args)
     if args.record_interval < step_size:
         raise ParameterError(f"--record-interval must be >= the step size ({step_size:g} s)")
@@ -135,7 +137,7 @@ def run(args):
         # valve_node's 1 kHz ticks where the samples allow it, else every sample.
         ratio = 1e-3 / args.record_interval
         interval = 1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
-        write_simulation_bag(args.mcap, waveforms, publish_interval=interval)
+        write_simulation_bag(args.mcap, waveforms, settings["ambient_pressure"], publish_interval=interval)
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:

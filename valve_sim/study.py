@@ -109,7 +109,8 @@ def write_figures(out, results):
 
 
 def run(args):
-    params, step_size = load_from_arguments(args)
+    params, settings = load_from_arguments(args)
+    step_size = settings["step_size"]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"parameter study: {len(study_cases())} runs on {args.jobs} processes", file=sys.stderr)

@@ -15,7 +15,7 @@ from std_msgs.msg import Float64
 
 from valve_sim.bag import BagWriter
 from valve_sim.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
-from valve_sim.parameters import ParameterError
+from valve_sim.parameters import STANDARD_ATMOSPHERE, ParameterError
 
 PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
 TICK_TOPICS = PRESSURE_TOPICS + ("joint_states", "applied_inlet_flow")
@@ -67,7 +67,7 @@ class TickMessages:
         return self._messages
 
 
-def write_simulation_bag(path, waveforms, ambient_pressure=101325.0, publish_interval=1e-3, start_time_ns=0):
+def write_simulation_bag(path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0):
     """Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
 
     waveforms: simulation.Waveforms; every sample publish_interval [s] apart (a
