@@ -307,13 +307,16 @@ class ValveAnalyser(Node):
 def record(stop):
     """Run a ValveAnalyser until the event stop is set, then close its recording."""
     node = ValveAnalyser()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
         node.close()
     finally:
+        # As rclpy.spin() does: the executor lets go of the node before it is destroyed.
+        executor.remove_node(node)
+        executor.shutdown()
         node.destroy_node()
 
 
