@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Benchmark valve_node at 1 kHz with 10 us steps (issue 3).
 
-    python bench/bench_node.py [--duration 60] [--json out/bench_node.json] [--rt-priority 50]
+    python bench/bench_node.py [--duration 60] [--json out/bench_node.json]
+                               [--executor {events,single-threaded}] [--rt-priority 50]
 
 Starts valve_node and a bare rclpy echo node, each in its own process, on a
 private ROS domain (localhost only), and measures from this process:
@@ -9,21 +10,27 @@ private ROS domain (localhost only), and measures from this process:
 - on-time ticks: (ticks - late) / (ticks + missed), from the node's diagnostics
   (late: started more than half a period after its timer slot; missed: a slot
   without a tick), and the looser share of slots that got a tick at all;
-- tick compute time: p50 and p99 of each 1-s diagnostics window; the worst
-  window's p99 bounds the p99 of the whole run from above;
+- tick compute time: p50 and p99 of each 1-s diagnostics window, and the
+  share of ticks that computed for more than half a period (the node's
+  long_ticks): the whole run's p99 is at most 0.5 ms exactly when that share is
+  at most 1 %;
 - latency: from publishing an inlet_flow (a value never sent before) to receiving
   the first supply_pressure message of the tick that applied it (the tick is
   found on applied_inlet_flow by its value and stamp); floor: the round trip
   of a Float64 through the bare echo node, measured in the same run;
-- the node's resident memory (psutil) after 10 s and at the end.
+- the node's resident memory (psutil) after 10 s and at the end;
+- the CPU time of the node, the echo and this process over the measured span;
+- the timer floor: a bare Python loop sleeping to 1 kHz slots in its own process,
+  counted as the node counts its ticks, in the same run (what the OS scheduler
+  alone allows).
 
 Prints a table and writes the figures as JSON. Targets (issue 3): on-time
 >= 99.9 %, compute p99 <= 0.5 ms, latency p99 <= 3 ms, memory growth a few MB.
---rt-priority P runs valve_node and the echo node under SCHED_FIFO priority P
-and this measuring process at P - 1 (needs the privilege), as a test rig would
-run its nodes. The load
-average at start and end is reported: other work on the machine shows in every
-figure here.
+--executor picks the rclpy executor of all three processes (valve_node's
+--executor). --rt-priority P runs valve_node and the echo node under SCHED_FIFO
+priority P and this measuring process at P - 1 (needs the privilege), as a test
+rig would run its nodes. The load average at start and end is reported: other
+work on the machine shows in every figure here.
 """
 import argparse
 import json
@@ -38,27 +45,58 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 FLOW = 5.0e-3 / 60.0          # [m^3/s] 5 L/min
 FLOW_INCREMENT = 1e-12        # [m^3/s] makes every probe value unique, negligible for the valve
-PROBE_PERIOD = 0.01           # [s] an inlet probe and an echo probe alternate: 50 Hz each
+PROBE_PERIOD = 0.01037        # [s] inlet and echo probes alternate; not a multiple of the tick period,
+                              # so the probes fall on every phase of the tick
 WARM_UP = 3.0                 # [s] discovery and first ticks, not measured
 MEMORY_EARLY = 10.0           # [s] first resident-memory reading
-STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec) in little-endian CDR
+PERIOD_NS = 1_000_000         # [ns] the tick period at 1 kHz
+STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec) in little-endian CDR, after the 4-byte CDR header
+APPLIED_FLOW = struct.Struct("<d")   # applied_inlet_flow's velocity[0] ...
+APPLIED_FLOW_FROM_END = 12           # ... ends where the empty effort sequence (a uint32 count 0) begins
 
 
-def run_echo():
-    """The floor: a bare rclpy node that republishes echo_in on echo_out."""
+def run_echo(executor):
+    """The floor: a bare rclpy node that republishes echo_in on echo_out, on the valve's executor kind."""
     import rclpy
     from std_msgs.msg import Float64
 
-    rclpy.init()
+    from valve_sim import spinning
+
+    stop = spinning.init()
     node = rclpy.create_node("echo")
     publisher = node.create_publisher(Float64, "echo_out", 10)
     node.create_subscription(Float64, "echo_in", publisher.publish, 10)
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spinning.spin_until(node, spinning.EXECUTORS[executor](), stop)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def run_timer_floor(path):
+    """The timer floor: a bare Python loop sleeping to 1 kHz slots, counted as valve_node counts its ticks.
+
+    Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
+    A tick is late if it starts more than LATE_FRACTION of a period after its slot;
+    slots that passed while it was late are missed (the loop goes on at the next slot).
+    """
+    import signal
+
+    from valve_sim.node_status import LATE_FRACTION
+
+    stop = []
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: stop.append(number))
+    counts = {"ticks": 0, "late": 0, "missed": 0}
+    slot = time.monotonic_ns() + PERIOD_NS
+    while not stop:
+        delay = slot - time.monotonic_ns()
+        if delay > 0:
+            time.sleep(delay / 1e9)
+        lateness = time.monotonic_ns() - slot
+        counts["ticks"] += 1
+        counts["late"] += lateness > LATE_FRACTION * PERIOD_NS
+        counts["missed"] += lateness // PERIOD_NS
+        slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
+    Path(path).write_text(json.dumps(counts))
 
 
 class Bench:
@@ -81,8 +119,8 @@ class Bench:
         self.diagnostics = []     # (receive time [s], {key: value})
         self.probes = 0
         self.measuring = False
-        node.create_subscription(JointState, "applied_inlet_flow", self._on_applied, 1000)
-        # Raw CDR: only the stamp is needed, read straight from the bytes (less load on this process).
+        # Raw CDR: only a stamp and a value are needed, read straight from the bytes (less load on this process).
+        node.create_subscription(JointState, "applied_inlet_flow", self._on_applied, 1000, raw=True)
         node.create_subscription(FluidPressure, "supply_pressure", self._on_pressure, 1000, raw=True)
         node.create_subscription(Float64, "echo_out", self._on_echo, 100)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
@@ -100,10 +138,11 @@ class Bench:
             self.echo_sent[float(self.probes)] = time.monotonic_ns()
             self.echo.publish(self.Float64(data=float(self.probes)))
 
-    def _on_applied(self, message):
-        flow = message.velocity[0]
+    def _on_applied(self, data):
+        """The stamp of the tick that first applied a probe flow (velocity[0], before the empty effort)."""
+        flow, = APPLIED_FLOW.unpack_from(data, len(data) - APPLIED_FLOW_FROM_END)
         if flow in self.inlet_sent and flow not in self.applied:
-            self.applied[flow] = (message.header.stamp.sec, message.header.stamp.nanosec)
+            self.applied[flow] = STAMP.unpack_from(data, 4)
 
     def _on_pressure(self, data):
         """Receive time of a raw supply_pressure message, by its header stamp (after the CDR header)."""
@@ -142,7 +181,7 @@ def tick_figures(diagnostics):
 
     first, last = diagnostics[0][1], diagnostics[-1][1]
     counts = {key: int(last[key]) - int(first[key])
-              for key in ("ticks", "late_ticks", "missed_ticks", "skipped_ticks")}
+              for key in ("ticks", "late_ticks", "long_ticks", "missed_ticks", "skipped_ticks")}
     windows = [values for _, values in diagnostics[1:]]
     p50s = [float(w["tick_compute_p50_ms"]) for w in windows]
     p99s = [float(w["tick_compute_p99_ms"]) for w in windows]
@@ -150,6 +189,7 @@ def tick_figures(diagnostics):
     return {
         **counts,
         "on_time_percent": 100.0 * on_time / (counts["ticks"] + counts["missed_ticks"]),
+        "long_percent": 100.0 * counts["long_ticks"] / counts["ticks"],
         "slots_served_percent": 100.0 * counts["ticks"] / (counts["ticks"] + counts["missed_ticks"]),
         "compute_p50_ms": float(np.median(p50s)),
         "compute_p99_ms_median_window": float(np.median(p99s)),
@@ -175,53 +215,76 @@ def stop(process):
         return process.wait()
 
 
-def measure(duration, rt_priority, env):
+def cpu_seconds(processes):
+    """{name: user + system CPU time [s]} of psutil processes."""
+    return {name: sum(process.cpu_times()[:2]) for name, process in processes.items()}
+
+
+def measure(duration, rt_priority, executor, env):
     """Run the node, the echo and the probes for duration [s]; returns the figures."""
     import psutil
     import rclpy
+
+    from valve_sim.spinning import EXECUTORS
 
     scheduler = ["chrt", "--fifo", str(rt_priority)] if rt_priority else []
     if rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority - 1))
     load_at_start = os.getloadavg()
-    valve = start([*scheduler, sys.executable, "-m", "valve_sim.valve_node", "--ros-args",
+    valve = start([*scheduler, sys.executable, "-m", "valve_sim.valve_node", "--executor", executor, "--ros-args",
                    "-p", "publish_rate:=1000.0", "-p", "step_size:=1.0e-5", "-p", "input_timeout:=0.0"], env)
-    echo = start([*scheduler, sys.executable, __file__, "--echo"], env)
+    echo = start([*scheduler, sys.executable, __file__, "--echo", executor], env)
+    floor_file = REPO / "out" / f"timer_floor_{os.getpid()}.json"
+    floor_file.parent.mkdir(exist_ok=True)
+    timer_floor = start([*scheduler, sys.executable, __file__, "--timer-floor", str(floor_file)], env)
+    processes = {"valve_node": psutil.Process(valve.pid), "echo": psutil.Process(echo.pid), "bench": psutil.Process()}
     rclpy.init()
     node = rclpy.create_node("bench")
     bench = Bench(node)
+    spinner = EXECUTORS[executor]()   # this process is loaded least on the node's kind of executor
+    spinner.add_node(node)
     memory = {}
     try:
         started = time.monotonic()
         while time.monotonic() - started < WARM_UP or not bench.diagnostics:
-            rclpy.spin_once(node, timeout_sec=0.1)
+            spinner.spin_once(timeout_sec=0.1)
         bench.measuring = True
         bench.diagnostics = bench.diagnostics[-1:]
-        measured_from = time.monotonic()
+        measured_from, cpu_at_start = time.monotonic(), cpu_seconds(processes)
         while (elapsed := time.monotonic() - measured_from) < duration:
-            rclpy.spin_once(node, timeout_sec=0.1)
+            spinner.spin_once(timeout_sec=0.1)
             if "after_10s_mb" not in memory and elapsed >= min(MEMORY_EARLY, duration / 2):
-                memory["after_10s_mb"] = psutil.Process(valve.pid).memory_info().rss / 2**20
+                memory["after_10s_mb"] = processes["valve_node"].memory_info().rss / 2**20
                 memory["after_10s_at_s"] = round(elapsed, 1)
-        memory["at_end_mb"] = psutil.Process(valve.pid).memory_info().rss / 2**20
+        cpu_at_end = cpu_seconds(processes)
+        memory["at_end_mb"] = processes["valve_node"].memory_info().rss / 2**20
         memory["at_end_s"] = round(elapsed, 1)
         bench.measuring = False
         settle = time.monotonic()
         while time.monotonic() - settle < 1.5:   # the last answers and diagnostics
-            rclpy.spin_once(node, timeout_sec=0.1)
+            spinner.spin_once(timeout_sec=0.1)
     finally:
+        spinner.remove_node(node)
+        spinner.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-        exit_codes = {"valve_node": stop(valve), "echo": stop(echo)}
+        exit_codes = {"valve_node": stop(valve), "echo": stop(echo), "timer_floor": stop(timer_floor)}
+    floor = json.loads(floor_file.read_text())
+    floor_file.unlink()
     return {
         "duration_s": duration,
         "publish_rate_hz": 1000.0,
         "step_size_s": 1e-5,
+        "executor": executor,
         "ticks": tick_figures(bench.diagnostics),
+        "timer_floor_on_time_percent": 100.0 * (floor["ticks"] - floor["late"]) / (floor["ticks"] + floor["missed"]),
+        "timer_floor": floor,
         "latency": percentiles_ms(bench.latencies_ns()),
         "latency_probes_sent": len(bench.inlet_sent),
         "echo_round_trip": percentiles_ms(bench.echo_trips),
         "memory": {**memory, "growth_mb": memory["at_end_mb"] - memory["after_10s_mb"]},
+        "cpu_percent_of_one_core": {name: 100.0 * (cpu_at_end[name] - cpu_at_start[name]) / elapsed
+                                    for name in processes},
         "exit_codes": exit_codes,
         "scheduler": f"SCHED_FIFO {rt_priority}" if rt_priority else "normal",
         "cpus": os.cpu_count(),
@@ -232,16 +295,22 @@ def measure(duration, rt_priority, env):
 
 def table(figures):
     ticks, latency, echo, memory = figures["ticks"], figures["latency"], figures["echo_round_trip"], figures["memory"]
+    cpu = figures["cpu_percent_of_one_core"]
     rows = [
         ("on-time ticks", f"{ticks['on_time_percent']:.3f} %", ">= 99.9 %",
          f"{ticks['ticks']} ticks, {ticks['late_ticks']} late, {ticks['missed_ticks']} missed, "
          f"{ticks['skipped_ticks']} skipped"),
+        ("floor: bare sleep loop on time", f"{figures['timer_floor_on_time_percent']:.3f} %", "",
+         f"{figures['timer_floor']['ticks']} ticks, {figures['timer_floor']['late']} late, "
+         f"{figures['timer_floor']['missed']} missed (a Python loop sleeping to 1 kHz slots, same run)"),
         ("timer slots with a tick", f"{ticks['slots_served_percent']:.3f} %", "",
          "ticks started within a period of their slot, late or not"),
         ("tick compute p50", f"{ticks['compute_p50_ms']:.3f} ms", "", "median of 1-s windows"),
         ("tick compute p99", f"{ticks['compute_p99_ms_worst_window']:.3f} ms", "<= 0.5 ms",
          f"worst 1-s window (median window {ticks['compute_p99_ms_median_window']:.3f} ms); "
          f"max {ticks['compute_max_ms']:.2f} ms"),
+        ("ticks computing > 0.5 ms", f"{ticks['long_percent']:.3f} %", "<= 1 %",
+         f"{ticks['long_ticks']} of {ticks['ticks']}: the run's compute p99 is <= 0.5 ms iff this is <= 1 %"),
         ("latency inlet -> pressure p50", f"{latency.get('p50_ms', float('nan')):.3f} ms", "",
          f"{latency['count']} of {figures['latency_probes_sent']} probes"),
         ("latency inlet -> pressure p99", f"{latency.get('p99_ms', float('nan')):.3f} ms", "<= 3 ms",
@@ -252,10 +321,13 @@ def table(figures):
         (f"resident memory at {memory['after_10s_at_s']:g} s", f"{memory['after_10s_mb']:.1f} MB", "", ""),
         (f"resident memory at {memory['at_end_s']:g} s", f"{memory['at_end_mb']:.1f} MB",
          "growth: a few MB", f"growth {memory['growth_mb']:+.2f} MB"),
+        ("CPU valve_node", f"{cpu['valve_node']:.1f} %", "", "of one core, measured span"),
+        ("CPU echo / this process", f"{cpu['echo']:.1f} / {cpu['bench']:.1f} %", "", "of one core"),
     ]
     width = max(len(row[0]) for row in rows)
     lines = [f"valve_node benchmark: {figures['duration_s']:g} s at {figures['publish_rate_hz']:g} Hz, "
-             f"steps of {figures['step_size_s'] * 1e6:g} us, scheduler {figures['scheduler']}, "
+             f"steps of {figures['step_size_s'] * 1e6:g} us, executor {figures['executor']}, "
+             f"scheduler {figures['scheduler']}, "
              f"{figures['cpus']} CPUs, load average (1 min) {figures['load_average_at_start'][0]:.2f} at start, "
              f"{figures['load_average_at_end'][0]:.2f} at end",
              f"{'measure':<{width}}  {'value':>12}  {'target':<16}  notes"]
@@ -264,20 +336,27 @@ def table(figures):
 
 
 def main(argv=None):
+    from valve_sim.spinning import DEFAULT_EXECUTOR, EXECUTORS
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=60.0, help="measured time [s] (default 60)")
     parser.add_argument("--json", type=Path, default=REPO / "out" / "bench_node.json", help="JSON output file")
     parser.add_argument("--rt-priority", type=int, default=0,
                         help="run the nodes under SCHED_FIFO with this priority (this process one lower)")
-    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--executor", choices=EXECUTORS, default=DEFAULT_EXECUTOR,
+                        help=f"the executor of valve_node, the echo node and this process (default {DEFAULT_EXECUTOR})")
+    parser.add_argument("--echo", metavar="EXECUTOR", help=argparse.SUPPRESS)
+    parser.add_argument("--timer-floor", metavar="FILE", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.echo:
-        return run_echo()
+        return run_echo(args.echo)
+    if args.timer_floor:
+        return run_timer_floor(args.timer_floor)
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 101)),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     os.environ.update(env)
-    figures = measure(args.duration, args.rt_priority, env)
+    figures = measure(args.duration, args.rt_priority, args.executor, env)
     print(table(figures))
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(figures, indent=2, default=float) + "\n")

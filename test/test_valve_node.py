@@ -148,6 +148,14 @@ def test_publish_rate_change_recreates_the_timer(sim_valve):
     assert stamps == [changed_ns + 5 * tick * PERIOD_NS for tick in range(1, 5)]
 
 
+def test_diagnostics_go_on_while_the_clock_is_paused(sim_valve):
+    """Housekeeping runs after a tick; with /clock paused (no ticks) the 1 Hz report still comes."""
+    first = sim_valve.wait_for_diagnostics()
+    second = sim_valve.wait_for_diagnostics()
+    assert first["model_time_s"] == second["model_time_s"] == repr(sim_valve.clock_ns / 1e9)
+    assert int(second["ticks"]) == int(first["ticks"])
+
+
 def node_waveforms(probe, start_ns):
     """(t [s] from start, p_s [Pa gauge], x [m], t_step [s]) from what the node published."""
     pressure = dict(probe.pressures["supply_pressure"])
@@ -310,8 +318,8 @@ def test_diagnostics_report_health_and_stale_input(valve):
     assert valve.set_parameters(input_timeout=0.2)[0].successful
     stale = valve.wait_for_diagnostics(lambda d: d["input_stale"] == "true", "input reported stale")
     assert stale["level"] >= 1 and "stale" in stale["message"]
-    for key in ("real_time_factor", "ticks", "late_ticks", "missed_ticks", "skipped_ticks", "skipped_time_s",
-                "rejected_inputs", "rejected_parameter_changes", "integration_failures",
+    for key in ("real_time_factor", "ticks", "late_ticks", "long_ticks", "missed_ticks", "skipped_ticks",
+                "skipped_time_s", "rejected_inputs", "rejected_parameter_changes", "integration_failures",
                 "tick_compute_p50_ms", "tick_compute_p99_ms", "inlet_flow_m3_s", "model_time_s"):
         assert key in stale, key
     assert float(stale["inlet_flow_m3_s"]) == INITIAL_FLOW
@@ -325,3 +333,27 @@ def test_diagnostics_report_health_and_stale_input(valve):
         time.sleep(0.05)
     else:
         pytest.fail("input never reported fresh again")
+
+
+# --- the executor option ----------------------------------------------------------------------
+
+def test_runs_on_the_single_threaded_executor_too(context, tmp_path):
+    log = tmp_path / "valve_node.log"
+    process = start_node(log, "-r", "__ns:=/single", options=("--executor", "single-threaded"))
+    probe = Probe(context, "/single")
+    try:
+        probe.wait_until_connected()
+        probe.wait_for_new_samples(100)
+        assert probe.wait_for_diagnostics()["integration_failures"] == "0"
+    finally:
+        probe.close()
+        exit_code = stop_node(process)
+    assert exit_code == 0, log.read_text()
+    assert "executor: single-threaded" in log.read_text()
+
+
+def test_an_unknown_executor_is_a_usage_error(tmp_path):
+    log = tmp_path / "valve_node.log"
+    process = start_node(log, options=("--executor", "multi"))
+    assert process.wait(timeout=60) == 2
+    assert "invalid choice: 'multi'" in log.read_text()

@@ -35,12 +35,12 @@ NODE_NAME = "relief_valve"
 TIMEOUT = 60.0   # [s] for anything that waits: start-up, discovery, a service answer
 
 
-def start_node(log_path, *ros_args):
-    """valve_node in its own process (python -m valve_sim.valve_node --ros-args ...), output to log_path."""
+def start_node(log_path, *ros_args, options=()):
+    """valve_node in its own process (python -m valve_sim.valve_node *options --ros-args ...), output to log_path."""
     env = dict(os.environ, PYTHONUNBUFFERED="1",
                PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     with open(log_path, "w") as log:
-        return subprocess.Popen([sys.executable, "-m", "valve_sim.valve_node", "--ros-args", *ros_args],
+        return subprocess.Popen([sys.executable, "-m", "valve_sim.valve_node", *options, "--ros-args", *ros_args],
                                 stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
 
 

@@ -28,9 +28,7 @@ operating system, so a hard kill loses at most that much. SIGINT and SIGTERM
 end the spin; the node then takes what is still queued, measures (and
 publishes) the open steps on what it has, and closes the file.
 """
-import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,8 +42,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from rclpy.signals import SignalHandlerOptions
 
+from valve_sim import spinning
 from valve_sim.bag import BagWriter
 from valve_sim.errors import InputFileError
 from valve_sim.measures import MEASURE_NAMES
@@ -307,29 +305,20 @@ class ValveAnalyser(Node):
 def record(stop):
     """Run a ValveAnalyser until the event stop is set, then close its recording."""
     node = ValveAnalyser()
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
     try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
+        spinning.spin_until(node, SingleThreadedExecutor(), stop)
         node.close()
     finally:
-        # As rclpy.spin() does: the executor lets go of the node before it is destroyed.
-        executor.remove_node(node)
-        executor.shutdown()
         node.destroy_node()
 
 
 def main(args=None):
     """Run analyser_node until SIGINT or SIGTERM; returns the exit code.
 
-    The signals only set a flag that ends the spin loop, so the node closes its
-    file with the middleware still up (the last measures are still published).
+    The node closes its file with the middleware still up, so the last
+    measures are still published.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: stop.set())
+    stop = spinning.init(args)
     try:
         record(stop)
     except (InputFileError, ParameterError, ParameterException, OSError) as error:

@@ -10,16 +10,19 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 NS_PER_S = 1e9
+LATE_FRACTION = 0.5   # a tick is late if it starts, long if it computes, more than this fraction of a period
 
 
 @dataclass
 class Counters:
     """Events since node start. A late tick ran more than half a period after it was due;
-    a missed tick never ran (its time was integrated by the next one); skipped time was
-    not integrated at all because the lag exceeded the catch-up limit."""
+    a long tick computed for more than half a period; a missed tick never ran (its time
+    was integrated by the next one); skipped time was not integrated at all because
+    the lag exceeded the catch-up limit."""
 
     ticks: int = 0
     late_ticks: int = 0
+    long_ticks: int = 0
     missed_ticks: int = 0
     skipped_ticks: int = 0
     skipped_time_s: float = 0.0
@@ -47,9 +50,10 @@ class NodeStatus:
         self._durations_ns = []
         self._window = (steady_now_ns, None)   # (steady time, model time) at the last report
 
-    def tick_done(self, compute_ns):
-        """Count a tick that took compute_ns [ns] of wall time."""
+    def tick_done(self, compute_ns, period_ns):
+        """Count a tick that took compute_ns [ns] of wall time, at a tick period of period_ns [ns]."""
         self.counters.ticks += 1
+        self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
     def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings):

@@ -42,7 +42,7 @@ class Replay:
             if delay > 0.0:
                 time.sleep(delay)
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
-            for topic, message in messages.fill(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
-                                                self.ambient_pressure):
-                self.publishers[topic].publish(message)
+            for topic, data in messages.fill(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
+                                             self.ambient_pressure):
+                self.publishers[topic].publish(data)
                 self.published[topic] += 1

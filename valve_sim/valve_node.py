@@ -18,9 +18,9 @@ The model itself (valve_sim.realtime_model) has no ROS in it; this module only
 adapts it: parameters, topics, the tick timer and the reset service.
 See docs/valve_node.md for the behaviour in detail.
 """
+import argparse
 import gc
 import math
-import signal
 import sys
 import time
 
@@ -31,24 +31,26 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from valve_sim import spinning
 from valve_sim.integrator import IntegrationError
 from valve_sim.model import P_S
-from valve_sim.node_status import InputReport, NodeStatus
+from valve_sim.node_status import LATE_FRACTION, InputReport, NodeStatus
 from valve_sim.parameters import (
     NODE_NAME, PARAMETERS, SETTING_SPECS, SETTINGS, SPECS, ParameterError, check_value, load_parameters, validate)
 from valve_sim.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
 from valve_sim.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
 from valve_sim.ros_parameters import declare_double, integers_as_doubles, value_problem
+from valve_sim.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
 from valve_sim.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 READ_ONLY = ("initial_inlet_flow",)   # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50    # a tick integrates at most this many tick periods of lag
-LATE_FRACTION = 0.5            # a tick is late if it starts this fraction of a period after its slot
+YOUNG_GENERATIONS = 1          # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
 STATE_QUEUE_DEPTH = 1000       # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {**SPECS, **SETTING_SPECS, PRESET_PRESSURE.name: PRESET_PRESSURE}   # all double parameters
@@ -71,7 +73,9 @@ class ReliefValveNode(Node):
         self._create_outputs()
         self.create_subscription(Float64, "inlet_flow", self._on_inlet_flow, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._housekeeping_due = False
+        self._ticks_at_housekeeping = 0
+        self.create_timer(1.0, self._on_housekeeping_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._tick_timer = self._create_tick_timer()
         self.add_pre_set_parameters_callback(self._complete_parameter_change)
         self.add_on_set_parameters_callback(self._check_parameter_change)
@@ -199,7 +203,9 @@ class ReliefValveNode(Node):
             self._count_lateness(now_ns)
             if self._advance(now_ns):
                 self._publish_state()
-        self.status.tick_done(time.perf_counter_ns() - started)
+        self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
+        if self._housekeeping_due:
+            self._housekeeping()
 
     def _start(self, now_ns):
         """Anchor the model time to the clock: at the first tick, or when the clock jumped back."""
@@ -258,9 +264,9 @@ class ReliefValveNode(Node):
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
-        for topic, message in self._tick_messages.fill(self.model.time_ns, self.model.state, self.applied_flow,
-                                                       self.settings["ambient_pressure"]):
-            self._tick_publishers[topic].publish(message)
+        for topic, data in self._tick_messages.fill(self.model.time_ns, self.model.state, self.applied_flow,
+                                                    self.settings["ambient_pressure"]):
+            self._tick_publishers[topic].publish(data)
 
     def _on_inlet_flow(self, message):
         """Take a finite, non-negative inlet flow [m^3/s]; reject and count anything else."""
@@ -288,6 +294,26 @@ class ReliefValveNode(Node):
         self.get_logger().info(response.message)
         return response
 
+    def _on_housekeeping_timer(self):
+        """1 Hz: housekeeping runs right after the next tick, in the slack before the one after.
+
+        Run from this timer's callback it could delay a tick: it takes up to about a
+        millisecond. Without ticks (none since the last housekeeping, or none for a
+        second to run pending housekeeping: none yet, or a paused /clock) it runs at once.
+        """
+        if self._housekeeping_due or self.status.counters.ticks == self._ticks_at_housekeeping:
+            self._housekeeping()
+        else:
+            self._housekeeping_due = True
+
+    def _housekeeping(self):
+        """The diagnostics report, and the young generations' garbage collection (main() turns automatic
+        collection off: a collection that starts inside a tick stalls it for up to a millisecond)."""
+        self._housekeeping_due = False
+        self._ticks_at_housekeeping = self.status.counters.ticks
+        self._publish_diagnostics()
+        gc.collect(YOUNG_GENERATIONS)
+
     def _publish_diagnostics(self):
         now = self.get_clock().now()
         inputs = self._input_report(now.nanoseconds)
@@ -313,33 +339,32 @@ class ReliefValveNode(Node):
 STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+def parse_arguments(args):
+    """valve_node's own command line (ROS arguments removed): the executor."""
+    parser = argparse.ArgumentParser(prog="valve_node", description="The virtual relief valve as a ROS 2 node.")
+    parser.add_argument("--executor", choices=EXECUTORS, default=DEFAULT_EXECUTOR, help=(
+        f"rclpy executor that runs the node (default {DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
+        "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"))
+    return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
 
 
 def main(args=None):
-    """Run valve_node until SIGINT or SIGTERM; returns the exit code.
-
-    Both signals raise KeyboardInterrupt in the spinning thread, which ends the
-    node cleanly (rclpy's own handlers shut the context down under a running
-    executor, which can surface as an error in the middle of spin()).
-    """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
-    node = None
+    """Run valve_node until SIGINT or SIGTERM; returns the exit code."""
+    options = parse_arguments(args)
+    stop = spinning.init(args)
     try:
         node = ReliefValveNode()
-        gc.freeze()   # start-up objects stay out of the garbage collector's scans: shorter pauses
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
     except STARTUP_ERRORS as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {error}")
+        rclpy.try_shutdown()
         return 1
+    try:
+        node.get_logger().info(f"executor: {options.executor}")
+        gc.freeze()    # start-up objects stay out of the garbage collector's scans
+        gc.disable()   # the node collects in its housekeeping, between ticks
+        spinning.spin_until(node, EXECUTORS[options.executor](), stop)
     finally:
-        if node is not None:
-            node.destroy_node()
+        node.destroy_node()
         rclpy.try_shutdown()
     return 0
 

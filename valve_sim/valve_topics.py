@@ -10,15 +10,16 @@ std_msgs/msg/Float64 [m^3/s].
 """
 import importlib
 
-from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 
 from valve_sim.bag import BagWriter
+from valve_sim.cdr import CdrMessage
 from valve_sim.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
 from valve_sim.parameters import STANDARD_ATMOSPHERE, ParameterError
 
 PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
 TICK_TOPICS = PRESSURE_TOPICS + ("joint_states", "applied_inlet_flow")
+JOINT_NAMES = ("main_valve", "pilot_poppet")   # joint_states: x and y
 TOPIC_TYPES = {
     **{name: "sensor_msgs/msg/FluidPressure" for name in PRESSURE_TOPICS},
     "joint_states": "sensor_msgs/msg/JointState",
@@ -35,36 +36,47 @@ def message_class(type_name):
 
 
 class TickMessages:
-    """The messages of one valve_node tick, allocated once and refilled every tick.
+    """The serialized messages of one valve_node tick, built once and refilled every tick.
 
     fill() writes the state (8 model states, SI, gauge pressures) at time_ns [ns]
-    into them and returns [(topic, message)]. valve_node publishes these; the
+    into them and returns [(topic, CDR bytes)]. valve_node publishes these; the
     offline bag writer and the replay publisher write them: one layout for all.
+    Each message's header.frame_id is its topic name.
     """
 
     def __init__(self):
         self._messages = []
-        for name in PRESSURE_TOPICS:
-            message = FluidPressure(variance=0.0)
-            message.header.frame_id = name
+        self._pressure_offsets = []
+        for name in PRESSURE_TOPICS:                          # sensor_msgs/FluidPressure
+            message = CdrMessage(frame_id=name)
+            self._pressure_offsets.append(message.float64())  # fluid_pressure
+            message.float64()                                 # variance: 0, unknown
             self._messages.append((name, message))
-        self._joints = JointState(name=["main_valve", "pilot_poppet"])
-        self._joints.header.frame_id = "joint_states"
-        self._applied = JointState(name=["inlet_flow"])
-        self._applied.header.frame_id = "applied_inlet_flow"
+        self._joints = CdrMessage(frame_id="joint_states")    # sensor_msgs/JointState
+        self._joints.strings(JOINT_NAMES)
+        self._joint_positions = self._joints.float64s(len(JOINT_NAMES))
+        self._joint_velocities = self._joints.float64s(len(JOINT_NAMES))
+        self._joints.float64s(0)                              # effort
+        self._applied = CdrMessage(frame_id="applied_inlet_flow")
+        self._applied.strings(["inlet_flow"])
+        self._applied.float64s(0)                             # position
+        self._applied_velocity = self._applied.float64s(1)
+        self._applied.float64s(0)                             # effort
         self._messages += [("joint_states", self._joints), ("applied_inlet_flow", self._applied)]
 
     def fill(self, time_ns, state, applied_flow, ambient_pressure):
-        """The tick's [(topic, message)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
-        for index in range(len(PRESSURE_TOPICS)):
-            self._messages[index][1].fluid_pressure = float(state[index]) + ambient_pressure
-        self._joints.position = [float(state[X]), float(state[Y])]
-        self._joints.velocity = [float(state[X_DOT]), float(state[Y_DOT])]
-        self._applied.velocity = [float(applied_flow)]
+        """The tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
+        for (_, message), offset, pressure in zip(self._messages, self._pressure_offsets, state[P_S:P_C + 1]):
+            message.set_float64s(offset, pressure + ambient_pressure)
+        self._joints.set_float64s(self._joint_positions, state[X], state[Y])
+        self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
+        self._applied.set_float64s(self._applied_velocity, applied_flow)
         sec, nanosec = divmod(time_ns, NS_PER_S)
-        for _, message in self._messages:
-            message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
-        return self._messages
+        tick = []
+        for topic, message in self._messages:
+            message.set_stamp(sec, nanosec)
+            tick.append((topic, message.bytes()))
+        return tick
 
 
 def write_simulation_bag(path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0):
@@ -96,8 +108,8 @@ def write_simulation_bag(path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, 
                 command_ns = time_ns if previous is None else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
                 bag.write_message("/inlet_flow", Float64(data=flow), command_ns, command_ns)
                 commanded = flow
-            for topic, message in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
-                bag.write_message("/" + topic, message, time_ns, time_ns)
+            for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
+                bag.write(bag.channels["/" + topic], data, time_ns, time_ns)
         return len(indices)
     finally:
         bag.close()

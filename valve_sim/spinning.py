@@ -1,0 +1,45 @@
+"""How valve_sim's node processes run: one node on an executor until SIGINT or SIGTERM.
+
+The signals only set a flag that ends the spin loop; rclpy's own handlers are
+off. So a node finishes its work (the analyser closes its file) with the
+middleware still up, and no exception is raised inside a callback or under a
+running executor (rclpy's EventsExecutor.spin() does not return on a signal,
+but its spin_once() does).
+"""
+import signal
+import threading
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+try:
+    from rclpy.experimental import EventsExecutor
+except ImportError:   # rclpy releases before the EventsExecutor (early Jazzy)
+    EventsExecutor = None
+
+EXECUTORS = {"single-threaded": SingleThreadedExecutor}
+if EventsExecutor is not None:
+    EXECUTORS = {"events": EventsExecutor, **EXECUTORS}
+DEFAULT_EXECUTOR = next(iter(EXECUTORS))   # events where there is one
+SPIN_TIMEOUT = 0.1   # [s] the longest a signal waits for the spin loop to notice it
+
+
+def init(args=None):
+    """rclpy.init with valve_sim's signal handling; returns the Event that SIGINT and SIGTERM set."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: stop.set())
+    return stop
+
+
+def spin_until(node, executor, stop):
+    """Spin node on executor until the Event stop is set; the executor then lets go of it, as rclpy.spin() does."""
+    executor.add_node(node)
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
