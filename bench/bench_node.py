@@ -42,6 +42,8 @@ import sys
 import time
 from pathlib import Path
 
+from valve_sim.cdr import STAMP, STAMP_OFFSET   # header.stamp (sec, nanosec) in the received CDR bytes
+
 REPO = Path(__file__).resolve().parent.parent
 FLOW = 5.0e-3 / 60.0          # [m^3/s] 5 L/min
 FLOW_INCREMENT = 1e-12        # [m^3/s] makes every probe value unique, negligible for the valve
@@ -50,7 +52,6 @@ PROBE_PERIOD = 0.01037        # [s] inlet and echo probes alternate; not a multi
 WARM_UP = 3.0                 # [s] discovery and first ticks, not measured
 MEMORY_EARLY = 10.0           # [s] first resident-memory reading
 PERIOD_NS = 1_000_000         # [ns] the tick period at 1 kHz
-STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec) in little-endian CDR, after the 4-byte CDR header
 APPLIED_FLOW = struct.Struct("<d")   # applied_inlet_flow's velocity[0] ...
 APPLIED_FLOW_FROM_END = 12           # ... ends where the empty effort sequence (a uint32 count 0) begins
 
@@ -142,12 +143,12 @@ class Bench:
         """The stamp of the tick that first applied a probe flow (velocity[0], before the empty effort)."""
         flow, = APPLIED_FLOW.unpack_from(data, len(data) - APPLIED_FLOW_FROM_END)
         if flow in self.inlet_sent and flow not in self.applied:
-            self.applied[flow] = STAMP.unpack_from(data, 4)
+            self.applied[flow] = STAMP.unpack_from(data, STAMP_OFFSET)
 
     def _on_pressure(self, data):
         """Receive time of a raw supply_pressure message, by its header stamp (after the CDR header)."""
         if self.measuring:
-            self.pressure_received[STAMP.unpack_from(data, 4)] = time.monotonic_ns()
+            self.pressure_received[STAMP.unpack_from(data, STAMP_OFFSET)] = time.monotonic_ns()
 
     def _on_echo(self, message):
         sent = self.echo_sent.get(message.data)

@@ -2,7 +2,7 @@
 
 valve_node publishes six messages every millisecond. Filling an rclpy message
 and letting rclpy convert and serialize it costs about twice as much as
-publishing bytes (bench/bench_node.py, docs/valve_node.md), so the tick messages
+publishing bytes (a profile, docs/valve_node.md), so the tick messages
 are kept as CDR bytes: built once, field by field, and then only the header
 stamp and the float64 values are overwritten at their offsets.
 

@@ -44,7 +44,6 @@ from valve_sim.parameters import (
 from valve_sim.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
 from valve_sim.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
 from valve_sim.ros_parameters import declare_double, integers_as_doubles, value_problem
-from valve_sim.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
 from valve_sim.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
@@ -342,8 +341,8 @@ STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
 def parse_arguments(args):
     """valve_node's own command line (ROS arguments removed): the executor."""
     parser = argparse.ArgumentParser(prog="valve_node", description="The virtual relief valve as a ROS 2 node.")
-    parser.add_argument("--executor", choices=EXECUTORS, default=DEFAULT_EXECUTOR, help=(
-        f"rclpy executor that runs the node (default {DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
+    parser.add_argument("--executor", choices=spinning.EXECUTORS, default=spinning.DEFAULT_EXECUTOR, help=(
+        f"rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
         "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"))
     return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
 
@@ -362,7 +361,7 @@ def main(args=None):
         node.get_logger().info(f"executor: {options.executor}")
         gc.freeze()    # start-up objects stay out of the garbage collector's scans
         gc.disable()   # the node collects in its housekeeping, between ticks
-        spinning.spin_until(node, EXECUTORS[options.executor](), stop)
+        spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
