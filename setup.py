@@ -35,9 +35,9 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "valve-sim = valve_sim.cli:main",
-            "valve_node = valve_sim.valve_node:main",
-            "analyser_node = valve_sim.analyser_node:main",
+            "valve-sim = valve_sim.commands.cli:main",
+            "valve_node = valve_sim.ros.valve_node:main",
+            "analyser_node = valve_sim.ros.analyser_node:main",
         ],
     },
 )

@@ -4,7 +4,7 @@
 
 One run, three processes on this machine's DDS (own random ROS_DOMAIN_ID,
 discovery on localhost):
-- this script publishes valve_node's six tick topics at 1 kHz (valve_sim.replay)
+- this script publishes valve_node's six tick topics at 1 kHz (valve_sim.recording.replay)
   for --duration seconds: a simulated 5 <-> 20 L/min step every 1.25 s, so the
   analyser also measures a step every 1.25 s;
 - analyser_node records them (and everything else it records by default) to MCAP;
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, Waveforms, simulate
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, Waveforms, simulate
 
 PERIOD = 1e-3              # [s] tick period, valve_node's default
 EARLY_RSS_TIME = 10.0      # [s] after the start of publishing
@@ -62,7 +62,7 @@ def count_only(queue_depth):
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from valve_sim.valve_topics import TICK_TOPICS, TOPIC_TYPES, message_class
+    from valve_sim.recording.valve_topics import TICK_TOPICS, TOPIC_TYPES, message_class
 
     rclpy.init()
     node = rclpy.create_node("bare_counter")
@@ -114,10 +114,10 @@ def run_processes(folder, waveforms, queue_depth):
     """Publish waveforms to analyser_node (recording into folder) and the bare subscriber; the figures as a dict."""
     import rclpy
 
-    from valve_sim.replay import Replay
+    from valve_sim.recording.replay import Replay
 
     processes = {
-        "analyser_node": subprocess.Popen([sys.executable, "-m", "valve_sim.analyser_node", "--ros-args", "-p",
+        "analyser_node": subprocess.Popen([sys.executable, "-m", "valve_sim.ros.analyser_node", "--ros-args", "-p",
                                            f"output_dir:={folder}", "-p", f"queue_depth:={queue_depth}"],
                                           stderr=subprocess.DEVNULL),
         "bare subscriber": subprocess.Popen([sys.executable, __file__, "--count-only", "--queue-depth",
@@ -163,7 +163,7 @@ def main():
         return count_only(args.queue_depth)
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from valve_sim.parameters import load_parameters
+    from valve_sim.core.parameters import load_parameters
 
     waveforms = repeated(step_cycle(load_parameters()[0]), args.duration)
     with tempfile.TemporaryDirectory(prefix="bench_analyser_") as folder:

@@ -6,7 +6,7 @@ Measured side by side in one run (this machine is shared and noisy, so compare
 the ratios, not the absolute times):
 1. Fixed-step RK4 at 10 us (our kernel, one core) against real time.
 2. scipy.integrate.solve_ivp, LSODA and Radau, on the same right-hand side
-   (valve_sim.model.derivatives), at matched accuracy. Error measure: the
+   (valve_sim.core.model.derivatives), at matched accuracy. Error measure: the
    largest deviation of p_s from a reference run (RK4 at 1.25 us), sampled every
    0.1 ms over the whole run, relative to the overshoot p_1 - p_0. For each
    solver the loosest rtol (atol scaled per state) whose error is no larger than
@@ -27,12 +27,12 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from valve_sim.model import P_S, coefficients, state_derivative
-from valve_sim.paper import REFERENCE_SCENARIO as SCENARIO
-from valve_sim.parameters import load_parameters
-from valve_sim.simulation import simulate
-from valve_sim.steady_state import steady_state
-from valve_sim.study import run_all
+from valve_sim.core.model import P_S, coefficients, state_derivative
+from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import simulate
+from valve_sim.core.steady_state import steady_state
+from valve_sim.commands.study import run_all
 
 SAMPLE = 1e-4                                              # [s] comparison grid
 STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])   # atol per state = rtol * scale
@@ -103,7 +103,7 @@ def main():
     study_seconds, _ = best_time(lambda: run_all(params, 1e-5, os.cpu_count() or 1, progress=lambda line: None), 1)
     with tempfile.TemporaryDirectory() as out:
         command_seconds, _ = best_time(lambda: subprocess.run(
-            [sys.executable, "-m", "valve_sim.cli", "study", "--out", out], check=True, capture_output=True), 1)
+            [sys.executable, "-m", "valve_sim.commands.cli", "study", "--out", out], check=True, capture_output=True), 1)
 
     print(f"paper's run: {SCENARIO.end_time} s of model time; error = max|p_s - p_s,ref| / (p_1 - p_0), "
           f"reference RK4 1.25 us")

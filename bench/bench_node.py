@@ -42,7 +42,7 @@ import sys
 import time
 from pathlib import Path
 
-from valve_sim.cdr import STAMP, STAMP_OFFSET   # header.stamp (sec, nanosec) in the received CDR bytes
+from valve_sim.recording.cdr import STAMP, STAMP_OFFSET   # header.stamp (sec, nanosec) in the received CDR bytes
 
 REPO = Path(__file__).resolve().parent.parent
 FLOW = 5.0e-3 / 60.0          # [m^3/s] 5 L/min
@@ -61,7 +61,7 @@ def run_echo(executor):
     import rclpy
     from std_msgs.msg import Float64
 
-    from valve_sim import spinning
+    from valve_sim.ros import spinning
 
     stop = spinning.init()
     node = rclpy.create_node("echo")
@@ -81,7 +81,7 @@ def run_timer_floor(path):
     """
     import signal
 
-    from valve_sim.node_status import LATE_FRACTION
+    from valve_sim.ros.node_status import LATE_FRACTION
 
     stop = []
     for number in (signal.SIGINT, signal.SIGTERM):
@@ -226,13 +226,13 @@ def measure(duration, rt_priority, executor, env):
     import psutil
     import rclpy
 
-    from valve_sim.spinning import EXECUTORS
+    from valve_sim.ros.spinning import EXECUTORS
 
     scheduler = ["chrt", "--fifo", str(rt_priority)] if rt_priority else []
     if rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority - 1))
     load_at_start = os.getloadavg()
-    valve = start([*scheduler, sys.executable, "-m", "valve_sim.valve_node", "--executor", executor, "--ros-args",
+    valve = start([*scheduler, sys.executable, "-m", "valve_sim.ros.valve_node", "--executor", executor, "--ros-args",
                    "-p", "publish_rate:=1000.0", "-p", "step_size:=1.0e-5", "-p", "input_timeout:=0.0"], env)
     echo = start([*scheduler, sys.executable, __file__, "--echo", executor], env)
     floor_file = REPO / "out" / f"timer_floor_{os.getpid()}.json"
@@ -337,7 +337,7 @@ def table(figures):
 
 
 def main(argv=None):
-    from valve_sim.spinning import DEFAULT_EXECUTOR, EXECUTORS
+    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=60.0, help="measured time [s] (default 60)")

@@ -26,6 +26,6 @@ def context():
 @pytest.fixture(scope="session")
 def reference():
     """The validated parameters of config/reference.yaml."""
-    from valve_sim.parameters import load_parameters
+    from valve_sim.core.parameters import load_parameters
 
     return load_parameters()[0]

@@ -15,13 +15,13 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 
-from valve_sim.analyser_node import MEASURES_QOS, measures_from_message
-from valve_sim.bag import BagReader, message_definition
-from valve_sim.bag_analysis import analyse, read_recording
-from valve_sim.measures import MEASURE_NAMES
-from valve_sim.parameters import load_parameters
-from valve_sim.replay import Replay
-from valve_sim.simulation import Scenario, simulate
+from valve_sim.ros.analyser_node import MEASURES_QOS, measures_from_message
+from valve_sim.recording.bag import BagReader, message_definition
+from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.parameters import load_parameters
+from valve_sim.recording.replay import Replay
+from valve_sim.core.simulation import Scenario, simulate
 
 TIMEOUT = 60.0   # [s] for anything that waits on another process
 
@@ -47,7 +47,7 @@ def waveforms():
 def running_analyser(folder, *parameters):
     """An analyser_node process recording into folder; killed on the way out if a test left it running."""
     arguments = [argument for parameter in (f"output_dir:={folder}", *parameters) for argument in ("-p", parameter)]
-    process = subprocess.Popen([sys.executable, "-m", "valve_sim.analyser_node", "--ros-args", *arguments],
+    process = subprocess.Popen([sys.executable, "-m", "valve_sim.ros.analyser_node", "--ros-args", *arguments],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         yield process

@@ -1,4 +1,4 @@
-"""MCAP files as rosbag2 writes them (valve_sim.bag, valve_topics) and their offline analysis (bag_analysis)."""
+"""MCAP files as rosbag2 writes them (valve_sim.recording.bag, valve_topics) and their offline analysis (bag_analysis)."""
 import json
 import subprocess
 import sys
@@ -13,14 +13,14 @@ from mcap_ros2.decoder import DecoderFactory
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 
-from valve_sim.bag import DEFAULT_OFFER, SEPARATOR, BagReader, BagWriter, message_definition, qos_profiles_yaml
-from valve_sim.bag_analysis import analyse, read_recording
-from valve_sim.cli import main
-from valve_sim.errors import InputFileError
-from valve_sim.measures import MEASURE_NAMES
-from valve_sim.parameters import load_parameters
-from valve_sim.simulation import Scenario, simulate
-from valve_sim.valve_topics import TOPIC_TYPES, write_simulation_bag
+from valve_sim.recording.bag import DEFAULT_OFFER, SEPARATOR, BagReader, BagWriter, message_definition, qos_profiles_yaml
+from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.commands.cli import main
+from valve_sim.core.errors import InputFileError
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.recording.valve_topics import TOPIC_TYPES, write_simulation_bag
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_BAG = ROOT / "bags" / "reference_step.mcap"
@@ -117,7 +117,7 @@ def test_offline_analysis_of_simulation_bag(simulation_bag):
 
 def test_sample_bag_analyses_to_its_json():
     """The installed command itself, on the sample bag in bags/."""
-    done = subprocess.run([sys.executable, "-m", "valve_sim.cli", "analyse", str(SAMPLE_BAG), "--json"],
+    done = subprocess.run([sys.executable, "-m", "valve_sim.commands.cli", "analyse", str(SAMPLE_BAG), "--json"],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     out = done.stdout

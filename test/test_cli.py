@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from valve_sim.measures import MEASURE_NAMES
+from valve_sim.analysis.measures import MEASURE_NAMES
 
 # Issue 2: the paper's Figure 5 values and the tolerances the reference geometry must meet.
 PAPER = {"T_1_ms": (6.7, 0.10, "rel"), "T_d_ms": (25.1, 0.10, "rel"), "P_1_percent": (3.18, 0.15, "rel"),
@@ -14,7 +14,7 @@ PAPER = {"T_1_ms": (6.7, 0.10, "rel"), "T_d_ms": (25.1, 0.10, "rel"), "P_1_perce
 
 
 def valve_sim(*args, check=True):
-    result = subprocess.run([sys.executable, "-m", "valve_sim.cli", *args], capture_output=True, text=True,
+    result = subprocess.run([sys.executable, "-m", "valve_sim.commands.cli", *args], capture_output=True, text=True,
                             timeout=300)
     if check:
         assert result.returncode == 0, result.stderr

@@ -5,9 +5,9 @@ import signal
 import subprocess
 import sys
 
-from valve_sim.bag import BagReader
-from valve_sim.measures import MEASURE_NAMES
-from valve_sim.paper import FIGURE5_MEASURES
+from valve_sim.recording.bag import BagReader
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.paper import FIGURE5_MEASURES
 
 
 def run_demo(folder, timeout=300):
@@ -15,7 +15,7 @@ def run_demo(folder, timeout=300):
 
     On a time-out the whole group goes, so no node outlives the test.
     """
-    demo = subprocess.Popen([sys.executable, "-m", "valve_sim.cli", "demo", "--out", str(folder)],
+    demo = subprocess.Popen([sys.executable, "-m", "valve_sim.commands.cli", "demo", "--out", str(folder)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = demo.communicate(timeout=timeout)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from valve_sim.measures import MEASURE_NAMES, StepDetector, detect_steps, step_measures
+from valve_sim.analysis.measures import MEASURE_NAMES, StepDetector, detect_steps, step_measures
 
 P0, DELTA = 7.0e6, 1.0e4           # pressure before the step, settled increment [Pa]
 SIGMA, OMEGA = 6.4, 2 * math.pi / 0.025   # decay rate [1/s], damped angular frequency [rad/s]

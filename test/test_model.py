@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from valve_sim.integrator import IntegrationError, advance
-from valve_sim.model import P_C, P_M, P_S, X, X_DOT, Y, Y_DOT, coefficients, flows, net_forces, state_derivative
-from valve_sim.parameters import load_parameters
-from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
+from valve_sim.core.integrator import IntegrationError, advance
+from valve_sim.core.model import P_C, P_M, P_S, X, X_DOT, Y, Y_DOT, coefficients, flows, net_forces, state_derivative
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
 
 FLOWS_LPM = (0.3, 2.0, 5.0, 20.0, 35.0)
 
@@ -114,7 +114,7 @@ def test_rk4_converges_with_fourth_order(params):
 
 
 def test_measures_agree_across_step_sizes(params):
-    from valve_sim.measures import step_measures
+    from valve_sim.analysis.measures import step_measures
 
     results = []
     for step in (2e-6, 5e-6, 1e-5):

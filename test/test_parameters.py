@@ -3,9 +3,9 @@ import math
 
 import pytest
 
-from valve_sim.bearing import reference_bearing_fit
-from valve_sim.paper import TABLE2_CHANGES
-from valve_sim.parameters import (
+from valve_sim.core.bearing import reference_bearing_fit
+from valve_sim.analysis.paper import TABLE2_CHANGES
+from valve_sim.core.parameters import (
     SPECS, STANDARD_ATMOSPHERE, ParameterError, config_path, load_parameters, read_parameter_file, resolve_name, scaled, validate)
 
 

@@ -2,12 +2,12 @@
 import numpy as np
 import pytest
 
-from valve_sim.integrator import IntegrationError, advance
-from valve_sim.model import P_S, coefficients
-from valve_sim.parameters import load_parameters
-from valve_sim.realtime_model import RealTimeModel, step_ns
-from valve_sim.simulation import LITRE_PER_MINUTE
-from valve_sim.steady_state import steady_state
+from valve_sim.core.integrator import IntegrationError, advance
+from valve_sim.core.model import P_S, coefficients
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.realtime_model import RealTimeModel, step_ns
+from valve_sim.core.simulation import LITRE_PER_MINUTE
+from valve_sim.core.steady_state import steady_state
 
 FLOW = 5.0 * LITRE_PER_MINUTE
 START_NS = 1_000_000_000_000   # any clock time; the model time is anchored to it

@@ -6,10 +6,10 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from valve_sim.parameters import SPECS, ParameterError
-from valve_sim.ros_parameters import declare_double, descriptor, integers_as_doubles, value_problem
-from valve_sim.steady_state import cracking_pressure
-from valve_sim.retuning import check_preset, dependent_change
+from valve_sim.core.parameters import SPECS, ParameterError
+from valve_sim.ros.ros_parameters import declare_double, descriptor, integers_as_doubles, value_problem
+from valve_sim.core.steady_state import cracking_pressure
+from valve_sim.core.retuning import check_preset, dependent_change
 
 MASS = SPECS["main_valve_mass"]
 
@@ -86,8 +86,8 @@ def test_check_preset_refuses_disagreeing_values(reference):
 def test_the_node_documentation_lists_every_parameter_with_symbol_and_unit():
     from pathlib import Path
 
-    from valve_sim.parameters import PARAMETERS, SETTINGS
-    from valve_sim.retuning import PRESET_PRESSURE
+    from valve_sim.core.parameters import PARAMETERS, SETTINGS
+    from valve_sim.core.retuning import PRESET_PRESSURE
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "valve_node.md").read_text()
     for spec in PARAMETERS + SETTINGS + (PRESET_PRESSURE,):

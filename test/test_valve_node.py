@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from valve_harness import PRESSURE_TOPICS, Probe, start_node, stop_node
-from valve_sim.measures import MEASURE_NAMES, detect_steps, step_measures
-from valve_sim.model import P_S, X
-from valve_sim.parameters import SPECS, config_path, load_parameters
-from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
+from valve_sim.analysis.measures import MEASURE_NAMES, detect_steps, step_measures
+from valve_sim.core.model import P_S, X
+from valve_sim.core.parameters import SPECS, config_path, load_parameters
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
 
 pytestmark = pytest.mark.timeout(300)
 

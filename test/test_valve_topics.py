@@ -4,9 +4,9 @@ import pytest
 from mcap_ros2._dynamic import serialize_dynamic
 from rclpy.serialization import deserialize_message
 
-from valve_sim.bag import message_definition
-from valve_sim.model import STATE_NAMES
-from valve_sim.valve_topics import PRESSURE_TOPICS, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
+from valve_sim.recording.bag import message_definition
+from valve_sim.core.model import STATE_NAMES
+from valve_sim.recording.valve_topics import PRESSURE_TOPICS, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 AMBIENT = 101325.0
 

@@ -28,7 +28,7 @@ from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from valve_sim.valve_topics import PRESSURE_TOPICS
+from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 
 REPO = Path(__file__).resolve().parent.parent
 NODE_NAME = "relief_valve"
@@ -36,11 +36,11 @@ TIMEOUT = 60.0   # [s] for anything that waits: start-up, discovery, a service a
 
 
 def start_node(log_path, *ros_args, options=()):
-    """valve_node in its own process (python -m valve_sim.valve_node *options --ros-args ...), output to log_path."""
+    """valve_node in its own process (python -m valve_sim.ros.valve_node *options --ros-args ...), output to log_path."""
     env = dict(os.environ, PYTHONUNBUFFERED="1",
                PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     with open(log_path, "w") as log:
-        return subprocess.Popen([sys.executable, "-m", "valve_sim.valve_node", *options, "--ros-args", *ros_args],
+        return subprocess.Popen([sys.executable, "-m", "valve_sim.ros.valve_node", *options, "--ros-args", *ros_args],
                                 stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
 
 

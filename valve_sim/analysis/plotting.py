@@ -8,7 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
 
-from valve_sim.measures import MEASURE_NAMES  # noqa: E402
+from valve_sim.analysis.measures import MEASURE_NAMES  # noqa: E402
 
 MEASURE_LABELS = {
     "P_o_percent": "P_o, pressure increment [%]",

@@ -12,10 +12,10 @@ import importlib
 
 from std_msgs.msg import Float64
 
-from valve_sim.bag import BagWriter
-from valve_sim.cdr import CdrMessage
-from valve_sim.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
-from valve_sim.parameters import STANDARD_ATMOSPHERE, ParameterError
+from valve_sim.recording.bag import BagWriter
+from valve_sim.recording.cdr import CdrMessage
+from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE, ParameterError
 
 PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
 TICK_TOPICS = PRESSURE_TOPICS + ("joint_states", "applied_inlet_flow")

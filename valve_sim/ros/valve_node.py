@@ -14,7 +14,7 @@ Topic and service names are relative, so namespaces and remapping work:
   srv  ~/reset                  std_srvs/Trigger            exact steady state of the current inlet flow
 
 All messages of one tick carry the model time of the state as header.stamp.
-The model itself (valve_sim.realtime_model) has no ROS in it; this module only
+The model itself (valve_sim.core.realtime_model) has no ROS in it; this module only
 adapts it: parameters, topics, the tick timer and the reset service.
 See docs/valve_node.md for the behaviour in detail.
 """
@@ -35,17 +35,17 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from valve_sim import spinning
-from valve_sim.integrator import IntegrationError
-from valve_sim.model import P_S
-from valve_sim.node_status import LATE_FRACTION, InputReport, NodeStatus
-from valve_sim.parameters import (
+from valve_sim.ros import spinning
+from valve_sim.core.integrator import IntegrationError
+from valve_sim.core.model import P_S
+from valve_sim.ros.node_status import LATE_FRACTION, InputReport, NodeStatus
+from valve_sim.core.parameters import (
     NODE_NAME, PARAMETERS, SETTING_SPECS, SETTINGS, SPECS, ParameterError, check_value, load_parameters, validate)
-from valve_sim.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
-from valve_sim.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
-from valve_sim.ros_parameters import declare_double, integers_as_doubles, value_problem
-from valve_sim.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
-from valve_sim.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
+from valve_sim.core.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
+from valve_sim.core.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
+from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
+from valve_sim.core.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
+from valve_sim.recording.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 READ_ONLY = ("initial_inlet_flow",)   # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50    # a tick integrates at most this many tick periods of lag

@@ -1,10 +1,10 @@
 """The six measures of every inlet-flow step in a stream of samples, and their JSON file.
 
-StepAnalysis is fed joined rows (valve_sim.signals) in time order: time t [s],
+StepAnalysis is fed joined rows (valve_sim.analysis.signals) in time order: time t [s],
 supply pressure p_s [Pa, gauge], main-valve displacement x [m] and applied inlet
-flow q [m^3/s]. valve_sim.measures.StepDetector finds the steps (up and down, any
+flow q [m^3/s]. valve_sim.analysis.measures.StepDetector finds the steps (up and down, any
 number); once a step's window (measures.WINDOW after it) is complete,
-valve_sim.measures.step_measures gives its six measures. Only the rows from the
+valve_sim.analysis.measures.step_measures gives its six measures. Only the rows from the
 oldest open step on are kept, so memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from valve_sim.measures import WINDOW, StepDetector, step_measures
-from valve_sim.signals import seconds
+from valve_sim.analysis.measures import WINDOW, StepDetector, step_measures
+from valve_sim.analysis.signals import seconds
 
 
 def step_record(t_step, flow_before, direction, measures):

@@ -26,7 +26,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from valve_sim._jit import jit
+from valve_sim.core.jit import jit
 
 STATE_NAMES = (
     "supply_pressure", "intermediate_pressure", "pilot_pressure", "poppet_chamber_pressure",
@@ -68,7 +68,7 @@ def land_pressure_term(outer, inner):
 
 
 def coefficients(p):
-    """Derived Coefficients from a validated parameter dict (see valve_sim.parameters)."""
+    """Derived Coefficients from a validated parameter dict (see valve_sim.core.parameters)."""
     root = math.sqrt(2.0 / p["fluid_density"])
     land_1 = land_pressure_term(p["first_throttle_outer_diameter"], p["first_throttle_inner_diameter"])
     land_2 = land_pressure_term(p["second_throttle_outer_diameter"], p["second_throttle_inner_diameter"])

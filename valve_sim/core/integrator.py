@@ -8,8 +8,8 @@ and raises IntegrationError instead of returning numbers.
 """
 import numpy as np
 
-from valve_sim._jit import jit
-from valve_sim.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT, derivatives
+from valve_sim.core.jit import jit
+from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT, derivatives
 
 # A pressure beyond these limits [Pa, gauge] means the integration broke down:
 # water cannot hold 10 bar below vacuum, and nothing in the valve reaches 1 GPa.

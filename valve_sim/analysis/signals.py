@@ -23,8 +23,8 @@ code, so both see the same rows.
 from collections import deque
 from dataclasses import dataclass, field
 
-from valve_sim.errors import InputFileError
-from valve_sim.parameters import STANDARD_ATMOSPHERE
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 
 FLUID_PRESSURE = "sensor_msgs/msg/FluidPressure"
 JOINT_STATE = "sensor_msgs/msg/JointState"

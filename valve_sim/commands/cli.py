@@ -10,11 +10,11 @@ import os
 import sys
 
 SUBCOMMANDS = {
-    "simulate": ("valve_sim.simulate_command", "run the valve model offline for one inlet-flow step"),
-    "study": ("valve_sim.study", "the paper's parameter study (Figures 6-13, Table 3)"),
-    "operating-point": ("valve_sim.operating_point", "exact steady state, flows, forces and linear modes at a flow"),
-    "analyse": ("valve_sim.bag_analysis", "step measures of a recorded rosbag2 MCAP file"),
-    "demo": ("valve_sim.demo", "valve_node + analyser_node over DDS: the paper's step, recorded and measured"),
+    "simulate": ("valve_sim.commands.simulate", "run the valve model offline for one inlet-flow step"),
+    "study": ("valve_sim.commands.study", "the paper's parameter study (Figures 6-13, Table 3)"),
+    "operating-point": ("valve_sim.commands.operating_point", "exact steady state, flows, forces and linear modes at a flow"),
+    "analyse": ("valve_sim.commands.analyse", "step measures of a recorded rosbag2 MCAP file"),
+    "demo": ("valve_sim.commands.demo", "valve_node + analyser_node over DDS: the paper's step, recorded and measured"),
 }
 
 
@@ -30,7 +30,7 @@ def build_parser():
 
 
 def main(argv=None):
-    from valve_sim.errors import USER_ERRORS
+    from valve_sim.core.errors import USER_ERRORS
 
     args = build_parser().parse_args(argv)
     try:

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from valve_sim.integrator import advance
-from valve_sim.model import STATE_NAMES, coefficients
-from valve_sim.steady_state import steady_state
+from valve_sim.core.integrator import advance
+from valve_sim.core.model import STATE_NAMES, coefficients
+from valve_sim.core.steady_state import steady_state
 
 LITRE_PER_MINUTE = 1e-3 / 60.0   # [m^3/s]
 

@@ -2,11 +2,11 @@
 
 The numbers behind docs/model.md's force and flow balances and stability margins.
 """
-from valve_sim.linear import oscillatory_modes
-from valve_sim.model import coefficients, flows
-from valve_sim.simulate_command import add_parameter_arguments, flow_value, load_from_arguments
-from valve_sim.simulation import LITRE_PER_MINUTE
-from valve_sim.steady_state import cracking_pressure, steady_state
+from valve_sim.core.linear import oscillatory_modes
+from valve_sim.core.model import coefficients, flows
+from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
+from valve_sim.core.simulation import LITRE_PER_MINUTE
+from valve_sim.core.steady_state import cracking_pressure, steady_state
 
 
 def add_arguments(parser):

@@ -7,8 +7,8 @@ lambda give the modes: frequency |Im lambda| / 2 pi and damping ratio
 """
 import numpy as np
 
-from valve_sim.model import coefficients, state_derivative
-from valve_sim.steady_state import steady_state
+from valve_sim.core.model import coefficients, state_derivative
+from valve_sim.core.steady_state import steady_state
 
 STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])   # typical size of each state
 

@@ -16,11 +16,11 @@ import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from valve_sim.measures import MEASURE_NAMES, step_measures
-from valve_sim.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS, TABLE2_CHANGES
-from valve_sim.parameters import scaled
-from valve_sim.simulate_command import add_parameter_arguments, load_from_arguments
-from valve_sim.simulation import simulate
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS, TABLE2_CHANGES
+from valve_sim.core.parameters import scaled
+from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.core.simulation import simulate
 
 FIGURE_NUMBERS = {"m_m": 6, "m_p": 7, "V_p": 9, "V_c": 10, "d_c": 11, "k_p": 12}
 POPPET_SAMPLE_INTERVAL = 1e-4   # [s] for Figure 8's waveforms
@@ -93,7 +93,7 @@ def write_table3(path, results):
 
 
 def write_figures(out, results):
-    from valve_sim.plotting import plot_poppet_waveforms, plot_pressure_increment, plot_sensitivity
+    from valve_sim.analysis.plotting import plot_poppet_waveforms, plot_pressure_increment, plot_sensitivity
 
     for symbol in STUDY_PARAMETERS:
         series = {percent: results[f"{symbol} {percent:+d} %" if percent else "reference"][0]

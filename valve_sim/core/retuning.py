@@ -9,8 +9,8 @@ change, check_preset() verifies that a change keeps the two consistent.
 """
 import math
 
-from valve_sim.parameters import SPECS, ParameterError, ParameterSpec, validate
-from valve_sim.steady_state import cracking_pressure, preload_for_cracking_pressure
+from valve_sim.core.parameters import SPECS, ParameterError, ParameterSpec, validate
+from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
 PRESET_PRESSURE = ParameterSpec(
     "preset_pressure", "p_set", "Pa", 0.0, 1e8,

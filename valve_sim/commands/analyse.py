@@ -1,8 +1,8 @@
 """Step measures of a recorded rosbag2 MCAP file: every inlet-flow step in it, as the analyser computes them live.
 
-Reads the signals of valve_sim.signals (topics mappable by option, so a real rig's
+Reads the signals of valve_sim.analysis.signals (topics mappable by option, so a real rig's
 bag with other names or types works), joins them on the supply-pressure times,
-and runs valve_sim.step_analysis.StepAnalysis over them. A file whose end is
+and runs valve_sim.analysis.step_analysis.StepAnalysis over them. A file whose end is
 missing (a recording killed before it closed) gives what its complete chunks
 hold, with a warning; a damaged or foreign file is an error.
 """
@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from valve_sim.bag import BagReader
-from valve_sim.errors import InputFileError
-from valve_sim.parameters import STANDARD_ATMOSPHERE
-from valve_sim.measures import MEASURE_NAMES, WINDOW, StepMeasures, step_measures
-from valve_sim.signals import CLOCKS, REQUIRED, ROLES, Extractor, Joiner, SignalMap, seconds
-from valve_sim.step_analysis import StepAnalysis, step_record
+from valve_sim.recording.bag import BagReader
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
+from valve_sim.analysis.measures import MEASURE_NAMES, WINDOW, StepMeasures, step_measures
+from valve_sim.analysis.signals import CLOCKS, REQUIRED, ROLES, Extractor, Joiner, SignalMap, seconds
+from valve_sim.analysis.step_analysis import StepAnalysis, step_record
 
 PLOT_LEAD = 0.25   # [s] shown before the step, which the plot puts at 0.25 s as in the paper's Figure 5
 
@@ -93,7 +93,7 @@ def plot_steps(path, recording, records):
     """Figure 5 of each step: path itself for one, path with _step<k> before the suffix for several."""
     from pathlib import Path
 
-    from valve_sim.plotting import plot_step_response
+    from valve_sim.analysis.plotting import plot_step_response
 
     path, written = Path(path), []
     for k, record in enumerate(records, start=1):
@@ -108,8 +108,8 @@ def plot_steps(path, recording, records):
 
 
 def print_steps(records, start_time):
-    """Each step's measures as a table beside the paper's values (valve_sim.simulate_command)."""
-    from valve_sim.simulate_command import print_table
+    """Each step's measures as a table beside the paper's values (valve_sim.commands.simulate)."""
+    from valve_sim.commands.simulate import print_table
 
     for k, record in enumerate(records, start=1):
         direction = "up" if record["direction"] > 0 else "down"

@@ -28,7 +28,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
-from valve_sim.errors import InputFileError
+from valve_sim.core.errors import InputFileError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 LIBRARY = "valve_sim (mcap-python writer, rosbag2 storage layout)"

@@ -43,15 +43,15 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from valve_sim import spinning
-from valve_sim.bag import BagWriter
-from valve_sim.errors import InputFileError
-from valve_sim.measures import MEASURE_NAMES
-from valve_sim.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE, ParameterError, ParameterSpec
-from valve_sim.ros_parameters import declare_double
-from valve_sim.signals import REQUIRED, ROLE, Extractor, Joiner, SignalMap
-from valve_sim.step_analysis import MeasuresFile, StepAnalysis
-from valve_sim.valve_topics import message_class
+from valve_sim.ros import spinning
+from valve_sim.recording.bag import BagWriter
+from valve_sim.core.errors import InputFileError
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE, ParameterError, ParameterSpec
+from valve_sim.ros.ros_parameters import declare_double
+from valve_sim.analysis.signals import REQUIRED, ROLE, Extractor, Joiner, SignalMap
+from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
+from valve_sim.recording.valve_topics import message_class
 
 NODE_NAME = "valve_analyser"
 DEFAULT_TOPICS = ["inlet_flow", "applied_inlet_flow", "supply_pressure", "intermediate_pressure", "pilot_pressure",
@@ -103,7 +103,7 @@ class RecordedTopic:
 
 
 def qos_offer(qos):
-    """An rclpy QoSProfile as the offer dict of valve_sim.bag.qos_profiles_yaml()."""
+    """An rclpy QoSProfile as the offer dict of valve_sim.recording.bag.qos_profiles_yaml()."""
     return {"history": qos.history.name.lower(), "depth": qos.depth, "reliability": qos.reliability.name.lower(),
             "durability": qos.durability.name.lower(), "deadline_ns": qos.deadline.nanoseconds,
             "lifespan_ns": qos.lifespan.nanoseconds, "liveliness": qos.liveliness.name.lower(),
@@ -112,7 +112,7 @@ def qos_offer(qos):
 
 
 def measures_message(record, hardware_id):
-    """The step_measures DiagnosticArray of a step record (valve_sim.step_analysis)."""
+    """The step_measures DiagnosticArray of a step record (valve_sim.analysis.step_analysis)."""
     def number(value):
         return "none" if value is None else repr(float(value))
 

@@ -13,9 +13,9 @@ position is fixed there and its force balance is replaced by the contact conditi
 import numpy as np
 from scipy.optimize import root
 
-from valve_sim.integrator import IntegrationError, advance
-from valve_sim.model import P_C, P_M, P_P, P_S, X, Y, coefficients, derivatives, flows, net_forces
-from valve_sim.parameters import SPECS, ParameterError, validate
+from valve_sim.core.integrator import IntegrationError, advance
+from valve_sim.core.model import P_C, P_M, P_P, P_S, X, Y, coefficients, derivatives, flows, net_forces
+from valve_sim.core.parameters import SPECS, ParameterError, validate
 
 PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5   # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
 PSEUDO_TRANSIENT_TIME = 0.3             # [s]

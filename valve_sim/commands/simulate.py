@@ -9,11 +9,11 @@ import json
 import math
 from argparse import ArgumentTypeError
 
-from valve_sim.measures import MEASURE_NAMES, step_measures
-from valve_sim.model import STATE_NAMES
-from valve_sim.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
-from valve_sim.parameters import ParameterError, load_parameters
-from valve_sim.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.core.model import STATE_NAMES
+from valve_sim.analysis.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
+from valve_sim.core.parameters import ParameterError, load_parameters
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 
 STATE_UNITS = ("Pa", "Pa", "Pa", "Pa", "m", "m_s", "m", "m_s")
 
@@ -126,13 +126,13 @@ def run(args):
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
-        from valve_sim.plotting import plot_step_response
+        from valve_sim.analysis.plotting import plot_step_response
 
         plot_step_response(args.plot, waveforms.time, waveforms["supply_pressure"],
                            waveforms["main_valve_displacement"], waveforms["poppet_displacement"],
                            scenario.step_time, measures.as_dict())
     if args.mcap:
-        from valve_sim.valve_topics import write_simulation_bag
+        from valve_sim.recording.valve_topics import write_simulation_bag
 
         # valve_node's 1 kHz ticks where the samples allow it, else every sample.
         ratio = 1e-3 / args.record_interval

@@ -2,7 +2,7 @@
 
 Nothing in the model reads these; they are printed beside our results.
 """
-from valve_sim.simulation import LITRE_PER_MINUTE, Scenario
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario
 
 # Figure 5 / Table 3, Table 1 conditions, under the names of metrics.md.
 FIGURE5_MEASURES = {

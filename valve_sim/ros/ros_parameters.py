@@ -1,6 +1,6 @@
 """ROS 2 parameter declarations for valve_sim's parameter specs.
 
-Turns a ParameterSpec (valve_sim.parameters) into a ParameterDescriptor: the
+Turns a ParameterSpec (valve_sim.core.parameters) into a ParameterDescriptor: the
 description carries the symbol, unit and source, and a FloatingPointRange holds
 the spec's limits, so `ros2 param describe` tells a user what each number is.
 

@@ -10,8 +10,8 @@ before publish() makes sure that nothing published is lost to discovery.
 """
 import time
 
-from valve_sim.parameters import STANDARD_ATMOSPHERE
-from valve_sim.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
+from valve_sim.recording.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
 QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
 

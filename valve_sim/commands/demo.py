@@ -17,8 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from valve_sim.measures import MEASURE_NAMES
-from valve_sim.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.paper import REFERENCE_SCENARIO
 
 INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow   # [m^3/s] 5 L/min
 FINAL_FLOW = REFERENCE_SCENARIO.final_flow       # [m^3/s] 20 L/min
@@ -49,7 +49,7 @@ def start_nodes(folder):
     processes = {}
     for name in NODES:
         with open(folder / f"{name}.log", "wb") as log:
-            processes[name] = subprocess.Popen([sys.executable, "-m", f"valve_sim.{name}", *arguments[name]],
+            processes[name] = subprocess.Popen([sys.executable, "-m", f"valve_sim.ros.{name}", *arguments[name]],
                                                stdout=log, stderr=subprocess.STDOUT)
     return processes
 
@@ -82,7 +82,7 @@ class Driver:
         from rclpy.node import Node
         from std_msgs.msg import Float64
 
-        from valve_sim.analyser_node import MEASURES_QOS, RECORDING_STATUS
+        from valve_sim.ros.analyser_node import MEASURES_QOS, RECORDING_STATUS
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
         self.node = Node("valve_demo")
@@ -134,7 +134,7 @@ class Driver:
 
 def report(folder, bag):
     """Print the live measures beside the paper's and the offline check; draw Figure 5. Returns the JSON path."""
-    from valve_sim.bag_analysis import analyse, plot_steps, print_steps, read_recording
+    from valve_sim.commands.analyse import analyse, plot_steps, print_steps, read_recording
 
     measures_path = bag.with_suffix(".measures.json")
     live = json.loads(measures_path.read_text())["steps"]

@@ -176,7 +176,7 @@ def validate(params):
 def config_path(filename):
     """Path of a file shipped in config/ (installed share/valve_sim/config or the source tree)."""
     candidates = [Path(sys.prefix) / "share" / "valve_sim" / "config" / filename,
-                  Path(__file__).resolve().parent.parent / "config" / filename]
+                  Path(__file__).resolve().parents[2] / "config" / filename]
     for candidate in candidates:
         if candidate.is_file():
             return candidate

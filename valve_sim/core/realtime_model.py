@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from valve_sim.integrator import advance
-from valve_sim.model import coefficients
-from valve_sim.steady_state import steady_state
+from valve_sim.core.integrator import advance
+from valve_sim.core.model import coefficients
+from valve_sim.core.steady_state import steady_state
 
 NS_PER_S = 1_000_000_000
 TRIAL_STEPS = 2000   # steps a parameter change is trial-integrated for before it is accepted

@@ -1,0 +1,76 @@
+"""The wings of valve_sim import only downward, and only ros and commands use rclpy.
+
+Reads every module's imports with ast (nothing is executed), module-level and
+inside functions alike.
+"""
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'valve_sim'
+WINGS = ['core', 'analysis', 'recording', 'ros', 'commands']
+NO_RCLPY = {'core', 'analysis', 'recording'}
+# recording may use rclpy inside functions that need a live context, never at import time
+RCLPY_INSIDE_FUNCTIONS = {'recording'}
+
+
+def imported_modules(path):
+    """(module name, at module level) for every import statement of a file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    top_level = {id(node) for node in tree.body}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, id(node) in top_level
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            if node.module == 'valve_sim':
+                for alias in node.names:
+                    yield f'valve_sim.{alias.name}', id(node) in top_level
+            else:
+                yield node.module, id(node) in top_level
+
+
+def modules():
+    return sorted(PACKAGE.rglob('*.py'))
+
+
+def wing_of(path):
+    relative = path.relative_to(PACKAGE)
+    return relative.parts[0] if len(relative.parts) > 1 else None
+
+
+def test_every_module_lives_in_a_wing():
+    loose = [p.name for p in PACKAGE.glob('*.py') if p.name != '__init__.py']
+    assert loose == [], f'modules outside the wings: {loose}'
+    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != '__pycache__') == sorted(WINGS)
+
+
+@pytest.mark.parametrize('wing', WINGS)
+def test_each_wing_says_what_lives_there_and_what_it_may_import(wing):
+    docstring = ast.get_docstring(ast.parse((PACKAGE / wing / '__init__.py').read_text()))
+    assert docstring and 'May import' in docstring
+
+
+@pytest.mark.parametrize('path', modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_imports_go_only_downward(path):
+    wing = wing_of(path)
+    if wing is None:
+        return
+    level = WINGS.index(wing)
+    problems = []
+    for module, top_level in imported_modules(path):
+        parts = module.split('.')
+        if parts[0] == 'valve_sim' and len(parts) > 1 and parts[1] in WINGS:
+            if WINGS.index(parts[1]) > level:
+                problems.append(f'{module} (wing {parts[1]} is above {wing})')
+        if parts[0] == 'rclpy' and wing in NO_RCLPY:
+            if top_level or wing not in RCLPY_INSIDE_FUNCTIONS:
+                problems.append(f'{module} ({wing} must not import rclpy{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})')
+    assert problems == [], f'{path.relative_to(PACKAGE)} imports upward: {problems}'
+
+
+def test_the_check_sees_an_upward_import(tmp_path):
+    bad = tmp_path / 'bad.py'
+    bad.write_text('def f():\n    from valve_sim.ros import valve_node\n')
+    assert ('valve_sim.ros', False) in list(imported_modules(bad))
