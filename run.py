@@ -8,48 +8,53 @@ Each creates .venv beside this file on first use and installs valve_sim into it
 (editable, with its PyPI dependencies and the ROS 2 Jazzy wheels); it reinstalls
 when setup.py changes. Nothing needs sourcing.
 """
+
 import hashlib
 import os
+from pathlib import Path
 import subprocess
 import sys
 import venv
-from pathlib import Path
+
 
 ROOT = Path(__file__).resolve().parent
-VENV = ROOT / ".venv"
-BIN = VENV / "bin"
-STAMP = VENV / "valve_sim-installed"
+VENV = ROOT / '.venv'
+BIN = VENV / 'bin'
+STAMP = VENV / 'valve_sim-installed'
 
 
 def ensure_environment():
-    wanted = hashlib.sha256((ROOT / "setup.py").read_bytes()).hexdigest()
+    wanted = hashlib.sha256((ROOT / 'setup.py').read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text() == wanted:
         return
-    if not (BIN / "python").exists():
-        print(f"run.py: creating virtual environment {VENV}", flush=True)
+    if not (BIN / 'python').exists():
+        print(f'run.py: creating virtual environment {VENV}', flush=True)
         venv.EnvBuilder(with_pip=True).create(VENV)
-    print("run.py: installing valve_sim and its dependencies (first run only, about a minute)", flush=True)
-    pip = [str(BIN / "python"), "-m", "pip", "install", "--quiet", "--disable-pip-version-check"]
-    subprocess.run(pip + ["--upgrade", "pip"], check=True)
-    subprocess.run(pip + ["--editable", f"{ROOT}[wheels,test]"], check=True)
+    print(
+        'run.py: installing valve_sim and its dependencies (first run only, about a minute)',
+        flush=True,
+    )
+    pip = [str(BIN / 'python'), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
+    subprocess.run(pip + ['--upgrade', 'pip'], check=True)
+    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,test]'], check=True)
     STAMP.write_text(wanted)
 
 
 def main(argv):
-    if not argv or argv[0] not in ("demo", "test"):
+    if not argv or argv[0] not in ('demo', 'test'):
         print(__doc__.strip(), file=sys.stderr)
         return 2
     ensure_environment()
-    env = dict(os.environ, MPLBACKEND="Agg")
-    if argv[0] == "demo":
-        command = [str(BIN / "valve-sim"), "demo", *argv[1:]]
+    env = dict(os.environ, MPLBACKEND='Agg')
+    if argv[0] == 'demo':
+        command = [str(BIN / 'valve-sim'), 'demo', *argv[1:]]
     else:
-        command = [str(BIN / "python"), "-m", "pytest", str(ROOT / "test"), *argv[1:]]
+        command = [str(BIN / 'python'), '-m', 'pytest', str(ROOT / 'test'), *argv[1:]]
     return subprocess.call(command, cwd=os.getcwd(), env=env)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     try:
         sys.exit(main(sys.argv[1:]))
     except subprocess.CalledProcessError as error:
-        sys.exit(f"run.py: setting up the environment failed: {error}")
+        sys.exit(f'run.py: setting up the environment failed: {error}')

@@ -16,6 +16,7 @@ the ratios, not the absolute times):
 Targets (issue 2): the single run >= 50x faster than real time and faster than
 solve_ivp; the study < 15 s on 2 cores.
 """
+
 import argparse
 import json
 import os
@@ -26,16 +27,16 @@ import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
-
-from valve_sim.core.model import P_S, coefficients, state_derivative
 from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
+from valve_sim.commands.study import run_all
+from valve_sim.core.model import coefficients, P_S, state_derivative
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import simulate
 from valve_sim.core.steady_state import steady_state
-from valve_sim.commands.study import run_all
 
-SAMPLE = 1e-4                                              # [s] comparison grid
-STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])   # atol per state = rtol * scale
+
+SAMPLE = 1e-4  # [s] comparison grid
+STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])  # atol per state = rtol * scale
 
 
 def best_time(function, repeats):
@@ -48,7 +49,7 @@ def best_time(function, repeats):
 
 
 def rk4_supply_pressure(params, step):
-    return simulate(params, SCENARIO, step, SAMPLE)["supply_pressure"]
+    return simulate(params, SCENARIO, step, SAMPLE)['supply_pressure']
 
 
 def solve_ivp_supply_pressure(params, method, rtol):
@@ -57,15 +58,24 @@ def solve_ivp_supply_pressure(params, method, rtol):
     state = steady_state(params, SCENARIO.initial_flow)
     grid = np.arange(0.0, SCENARIO.end_time + SAMPLE / 2, SAMPLE)
     pressure = []
-    for t0, t1, flow in ((0.0, SCENARIO.step_time, SCENARIO.initial_flow),
-                         (SCENARIO.step_time, SCENARIO.end_time, SCENARIO.final_flow)):
+    for t0, t1, flow in (
+        (0.0, SCENARIO.step_time, SCENARIO.initial_flow),
+        (SCENARIO.step_time, SCENARIO.end_time, SCENARIO.final_flow),
+    ):
         points = grid[(grid >= t0 - 1e-12) & (grid <= t1 + 1e-12)]
         if pressure:
             points = points[1:]
-        solution = solve_ivp(lambda t, y: state_derivative(y, flow, c), (t0, t1), state, method=method,
-                             t_eval=points, rtol=rtol, atol=rtol * STATE_SCALE)
+        solution = solve_ivp(
+            lambda t, y: state_derivative(y, flow, c),
+            (t0, t1),
+            state,
+            method=method,
+            t_eval=points,
+            rtol=rtol,
+            atol=rtol * STATE_SCALE,
+        )
         if not solution.success:
-            raise RuntimeError(f"{method} failed: {solution.message}")
+            raise RuntimeError(f'{method} failed: {solution.message}')
         pressure.append(solution.y[P_S])
         state = solution.y[:, -1]
     return np.concatenate(pressure)
@@ -77,49 +87,86 @@ def error_of(pressure, reference, overshoot):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument('--json', metavar='FILE', help='also write the results as JSON')
     args = parser.parse_args()
     params, _ = load_parameters()
 
-    rk4_supply_pressure(params, 1e-5)      # compile (numba cache) and warm up
+    rk4_supply_pressure(params, 1e-5)  # compile (numba cache) and warm up
     reference = rk4_supply_pressure(params, 1.25e-6)
     index = int(round(SCENARIO.step_time / SAMPLE))
     overshoot = reference.max() - reference[index]
     rk4_time, pressure = best_time(lambda: rk4_supply_pressure(params, 1e-5), args.repeats)
     rk4_error = error_of(pressure, reference, overshoot)
-    rows = [{"method": "RK4 10 us (valve_sim)", "seconds": rk4_time, "error": rk4_error, "rtol": None}]
+    rows = [
+        {'method': 'RK4 10 us (valve_sim)', 'seconds': rk4_time, 'error': rk4_error, 'rtol': None}
+    ]
 
-    for method in ("LSODA", "Radau"):
+    for method in ('LSODA', 'Radau'):
         for rtol in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10):
             pressure = solve_ivp_supply_pressure(params, method, rtol)
             error = error_of(pressure, reference, overshoot)
             if error <= rk4_error:
                 break
-        seconds, _ = best_time(lambda: solve_ivp_supply_pressure(params, method, rtol), max(1, args.repeats // 2))
-        rows.append({"method": f"solve_ivp {method}", "seconds": seconds, "error": error, "rtol": rtol,
-                     "matched": error <= rk4_error})
+        seconds, _ = best_time(
+            lambda: solve_ivp_supply_pressure(params, method, rtol), max(1, args.repeats // 2)
+        )
+        rows.append(
+            {
+                'method': f'solve_ivp {method}',
+                'seconds': seconds,
+                'error': error,
+                'rtol': rtol,
+                'matched': error <= rk4_error,
+            }
+        )
 
-    study_seconds, _ = best_time(lambda: run_all(params, 1e-5, os.cpu_count() or 1, progress=lambda line: None), 1)
+    study_seconds, _ = best_time(
+        lambda: run_all(params, 1e-5, os.cpu_count() or 1, progress=lambda line: None), 1
+    )
     with tempfile.TemporaryDirectory() as out:
-        command_seconds, _ = best_time(lambda: subprocess.run(
-            [sys.executable, "-m", "valve_sim.commands.cli", "study", "--out", out], check=True, capture_output=True), 1)
+        command_seconds, _ = best_time(
+            lambda: subprocess.run(
+                [sys.executable, '-m', 'valve_sim.commands.cli', 'study', '--out', out],
+                check=True,
+                capture_output=True,
+            ),
+            1,
+        )
 
-    print(f"paper's run: {SCENARIO.end_time} s of model time; error = max|p_s - p_s,ref| / (p_1 - p_0), "
-          f"reference RK4 1.25 us")
-    print(f"{'method':<24}{'rtol':>8}{'error':>11}{'wall [ms]':>11}{'x real time':>13}{'x vs RK4':>10}")
+    print(
+        f"paper's run: {SCENARIO.end_time} s of model time; error = max|p_s - p_s,ref| / (p_1 - p_0), "
+        f'reference RK4 1.25 us'
+    )
+    print(
+        f'{"method":<24}{"rtol":>8}{"error":>11}{"wall [ms]":>11}{"x real time":>13}{"x vs RK4":>10}'
+    )
     for row in rows:
-        rtol = f"{row['rtol']:.0e}" if row["rtol"] else "-"
-        note = "" if row.get("matched", True) else "  (tightest rtol tried; RK4's error not reached)"
-        print(f"{row['method']:<24}{rtol:>8}{row['error']:>11.2e}{row['seconds'] * 1e3:>11.1f}"
-              f"{SCENARIO.end_time / row['seconds']:>13.1f}{row['seconds'] / rk4_time:>10.1f}{note}")
-    print(f"parameter study, 26 runs on {os.cpu_count()} cores: {study_seconds:.2f} s computing; "
-          f"the whole `valve-sim study` command with CSV and figures: {command_seconds:.2f} s (target < 15 s)")
+        rtol = f'{row["rtol"]:.0e}' if row['rtol'] else '-'
+        note = (
+            '' if row.get('matched', True) else "  (tightest rtol tried; RK4's error not reached)"
+        )
+        print(
+            f'{row["method"]:<24}{rtol:>8}{row["error"]:>11.2e}{row["seconds"] * 1e3:>11.1f}'
+            f'{SCENARIO.end_time / row["seconds"]:>13.1f}{row["seconds"] / rk4_time:>10.1f}{note}'
+        )
+    print(
+        f'parameter study, 26 runs on {os.cpu_count()} cores: {study_seconds:.2f} s computing; '
+        f'the whole `valve-sim study` command with CSV and figures: {command_seconds:.2f} s (target < 15 s)'
+    )
     if args.json:
-        with open(args.json, "w") as stream:
-            json.dump({"runs": rows, "study_seconds": study_seconds, "study_command_seconds": command_seconds,
-                       "cores": os.cpu_count()}, stream, indent=2)
+        with open(args.json, 'w') as stream:
+            json.dump(
+                {
+                    'runs': rows,
+                    'study_seconds': study_seconds,
+                    'study_command_seconds': command_seconds,
+                    'cores': os.cpu_count(),
+                },
+                stream,
+                indent=2,
+            )
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

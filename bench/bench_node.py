@@ -32,41 +32,45 @@ priority P and this measuring process at P - 1 (needs the privilege), as a test
 rig would run its nodes. The load average at start and end is reported: other
 work on the machine shows in every figure here.
 """
+
 import argparse
 import json
 import os
+from pathlib import Path
 import random
 import struct
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-from valve_sim.recording.cdr import STAMP, STAMP_OFFSET   # header.stamp (sec, nanosec) in the received CDR bytes
+from valve_sim.recording.cdr import (
+    STAMP,
+    STAMP_OFFSET,
+)  # header.stamp (sec, nanosec) in the received CDR bytes
+
 
 REPO = Path(__file__).resolve().parent.parent
-FLOW = 5.0e-3 / 60.0          # [m^3/s] 5 L/min
-FLOW_INCREMENT = 1e-12        # [m^3/s] makes every probe value unique, negligible for the valve
-PROBE_PERIOD = 0.01037        # [s] inlet and echo probes alternate; not a multiple of the tick period,
-                              # so the probes fall on every phase of the tick
-WARM_UP = 3.0                 # [s] discovery and first ticks, not measured
-MEMORY_EARLY = 10.0           # [s] first resident-memory reading
-PERIOD_NS = 1_000_000         # [ns] the tick period at 1 kHz
-APPLIED_FLOW = struct.Struct("<d")   # applied_inlet_flow's velocity[0] ...
-APPLIED_FLOW_FROM_END = 12           # ... ends where the empty effort sequence (a uint32 count 0) begins
+FLOW = 5.0e-3 / 60.0  # [m^3/s] 5 L/min
+FLOW_INCREMENT = 1e-12  # [m^3/s] makes every probe value unique, negligible for the valve
+PROBE_PERIOD = 0.01037  # [s] inlet and echo probes alternate; not a multiple of the tick period,
+# so the probes fall on every phase of the tick
+WARM_UP = 3.0  # [s] discovery and first ticks, not measured
+MEMORY_EARLY = 10.0  # [s] first resident-memory reading
+PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
+APPLIED_FLOW = struct.Struct('<d')  # applied_inlet_flow's velocity[0] ...
+APPLIED_FLOW_FROM_END = 12  # ... ends where the empty effort sequence (a uint32 count 0) begins
 
 
 def run_echo(executor):
     """The floor: a bare rclpy node that republishes echo_in on echo_out, on the valve's executor kind."""
     import rclpy
     from std_msgs.msg import Float64
-
     from valve_sim.ros import spinning
 
     stop = spinning.init()
-    node = rclpy.create_node("echo")
-    publisher = node.create_publisher(Float64, "echo_out", 10)
-    node.create_subscription(Float64, "echo_in", publisher.publish, 10)
+    node = rclpy.create_node('echo')
+    publisher = node.create_publisher(Float64, 'echo_out', 10)
+    node.create_subscription(Float64, 'echo_in', publisher.publish, 10)
     spinning.spin_until(node, spinning.EXECUTORS[executor](), stop)
     node.destroy_node()
     rclpy.try_shutdown()
@@ -86,16 +90,16 @@ def run_timer_floor(path):
     stop = []
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stop.append(number))
-    counts = {"ticks": 0, "late": 0, "missed": 0}
+    counts = {'ticks': 0, 'late': 0, 'missed': 0}
     slot = time.monotonic_ns() + PERIOD_NS
     while not stop:
         delay = slot - time.monotonic_ns()
         if delay > 0:
             time.sleep(delay / 1e9)
         lateness = time.monotonic_ns() - slot
-        counts["ticks"] += 1
-        counts["late"] += lateness > LATE_FRACTION * PERIOD_NS
-        counts["missed"] += lateness // PERIOD_NS
+        counts['ticks'] += 1
+        counts['late'] += lateness > LATE_FRACTION * PERIOD_NS
+        counts['missed'] += lateness // PERIOD_NS
         slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
     Path(path).write_text(json.dumps(counts))
 
@@ -110,21 +114,25 @@ class Bench:
 
         self.node = node
         self.Float64 = Float64
-        self.inlet = node.create_publisher(Float64, "inlet_flow", 10)
-        self.echo = node.create_publisher(Float64, "echo_in", 10)
-        self.inlet_sent = {}      # flow value -> send time [ns]
-        self.echo_sent = {}       # sequence number -> send time [ns]
-        self.echo_trips = []      # [ns]
-        self.applied = {}         # flow value -> first stamp that applied it
-        self.pressure_received = {}   # stamp -> receive time [ns]
-        self.diagnostics = []     # (receive time [s], {key: value})
+        self.inlet = node.create_publisher(Float64, 'inlet_flow', 10)
+        self.echo = node.create_publisher(Float64, 'echo_in', 10)
+        self.inlet_sent = {}  # flow value -> send time [ns]
+        self.echo_sent = {}  # sequence number -> send time [ns]
+        self.echo_trips = []  # [ns]
+        self.applied = {}  # flow value -> first stamp that applied it
+        self.pressure_received = {}  # stamp -> receive time [ns]
+        self.diagnostics = []  # (receive time [s], {key: value})
         self.probes = 0
         self.measuring = False
         # Raw CDR: only a stamp and a value are needed, read straight from the bytes (less load on this process).
-        node.create_subscription(JointState, "applied_inlet_flow", self._on_applied, 1000, raw=True)
-        node.create_subscription(FluidPressure, "supply_pressure", self._on_pressure, 1000, raw=True)
-        node.create_subscription(Float64, "echo_out", self._on_echo, 100)
-        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        node.create_subscription(
+            JointState, 'applied_inlet_flow', self._on_applied, 1000, raw=True
+        )
+        node.create_subscription(
+            FluidPressure, 'supply_pressure', self._on_pressure, 1000, raw=True
+        )
+        node.create_subscription(Float64, 'echo_out', self._on_echo, 100)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         node.create_timer(PROBE_PERIOD, self._probe)
 
     def _probe(self):
@@ -141,7 +149,7 @@ class Bench:
 
     def _on_applied(self, data):
         """The stamp of the tick that first applied a probe flow (velocity[0], before the empty effort)."""
-        flow, = APPLIED_FLOW.unpack_from(data, len(data) - APPLIED_FLOW_FROM_END)
+        (flow,) = APPLIED_FLOW.unpack_from(data, len(data) - APPLIED_FLOW_FROM_END)
         if flow in self.inlet_sent and flow not in self.applied:
             self.applied[flow] = STAMP.unpack_from(data, STAMP_OFFSET)
 
@@ -157,23 +165,28 @@ class Bench:
 
     def _on_diagnostics(self, message):
         for status in message.status:
-            if status.hardware_id == "/relief_valve":
-                self.diagnostics.append((time.monotonic(), {kv.key: kv.value for kv in status.values}))
+            if status.hardware_id == '/relief_valve':
+                self.diagnostics.append(
+                    (time.monotonic(), {kv.key: kv.value for kv in status.values})
+                )
 
     def latencies_ns(self):
         """inlet_flow publish -> receipt of the supply pressure of the tick that applied it [ns]."""
-        return [self.pressure_received[stamp] - self.inlet_sent[flow]
-                for flow, stamp in self.applied.items() if stamp in self.pressure_received]
+        return [
+            self.pressure_received[stamp] - self.inlet_sent[flow]
+            for flow, stamp in self.applied.items()
+            if stamp in self.pressure_received
+        ]
 
 
 def percentiles_ms(values_ns):
     import numpy as np
 
     if len(values_ns) == 0:
-        return {"count": 0}
+        return {'count': 0}
     values = np.asarray(values_ns) / 1e6
     p50, p99 = np.percentile(values, [50, 99])
-    return {"count": len(values), "p50_ms": p50, "p99_ms": p99, "max_ms": values.max()}
+    return {'count': len(values), 'p50_ms': p50, 'p99_ms': p99, 'max_ms': values.max()}
 
 
 def tick_figures(diagnostics):
@@ -181,23 +194,27 @@ def tick_figures(diagnostics):
     import numpy as np
 
     first, last = diagnostics[0][1], diagnostics[-1][1]
-    counts = {key: int(last[key]) - int(first[key])
-              for key in ("ticks", "late_ticks", "long_ticks", "missed_ticks", "skipped_ticks")}
+    counts = {
+        key: int(last[key]) - int(first[key])
+        for key in ('ticks', 'late_ticks', 'long_ticks', 'missed_ticks', 'skipped_ticks')
+    }
     windows = [values for _, values in diagnostics[1:]]
-    p50s = [float(w["tick_compute_p50_ms"]) for w in windows]
-    p99s = [float(w["tick_compute_p99_ms"]) for w in windows]
-    on_time = counts["ticks"] - counts["late_ticks"]
+    p50s = [float(w['tick_compute_p50_ms']) for w in windows]
+    p99s = [float(w['tick_compute_p99_ms']) for w in windows]
+    on_time = counts['ticks'] - counts['late_ticks']
     return {
         **counts,
-        "on_time_percent": 100.0 * on_time / (counts["ticks"] + counts["missed_ticks"]),
-        "long_percent": 100.0 * counts["long_ticks"] / counts["ticks"],
-        "slots_served_percent": 100.0 * counts["ticks"] / (counts["ticks"] + counts["missed_ticks"]),
-        "compute_p50_ms": float(np.median(p50s)),
-        "compute_p99_ms_median_window": float(np.median(p99s)),
-        "compute_p99_ms_worst_window": max(p99s),
-        "compute_max_ms": max(float(w["tick_compute_max_ms"]) for w in windows),
-        "real_time_factor_min": min(float(w["real_time_factor"]) for w in windows),
-        "integration_failures": int(last["integration_failures"]),
+        'on_time_percent': 100.0 * on_time / (counts['ticks'] + counts['missed_ticks']),
+        'long_percent': 100.0 * counts['long_ticks'] / counts['ticks'],
+        'slots_served_percent': 100.0
+        * counts['ticks']
+        / (counts['ticks'] + counts['missed_ticks']),
+        'compute_p50_ms': float(np.median(p50s)),
+        'compute_p99_ms_median_window': float(np.median(p99s)),
+        'compute_p99_ms_worst_window': max(p99s),
+        'compute_max_ms': max(float(w['tick_compute_max_ms']) for w in windows),
+        'real_time_factor_min': min(float(w['real_time_factor']) for w in windows),
+        'integration_failures': int(last['integration_failures']),
     }
 
 
@@ -225,24 +242,45 @@ def measure(duration, rt_priority, executor, env):
     """Run the node, the echo and the probes for duration [s]; returns the figures."""
     import psutil
     import rclpy
-
     from valve_sim.ros.spinning import EXECUTORS
 
-    scheduler = ["chrt", "--fifo", str(rt_priority)] if rt_priority else []
+    scheduler = ['chrt', '--fifo', str(rt_priority)] if rt_priority else []
     if rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority - 1))
     load_at_start = os.getloadavg()
-    valve = start([*scheduler, sys.executable, "-m", "valve_sim.ros.valve_node", "--executor", executor, "--ros-args",
-                   "-p", "publish_rate:=1000.0", "-p", "step_size:=1.0e-5", "-p", "input_timeout:=0.0"], env)
-    echo = start([*scheduler, sys.executable, __file__, "--echo", executor], env)
-    floor_file = REPO / "out" / f"timer_floor_{os.getpid()}.json"
+    valve = start(
+        [
+            *scheduler,
+            sys.executable,
+            '-m',
+            'valve_sim.ros.valve_node',
+            '--executor',
+            executor,
+            '--ros-args',
+            '-p',
+            'publish_rate:=1000.0',
+            '-p',
+            'step_size:=1.0e-5',
+            '-p',
+            'input_timeout:=0.0',
+        ],
+        env,
+    )
+    echo = start([*scheduler, sys.executable, __file__, '--echo', executor], env)
+    floor_file = REPO / 'out' / f'timer_floor_{os.getpid()}.json'
     floor_file.parent.mkdir(exist_ok=True)
-    timer_floor = start([*scheduler, sys.executable, __file__, "--timer-floor", str(floor_file)], env)
-    processes = {"valve_node": psutil.Process(valve.pid), "echo": psutil.Process(echo.pid), "bench": psutil.Process()}
+    timer_floor = start(
+        [*scheduler, sys.executable, __file__, '--timer-floor', str(floor_file)], env
+    )
+    processes = {
+        'valve_node': psutil.Process(valve.pid),
+        'echo': psutil.Process(echo.pid),
+        'bench': psutil.Process(),
+    }
     rclpy.init()
-    node = rclpy.create_node("bench")
+    node = rclpy.create_node('bench')
     bench = Bench(node)
-    spinner = EXECUTORS[executor]()   # this process is loaded least on the node's kind of executor
+    spinner = EXECUTORS[executor]()  # this process is loaded least on the node's kind of executor
     spinner.add_node(node)
     memory = {}
     try:
@@ -254,116 +292,199 @@ def measure(duration, rt_priority, executor, env):
         measured_from, cpu_at_start = time.monotonic(), cpu_seconds(processes)
         while (elapsed := time.monotonic() - measured_from) < duration:
             spinner.spin_once(timeout_sec=0.1)
-            if "after_10s_mb" not in memory and elapsed >= min(MEMORY_EARLY, duration / 2):
-                memory["after_10s_mb"] = processes["valve_node"].memory_info().rss / 2**20
-                memory["after_10s_at_s"] = round(elapsed, 1)
+            if 'after_10s_mb' not in memory and elapsed >= min(MEMORY_EARLY, duration / 2):
+                memory['after_10s_mb'] = processes['valve_node'].memory_info().rss / 2**20
+                memory['after_10s_at_s'] = round(elapsed, 1)
         cpu_at_end = cpu_seconds(processes)
-        memory["at_end_mb"] = processes["valve_node"].memory_info().rss / 2**20
-        memory["at_end_s"] = round(elapsed, 1)
+        memory['at_end_mb'] = processes['valve_node'].memory_info().rss / 2**20
+        memory['at_end_s'] = round(elapsed, 1)
         bench.measuring = False
         settle = time.monotonic()
-        while time.monotonic() - settle < 1.5:   # the last answers and diagnostics
+        while time.monotonic() - settle < 1.5:  # the last answers and diagnostics
             spinner.spin_once(timeout_sec=0.1)
     finally:
         spinner.remove_node(node)
         spinner.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-        exit_codes = {"valve_node": stop(valve), "echo": stop(echo), "timer_floor": stop(timer_floor)}
+        exit_codes = {
+            'valve_node': stop(valve),
+            'echo': stop(echo),
+            'timer_floor': stop(timer_floor),
+        }
     floor = json.loads(floor_file.read_text())
     floor_file.unlink()
     return {
-        "duration_s": duration,
-        "publish_rate_hz": 1000.0,
-        "step_size_s": 1e-5,
-        "executor": executor,
-        "ticks": tick_figures(bench.diagnostics),
-        "timer_floor_on_time_percent": 100.0 * (floor["ticks"] - floor["late"]) / (floor["ticks"] + floor["missed"]),
-        "timer_floor": floor,
-        "latency": percentiles_ms(bench.latencies_ns()),
-        "latency_probes_sent": len(bench.inlet_sent),
-        "echo_round_trip": percentiles_ms(bench.echo_trips),
-        "memory": {**memory, "growth_mb": memory["at_end_mb"] - memory["after_10s_mb"]},
-        "cpu_percent_of_one_core": {name: 100.0 * (cpu_at_end[name] - cpu_at_start[name]) / elapsed
-                                    for name in processes},
-        "exit_codes": exit_codes,
-        "scheduler": f"SCHED_FIFO {rt_priority}" if rt_priority else "normal",
-        "cpus": os.cpu_count(),
-        "load_average_at_start": load_at_start,
-        "load_average_at_end": os.getloadavg(),
+        'duration_s': duration,
+        'publish_rate_hz': 1000.0,
+        'step_size_s': 1e-5,
+        'executor': executor,
+        'ticks': tick_figures(bench.diagnostics),
+        'timer_floor_on_time_percent': 100.0
+        * (floor['ticks'] - floor['late'])
+        / (floor['ticks'] + floor['missed']),
+        'timer_floor': floor,
+        'latency': percentiles_ms(bench.latencies_ns()),
+        'latency_probes_sent': len(bench.inlet_sent),
+        'echo_round_trip': percentiles_ms(bench.echo_trips),
+        'memory': {**memory, 'growth_mb': memory['at_end_mb'] - memory['after_10s_mb']},
+        'cpu_percent_of_one_core': {
+            name: 100.0 * (cpu_at_end[name] - cpu_at_start[name]) / elapsed for name in processes
+        },
+        'exit_codes': exit_codes,
+        'scheduler': f'SCHED_FIFO {rt_priority}' if rt_priority else 'normal',
+        'cpus': os.cpu_count(),
+        'load_average_at_start': load_at_start,
+        'load_average_at_end': os.getloadavg(),
     }
 
 
 def table(figures):
-    ticks, latency, echo, memory = figures["ticks"], figures["latency"], figures["echo_round_trip"], figures["memory"]
-    cpu = figures["cpu_percent_of_one_core"]
+    ticks, latency, echo, memory = (
+        figures['ticks'],
+        figures['latency'],
+        figures['echo_round_trip'],
+        figures['memory'],
+    )
+    cpu = figures['cpu_percent_of_one_core']
     rows = [
-        ("on-time ticks", f"{ticks['on_time_percent']:.3f} %", ">= 99.9 %",
-         f"{ticks['ticks']} ticks, {ticks['late_ticks']} late, {ticks['missed_ticks']} missed, "
-         f"{ticks['skipped_ticks']} skipped"),
-        ("floor: bare sleep loop on time", f"{figures['timer_floor_on_time_percent']:.3f} %", "",
-         f"{figures['timer_floor']['ticks']} ticks, {figures['timer_floor']['late']} late, "
-         f"{figures['timer_floor']['missed']} missed (a Python loop sleeping to 1 kHz slots, same run)"),
-        ("timer slots with a tick", f"{ticks['slots_served_percent']:.3f} %", "",
-         "ticks started within a period of their slot, late or not"),
-        ("tick compute p50", f"{ticks['compute_p50_ms']:.3f} ms", "", "median of 1-s windows"),
-        ("tick compute p99", f"{ticks['compute_p99_ms_worst_window']:.3f} ms", "<= 0.5 ms",
-         f"worst 1-s window (median window {ticks['compute_p99_ms_median_window']:.3f} ms); "
-         f"max {ticks['compute_max_ms']:.2f} ms"),
-        ("ticks computing > 0.5 ms", f"{ticks['long_percent']:.3f} %", "<= 1 %",
-         f"{ticks['long_ticks']} of {ticks['ticks']}: the run's compute p99 is <= 0.5 ms iff this is <= 1 %"),
-        ("latency inlet -> pressure p50", f"{latency.get('p50_ms', float('nan')):.3f} ms", "",
-         f"{latency['count']} of {figures['latency_probes_sent']} probes"),
-        ("latency inlet -> pressure p99", f"{latency.get('p99_ms', float('nan')):.3f} ms", "<= 3 ms",
-         f"max {latency.get('max_ms', float('nan')):.2f} ms"),
-        ("floor: echo round trip p50", f"{echo.get('p50_ms', float('nan')):.3f} ms", "", f"{echo['count']} probes"),
-        ("floor: echo round trip p99", f"{echo.get('p99_ms', float('nan')):.3f} ms", "",
-         f"max {echo.get('max_ms', float('nan')):.2f} ms"),
-        (f"resident memory at {memory['after_10s_at_s']:g} s", f"{memory['after_10s_mb']:.1f} MB", "", ""),
-        (f"resident memory at {memory['at_end_s']:g} s", f"{memory['at_end_mb']:.1f} MB",
-         "growth: a few MB", f"growth {memory['growth_mb']:+.2f} MB"),
-        ("CPU valve_node", f"{cpu['valve_node']:.1f} %", "", "of one core, measured span"),
-        ("CPU echo / this process", f"{cpu['echo']:.1f} / {cpu['bench']:.1f} %", "", "of one core"),
+        (
+            'on-time ticks',
+            f'{ticks["on_time_percent"]:.3f} %',
+            '>= 99.9 %',
+            f'{ticks["ticks"]} ticks, {ticks["late_ticks"]} late, {ticks["missed_ticks"]} missed, '
+            f'{ticks["skipped_ticks"]} skipped',
+        ),
+        (
+            'floor: bare sleep loop on time',
+            f'{figures["timer_floor_on_time_percent"]:.3f} %',
+            '',
+            f'{figures["timer_floor"]["ticks"]} ticks, {figures["timer_floor"]["late"]} late, '
+            f'{figures["timer_floor"]["missed"]} missed (a Python loop sleeping to 1 kHz slots, same run)',
+        ),
+        (
+            'timer slots with a tick',
+            f'{ticks["slots_served_percent"]:.3f} %',
+            '',
+            'ticks started within a period of their slot, late or not',
+        ),
+        ('tick compute p50', f'{ticks["compute_p50_ms"]:.3f} ms', '', 'median of 1-s windows'),
+        (
+            'tick compute p99',
+            f'{ticks["compute_p99_ms_worst_window"]:.3f} ms',
+            '<= 0.5 ms',
+            f'worst 1-s window (median window {ticks["compute_p99_ms_median_window"]:.3f} ms); '
+            f'max {ticks["compute_max_ms"]:.2f} ms',
+        ),
+        (
+            'ticks computing > 0.5 ms',
+            f'{ticks["long_percent"]:.3f} %',
+            '<= 1 %',
+            f"{ticks['long_ticks']} of {ticks['ticks']}: the run's compute p99 is <= 0.5 ms iff this is <= 1 %",
+        ),
+        (
+            'latency inlet -> pressure p50',
+            f'{latency.get("p50_ms", float("nan")):.3f} ms',
+            '',
+            f'{latency["count"]} of {figures["latency_probes_sent"]} probes',
+        ),
+        (
+            'latency inlet -> pressure p99',
+            f'{latency.get("p99_ms", float("nan")):.3f} ms',
+            '<= 3 ms',
+            f'max {latency.get("max_ms", float("nan")):.2f} ms',
+        ),
+        (
+            'floor: echo round trip p50',
+            f'{echo.get("p50_ms", float("nan")):.3f} ms',
+            '',
+            f'{echo["count"]} probes',
+        ),
+        (
+            'floor: echo round trip p99',
+            f'{echo.get("p99_ms", float("nan")):.3f} ms',
+            '',
+            f'max {echo.get("max_ms", float("nan")):.2f} ms',
+        ),
+        (
+            f'resident memory at {memory["after_10s_at_s"]:g} s',
+            f'{memory["after_10s_mb"]:.1f} MB',
+            '',
+            '',
+        ),
+        (
+            f'resident memory at {memory["at_end_s"]:g} s',
+            f'{memory["at_end_mb"]:.1f} MB',
+            'growth: a few MB',
+            f'growth {memory["growth_mb"]:+.2f} MB',
+        ),
+        ('CPU valve_node', f'{cpu["valve_node"]:.1f} %', '', 'of one core, measured span'),
+        (
+            'CPU echo / this process',
+            f'{cpu["echo"]:.1f} / {cpu["bench"]:.1f} %',
+            '',
+            'of one core',
+        ),
     ]
     width = max(len(row[0]) for row in rows)
-    lines = [f"valve_node benchmark: {figures['duration_s']:g} s at {figures['publish_rate_hz']:g} Hz, "
-             f"steps of {figures['step_size_s'] * 1e6:g} us, executor {figures['executor']}, "
-             f"scheduler {figures['scheduler']}, "
-             f"{figures['cpus']} CPUs, load average (1 min) {figures['load_average_at_start'][0]:.2f} at start, "
-             f"{figures['load_average_at_end'][0]:.2f} at end",
-             f"{'measure':<{width}}  {'value':>12}  {'target':<16}  notes"]
-    lines += [f"{name:<{width}}  {value:>12}  {target:<16}  {notes}" for name, value, target, notes in rows]
-    return "\n".join(lines)
+    lines = [
+        f'valve_node benchmark: {figures["duration_s"]:g} s at {figures["publish_rate_hz"]:g} Hz, '
+        f'steps of {figures["step_size_s"] * 1e6:g} us, executor {figures["executor"]}, '
+        f'scheduler {figures["scheduler"]}, '
+        f'{figures["cpus"]} CPUs, load average (1 min) {figures["load_average_at_start"][0]:.2f} at start, '
+        f'{figures["load_average_at_end"][0]:.2f} at end',
+        f'{"measure":<{width}}  {"value":>12}  {"target":<16}  notes',
+    ]
+    lines += [
+        f'{name:<{width}}  {value:>12}  {target:<16}  {notes}'
+        for name, value, target, notes in rows
+    ]
+    return '\n'.join(lines)
 
 
 def main(argv=None):
     from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=60.0, help="measured time [s] (default 60)")
-    parser.add_argument("--json", type=Path, default=REPO / "out" / "bench_node.json", help="JSON output file")
-    parser.add_argument("--rt-priority", type=int, default=0,
-                        help="run the nodes under SCHED_FIFO with this priority (this process one lower)")
-    parser.add_argument("--executor", choices=EXECUTORS, default=DEFAULT_EXECUTOR,
-                        help=f"the executor of valve_node, the echo node and this process (default {DEFAULT_EXECUTOR})")
-    parser.add_argument("--echo", metavar="EXECUTOR", help=argparse.SUPPRESS)
-    parser.add_argument("--timer-floor", metavar="FILE", help=argparse.SUPPRESS)
+    parser.add_argument(
+        '--duration', type=float, default=60.0, help='measured time [s] (default 60)'
+    )
+    parser.add_argument(
+        '--json', type=Path, default=REPO / 'out' / 'bench_node.json', help='JSON output file'
+    )
+    parser.add_argument(
+        '--rt-priority',
+        type=int,
+        default=0,
+        help='run the nodes under SCHED_FIFO with this priority (this process one lower)',
+    )
+    parser.add_argument(
+        '--executor',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
+        help=f'the executor of valve_node, the echo node and this process (default {DEFAULT_EXECUTOR})',
+    )
+    parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
+    parser.add_argument('--timer-floor', metavar='FILE', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.echo:
         return run_echo(args.echo)
     if args.timer_floor:
         return run_timer_floor(args.timer_floor)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 101)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 101)),
+        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
+    )
     os.environ.update(env)
     figures = measure(args.duration, args.rt_priority, args.executor, env)
     print(table(figures))
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(figures, indent=2, default=float) + "\n")
-    print(f"figures written to {args.json}")
+    args.json.write_text(json.dumps(figures, indent=2, default=float) + '\n')
+    print(f'figures written to {args.json}')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

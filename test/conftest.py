@@ -1,18 +1,20 @@
 """Test isolation (../shared/spec/platform.md): every test session picks its own
 ROS_DOMAIN_ID and keeps discovery on localhost, before anything imports rclpy,
 so parallel or leftover runs never cross-talk. Child processes inherit both."""
+
 import os
 import random
 
-os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101))
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.setdefault("MPLBACKEND", "Agg")
+
+os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
 import pytest  # noqa: E402  (after the environment is set)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def context():
     """An rclpy context of its own for a test module (nodes in the test process)."""
     import rclpy
@@ -23,7 +25,7 @@ def context():
     context.try_shutdown()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope='session')
 def reference():
     """The validated parameters of config/reference.yaml."""
     from valve_sim.core.parameters import load_parameters

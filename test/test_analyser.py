@@ -1,54 +1,65 @@
 """analyser_node over real DDS: a simulated step published at 1 kHz, recorded, measured live and offline."""
+
+from contextlib import contextmanager
 import json
 import signal
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 
-import pytest
-import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
-
-from valve_sim.ros.analyser_node import MEASURES_QOS, measures_from_message
-from valve_sim.recording.bag import BagReader, message_definition
-from valve_sim.commands.analyse import analyse, read_recording
+import pytest
+import rclpy
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.core.parameters import load_parameters
-from valve_sim.recording.replay import Replay
 from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.recording.bag import BagReader, message_definition
+from valve_sim.recording.replay import Replay
+from valve_sim.ros.analyser_node import measures_from_message, MEASURES_QOS
+import yaml
 
-TIMEOUT = 60.0   # [s] for anything that waits on another process
+
+TIMEOUT = 60.0  # [s] for anything that waits on another process
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def node():
     """A node of this test process, in its own rclpy context."""
     context = rclpy.Context()
     rclpy.init(context=context)
-    test_node = rclpy.create_node("analyser_test", context=context)
+    test_node = rclpy.create_node('analyser_test', context=context)
     yield test_node
     test_node.destroy_node()
     rclpy.try_shutdown(context=context)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def waveforms():
     """The paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
-    return simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3)
+    return simulate(
+        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
+    )
 
 
 @contextmanager
 def running_analyser(folder, *parameters):
     """An analyser_node process recording into folder; killed on the way out if a test left it running."""
-    arguments = [argument for parameter in (f"output_dir:={folder}", *parameters) for argument in ("-p", parameter)]
-    process = subprocess.Popen([sys.executable, "-m", "valve_sim.ros.analyser_node", "--ros-args", *arguments],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    arguments = [
+        argument
+        for parameter in (f'output_dir:={folder}', *parameters)
+        for argument in ('-p', parameter)
+    ]
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'valve_sim.ros.analyser_node', '--ros-args', *arguments],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         yield process
     finally:
@@ -57,12 +68,12 @@ def running_analyser(folder, *parameters):
             process.communicate()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def recording(node, waveforms, tmp_path_factory):
     """One analyser run: the step replayed, its measures received, the analyser stopped with SIGTERM."""
-    folder = tmp_path_factory.mktemp("recording")
+    folder = tmp_path_factory.mktemp('recording')
     messages = []
-    node.create_subscription(DiagnosticArray, "step_measures", messages.append, MEASURES_QOS)
+    node.create_subscription(DiagnosticArray, 'step_measures', messages.append, MEASURES_QOS)
     executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     with running_analyser(folder) as analyser:
@@ -72,78 +83,96 @@ def recording(node, waveforms, tmp_path_factory):
         deadline = time.monotonic() + TIMEOUT
         while not messages:
             executor.spin_once(timeout_sec=0.05)
-            assert time.monotonic() < deadline, "no step_measures message"
+            assert time.monotonic() < deadline, 'no step_measures message'
         executor.remove_node(node)
         analyser.send_signal(signal.SIGTERM)
         log = analyser.communicate(timeout=TIMEOUT)[0]
-    bag = next(folder.glob("*.mcap"))
-    return {"code": analyser.returncode, "log": log, "bag": bag, "published": replay.published,
-            "messages": messages, "records": json.loads(bag.with_suffix(".measures.json").read_text())["steps"]}
+    bag = next(folder.glob('*.mcap'))
+    return {
+        'code': analyser.returncode,
+        'log': log,
+        'bag': bag,
+        'published': replay.published,
+        'messages': messages,
+        'records': json.loads(bag.with_suffix('.measures.json').read_text())['steps'],
+    }
 
 
 def test_sigterm_closes_the_file(recording):
-    assert recording["code"] == 0, recording["log"]
-    assert "closed" in recording["log"] and "Traceback" not in recording["log"]
-    with open(recording["bag"], "rb") as stream:
-        assert make_reader(stream).get_summary() is not None   # summary and footer written
+    assert recording['code'] == 0, recording['log']
+    assert 'closed' in recording['log'] and 'Traceback' not in recording['log']
+    with open(recording['bag'], 'rb') as stream:
+        assert make_reader(stream).get_summary() is not None  # summary and footer written
 
 
 def test_every_published_message_is_recorded(recording):
-    with open(recording["bag"], "rb") as stream:
+    with open(recording['bag'], 'rb') as stream:
         summary = make_reader(stream).get_summary()
-    counts = {summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()}
-    assert {topic: counts.get("/" + topic) for topic in recording["published"]} == recording["published"]
+    counts = {
+        summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()
+    }
+    assert {topic: counts.get('/' + topic) for topic in recording['published']} == recording[
+        'published'
+    ]
 
 
 def test_live_measures_equal_offline_analysis(recording):
-    records = recording["records"]
-    assert len(records) == 1 and records[0]["direction"] == 1
-    assert all(records[0][name] is not None for name in MEASURE_NAMES), records[0]["reasons"]
-    assert records == analyse(read_recording(recording["bag"]))
-    published = measures_from_message(recording["messages"][0])
+    records = recording['records']
+    assert len(records) == 1 and records[0]['direction'] == 1
+    assert all(records[0][name] is not None for name in MEASURE_NAMES), records[0]['reasons']
+    assert records == analyse(read_recording(recording['bag']))
+    published = measures_from_message(recording['messages'][0])
     assert published == {name: records[0][name] for name in MEASURE_NAMES}
 
 
 def test_recording_decodes_with_mcap_ros2_and_rosbags(recording):
     from rosbags.highlevel import AnyReader
 
-    with open(recording["bag"], "rb") as stream:
+    with open(recording['bag'], 'rb') as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        assert reader.get_header().profile == "ros2"
+        assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
         for channel in summary.channels.values():
             schema = summary.schemas[channel.schema_id]
-            assert (channel.message_encoding, schema.encoding) == ("cdr", "ros2msg")
+            assert (channel.message_encoding, schema.encoding) == ('cdr', 'ros2msg')
             assert schema.data.decode() == message_definition(schema.name)
-            offers = yaml.safe_load(channel.metadata["offered_qos_profiles"])
-            assert offers and offers[0]["reliability"] == "reliable"
+            offers = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+            assert offers and offers[0]['reliability'] == 'reliable'
         decoded = sum(1 for _ in reader.iter_decoded_messages())
     assert decoded == summary.statistics.message_count
-    with AnyReader([recording["bag"]]) as bag:
-        connections = [c for c in bag.connections if c.topic == "/joint_states"]
-        positions = [bag.deserialize(raw, c.msgtype).position for c, _, raw in bag.messages(connections)]
-    assert len(positions) == recording["published"]["joint_states"]
+    with AnyReader([recording['bag']]) as bag:
+        connections = [c for c in bag.connections if c.topic == '/joint_states']
+        positions = [
+            bag.deserialize(raw, c.msgtype).position for c, _, raw in bag.messages(connections)
+        ]
+    assert len(positions) == recording['published']['joint_states']
 
 
 def test_hard_kill_leaves_every_flushed_chunk_readable(node, waveforms, tmp_path):
-    with running_analyser(tmp_path, "flush_interval:=0.2") as analyser:
+    with running_analyser(tmp_path, 'flush_interval:=0.2') as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
         replay.publish(waveforms, time.time_ns(), every=2)
-        published, topics = sum(replay.published.values()), {"/" + topic for topic in replay.published}
-        bag = next(tmp_path.glob("*.mcap"))
+        published, topics = (
+            sum(replay.published.values()),
+            {'/' + topic for topic in replay.published},
+        )
+        bag = next(tmp_path.glob('*.mcap'))
         deadline = time.monotonic() + TIMEOUT
-        while sum(1 for _ in BagReader(bag).messages(topics)) < published:   # until all is flushed
-            assert time.monotonic() < deadline, "the analyser did not flush what it received"
+        while sum(1 for _ in BagReader(bag).messages(topics)) < published:  # until all is flushed
+            assert time.monotonic() < deadline, 'the analyser did not flush what it received'
             time.sleep(0.2)
         analyser.kill()
         analyser.wait(timeout=TIMEOUT)
         assert analyser.returncode == -signal.SIGKILL
     reader = BagReader(bag)
     assert sum(1 for _ in reader.messages(topics)) == published
-    assert "ends before its footer" in reader.problem
+    assert 'ends before its footer' in reader.problem
     records = []
-    with open(bag, "rb") as stream, pytest.raises(Exception):   # the mcap library reads it as far as it goes
+    with (
+        open(bag, 'rb') as stream,
+        pytest.raises(Exception),
+    ):  # the mcap library reads it as far as it goes
         for record in StreamReader(stream).records:
             records.append(record)
     assert sum(isinstance(record, Message) for record in records) >= published
@@ -151,9 +180,9 @@ def test_hard_kill_leaves_every_flushed_chunk_readable(node, waveforms, tmp_path
 
 
 def test_unwritable_output_dir_is_an_error_at_start(tmp_path):
-    blocker = tmp_path / "file"
-    blocker.write_text("")
-    with running_analyser(blocker / "recordings") as analyser:
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    with running_analyser(blocker / 'recordings') as analyser:
         log = analyser.communicate(timeout=TIMEOUT)[0]
     assert analyser.returncode == 1
-    assert "output_dir" in log and "cannot be created" in log and "Traceback" not in log
+    assert 'output_dir' in log and 'cannot be created' in log and 'Traceback' not in log

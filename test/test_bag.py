@@ -1,41 +1,49 @@
 """MCAP files as rosbag2 writes them (valve_sim.recording.bag, valve_topics) and their offline analysis (bag_analysis)."""
+
 import json
+from pathlib import Path
 import subprocess
 import sys
-from pathlib import Path
 
-import pytest
-import yaml
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 from mcap_ros2.decoder import DecoderFactory
+import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
-
-from valve_sim.recording.bag import DEFAULT_OFFER, SEPARATOR, BagReader, BagWriter, message_definition, qos_profiles_yaml
+from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.recording.bag import (
+    BagReader,
+    BagWriter,
+    DEFAULT_OFFER,
+    message_definition,
+    qos_profiles_yaml,
+    SEPARATOR,
+)
 from valve_sim.recording.valve_topics import TOPIC_TYPES, write_simulation_bag
+import yaml
+
 
 ROOT = Path(__file__).resolve().parent.parent
-SAMPLE_BAG = ROOT / "bags" / "reference_step.mcap"
+SAMPLE_BAG = ROOT / 'bags' / 'reference_step.mcap'
 START_NS = 1_700_000_000 * 10**9
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def waveforms():
     """The paper's step, shortened to 0.6 s (step at 0.25 s; its window is then truncated)."""
     return simulate(load_parameters()[0], Scenario(step_time=0.25, end_time=0.6))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def simulation_bag(waveforms, tmp_path_factory):
-    path = tmp_path_factory.mktemp("bags") / "simulation.mcap"
+    path = tmp_path_factory.mktemp('bags') / 'simulation.mcap'
     write_simulation_bag(path, waveforms, start_time_ns=START_NS)
     return path
 
@@ -48,203 +56,258 @@ def run_cli(capsys, *arguments):
 
 
 def test_definition_is_rosbag2_full_text():
-    text = message_definition("diagnostic_msgs/msg/DiagnosticArray")
-    share = Path(sys.prefix) / "share"
-    assert text.startswith((share / "diagnostic_msgs/msg/DiagnosticArray.msg").read_text())
-    nested = [line for line in text.splitlines() if line.startswith("MSG: ")]
+    text = message_definition('diagnostic_msgs/msg/DiagnosticArray')
+    share = Path(sys.prefix) / 'share'
+    assert text.startswith((share / 'diagnostic_msgs/msg/DiagnosticArray.msg').read_text())
+    nested = [line for line in text.splitlines() if line.startswith('MSG: ')]
     # Sorted per level, depth first, each type once (rosbag2's LocalMessageDefinitionSource).
-    assert nested == ["MSG: diagnostic_msgs/DiagnosticStatus", "MSG: diagnostic_msgs/KeyValue",
-                      "MSG: std_msgs/Header", "MSG: builtin_interfaces/Time"]
-    assert text.count(f"\n{SEPARATOR}\nMSG: ") == 4
-    key_value = (share / "diagnostic_msgs/msg/KeyValue.msg").read_text()
-    assert f"\n{SEPARATOR}\nMSG: diagnostic_msgs/KeyValue\n{key_value}" in text
+    assert nested == [
+        'MSG: diagnostic_msgs/DiagnosticStatus',
+        'MSG: diagnostic_msgs/KeyValue',
+        'MSG: std_msgs/Header',
+        'MSG: builtin_interfaces/Time',
+    ]
+    assert text.count(f'\n{SEPARATOR}\nMSG: ') == 4
+    key_value = (share / 'diagnostic_msgs/msg/KeyValue.msg').read_text()
+    assert f'\n{SEPARATOR}\nMSG: diagnostic_msgs/KeyValue\n{key_value}' in text
 
 
 def test_qos_profiles_are_rosbag2_yaml():
     text = qos_profiles_yaml([DEFAULT_OFFER])
-    assert text.startswith("- history: unknown\n  depth: 0\n  reliability: reliable\n  durability: volatile\n"
-                           "  deadline:\n    sec: 9223372036\n    nsec: 854775807\n")
-    assert text.endswith("  avoid_ros_namespace_conventions: false")
-    assert yaml.safe_load(qos_profiles_yaml([DEFAULT_OFFER, DEFAULT_OFFER]))[1]["liveliness"] == "automatic"
-    assert qos_profiles_yaml([]) == "[]"
+    assert text.startswith(
+        '- history: unknown\n  depth: 0\n  reliability: reliable\n  durability: volatile\n'
+        '  deadline:\n    sec: 9223372036\n    nsec: 854775807\n'
+    )
+    assert text.endswith('  avoid_ros_namespace_conventions: false')
+    assert (
+        yaml.safe_load(qos_profiles_yaml([DEFAULT_OFFER, DEFAULT_OFFER]))[1]['liveliness']
+        == 'automatic'
+    )
+    assert qos_profiles_yaml([]) == '[]'
 
 
 def test_simulation_bag_has_valve_node_layout(simulation_bag, waveforms):
-    with open(simulation_bag, "rb") as stream:
+    with open(simulation_bag, 'rb') as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        assert reader.get_header().profile == "ros2"
+        assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
-        assert {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()} == \
-               {"/" + topic: type_name for topic, type_name in TOPIC_TYPES.items()}
+        assert {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()} == {
+            '/' + topic: type_name for topic, type_name in TOPIC_TYPES.items()
+        }
         for channel in summary.channels.values():
             schema = summary.schemas[channel.schema_id]
-            assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
+            assert channel.message_encoding == 'cdr' and schema.encoding == 'ros2msg'
             assert schema.data.decode() == message_definition(schema.name)
-            assert channel.metadata["offered_qos_profiles"] == qos_profiles_yaml([DEFAULT_OFFER])
-            assert channel.metadata["topic_type_hash"].startswith("RIHS01_")
+            assert channel.metadata['offered_qos_profiles'] == qos_profiles_yaml([DEFAULT_OFFER])
+            assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
         ticks = len(range(0, len(waveforms.time), 10))
-        counts = {summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()}
-        assert counts == {**{"/" + t: ticks for t in TOPIC_TYPES if t != "inlet_flow"}, "/inlet_flow": 2}
+        counts = {
+            summary.channels[i].topic: n
+            for i, n in summary.statistics.channel_message_counts.items()
+        }
+        assert counts == {
+            **{'/' + t: ticks for t in TOPIC_TYPES if t != 'inlet_flow'},
+            '/inlet_flow': 2,
+        }
         decoded = {}
         for _, channel, message, ros in reader.iter_decoded_messages():
             decoded.setdefault(channel.topic, (message, ros))
-    message, supply = decoded["/supply_pressure"]
-    assert supply.fluid_pressure == pytest.approx(waveforms["supply_pressure"][0] + 101325.0)
+    message, supply = decoded['/supply_pressure']
+    assert supply.fluid_pressure == pytest.approx(waveforms['supply_pressure'][0] + 101325.0)
     assert (supply.header.stamp.sec, supply.header.stamp.nanosec) == (START_NS // 10**9, 0)
     assert message.log_time == message.publish_time == START_NS
-    assert list(decoded["/joint_states"][1].name) == ["main_valve", "pilot_poppet"]
+    assert list(decoded['/joint_states'][1].name) == ['main_valve', 'pilot_poppet']
 
 
 def test_bag_decodes_with_rosbags(simulation_bag):
     from rosbags.highlevel import AnyReader
 
     with AnyReader([simulation_bag]) as reader:
-        connections = [c for c in reader.connections if c.topic == "/applied_inlet_flow"]
-        flows = [reader.deserialize(raw, c.msgtype).velocity[0] for c, _, raw in reader.messages(connections)]
-        qos = next(c for c in reader.connections if c.topic == "/supply_pressure").ext.offered_qos_profiles
+        connections = [c for c in reader.connections if c.topic == '/applied_inlet_flow']
+        flows = [
+            reader.deserialize(raw, c.msgtype).velocity[0]
+            for c, _, raw in reader.messages(connections)
+        ]
+        qos = next(
+            c for c in reader.connections if c.topic == '/supply_pressure'
+        ).ext.offered_qos_profiles
     assert flows[0] == pytest.approx(5 / 6e4) and flows[-1] == pytest.approx(20 / 6e4)
-    assert qos[0].reliability.name == "RELIABLE"
+    assert qos[0].reliability.name == 'RELIABLE'
 
 
 def test_offline_analysis_of_simulation_bag(simulation_bag):
     records = analyse(read_recording(simulation_bag))
     assert len(records) == 1
     step = records[0]
-    assert step["t_step"] == pytest.approx(START_NS / 1e9 + 0.25) and step["direction"] == 1
-    assert step["P_1_percent"] == pytest.approx(3.2, abs=0.3)
-    assert "truncated" in step["details"]["note"]
+    assert step['t_step'] == pytest.approx(START_NS / 1e9 + 0.25) and step['direction'] == 1
+    assert step['P_1_percent'] == pytest.approx(3.2, abs=0.3)
+    assert 'truncated' in step['details']['note']
 
 
 def test_sample_bag_analyses_to_its_json():
     """The installed command itself, on the sample bag in bags/."""
-    done = subprocess.run([sys.executable, "-m", "valve_sim.commands.cli", "analyse", str(SAMPLE_BAG), "--json"],
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'analyse', str(SAMPLE_BAG), '--json'],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     out = done.stdout
-    expected = json.loads(SAMPLE_BAG.with_suffix(".measures.json").read_text())["steps"]
-    steps = json.loads(out)["steps"]
+    expected = json.loads(SAMPLE_BAG.with_suffix('.measures.json').read_text())['steps']
+    steps = json.loads(out)['steps']
     assert len(steps) == len(expected) == 1
     for name in MEASURE_NAMES:
         assert steps[0][name] == pytest.approx(expected[0][name], rel=1e-12)
 
 
 def test_analyse_prints_table_and_plots(tmp_path, capsys):
-    code, out, err = run_cli(capsys, "analyse", SAMPLE_BAG, "--plot", tmp_path / "figure.png")
+    code, out, err = run_cli(capsys, 'analyse', SAMPLE_BAG, '--plot', tmp_path / 'figure.png')
     assert code == 0, err
-    assert "step 1: up at" in out and "T_s_ms" in out and "paper" in out
-    assert (tmp_path / "figure.png").stat().st_size > 10_000
+    assert 'step 1: up at' in out and 'T_s_ms' in out and 'paper' in out
+    assert (tmp_path / 'figure.png').stat().st_size > 10_000
 
 
 def write_rig_bag(path, waveforms, every=10):
     """The simulated run as a rig might record it: other topic names, Float64 flow, no shared layout."""
     bag = BagWriter(path)
-    bag.add_topic("/rig/p_supply", "sensor_msgs/msg/FluidPressure")
-    bag.add_topic("/rig/joints", "sensor_msgs/msg/JointState")
-    bag.add_topic("/rig/q_in", "std_msgs/msg/Float64")
+    bag.add_topic('/rig/p_supply', 'sensor_msgs/msg/FluidPressure')
+    bag.add_topic('/rig/joints', 'sensor_msgs/msg/JointState')
+    bag.add_topic('/rig/q_in', 'std_msgs/msg/Float64')
     for index in range(0, len(waveforms.time), every):
         time_ns = START_NS + round(waveforms.time[index] * 1e9)
-        messages = {"/rig/p_supply": FluidPressure(fluid_pressure=float(waveforms["supply_pressure"][index])),
-                    "/rig/joints": JointState(name=["spool"],
-                                              position=[float(waveforms["main_valve_displacement"][index])]),
-                    "/rig/q_in": Float64(data=float(waveforms.inlet_flow[index]))}
+        messages = {
+            '/rig/p_supply': FluidPressure(
+                fluid_pressure=float(waveforms['supply_pressure'][index])
+            ),
+            '/rig/joints': JointState(
+                name=['spool'], position=[float(waveforms['main_valve_displacement'][index])]
+            ),
+            '/rig/q_in': Float64(data=float(waveforms.inlet_flow[index])),
+        }
         for topic, message in messages.items():
             bag.write_message(topic, message, time_ns, time_ns)
     bag.close()
 
 
 def test_topic_mapping_reads_a_rig_bag(waveforms, simulation_bag, tmp_path, capsys):
-    rig = tmp_path / "rig.mcap"
+    rig = tmp_path / 'rig.mcap'
     write_rig_bag(rig, waveforms)
-    mapping = ["--topic-supply-pressure", "/rig/p_supply", "--topic-main-valve", "/rig/joints", "--joint-main-valve",
-               "spool", "--topic-inlet-flow", "/rig/q_in", "--ambient-pressure", "0"]
-    code, _, err = run_cli(capsys, "analyse", rig, *mapping)
-    assert code == 1 and "has no header stamp" in err and "receive clock" in err
-    code, out, err = run_cli(capsys, "analyse", rig, *mapping, "--clock", "receive", "--json")
+    mapping = [
+        '--topic-supply-pressure',
+        '/rig/p_supply',
+        '--topic-main-valve',
+        '/rig/joints',
+        '--joint-main-valve',
+        'spool',
+        '--topic-inlet-flow',
+        '/rig/q_in',
+        '--ambient-pressure',
+        '0',
+    ]
+    code, _, err = run_cli(capsys, 'analyse', rig, *mapping)
+    assert code == 1 and 'has no header stamp' in err and 'receive clock' in err
+    code, out, err = run_cli(capsys, 'analyse', rig, *mapping, '--clock', 'receive', '--json')
     assert code == 0, err
-    rig_step = json.loads(out)["steps"][0]
+    rig_step = json.loads(out)['steps'][0]
     valve_step = analyse(read_recording(simulation_bag))[0]
     for name in MEASURE_NAMES:
         if valve_step[name] is None:
-            assert rig_step[name] is None and rig_step["reasons"][name] == valve_step["reasons"][name]
+            assert (
+                rig_step[name] is None and rig_step['reasons'][name] == valve_step['reasons'][name]
+            )
         else:
             assert rig_step[name] == pytest.approx(valve_step[name], rel=1e-9)
 
 
 def test_step_time_option_needs_no_flow(simulation_bag, capsys):
-    code, out, err = run_cli(capsys, "analyse", simulation_bag, "--step-time", START_NS / 1e9 + 0.25,
-                             "--topic-inlet-flow", "/absent", "--json")
+    code, out, err = run_cli(
+        capsys,
+        'analyse',
+        simulation_bag,
+        '--step-time',
+        START_NS / 1e9 + 0.25,
+        '--topic-inlet-flow',
+        '/absent',
+        '--json',
+    )
     assert code == 0, err
-    assert json.loads(out)["steps"][0]["P_1_percent"] == pytest.approx(3.2, abs=0.3)
+    assert json.loads(out)['steps'][0]['P_1_percent'] == pytest.approx(3.2, abs=0.3)
 
 
 def chunked_bag(path, chunks=8, per_chunk=50):
     """A bag of supply-pressure messages in chunks of per_chunk messages each."""
     bag = BagWriter(path)
-    bag.add_topic("/supply_pressure", "sensor_msgs/msg/FluidPressure")
+    bag.add_topic('/supply_pressure', 'sensor_msgs/msg/FluidPressure')
     for k in range(chunks * per_chunk):
-        bag.write_message("/supply_pressure", {"fluid_pressure": float(k)}, k, k)
+        bag.write_message('/supply_pressure', {'fluid_pressure': float(k)}, k, k)
         if (k + 1) % per_chunk == 0:
             bag.flush()
     bag.close()
 
 
 def test_truncated_file_yields_its_complete_chunks(tmp_path):
-    path = tmp_path / "cut.mcap"
+    path = tmp_path / 'cut.mcap'
     chunked_bag(path)
     data = path.read_bytes()
-    path.write_bytes(data[:int(len(data) * 0.6)])
+    path.write_bytes(data[: int(len(data) * 0.6)])
     reader = BagReader(path)
     values = [message.log_time for _, _, message in reader.messages()]
     assert 0 < len(values) < 400 and len(values) % 50 == 0 and values == list(range(len(values)))
-    assert "ends before its footer" in reader.problem
+    assert 'ends before its footer' in reader.problem
 
 
 def test_truncated_recording_analyses_with_warning(simulation_bag, tmp_path, capsys):
-    cut = tmp_path / "cut.mcap"
+    cut = tmp_path / 'cut.mcap'
     cut.write_bytes(simulation_bag.read_bytes()[:-2000])
-    code, out, err = run_cli(capsys, "analyse", cut)
-    assert code == 0 and "warning" in err and "ends before its footer" in err and "step 1" in out
+    code, out, err = run_cli(capsys, 'analyse', cut)
+    assert code == 0 and 'warning' in err and 'ends before its footer' in err and 'step 1' in out
 
 
 def test_damaged_file_is_a_clear_error(tmp_path, capsys):
-    path = tmp_path / "damaged.mcap"
+    path = tmp_path / 'damaged.mcap'
     chunked_bag(path, chunks=2)
     data = bytearray(path.read_bytes())
-    data[len(data) // 4: len(data) // 4 + 16] = bytes(16)
+    data[len(data) // 4 : len(data) // 4 + 16] = bytes(16)
     path.write_bytes(bytes(data))
-    with pytest.raises(InputFileError, match="is damaged"):
+    with pytest.raises(InputFileError, match='is damaged'):
         list(BagReader(path).messages())
-    code, _, err = run_cli(capsys, "analyse", path)
-    assert code == 1 and "is damaged" in err and "Traceback" not in err
+    code, _, err = run_cli(capsys, 'analyse', path)
+    assert code == 1 and 'is damaged' in err and 'Traceback' not in err
 
 
 def test_foreign_files_are_clear_errors(tmp_path, capsys):
-    text = tmp_path / "notes.mcap"
-    text.write_text("not a bag\n")
-    empty = tmp_path / "empty.mcap"
-    empty.write_bytes(b"")
-    json_mcap = tmp_path / "json.mcap"
-    with open(json_mcap, "wb") as stream:
+    text = tmp_path / 'notes.mcap'
+    text.write_text('not a bag\n')
+    empty = tmp_path / 'empty.mcap'
+    empty.write_bytes(b'')
+    json_mcap = tmp_path / 'json.mcap'
+    with open(json_mcap, 'wb') as stream:
         writer = Writer(stream)
-        writer.start(profile="", library="test")
-        channel = writer.register_channel("/foo", "json", 0)
-        writer.add_message(channel, log_time=1, data=b"{}", publish_time=1)
+        writer.start(profile='', library='test')
+        channel = writer.register_channel('/foo', 'json', 0)
+        writer.add_message(channel, log_time=1, data=b'{}', publish_time=1)
         writer.finish()
-    cases = {text: "is not an MCAP file", empty: "is not an MCAP file (it is empty)", tmp_path: "is a directory",
-             tmp_path / "missing.mcap": "cannot read", json_mcap: "has no topic /supply_pressure"}
+    cases = {
+        text: 'is not an MCAP file',
+        empty: 'is not an MCAP file (it is empty)',
+        tmp_path: 'is a directory',
+        tmp_path / 'missing.mcap': 'cannot read',
+        json_mcap: 'has no topic /supply_pressure',
+    }
     for path, message in cases.items():
-        assert main(["analyse", str(path)]) == 1
+        assert main(['analyse', str(path)]) == 1
         error = capsys.readouterr().err
-        assert message in error and error.count("\n") == 1, error
+        assert message in error and error.count('\n') == 1, error
 
 
 def test_stream_reader_of_mcap_reads_a_cut_file(simulation_bag, tmp_path):
     """The mcap library itself also reads the complete records of a file without its end."""
-    cut = tmp_path / "cut.mcap"
+    cut = tmp_path / 'cut.mcap'
     cut.write_bytes(simulation_bag.read_bytes()[:-2000])
     records = []
-    with open(cut, "rb") as stream:
+    with open(cut, 'rb') as stream:
         with pytest.raises(Exception):
             for record in StreamReader(stream).records:
                 records.append(record)
-    assert sum(type(r).__name__ == "Message" for r in records) > 0
+    assert sum(type(r).__name__ == 'Message' for r in records) > 0

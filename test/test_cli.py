@@ -1,96 +1,130 @@
 """The valve-sim command line: simulate and study, as a user runs them."""
+
 import csv
 import json
 import subprocess
 import sys
 
 import pytest
-
 from valve_sim.analysis.measures import MEASURE_NAMES
 
+
 # Issue 2: the paper's Figure 5 values and the tolerances the reference geometry must meet.
-PAPER = {"T_1_ms": (6.7, 0.10, "rel"), "T_d_ms": (25.1, 0.10, "rel"), "P_1_percent": (3.18, 0.15, "rel"),
-         "r_d": (0.851, 0.03, "abs"), "T_s_ms": (540.0, 0.20, "rel"), "P_o_percent": (0.144, 0.30, "rel")}
+PAPER = {
+    'T_1_ms': (6.7, 0.10, 'rel'),
+    'T_d_ms': (25.1, 0.10, 'rel'),
+    'P_1_percent': (3.18, 0.15, 'rel'),
+    'r_d': (0.851, 0.03, 'abs'),
+    'T_s_ms': (540.0, 0.20, 'rel'),
+    'P_o_percent': (0.144, 0.30, 'rel'),
+}
 
 
 def valve_sim(*args, check=True):
-    result = subprocess.run([sys.executable, "-m", "valve_sim.commands.cli", *args], capture_output=True, text=True,
-                            timeout=300)
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     if check:
         assert result.returncode == 0, result.stderr
     return result
 
 
 def test_reference_run_reproduces_figure5_within_tolerance():
-    measures = json.loads(valve_sim("simulate", "--json").stdout)
-    assert measures["reasons"] == {}
+    measures = json.loads(valve_sim('simulate', '--json').stdout)
+    assert measures['reasons'] == {}
     for name, (paper, tolerance, kind) in PAPER.items():
-        allowed = tolerance * paper if kind == "rel" else tolerance
-        assert abs(measures[name] - paper) <= allowed, f"{name} = {measures[name]:.4g}, paper {paper}"
+        allowed = tolerance * paper if kind == 'rel' else tolerance
+        assert abs(measures[name] - paper) <= allowed, (
+            f'{name} = {measures[name]:.4g}, paper {paper}'
+        )
 
 
 def test_simulate_writes_csv_and_plot(tmp_path):
-    csv_path, png_path = tmp_path / "run.csv", tmp_path / "fig5.png"
-    out = valve_sim("simulate", "--end-time", "0.4", "--csv", str(csv_path), "--plot", str(png_path)).stdout
-    assert "T_1_ms" in out and "paper" in out
+    csv_path, png_path = tmp_path / 'run.csv', tmp_path / 'fig5.png'
+    out = valve_sim(
+        'simulate', '--end-time', '0.4', '--csv', str(csv_path), '--plot', str(png_path)
+    ).stdout
+    assert 'T_1_ms' in out and 'paper' in out
     with open(csv_path) as stream:
         rows = list(csv.reader(stream))
-    assert rows[0][:3] == ["time_s", "inlet_flow_m3_s", "supply_pressure_Pa"]
+    assert rows[0][:3] == ['time_s', 'inlet_flow_m3_s', 'supply_pressure_Pa']
     assert len(rows) == 1 + 4001 and float(rows[-1][0]) == pytest.approx(0.4)
-    assert png_path.read_bytes()[:4] == b"\x89PNG"
+    assert png_path.read_bytes()[:4] == b'\x89PNG'
 
 
 def test_simulate_from_a_closed_valve_with_a_ramp():
-    measures = json.loads(valve_sim("simulate", "--json", "--initial-flow", "0", "--final-flow", "20L/min",
-                                    "--ramp-time", "0.05", "--step-time", "0.1", "--end-time", "1.2").stdout)
-    assert measures["P_o_percent"] is None and "zero" in measures["reasons"]["P_o_percent"]
+    measures = json.loads(
+        valve_sim(
+            'simulate',
+            '--json',
+            '--initial-flow',
+            '0',
+            '--final-flow',
+            '20L/min',
+            '--ramp-time',
+            '0.05',
+            '--step-time',
+            '0.1',
+            '--end-time',
+            '1.2',
+        ).stdout
+    )
+    assert measures['P_o_percent'] is None and 'zero' in measures['reasons']['P_o_percent']
 
 
-@pytest.mark.parametrize("args, message", [
-    (("--set", "m_m=-1"), "main_valve_mass"),
-    (("--set", "nonsense=1"), "unknown parameter 'nonsense'"),
-    (("--set", "m_m"), "NAME=VALUE"),
-    (("--params", "/nonexistent/params.yaml"), "cannot read parameter file"),
-    (("--initial-flow=-5L/min",), "flow must be finite and >= 0"),
-    (("--final-flow", "lots"), "not a flow"),
-    (("--step-size", "1e-3"), "step size"),
-    (("--set", "step_size=1e-4"), "diverged"),
-])
+@pytest.mark.parametrize(
+    'args, message',
+    [
+        (('--set', 'm_m=-1'), 'main_valve_mass'),
+        (('--set', 'nonsense=1'), "unknown parameter 'nonsense'"),
+        (('--set', 'm_m'), 'NAME=VALUE'),
+        (('--params', '/nonexistent/params.yaml'), 'cannot read parameter file'),
+        (('--initial-flow=-5L/min',), 'flow must be finite and >= 0'),
+        (('--final-flow', 'lots'), 'not a flow'),
+        (('--step-size', '1e-3'), 'step size'),
+        (('--set', 'step_size=1e-4'), 'diverged'),
+    ],
+)
 def test_bad_input_is_one_clear_line(args, message):
-    result = valve_sim("simulate", *args, check=False)
+    result = valve_sim('simulate', *args, check=False)
     assert result.returncode != 0
-    assert message in result.stderr and "Traceback" not in result.stderr
+    assert message in result.stderr and 'Traceback' not in result.stderr
 
 
 def test_study_writes_the_papers_tables_and_figures(tmp_path):
-    result = valve_sim("study", "--out", str(tmp_path))
-    assert "[26/26]" in result.stderr                  # progress lines
-    with open(tmp_path / "sensitivity.csv") as stream:
+    result = valve_sim('study', '--out', str(tmp_path))
+    assert '[26/26]' in result.stderr  # progress lines
+    with open(tmp_path / 'sensitivity.csv') as stream:
         rows = list(csv.DictReader(stream))
-    assert list(rows[0]) == ["parameter", "variation_percent", *MEASURE_NAMES]
+    assert list(rows[0]) == ['parameter', 'variation_percent', *MEASURE_NAMES]
     assert len(rows) == 30
-    assert {row["parameter"] for row in rows} == {"m_m", "m_p", "V_p", "V_c", "d_c", "k_p"}
-    references = [row for row in rows if row["variation_percent"] == "0"]
-    assert all(row["T_1_ms"] == references[0]["T_1_ms"] for row in references)
-    with open(tmp_path / "table3.csv") as stream:
+    assert {row['parameter'] for row in rows} == {'m_m', 'm_p', 'V_p', 'V_c', 'd_c', 'k_p'}
+    references = [row for row in rows if row['variation_percent'] == '0']
+    assert all(row['T_1_ms'] == references[0]['T_1_ms'] for row in references)
+    with open(tmp_path / 'table3.csv') as stream:
         table3 = list(csv.DictReader(stream))
-    assert [row["measure"] for row in table3] == list(MEASURE_NAMES)
-    assert list(table3[0]) == ["measure", "table1", "table2", "relative_change_percent"]
+    assert [row['measure'] for row in table3] == list(MEASURE_NAMES)
+    assert list(table3[0]) == ['measure', 'table1', 'table2', 'relative_change_percent']
     for number in (6, 7, 8, 9, 10, 11, 12, 13):
-        assert len(list(tmp_path.glob(f"figure{number:02d}_*.png"))) == 1
+        assert len(list(tmp_path.glob(f'figure{number:02d}_*.png'))) == 1
 
 
 def test_operating_point_reports_balances_and_modes():
-    out = valve_sim("operating-point", "--flow", "5L/min").stdout
-    assert "cracking pressure" in out and "p_s 7.0000" in out
-    assert "linear modes" in out and "zeta" in out
+    out = valve_sim('operating-point', '--flow', '5L/min').stdout
+    assert 'cracking pressure' in out and 'p_s 7.0000' in out
+    assert 'linear modes' in out and 'zeta' in out
 
 
 def test_offline_bag_analyses_to_the_offline_measures(tmp_path):
-    bag = tmp_path / "run.mcap"
-    direct = json.loads(valve_sim("simulate", "--json", "--mcap", str(bag)).stdout)
-    (step,) = json.loads(valve_sim("analyse", str(bag), "--json").stdout)["steps"]
-    assert step["t_step"] == pytest.approx(0.25)
-    assert step["T_1_ms"] == pytest.approx(direct["T_1_ms"], abs=0.2)     # 1 kHz bag vs 10 kHz samples
-    for name in ("P_o_percent", "P_1_percent", "r_d", "T_d_ms", "T_s_ms"):
+    bag = tmp_path / 'run.mcap'
+    direct = json.loads(valve_sim('simulate', '--json', '--mcap', str(bag)).stdout)
+    (step,) = json.loads(valve_sim('analyse', str(bag), '--json').stdout)['steps']
+    assert step['t_step'] == pytest.approx(0.25)
+    assert step['T_1_ms'] == pytest.approx(
+        direct['T_1_ms'], abs=0.2
+    )  # 1 kHz bag vs 10 kHz samples
+    for name in ('P_o_percent', 'P_1_percent', 'r_d', 'T_d_ms', 'T_s_ms'):
         assert step[name] == pytest.approx(direct[name], rel=0.02), name

@@ -1,13 +1,14 @@
 """`valve-sim demo` end to end: valve_node and analyser_node over DDS, the paper's step recorded and measured."""
+
 import json
 import os
 import signal
 import subprocess
 import sys
 
-from valve_sim.recording.bag import BagReader
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.recording.bag import BagReader
 
 
 def run_demo(folder, timeout=300):
@@ -15,8 +16,13 @@ def run_demo(folder, timeout=300):
 
     On a time-out the whole group goes, so no node outlives the test.
     """
-    demo = subprocess.Popen([sys.executable, "-m", "valve_sim.commands.cli", "demo", "--out", str(folder)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    demo = subprocess.Popen(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'demo', '--out', str(folder)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = demo.communicate(timeout=timeout)
     finally:
@@ -29,16 +35,28 @@ def run_demo(folder, timeout=300):
 def test_demo_records_and_measures_the_papers_step(tmp_path):
     code, out, err = run_demo(tmp_path)
     assert code == 0, out + err
-    assert "both nodes stopped cleanly" in out and "offline analysis of the bag: the same measures" in out
-    for name in MEASURE_NAMES:   # each measure printed beside the paper's value
-        assert any(line.startswith(name) and f"{FIGURE5_MEASURES[name]:.4g}" in line for line in out.splitlines())
-    bag = next(tmp_path.glob("*.mcap"))
-    steps = json.loads(bag.with_suffix(".measures.json").read_text())["steps"]
-    assert len(steps) == 1 and steps[0]["direction"] == 1 and steps[0]["reasons"] == {}
-    assert 2.0 < steps[0]["P_1_percent"] < 5.0 and 15.0 < steps[0]["T_d_ms"] < 35.0
+    assert (
+        'both nodes stopped cleanly' in out
+        and 'offline analysis of the bag: the same measures' in out
+    )
+    for name in MEASURE_NAMES:  # each measure printed beside the paper's value
+        assert any(
+            line.startswith(name) and f'{FIGURE5_MEASURES[name]:.4g}' in line
+            for line in out.splitlines()
+        )
+    bag = next(tmp_path.glob('*.mcap'))
+    steps = json.loads(bag.with_suffix('.measures.json').read_text())['steps']
+    assert len(steps) == 1 and steps[0]['direction'] == 1 and steps[0]['reasons'] == {}
+    assert 2.0 < steps[0]['P_1_percent'] < 5.0 and 15.0 < steps[0]['T_d_ms'] < 35.0
     reader = BagReader(bag)
     topics = {channel.topic for channel, _, _ in reader.messages()}
     assert reader.problem is None
-    assert {"/inlet_flow", "/applied_inlet_flow", "/supply_pressure", "/joint_states", "/diagnostics"} <= topics
-    assert (tmp_path / "figure5.png").stat().st_size > 10_000
-    assert {"valve_node.log", "analyser_node.log"} <= {path.name for path in tmp_path.iterdir()}
+    assert {
+        '/inlet_flow',
+        '/applied_inlet_flow',
+        '/supply_pressure',
+        '/joint_states',
+        '/diagnostics',
+    } <= topics
+    assert (tmp_path / 'figure5.png').stat().st_size > 10_000
+    assert {'valve_node.log', 'analyser_node.log'} <= {path.name for path in tmp_path.iterdir()}

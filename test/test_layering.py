@@ -3,10 +3,12 @@
 Reads every module's imports with ast (nothing is executed), module-level and
 inside functions alike.
 """
+
 import ast
 from pathlib import Path
 
 import pytest
+
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'valve_sim'
 WINGS = ['core', 'analysis', 'recording', 'ros', 'commands']
@@ -43,7 +45,9 @@ def wing_of(path):
 def test_every_module_lives_in_a_wing():
     loose = [p.name for p in PACKAGE.glob('*.py') if p.name != '__init__.py']
     assert loose == [], f'modules outside the wings: {loose}'
-    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != '__pycache__') == sorted(WINGS)
+    assert sorted(
+        p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != '__pycache__'
+    ) == sorted(WINGS)
 
 
 @pytest.mark.parametrize('wing', WINGS)
@@ -66,7 +70,9 @@ def test_imports_go_only_downward(path):
                 problems.append(f'{module} (wing {parts[1]} is above {wing})')
         if parts[0] == 'rclpy' and wing in NO_RCLPY:
             if top_level or wing not in RCLPY_INSIDE_FUNCTIONS:
-                problems.append(f'{module} ({wing} must not import rclpy{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})')
+                problems.append(
+                    f'{module} ({wing} must not import rclpy{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})'
+                )
     assert problems == [], f'{path.relative_to(PACKAGE)} imports upward: {problems}'
 
 

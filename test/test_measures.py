@@ -1,23 +1,26 @@
 """The six measures on synthetic waveforms whose answers are known in closed form."""
+
 import math
 
 import numpy as np
 import pytest
+from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures, StepDetector
 
-from valve_sim.analysis.measures import MEASURE_NAMES, StepDetector, detect_steps, step_measures
 
-P0, DELTA = 7.0e6, 1.0e4           # pressure before the step, settled increment [Pa]
-SIGMA, OMEGA = 6.4, 2 * math.pi / 0.025   # decay rate [1/s], damped angular frequency [rad/s]
-AMPLITUDE = 2.2e5                  # overshoot amplitude scale [Pa]
+P0, DELTA = 7.0e6, 1.0e4  # pressure before the step, settled increment [Pa]
+SIGMA, OMEGA = 6.4, 2 * math.pi / 0.025  # decay rate [1/s], damped angular frequency [rad/s]
+AMPLITUDE = 2.2e5  # overshoot amplitude scale [Pa]
 T_STEP = 0.25
-X0, X_INF, TAU = 2e-5, 1.5e-4, 0.1   # main valve: first-order move [m], time constant [s]
+X0, X_INF, TAU = 2e-5, 1.5e-4, 0.1  # main valve: first-order move [m], time constant [s]
 
 
 def synthetic(rate=1e4, ripple=0.0, direction=1):
     """p = p0 + d (DELTA + A e^{-s tau} sin(w tau)), x first order; exact peaks and settling known."""
     t = np.arange(0.0, T_STEP + 1.0 + 0.5 / rate, 1.0 / rate)
     tau = np.clip(t - T_STEP, 0.0, None)
-    p = P0 + direction * (DELTA * (tau > 0) + AMPLITUDE * np.exp(-SIGMA * tau) * np.sin(OMEGA * tau))
+    p = P0 + direction * (
+        DELTA * (tau > 0) + AMPLITUDE * np.exp(-SIGMA * tau) * np.sin(OMEGA * tau)
+    )
     p = p + ripple * np.sin(2 * math.pi * 720.0 * t)
     x = X0 + (X_INF - X0) * (1.0 - np.exp(-tau / TAU))
     return t, p, x
@@ -30,11 +33,17 @@ def expected():
     t2 = t1 + 2 * math.pi / OMEGA
     e2 = AMPLITUDE * math.exp(-SIGMA * t2) * math.sin(OMEGA * t2)
     settle = TAU * math.log(1 / 0.05)
-    return {"P_o_percent": DELTA / P0 * 100, "P_1_percent": e1 / P0 * 100, "T_1_ms": t1 * 1e3,
-            "r_d": e2 / e1, "T_d_ms": (t2 - t1) * 1e3, "T_s_ms": settle * 1e3}
+    return {
+        'P_o_percent': DELTA / P0 * 100,
+        'P_1_percent': e1 / P0 * 100,
+        'T_1_ms': t1 * 1e3,
+        'r_d': e2 / e1,
+        'T_d_ms': (t2 - t1) * 1e3,
+        'T_s_ms': settle * 1e3,
+    }
 
 
-@pytest.mark.parametrize("rate", [1e4, 1e3])
+@pytest.mark.parametrize('rate', [1e4, 1e3])
 def test_known_answers_at_10_khz_and_1_khz(rate):
     t, p, x = synthetic(rate)
     result = step_measures(t, p, x, T_STEP)
@@ -42,29 +51,29 @@ def test_known_answers_at_10_khz_and_1_khz(rate):
     assert result.reasons == {}
     # p_inf and x_inf are 50 ms means that still hold a few Pa of ringing and of the
     # exponential tail: that, not the peak finding, sets the P_o, P_1 and T_s tolerances.
-    assert result.values["T_1_ms"] == pytest.approx(want["T_1_ms"], abs=0.05)
-    assert result.values["T_d_ms"] == pytest.approx(want["T_d_ms"], abs=0.05)
-    assert result.values["P_1_percent"] == pytest.approx(want["P_1_percent"], rel=2e-3)
-    assert result.values["r_d"] == pytest.approx(want["r_d"], abs=2e-3)
-    assert result.values["P_o_percent"] == pytest.approx(want["P_o_percent"], rel=2e-3)
-    assert result.values["T_s_ms"] == pytest.approx(want["T_s_ms"], abs=1e3 / rate + 0.5)
+    assert result.values['T_1_ms'] == pytest.approx(want['T_1_ms'], abs=0.05)
+    assert result.values['T_d_ms'] == pytest.approx(want['T_d_ms'], abs=0.05)
+    assert result.values['P_1_percent'] == pytest.approx(want['P_1_percent'], rel=2e-3)
+    assert result.values['r_d'] == pytest.approx(want['r_d'], abs=2e-3)
+    assert result.values['P_o_percent'] == pytest.approx(want['P_o_percent'], rel=2e-3)
+    assert result.values['T_s_ms'] == pytest.approx(want['T_s_ms'], abs=1e3 / rate + 0.5)
 
 
 def test_pilot_ripple_is_not_taken_for_a_peak():
-    t, p, x = synthetic(1e4, ripple=3e3)     # 720 Hz, 1.4 % of the overshoot
+    t, p, x = synthetic(1e4, ripple=3e3)  # 720 Hz, 1.4 % of the overshoot
     result = step_measures(t, p, x, T_STEP)
     want = expected()
-    assert result.values["T_d_ms"] == pytest.approx(want["T_d_ms"], abs=0.3)
-    assert result.values["r_d"] == pytest.approx(want["r_d"], abs=0.02)
+    assert result.values['T_d_ms'] == pytest.approx(want['T_d_ms'], abs=0.3)
+    assert result.values['r_d'] == pytest.approx(want['r_d'], abs=0.02)
 
 
 def test_falling_step_gives_undershoot_as_negative_overshoot():
     t, p, x = synthetic(1e4, direction=-1)
     result = step_measures(t, p, x, T_STEP, direction=-1)
     want = expected()
-    assert result.values["P_1_percent"] == pytest.approx(-want["P_1_percent"], rel=2e-3)
-    assert result.values["P_o_percent"] == pytest.approx(-want["P_o_percent"], rel=2e-3)
-    assert result.values["r_d"] == pytest.approx(want["r_d"], abs=2e-3)
+    assert result.values['P_1_percent'] == pytest.approx(-want['P_1_percent'], rel=2e-3)
+    assert result.values['P_o_percent'] == pytest.approx(-want['P_o_percent'], rel=2e-3)
+    assert result.values['r_d'] == pytest.approx(want['r_d'], abs=2e-3)
 
 
 def test_no_second_peak_is_an_explicit_null_with_reason():
@@ -74,45 +83,45 @@ def test_no_second_peak_is_an_explicit_null_with_reason():
     p = P0 + DELTA * (1 - np.exp(-tau / 0.01)) + 3e4 * tau / 0.02 * np.exp(1 - tau / 0.02)
     x = X0 + (X_INF - X0) * (1 - np.exp(-tau / TAU))
     result = step_measures(t, p, x, T_STEP)
-    assert result.values["P_1_percent"] is not None and result.values["T_1_ms"] is not None
-    assert result.values["r_d"] is None and result.values["T_d_ms"] is None
-    assert "second overshoot" in result.reasons["r_d"]
+    assert result.values['P_1_percent'] is not None and result.values['T_1_ms'] is not None
+    assert result.values['r_d'] is None and result.values['T_d_ms'] is None
+    assert 'second overshoot' in result.reasons['r_d']
 
 
 def test_never_settling_main_valve_is_an_explicit_null():
     t, p, _ = synthetic()
-    x = X_INF + 0.5 * (X_INF - X0) * np.sin(2 * math.pi * 40 * t)   # keeps oscillating to the end
+    x = X_INF + 0.5 * (X_INF - X0) * np.sin(2 * math.pi * 40 * t)  # keeps oscillating to the end
     x[t <= T_STEP] = X0
     result = step_measures(t, p, x, T_STEP)
-    assert result.values["T_s_ms"] is None
-    assert "does not settle" in result.reasons["T_s_ms"]
+    assert result.values['T_s_ms'] is None
+    assert 'does not settle' in result.reasons['T_s_ms']
 
 
 def test_no_overshoot_and_bad_input():
     t = np.arange(0.0, 1.3, 1e-4)
     p = np.where(t > T_STEP, P0 - 1e3 * (1 - np.exp(-(t - T_STEP) / 0.01)), P0)
     result = step_measures(t, p, np.full_like(t, X0), T_STEP)
-    assert all(result.values[name] is None for name in ("P_1_percent", "T_1_ms", "r_d", "T_d_ms"))
-    assert "zero step width" in result.reasons["T_s_ms"]
+    assert all(result.values[name] is None for name in ('P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms'))
+    assert 'zero step width' in result.reasons['T_s_ms']
     outside = step_measures(t, p, p, 5.0)
     assert all(outside.values[name] is None for name in MEASURE_NAMES)
-    assert "outside" in outside.reasons["T_1_ms"]
+    assert 'outside' in outside.reasons['T_1_ms']
 
 
 def test_pressure_still_rising_at_the_window_end_is_no_peak():
     t = np.arange(0.0, 1.3, 1e-4)
-    p = P0 + np.clip(t - T_STEP, 0.0, None) * 1e6          # ramps up to the end: no settling, no peak
+    p = P0 + np.clip(t - T_STEP, 0.0, None) * 1e6  # ramps up to the end: no settling, no peak
     x = np.full_like(t, X0)
     result = step_measures(t, p, x, T_STEP)
-    assert result.values["T_1_ms"] is None and "no overshoot peak" in result.reasons["T_1_ms"]
+    assert result.values['T_1_ms'] is None and 'no overshoot peak' in result.reasons['T_1_ms']
 
 
 def test_truncated_window_is_reported():
     t, p, x = synthetic()
     keep = t < T_STEP + 0.6
     result = step_measures(t[keep], p[keep], x[keep], T_STEP)
-    assert result.details["window_s"] == pytest.approx(0.6, abs=1e-3)
-    assert "truncated" in result.details["note"]
+    assert result.details['window_s'] == pytest.approx(0.6, abs=1e-3)
+    assert 'truncated' in result.details['note']
 
 
 def test_step_detector_dates_steps_at_the_last_old_sample():

@@ -1,40 +1,57 @@
 """Physics of the model core: balances, conservation, convergence, seats, divergence."""
+
 import numpy as np
 import pytest
-
-from valve_sim.core.integrator import IntegrationError, advance
-from valve_sim.core.model import P_C, P_M, P_S, X, X_DOT, Y, Y_DOT, coefficients, flows, net_forces, state_derivative
+from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.model import (
+    coefficients,
+    flows,
+    net_forces,
+    P_C,
+    P_M,
+    P_S,
+    state_derivative,
+    X,
+    X_DOT,
+    Y,
+    Y_DOT,
+)
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
+from valve_sim.core.steady_state import (
+    cracking_pressure,
+    preload_for_cracking_pressure,
+    steady_state,
+)
+
 
 FLOWS_LPM = (0.3, 2.0, 5.0, 20.0, 35.0)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def params():
     return load_parameters()[0]
 
 
-@pytest.mark.parametrize("flow_lpm", FLOWS_LPM)
+@pytest.mark.parametrize('flow_lpm', FLOWS_LPM)
 def test_steady_state_balances_flows_and_forces(params, flow_lpm):
     q_in = flow_lpm * LITRE_PER_MINUTE
     state = steady_state(params, q_in)
     c = coefficients(params)
     q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
     scale = q_in
-    assert q_m1 == pytest.approx(q_m2, abs=1e-9 * scale)              # intermediate chamber
-    assert q_n == pytest.approx(q_c, abs=1e-9 * scale)                # pilot chamber
-    assert q_c + q_s == pytest.approx(q_p, abs=1e-9 * scale)          # poppet chamber
+    assert q_m1 == pytest.approx(q_m2, abs=1e-9 * scale)  # intermediate chamber
+    assert q_n == pytest.approx(q_c, abs=1e-9 * scale)  # pilot chamber
+    assert q_c + q_s == pytest.approx(q_p, abs=1e-9 * scale)  # poppet chamber
     assert q_m1 + q_n + q_s == pytest.approx(q_in, abs=1e-9 * scale)  # supply chamber
-    assert q_m2 + q_p == pytest.approx(q_in, rel=1e-9)                # all inflow leaves to the tank
+    assert q_m2 + q_p == pytest.approx(q_in, rel=1e-9)  # all inflow leaves to the tank
     force_x, force_y = net_forces(state, c)
     force_scale = c.back_area * state[P_S]
     assert state[Y] > 0.0 and abs(force_y) < 1e-9 * force_scale
     if state[X] > 0.0:
         assert abs(force_x) < 1e-9 * force_scale
     else:
-        assert force_x <= 1e-9 * force_scale   # a seated main valve is pushed onto its seat
+        assert force_x <= 1e-9 * force_scale  # a seated main valve is pushed onto its seat
     assert state[X_DOT] == 0.0 and state[Y_DOT] == 0.0
 
 
@@ -48,14 +65,14 @@ def test_zero_flow_is_the_empty_closed_valve(params):
     assert np.all(steady_state(params, 0.0) == 0.0)
 
 
-@pytest.mark.parametrize("flow_lpm", (5.0, 20.0))
+@pytest.mark.parametrize('flow_lpm', (5.0, 20.0))
 def test_steady_state_is_exact_no_start_up_transient(params, flow_lpm):
     q_in = flow_lpm * LITRE_PER_MINUTE
     start = steady_state(params, q_in)
     state = start.copy()
     record = advance(state, np.full(20000, q_in), coefficients(params), 1e-5, record_every=100)
-    pressures = record[:, P_S:P_C + 1]
-    assert np.max(np.abs(pressures - start[P_S:P_C + 1])) < 1e-6 * start[P_S]
+    pressures = record[:, P_S : P_C + 1]
+    assert np.max(np.abs(pressures - start[P_S : P_C + 1])) < 1e-6 * start[P_S]
     assert np.max(np.abs(record[:, X] - start[X])) < 1e-6 * max(start[X], 1e-6)
 
 
@@ -63,14 +80,30 @@ def test_volume_conservation_identity(params):
     """Sum of V/beta dp/dt over the chambers equals inflow - outflow - net displacement, at any state."""
     c = coefficients(params)
     rng = np.random.default_rng(1)
-    volumes = np.array([params["supply_volume"], params["intermediate_volume"],
-                        params["pilot_volume"], params["poppet_chamber_volume"]])
+    volumes = np.array(
+        [
+            params['supply_volume'],
+            params['intermediate_volume'],
+            params['pilot_volume'],
+            params['poppet_chamber_volume'],
+        ]
+    )
     for _ in range(50):
-        state = np.array([rng.uniform(0, 9e6), rng.uniform(0, 9e6), rng.uniform(0, 9e6), rng.uniform(0, 9e6),
-                          rng.uniform(0, 4e-4), rng.uniform(-0.1, 0.1), rng.uniform(0, 3e-4), rng.uniform(-0.1, 0.1)])
+        state = np.array(
+            [
+                rng.uniform(0, 9e6),
+                rng.uniform(0, 9e6),
+                rng.uniform(0, 9e6),
+                rng.uniform(0, 9e6),
+                rng.uniform(0, 4e-4),
+                rng.uniform(-0.1, 0.1),
+                rng.uniform(0, 3e-4),
+                rng.uniform(-0.1, 0.1),
+            ]
+        )
         q_in = rng.uniform(0, 6e-4)
         rates = state_derivative(state, q_in, c)
-        stored = np.sum(volumes / params["bulk_modulus"] * rates[P_S:P_C + 1])
+        stored = np.sum(volumes / params['bulk_modulus'] * rates[P_S : P_C + 1])
         _, q_m2, _, _, _, q_p = flows(state, c)
         displaced = (c.swept_area - c.back_area) * state[X_DOT] + c.rod_area * state[Y_DOT]
         assert stored == pytest.approx(q_in - q_m2 - q_p - displaced, rel=1e-9, abs=1e-15)
@@ -86,11 +119,24 @@ def test_volume_is_conserved_over_a_step_response(params):
     record = advance(state, flows_in, c, step, record_every=1)
     states = np.vstack([start, record])
     outflow = np.array([sum(flows(s, c)[i] for i in (1, 5)) for s in states])
-    out_volume = np.sum((outflow[1:] + outflow[:-1]) / 2) * step            # trapezoidal rule
-    volumes = np.array([params[k] for k in ("supply_volume", "intermediate_volume", "pilot_volume",
-                                            "poppet_chamber_volume")])
-    stored = np.sum(volumes / params["bulk_modulus"] * (state[P_S:P_C + 1] - start[P_S:P_C + 1]))
-    displaced = (c.swept_area - c.back_area) * (state[X] - start[X]) + c.rod_area * (state[Y] - start[Y])
+    out_volume = np.sum((outflow[1:] + outflow[:-1]) / 2) * step  # trapezoidal rule
+    volumes = np.array(
+        [
+            params[k]
+            for k in (
+                'supply_volume',
+                'intermediate_volume',
+                'pilot_volume',
+                'poppet_chamber_volume',
+            )
+        ]
+    )
+    stored = np.sum(
+        volumes / params['bulk_modulus'] * (state[P_S : P_C + 1] - start[P_S : P_C + 1])
+    )
+    displaced = (c.swept_area - c.back_area) * (state[X] - start[X]) + c.rod_area * (
+        state[Y] - start[Y]
+    )
     inflow = flows_in.sum() * step
     assert stored == pytest.approx(inflow - out_volume - displaced, rel=1e-4)
 
@@ -119,17 +165,23 @@ def test_measures_agree_across_step_sizes(params):
     results = []
     for step in (2e-6, 5e-6, 1e-5):
         w = simulate(params, Scenario(), step, 1e-4)
-        results.append(step_measures(w.time, w["supply_pressure"], w["main_valve_displacement"], 0.25).values)
+        results.append(
+            step_measures(w.time, w['supply_pressure'], w['main_valve_displacement'], 0.25).values
+        )
     for name in results[0]:
         assert results[2][name] == pytest.approx(results[0][name], rel=2e-3), name
 
 
 def test_closed_valve_start_cracks_and_settles_near_the_preset(params):
     """0 -> 20 L/min from the empty valve: the pilot cracks, then the main valve, no NaN, settles."""
-    w = simulate(params, Scenario(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.01,
-                                  end_time=1.2), 1e-5, 1e-4)
+    w = simulate(
+        params,
+        Scenario(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.01, end_time=1.2),
+        1e-5,
+        1e-4,
+    )
     assert np.all(np.isfinite(w.states))
-    p_s, x, y = w["supply_pressure"], w["main_valve_displacement"], w["poppet_displacement"]
+    p_s, x, y = w['supply_pressure'], w['main_valve_displacement'], w['poppet_displacement']
     assert np.all(x >= 0.0) and np.all(y >= 0.0)
     first_pilot = np.argmax(y > 0.0)
     first_main = np.argmax(x > 0.0)
@@ -143,17 +195,29 @@ def test_closed_valve_start_cracks_and_settles_near_the_preset(params):
 
 def test_ramp_from_closed_valve_and_back_down(params):
     """Closed -> ramp to rated flow -> ramp back to zero: the valves reseat and nothing goes negative."""
-    w = simulate(params, Scenario(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.0,
-                                  end_time=0.6, ramp_time=0.2), 1e-5, 1e-4)
+    w = simulate(
+        params,
+        Scenario(
+            initial_flow=0.0,
+            final_flow=20 * LITRE_PER_MINUTE,
+            step_time=0.0,
+            end_time=0.6,
+            ramp_time=0.2,
+        ),
+        1e-5,
+        1e-4,
+    )
     state = w.states[-1].copy()
     c = coefficients(params)
     advance(state, np.linspace(20, 0, 30000) * LITRE_PER_MINUTE, c, 1e-5)
     advance(state, np.zeros(50000), c, 1e-5)
     assert np.all(np.isfinite(state))
-    assert state[X] == 0.0                           # the main valve is back on its seat
-    assert 0.0 <= state[Y] < 1e-6                    # the poppet closes asymptotically ...
-    pilot_cracking = params["pilot_spring_stiffness"] * params["pilot_spring_preload"] / c.rod_area
-    assert state[P_S] == pytest.approx(pilot_cracking, rel=1e-2)   # ... as p_s falls to its cracking pressure
+    assert state[X] == 0.0  # the main valve is back on its seat
+    assert 0.0 <= state[Y] < 1e-6  # the poppet closes asymptotically ...
+    pilot_cracking = params['pilot_spring_stiffness'] * params['pilot_spring_preload'] / c.rod_area
+    assert state[P_S] == pytest.approx(
+        pilot_cracking, rel=1e-2
+    )  # ... as p_s falls to its cracking pressure
 
 
 def test_cracking_pressure_and_preset(params):
@@ -169,6 +233,6 @@ def test_divergence_is_reported_not_returned(params):
     c = coefficients(params)
     state = steady_state(params, 5 * LITRE_PER_MINUTE)
     before = state.copy()
-    with pytest.raises(IntegrationError, match="diverged"):
+    with pytest.raises(IntegrationError, match='diverged'):
         advance(state, np.full(2000, 20 * LITRE_PER_MINUTE), c, 1e-4)
     assert np.array_equal(state, before)

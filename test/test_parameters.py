@@ -1,25 +1,36 @@
 """Parameter files, validation and the consistency of the shipped configuration."""
+
 import math
 
 import pytest
-
-from valve_sim.core.bearing import reference_bearing_fit
 from valve_sim.analysis.paper import TABLE2_CHANGES
+from valve_sim.core.bearing import reference_bearing_fit
 from valve_sim.core.parameters import (
-    SPECS, STANDARD_ATMOSPHERE, ParameterError, config_path, load_parameters, read_parameter_file, resolve_name, scaled, validate)
+    config_path,
+    load_parameters,
+    ParameterError,
+    read_parameter_file,
+    resolve_name,
+    scaled,
+    SPECS,
+    STANDARD_ATMOSPHERE,
+    validate,
+)
 
 
 def test_reference_file_holds_every_parameter_and_the_step_size():
-    raw = read_parameter_file(config_path("reference.yaml"))
+    raw = read_parameter_file(config_path('reference.yaml'))
     assert set(SPECS) <= set(raw)
     params, settings = load_parameters()
-    assert settings["step_size"] == 1e-5
-    assert settings["ambient_pressure"] == STANDARD_ATMOSPHERE   # the default of every wire reader and writer
+    assert settings['step_size'] == 1e-5
+    assert (
+        settings['ambient_pressure'] == STANDARD_ATMOSPHERE
+    )  # the default of every wire reader and writer
     assert all(isinstance(value, float) for value in params.values())
 
 
 def test_table2_file_is_the_reference_with_the_papers_changes(reference):
-    table2, _ = load_parameters(config_path("table2.yaml"))
+    table2, _ = load_parameters(config_path('table2.yaml'))
     expected = scaled(reference, TABLE2_CHANGES)
     for name in SPECS:
         assert table2[name] == pytest.approx(expected[name], rel=1e-12), name
@@ -27,65 +38,82 @@ def test_table2_file_is_the_reference_with_the_papers_changes(reference):
 
 
 def test_bearing_coefficients_are_the_fit_of_the_documented_bearing(reference):
-    k1, k2, k3, lam, error = reference_bearing_fit(reference["bearing_discharge_coefficient"],
-                                                   reference["fluid_density"], reference["fluid_viscosity"])
-    assert (reference["bearing_coefficient_1"], reference["bearing_coefficient_2"],
-            reference["bearing_coefficient_3"]) == pytest.approx((k1, k2, k3), abs=1e-4)
-    assert reference["bearing_orifice_diameter"] == pytest.approx(0.78e-3)
+    k1, k2, k3, lam, error = reference_bearing_fit(
+        reference['bearing_discharge_coefficient'],
+        reference['fluid_density'],
+        reference['fluid_viscosity'],
+    )
+    assert (
+        reference['bearing_coefficient_1'],
+        reference['bearing_coefficient_2'],
+        reference['bearing_coefficient_3'],
+    ) == pytest.approx((k1, k2, k3), abs=1e-4)
+    assert reference['bearing_orifice_diameter'] == pytest.approx(0.78e-3)
     assert error < 0.02 and 0.5 < lam < 2.0
 
 
-@pytest.mark.parametrize("name, value, message", [
-    ("main_valve_mass", -0.065, "outside its limits"),
-    ("main_valve_mass", 0.0, "outside its limits"),
-    ("supply_volume", 0.0, "outside its limits"),
-    ("damping_orifice_diameter", -1e-3, "outside its limits"),
-    ("bulk_modulus", math.nan, "must be finite"),
-    ("pilot_spring_stiffness", math.inf, "must be finite"),
-    ("fluid_density", "water", "must be a number"),
-    ("discharge_coefficient", True, "must be a number"),
-    ("first_throttle_inner_diameter", 0.011, "must exceed"),        # D_1 <= d_1
-    ("second_throttle_inner_diameter", 0.0099501, "must exceed"),   # D_2 <= d_2
-    ("bearing_coefficient_1", -5.0, "does not\nrise|does not rise"),
-])
+@pytest.mark.parametrize(
+    'name, value, message',
+    [
+        ('main_valve_mass', -0.065, 'outside its limits'),
+        ('main_valve_mass', 0.0, 'outside its limits'),
+        ('supply_volume', 0.0, 'outside its limits'),
+        ('damping_orifice_diameter', -1e-3, 'outside its limits'),
+        ('bulk_modulus', math.nan, 'must be finite'),
+        ('pilot_spring_stiffness', math.inf, 'must be finite'),
+        ('fluid_density', 'water', 'must be a number'),
+        ('discharge_coefficient', True, 'must be a number'),
+        ('first_throttle_inner_diameter', 0.011, 'must exceed'),  # D_1 <= d_1
+        ('second_throttle_inner_diameter', 0.0099501, 'must exceed'),  # D_2 <= d_2
+        ('bearing_coefficient_1', -5.0, 'does not\nrise|does not rise'),
+    ],
+)
 def test_invalid_values_are_rejected_naming_parameter_and_limit(reference, name, value, message):
     with pytest.raises(ParameterError, match=message) as error:
         validate(dict(reference, **{name: value}))
-    assert f"'{name}'" in str(error.value) or "bearing coefficients" in str(error.value)
+    assert f"'{name}'" in str(error.value) or 'bearing coefficients' in str(error.value)
 
 
 def test_unknown_and_missing_names_are_rejected(reference):
     with pytest.raises(ParameterError, match="unknown parameter 'mass'"):
         validate(dict(reference, mass=1.0))
     incomplete = dict(reference)
-    del incomplete["supply_volume"]
-    with pytest.raises(ParameterError, match="missing parameter.*supply_volume"):
+    del incomplete['supply_volume']
+    with pytest.raises(ParameterError, match='missing parameter.*supply_volume'):
         validate(incomplete)
 
 
 def test_symbols_and_names_both_resolve():
-    assert resolve_name("m_m") == "main_valve_mass"
-    assert resolve_name("main_valve_mass") == "main_valve_mass"
-    params, _ = load_parameters(overrides={"d_c": 1.2e-3, "supply_volume": 0.02})
-    assert params["damping_orifice_diameter"] == 1.2e-3 and params["supply_volume"] == 0.02
+    assert resolve_name('m_m') == 'main_valve_mass'
+    assert resolve_name('main_valve_mass') == 'main_valve_mass'
+    params, _ = load_parameters(overrides={'d_c': 1.2e-3, 'supply_volume': 0.02})
+    assert params['damping_orifice_diameter'] == 1.2e-3 and params['supply_volume'] == 0.02
 
 
 def test_parameter_files_like_ros_writes_them(tmp_path):
-    partial = tmp_path / "p.yaml"
-    partial.write_text("/**:\n  ros__parameters:\n    main_valve_mass: 7e-2\n    step_size: 5e-6\n")
+    partial = tmp_path / 'p.yaml'
+    partial.write_text(
+        '/**:\n  ros__parameters:\n    main_valve_mass: 7e-2\n    step_size: 5e-6\n'
+    )
     params, settings = load_parameters(partial)
-    assert params["main_valve_mass"] == 0.07 and settings["step_size"] == 5e-6
+    assert params['main_valve_mass'] == 0.07 and settings['step_size'] == 5e-6
 
 
-@pytest.mark.parametrize("text, message", [
-    ("relief_valve: [1, 2", "not valid YAML"),
-    ("- just\n- a list\n", "must map node names"),
-    ("other_node:\n  ros__parameters:\n    main_valve_mass: 1.0\n", "no 'relief_valve: ros__parameters:'"),
-    ("relief_valve:\n  ros__parameters:\n    step_size: 1.0\n", "step_size"),
-    ("relief_valve:\n  ros__parameters:\n    colour: blue\n", "unknown parameter 'colour'"),
-])
+@pytest.mark.parametrize(
+    'text, message',
+    [
+        ('relief_valve: [1, 2', 'not valid YAML'),
+        ('- just\n- a list\n', 'must map node names'),
+        (
+            'other_node:\n  ros__parameters:\n    main_valve_mass: 1.0\n',
+            "no 'relief_valve: ros__parameters:'",
+        ),
+        ('relief_valve:\n  ros__parameters:\n    step_size: 1.0\n', 'step_size'),
+        ('relief_valve:\n  ros__parameters:\n    colour: blue\n', "unknown parameter 'colour'"),
+    ],
+)
 def test_broken_parameter_files_give_clear_errors(tmp_path, text, message):
-    path = tmp_path / "bad.yaml"
+    path = tmp_path / 'bad.yaml'
     path.write_text(text)
     with pytest.raises(ParameterError, match=message):
         load_parameters(path)

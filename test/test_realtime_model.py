@@ -1,19 +1,20 @@
 """RealTimeModel: stepping against a clock in whole steps, catch-up limit, trial, roll-back."""
+
 import numpy as np
 import pytest
-
-from valve_sim.core.integrator import IntegrationError, advance
-from valve_sim.core.model import P_S, coefficients
+from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.model import coefficients, P_S
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.realtime_model import RealTimeModel, step_ns
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import steady_state
 
+
 FLOW = 5.0 * LITRE_PER_MINUTE
-START_NS = 1_000_000_000_000   # any clock time; the model time is anchored to it
+START_NS = 1_000_000_000_000  # any clock time; the model time is anchored to it
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def reference():
     return load_parameters()[0]
 
@@ -48,7 +49,9 @@ def test_model_time_follows_an_irregular_clock_without_drift(model, reference):
     assert steps == (now_ns - START_NS) // 10_000
     assert model.time_ns == START_NS + steps * 10_000
     advance(offline, np.full(steps, 2 * FLOW), coefficients(reference), 1e-5)
-    assert np.array_equal(model.state, offline), "chunked stepping equals one offline run, bit for bit"
+    assert np.array_equal(model.state, offline), (
+        'chunked stepping equals one offline run, bit for bit'
+    )
 
 
 def test_lag_beyond_the_catch_up_limit_is_skipped(model):
@@ -61,7 +64,7 @@ def test_lag_beyond_the_catch_up_limit_is_skipped(model):
 def test_divergence_leaves_state_and_model_time_unchanged(model):
     state = model.state.copy()
     with pytest.raises(IntegrationError):
-        model.advance_to(START_NS + 100_000_000, 1.0, max_lag_ns=10**9)   # 60 000 L/min
+        model.advance_to(START_NS + 100_000_000, 1.0, max_lag_ns=10**9)  # 60 000 L/min
     assert np.array_equal(model.state, state)
     assert model.time_ns == START_NS
     model.hold_until(START_NS + 1_234_567)
@@ -77,13 +80,13 @@ def test_trial_refuses_a_diverging_step_size_without_touching_the_model(model, r
 
 
 def test_roll_back_returns_to_the_parameters_before_the_last_change(model, reference):
-    assert not model.roll_back(), "nothing to roll back to before any change"
-    heavier = {**reference, "main_valve_mass": reference["main_valve_mass"] * 2}
+    assert not model.roll_back(), 'nothing to roll back to before any change'
+    heavier = {**reference, 'main_valve_mass': reference['main_valve_mass'] * 2}
     model.retune(heavier, 2e-5)
     assert (model.params, model.step_size) == (heavier, 2e-5)
     assert model.roll_back()
     assert (model.params, model.step_size) == (reference, 1e-5)
-    assert not model.roll_back(), "one level only"
+    assert not model.roll_back(), 'one level only'
 
 
 def test_reset_goes_to_the_steady_state_of_the_given_flow(model, reference):

@@ -6,50 +6,55 @@ does not depend on how busy the machine is. The other tests share one node on
 the wall clock; a fixture puts it back to 5 L/min, the reference parameters
 and the steady state after each test. No test asserts wall-clock timing.
 """
+
 import math
 import signal
 import time
 
 import numpy as np
 import pytest
-
 from valve_harness import PRESSURE_TOPICS, Probe, start_node, stop_node
-from valve_sim.analysis.measures import MEASURE_NAMES, detect_steps, step_measures
+from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
 from valve_sim.core.model import P_S, X
-from valve_sim.core.parameters import SPECS, config_path, load_parameters
+from valve_sim.core.parameters import config_path, load_parameters, SPECS
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure, steady_state
+from valve_sim.core.steady_state import (
+    cracking_pressure,
+    preload_for_cracking_pressure,
+    steady_state,
+)
+
 
 pytestmark = pytest.mark.timeout(300)
 
-AMBIENT = 101325.0            # [Pa] ambient_pressure default
+AMBIENT = 101325.0  # [Pa] ambient_pressure default
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE
 FINAL_FLOW = 20.0 * LITRE_PER_MINUTE
-PERIOD_NS = 1_000_000         # 1 kHz
-WINDOW_NS = 1_000_000_000     # measures need 1 s after the step
-SIM_NAMESPACE = "/sim"        # the simulated-time node; the wall-clock one runs in /
-RETUNABLE_SETTINGS = ("step_size", "publish_rate", "input_timeout", "ambient_pressure")
+PERIOD_NS = 1_000_000  # 1 kHz
+WINDOW_NS = 1_000_000_000  # measures need 1 s after the step
+SIM_NAMESPACE = '/sim'  # the simulated-time node; the wall-clock one runs in /
+RETUNABLE_SETTINGS = ('step_size', 'publish_rate', 'input_timeout', 'ambient_pressure')
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def reference_settings():
     return load_parameters()[1]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def valve_process(context, tmp_path_factory):
     """The shared wall-clock node and a probe connected to it; checks a clean SIGINT exit at the end."""
-    log = tmp_path_factory.mktemp("valve_node") / "valve_node.log"
+    log = tmp_path_factory.mktemp('valve_node') / 'valve_node.log'
     process = start_node(log)
     probe = Probe(context)
     try:
         probe.wait_until_connected()
         yield process, probe
-        assert process.poll() is None, f"valve_node died:\n{log.read_text()}"
+        assert process.poll() is None, f'valve_node died:\n{log.read_text()}'
     finally:
         probe.close()
         exit_code = stop_node(process)
-    assert exit_code == 0, f"valve_node exit code {exit_code} after SIGINT:\n{log.read_text()}"
+    assert exit_code == 0, f'valve_node exit code {exit_code} after SIGINT:\n{log.read_text()}'
 
 
 @pytest.fixture
@@ -57,15 +62,15 @@ def valve(valve_process, reference, reference_settings):
     """The probe, with the node at the reference parameters, 5 L/min and its steady state."""
     process, probe = valve_process
     yield probe
-    assert process.poll() is None, "valve_node died"
-    assert probe.non_finite == 0, "a NaN or inf was published"
+    assert process.poll() is None, 'valve_node died'
+    assert probe.non_finite == 0, 'a NaN or inf was published'
     defaults = {**reference, **{name: reference_settings[name] for name in RETUNABLE_SETTINGS}}
     current = probe.get_parameters(*defaults)
     changed = {name: value for name, value in defaults.items() if current[name] != value}
     if changed:
         assert probe.set_parameters_atomically(**changed).successful
     probe.send_flow(INITIAL_FLOW)
-    probe.wait_for(lambda: probe.applied[-1][1] == INITIAL_FLOW, "inlet flow back at 5 L/min")
+    probe.wait_for(lambda: probe.applied[-1][1] == INITIAL_FLOW, 'inlet flow back at 5 L/min')
     probe.reset()
 
 
@@ -81,17 +86,27 @@ def after_reset(probe):
 
 # --- on simulated time: the paper's step, compared with the offline simulation -----------------
 
-@pytest.fixture(scope="module")
+
+@pytest.fixture(scope='module')
 def sim_valve(context, tmp_path_factory):
     """A node on /clock (use_sim_time) in its own namespace, started from the reference parameter
     file plus a file with an integer for a double parameter (lenient typing); the probe has
     anchored its clock."""
-    directory = tmp_path_factory.mktemp("sim_valve")
-    integers = directory / "integers.yaml"
-    integers.write_text("relief_valve:\n  ros__parameters:\n    main_valve_damping: 0\n")
-    log = directory / "valve_node.log"
-    process = start_node(log, "-r", f"__ns:={SIM_NAMESPACE}", "-p", "use_sim_time:=true",
-                         "--params-file", str(config_path("reference.yaml")), "--params-file", str(integers))
+    directory = tmp_path_factory.mktemp('sim_valve')
+    integers = directory / 'integers.yaml'
+    integers.write_text('relief_valve:\n  ros__parameters:\n    main_valve_damping: 0\n')
+    log = directory / 'valve_node.log'
+    process = start_node(
+        log,
+        '-r',
+        f'__ns:={SIM_NAMESPACE}',
+        '-p',
+        'use_sim_time:=true',
+        '--params-file',
+        str(config_path('reference.yaml')),
+        '--params-file',
+        str(integers),
+    )
     probe = Probe(context, SIM_NAMESPACE)
     try:
         probe.wait_until_connected(use_sim_time=True)
@@ -101,7 +116,7 @@ def sim_valve(context, tmp_path_factory):
     finally:
         probe.close()
         exit_code = stop_node(process, signal.SIGTERM)
-    assert exit_code == 0, f"valve_node exit code {exit_code} after SIGTERM:\n{log.read_text()}"
+    assert exit_code == 0, f'valve_node exit code {exit_code} after SIGTERM:\n{log.read_text()}'
 
 
 def run_until(probe, end_ns):
@@ -121,13 +136,21 @@ def test_step_response_matches_offline_simulation(sim_valve, reference):
 
     t, p_s, x, t_step = node_waveforms(probe, probe.start_ns)
     node = step_measures(t, p_s, x, t_step)
-    offline_run = simulate(reference, Scenario(INITIAL_FLOW, FINAL_FLOW, step_time=t_step, end_time=t_step + 1.01),
-                           step_size=1e-5, record_interval=1e-4)
-    offline = step_measures(offline_run.time, offline_run["supply_pressure"],
-                            offline_run["main_valve_displacement"], t_step)
+    offline_run = simulate(
+        reference,
+        Scenario(INITIAL_FLOW, FINAL_FLOW, step_time=t_step, end_time=t_step + 1.01),
+        step_size=1e-5,
+        record_interval=1e-4,
+    )
+    offline = step_measures(
+        offline_run.time,
+        offline_run['supply_pressure'],
+        offline_run['main_valve_displacement'],
+        t_step,
+    )
     for name in MEASURE_NAMES:
-        assert node.values[name] is not None, f"{name}: {node.reasons.get(name)}"
-        if name == "T_1_ms":
+        assert node.values[name] is not None, f'{name}: {node.reasons.get(name)}'
+        if name == 'T_1_ms':
             assert node.values[name] == pytest.approx(offline.values[name], abs=0.2), name
         else:
             assert node.values[name] == pytest.approx(offline.values[name], rel=0.02), name
@@ -141,10 +164,10 @@ def test_publish_rate_change_recreates_the_timer(sim_valve):
     for tick in range(1, 5):
         for millisecond in range(1, 5):
             probe.send_clock(changed_ns + (5 * (tick - 1) + millisecond) * PERIOD_NS)
-            time.sleep(0.05)   # gives a 1 kHz timer, if there were one, the chance to tick
+            time.sleep(0.05)  # gives a 1 kHz timer, if there were one, the chance to tick
         probe.tick_at(changed_ns + 5 * tick * PERIOD_NS)
     with probe.condition:
-        stamps = [stamp for stamp, _ in probe.pressures["supply_pressure"] if stamp > changed_ns]
+        stamps = [stamp for stamp, _ in probe.pressures['supply_pressure'] if stamp > changed_ns]
     assert stamps == [changed_ns + 5 * tick * PERIOD_NS for tick in range(1, 5)]
 
 
@@ -152,83 +175,98 @@ def test_diagnostics_go_on_while_the_clock_is_paused(sim_valve):
     """Housekeeping runs after a tick; with /clock paused (no ticks) the 1 Hz report still comes."""
     first = sim_valve.wait_for_diagnostics()
     second = sim_valve.wait_for_diagnostics()
-    assert first["model_time_s"] == second["model_time_s"] == repr(sim_valve.clock_ns / 1e9)
-    assert int(second["ticks"]) == int(first["ticks"])
+    assert first['model_time_s'] == second['model_time_s'] == repr(sim_valve.clock_ns / 1e9)
+    assert int(second['ticks']) == int(first['ticks'])
 
 
 def node_waveforms(probe, start_ns):
     """(t [s] from start, p_s [Pa gauge], x [m], t_step [s]) from what the node published."""
-    pressure = dict(probe.pressures["supply_pressure"])
+    pressure = dict(probe.pressures['supply_pressure'])
     displacement = {row[0]: row[1] for row in probe.joints}
     stamps = np.array(sorted(pressure.keys() & displacement.keys()))
-    assert np.all(np.diff(stamps) == PERIOD_NS), "lockstep samples are 1 ms apart"
+    assert np.all(np.diff(stamps) == PERIOD_NS), 'lockstep samples are 1 ms apart'
     t = (stamps - start_ns) / 1e9
     p_s = np.array([pressure[s] for s in stamps]) - AMBIENT
     x = np.array([displacement[s] for s in stamps])
     applied_t = [(row[0] - start_ns) / 1e9 for row in probe.applied]
-    (t_step, flow_before, direction), = detect_steps(applied_t, [row[1] for row in probe.applied])
+    ((t_step, flow_before, direction),) = detect_steps(
+        applied_t, [row[1] for row in probe.applied]
+    )
     assert (flow_before, direction) == (INITIAL_FLOW, 1)
     return t, p_s, x, t_step
 
 
 # --- the shared wall-clock node --------------------------------------------------------------
 
+
 def test_starts_at_the_steady_state_and_publishes_each_tick_with_one_stamp(valve, reference):
     expected = steady_state(reference, INITIAL_FLOW)
-    valve.wait_for_new_samples(20, "poppet_chamber_pressure")
+    valve.wait_for_new_samples(20, 'poppet_chamber_pressure')
     with valve.condition:
         stamps = [dict(rows) for rows in valve.pressures.values()]
         joints = {row[0]: row[1:] for row in valve.joints}
         applied = dict(valve.applied)
     common = set.intersection(*(set(rows) for rows in stamps), joints, applied)
-    assert len(common) >= 10, "messages of a tick share one stamp"
+    assert len(common) >= 10, 'messages of a tick share one stamp'
     stamp = max(common)
     for index, rows in enumerate(stamps):
-        assert rows[stamp] - AMBIENT == pytest.approx(expected[index], rel=1e-6), PRESSURE_TOPICS[index]
+        assert rows[stamp] - AMBIENT == pytest.approx(expected[index], rel=1e-6), PRESSURE_TOPICS[
+            index
+        ]
     assert joints[stamp][0] == pytest.approx(expected[X], rel=1e-6)
     assert applied[stamp] == INITIAL_FLOW
-    assert all((b - a) % 10_000 == 0 for a, b in zip(sorted(common), sorted(common)[1:])), \
-        "model time moves in whole 10 us steps"
+    assert all((b - a) % 10_000 == 0 for a, b in zip(sorted(common), sorted(common)[1:])), (
+        'model time moves in whole 10 us steps'
+    )
 
 
 def test_parameter_descriptors_carry_unit_and_range(valve):
-    future = valve.parameters.describe_parameters(["main_valve_mass", "preset_pressure", "step_size"])
+    future = valve.parameters.describe_parameters(
+        ['main_valve_mass', 'preset_pressure', 'step_size']
+    )
     descriptors = valve._result(future).descriptors
     mass, preset, step = descriptors
-    assert "[kg]" in mass.description and "Table 1" in mass.description
-    assert (mass.floating_point_range[0].from_value, mass.floating_point_range[0].to_value) == \
-        (SPECS["main_valve_mass"].minimum, SPECS["main_valve_mass"].maximum)
-    assert "[Pa]" in preset.description and "[s]" in step.description
+    assert '[kg]' in mass.description and 'Table 1' in mass.description
+    assert (mass.floating_point_range[0].from_value, mass.floating_point_range[0].to_value) == (
+        SPECS['main_valve_mass'].minimum,
+        SPECS['main_valve_mass'].maximum,
+    )
+    assert '[Pa]' in preset.description and '[s]' in step.description
 
 
 def test_live_parameter_change_takes_effect(valve, reference):
-    preload = reference["pilot_spring_preload"] * 1.05
+    preload = reference['pilot_spring_preload'] * 1.05
     before = supply_gauge(valve)
     assert all(result.successful for result in valve.set_parameters(pilot_spring_preload=preload))
-    changed = {**reference, "pilot_spring_preload": preload}
-    reported = valve.get_parameters("pilot_spring_preload", "preset_pressure")
-    assert reported["pilot_spring_preload"] == preload
-    assert reported["preset_pressure"] == pytest.approx(cracking_pressure(changed), rel=1e-9)
-    valve.wait_for(lambda: valve.latest()[1] - AMBIENT > before + 1e4, "supply pressure rising with the preload")
+    changed = {**reference, 'pilot_spring_preload': preload}
+    reported = valve.get_parameters('pilot_spring_preload', 'preset_pressure')
+    assert reported['pilot_spring_preload'] == preload
+    assert reported['preset_pressure'] == pytest.approx(cracking_pressure(changed), rel=1e-9)
+    valve.wait_for(
+        lambda: valve.latest()[1] - AMBIENT > before + 1e4,
+        'supply pressure rising with the preload',
+    )
     assert after_reset(valve) == pytest.approx(steady_state(changed, INITIAL_FLOW)[P_S], rel=1e-6)
 
 
 def test_integer_is_accepted_for_a_double_parameter(valve):
     assert valve.set_parameters(main_valve_damping=2)[0].successful
-    assert valve.get_parameters("main_valve_damping") == {"main_valve_damping": 2.0}
+    assert valve.get_parameters('main_valve_damping') == {'main_valve_damping': 2.0}
 
 
 def invalid_changes(reference):
     """(change, words its refusal must contain): each kind of invalid change once."""
     return [
-        ({"main_valve_mass": math.nan}, ("main_valve_mass", "finite")),
-        ({"main_valve_mass": -0.065}, ("main_valve_mass", "limits [0.0001, 10] kg")),
-        ({"first_throttle_inner_diameter": reference["first_throttle_outer_diameter"]},
-         ("first_throttle_outer_diameter", "must exceed")),
-        ({"main_valve_mass": "heavy"}, ("main_valve_mass", "must be a number in kg", "string")),
-        ({"step_size": 1e-4}, ("diverge",)),
-        ({"preset_pressure": 1e5}, ("pilot_spring_preload", "limits")),
-        ({"initial_inlet_flow": 0.0}, ("read-only", "initial_inlet_flow")),
+        ({'main_valve_mass': math.nan}, ('main_valve_mass', 'finite')),
+        ({'main_valve_mass': -0.065}, ('main_valve_mass', 'limits [0.0001, 10] kg')),
+        (
+            {'first_throttle_inner_diameter': reference['first_throttle_outer_diameter']},
+            ('first_throttle_outer_diameter', 'must exceed'),
+        ),
+        ({'main_valve_mass': 'heavy'}, ('main_valve_mass', 'must be a number in kg', 'string')),
+        ({'step_size': 1e-4}, ('diverge',)),
+        ({'preset_pressure': 1e5}, ('pilot_spring_preload', 'limits')),
+        ({'initial_inlet_flow': 0.0}, ('read-only', 'initial_inlet_flow')),
     ]
 
 
@@ -236,44 +274,49 @@ def test_invalid_parameter_changes_are_rejected_with_their_reason(valve, referen
     changes = invalid_changes(reference)
     names = sorted({name for change, _ in changes for name in change})
     before = valve.get_parameters(*names)
-    refused_before = int(valve.wait_for_diagnostics()["rejected_parameter_changes"])
+    refused_before = int(valve.wait_for_diagnostics()['rejected_parameter_changes'])
     for change, words in changes:
-        result, = valve.set_parameters(**change)
+        (result,) = valve.set_parameters(**change)
         assert not result.successful, change
         for word in words:
             assert word in result.reason, (change, result.reason)
     assert valve.get_parameters(*names) == before
     valve.wait_for_new_samples(10)
-    assert supply_gauge(valve) == pytest.approx(steady_state(reference, INITIAL_FLOW)[P_S], rel=1e-6)
+    assert supply_gauge(valve) == pytest.approx(
+        steady_state(reference, INITIAL_FLOW)[P_S], rel=1e-6
+    )
     valve.wait_for_diagnostics(
-        lambda d: int(d["rejected_parameter_changes"]) >= refused_before + len(changes),
-        "rejected_parameter_changes counted")
+        lambda d: int(d['rejected_parameter_changes']) >= refused_before + len(changes),
+        'rejected_parameter_changes counted',
+    )
 
 
 def test_inconsistent_geometry_set_atomically_is_rejected_as_a_whole(valve, reference):
-    mass = reference["main_valve_mass"] * 1.1
+    mass = reference['main_valve_mass'] * 1.1
     result = valve.set_parameters_atomically(
-        first_throttle_outer_diameter=reference["first_throttle_inner_diameter"] * 0.99, main_valve_mass=mass)
-    assert not result.successful and "first_throttle_outer_diameter" in result.reason
-    assert valve.get_parameters("main_valve_mass")["main_valve_mass"] != mass
+        first_throttle_outer_diameter=reference['first_throttle_inner_diameter'] * 0.99,
+        main_valve_mass=mass,
+    )
+    assert not result.successful and 'first_throttle_outer_diameter' in result.reason
+    assert valve.get_parameters('main_valve_mass')['main_valve_mass'] != mass
 
 
 def test_reset_returns_to_the_steady_state_of_the_current_flow(valve, reference):
     valve.send_flow(FINAL_FLOW)
-    valve.wait_for(lambda: valve.applied[-1][1] == FINAL_FLOW, "the 20 L/min step applied")
+    valve.wait_for(lambda: valve.applied[-1][1] == FINAL_FLOW, 'the 20 L/min step applied')
     valve.wait_for_new_samples(20)
     expected = steady_state(reference, FINAL_FLOW)
-    assert supply_gauge(valve) != pytest.approx(expected[P_S], rel=1e-3), "still in the transient"
+    assert supply_gauge(valve) != pytest.approx(expected[P_S], rel=1e-3), 'still in the transient'
     reset_ns = valve.reset()
     assert valve.first_after(reset_ns)[1] - AMBIENT == pytest.approx(expected[P_S], rel=1e-6)
-    valve.wait_for(lambda: valve.joints[-1][0] > reset_ns, "joint_states after the reset")
+    valve.wait_for(lambda: valve.joints[-1][0] > reset_ns, 'joint_states after the reset')
     x_after = next(row[1] for row in valve.joints if row[0] > reset_ns)
     assert x_after == pytest.approx(expected[X], rel=1e-4)
 
 
 def test_flood_of_bad_inlet_flows_is_rejected_and_never_reaches_an_output(valve_process, valve):
     process, _ = valve_process
-    rejected_before = int(valve.wait_for_diagnostics()["rejected_inputs"])
+    rejected_before = int(valve.wait_for_diagnostics()['rejected_inputs'])
     samples_before = valve.count()
     for _ in range(100):
         for bad in (math.nan, math.inf, -math.inf, -1e-4):
@@ -282,78 +325,107 @@ def test_flood_of_bad_inlet_flows_is_rejected_and_never_reaches_an_output(valve_
     assert process.poll() is None
     assert valve.non_finite == 0
     with valve.condition:
-        assert all(q == INITIAL_FLOW for _, q in valve.applied[samples_before:]), "last good flow held"
-    diagnostics = valve.wait_for_diagnostics(lambda d: int(d["rejected_inputs"]) > rejected_before,
-                                             "rejected_inputs counted")
-    assert int(diagnostics["rejected_inputs"]) - rejected_before <= 400
+        assert all(q == INITIAL_FLOW for _, q in valve.applied[samples_before:]), (
+            'last good flow held'
+        )
+    diagnostics = valve.wait_for_diagnostics(
+        lambda d: int(d['rejected_inputs']) > rejected_before, 'rejected_inputs counted'
+    )
+    assert int(diagnostics['rejected_inputs']) - rejected_before <= 400
 
 
 def test_divergence_holds_the_state_and_undoes_the_last_parameter_change(valve, reference):
     assert valve.set_parameters(main_valve_damping=1.0)[0].successful
-    valve.send_flow(1.0)   # 60 000 L/min: the supply pressure leaves the model's range
-    diagnostics = valve.wait_for_diagnostics(lambda d: int(d["integration_failures"]) > 0, "a divergence")
-    assert diagnostics["level"] == 2 and "diverged" in diagnostics["message"]
-    assert valve.get_parameters("main_valve_damping") == {"main_valve_damping": reference["main_valve_damping"]}
+    valve.send_flow(1.0)  # 60 000 L/min: the supply pressure leaves the model's range
+    diagnostics = valve.wait_for_diagnostics(
+        lambda d: int(d['integration_failures']) > 0, 'a divergence'
+    )
+    assert diagnostics['level'] == 2 and 'diverged' in diagnostics['message']
+    assert valve.get_parameters('main_valve_damping') == {
+        'main_valve_damping': reference['main_valve_damping']
+    }
     assert valve.non_finite == 0
     with valve.condition:
-        assert max(p for _, p in valve.pressures["supply_pressure"]) < 1e9 + AMBIENT
+        assert max(p for _, p in valve.pressures['supply_pressure']) < 1e9 + AMBIENT
 
 
 def test_preset_pressure_moves_the_cracking_point(valve, reference):
     cracking = cracking_pressure(reference)
-    assert valve.get_parameters("preset_pressure")["preset_pressure"] == pytest.approx(cracking, rel=1e-9)
+    assert valve.get_parameters('preset_pressure')['preset_pressure'] == pytest.approx(
+        cracking, rel=1e-9
+    )
     before = supply_gauge(valve)
     preset = cracking + 0.5e6
     assert valve.set_parameters(preset_pressure=preset)[0].successful
-    preload = valve.get_parameters("pilot_spring_preload")["pilot_spring_preload"]
+    preload = valve.get_parameters('pilot_spring_preload')['pilot_spring_preload']
     assert preload == pytest.approx(preload_for_cracking_pressure(reference, preset), rel=1e-9)
-    moved = {**reference, "pilot_spring_preload": preload}
+    moved = {**reference, 'pilot_spring_preload': preload}
     assert cracking_pressure(moved) == pytest.approx(preset, rel=1e-6)
     assert after_reset(valve) - before == pytest.approx(0.5e6, rel=0.05)
-    conflicting = valve.set_parameters_atomically(preset_pressure=preset + 1e5, pilot_spring_preload=preload)
-    assert not conflicting.successful and "disagrees" in conflicting.reason
+    conflicting = valve.set_parameters_atomically(
+        preset_pressure=preset + 1e5, pilot_spring_preload=preload
+    )
+    assert not conflicting.successful and 'disagrees' in conflicting.reason
 
 
 def test_diagnostics_report_health_and_stale_input(valve):
     assert valve.set_parameters(input_timeout=0.2)[0].successful
-    stale = valve.wait_for_diagnostics(lambda d: d["input_stale"] == "true", "input reported stale")
-    assert stale["level"] >= 1 and "stale" in stale["message"]
-    for key in ("real_time_factor", "ticks", "late_ticks", "long_ticks", "missed_ticks", "skipped_ticks",
-                "skipped_time_s", "rejected_inputs", "rejected_parameter_changes", "integration_failures",
-                "tick_compute_p50_ms", "tick_compute_p99_ms", "inlet_flow_m3_s", "model_time_s"):
+    stale = valve.wait_for_diagnostics(
+        lambda d: d['input_stale'] == 'true', 'input reported stale'
+    )
+    assert stale['level'] >= 1 and 'stale' in stale['message']
+    for key in (
+        'real_time_factor',
+        'ticks',
+        'late_ticks',
+        'long_ticks',
+        'missed_ticks',
+        'skipped_ticks',
+        'skipped_time_s',
+        'rejected_inputs',
+        'rejected_parameter_changes',
+        'integration_failures',
+        'tick_compute_p50_ms',
+        'tick_compute_p99_ms',
+        'inlet_flow_m3_s',
+        'model_time_s',
+    ):
         assert key in stale, key
-    assert float(stale["inlet_flow_m3_s"]) == INITIAL_FLOW
-    assert float(stale["real_time_factor"]) > 0.0
+    assert float(stale['inlet_flow_m3_s']) == INITIAL_FLOW
+    assert float(stale['real_time_factor']) > 0.0
     with valve.condition:
         start = len(valve.diagnostics)
-    for _ in range(1200):   # inputs every 50 ms, within the 0.2 s timeout, until a report shows them
+    for _ in range(
+        1200
+    ):  # inputs every 50 ms, within the 0.2 s timeout, until a report shows them
         valve.send_flow(INITIAL_FLOW)
-        if any(d["input_stale"] == "false" for d in valve.diagnostics[start:]):
+        if any(d['input_stale'] == 'false' for d in valve.diagnostics[start:]):
             break
         time.sleep(0.05)
     else:
-        pytest.fail("input never reported fresh again")
+        pytest.fail('input never reported fresh again')
 
 
 # --- the executor option ----------------------------------------------------------------------
 
+
 def test_runs_on_the_single_threaded_executor_too(context, tmp_path):
-    log = tmp_path / "valve_node.log"
-    process = start_node(log, "-r", "__ns:=/single", options=("--executor", "single-threaded"))
-    probe = Probe(context, "/single")
+    log = tmp_path / 'valve_node.log'
+    process = start_node(log, '-r', '__ns:=/single', options=('--executor', 'single-threaded'))
+    probe = Probe(context, '/single')
     try:
         probe.wait_until_connected()
         probe.wait_for_new_samples(100)
-        assert probe.wait_for_diagnostics()["integration_failures"] == "0"
+        assert probe.wait_for_diagnostics()['integration_failures'] == '0'
     finally:
         probe.close()
         exit_code = stop_node(process)
     assert exit_code == 0, log.read_text()
-    assert "executor: single-threaded" in log.read_text()
+    assert 'executor: single-threaded' in log.read_text()
 
 
 def test_an_unknown_executor_is_a_usage_error(tmp_path):
-    log = tmp_path / "valve_node.log"
-    process = start_node(log, options=("--executor", "multi"))
+    log = tmp_path / 'valve_node.log'
+    process = start_node(log, options=('--executor', 'multi'))
     assert process.wait(timeout=60) == 2
     assert "invalid choice: 'multi'" in log.read_text()

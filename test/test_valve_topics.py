@@ -1,43 +1,60 @@
 """The tick messages' serialized form (valve_topics.TickMessages, cdr.CdrMessage)."""
+
+from mcap_ros2._dynamic import serialize_dynamic
 import numpy as np
 import pytest
-from mcap_ros2._dynamic import serialize_dynamic
 from rclpy.serialization import deserialize_message
-
-from valve_sim.recording.bag import message_definition
 from valve_sim.core.model import STATE_NAMES
-from valve_sim.recording.valve_topics import PRESSURE_TOPICS, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
+from valve_sim.recording.bag import message_definition
+from valve_sim.recording.valve_topics import (
+    message_class,
+    PRESSURE_TOPICS,
+    TICK_TOPICS,
+    TickMessages,
+    TOPIC_TYPES,
+)
+
 
 AMBIENT = 101325.0
 
 
 def tick(time_ns, state, flow):
     """{topic: (bytes, the message rclpy decodes from them)} of one filled tick."""
-    return {topic: (data, deserialize_message(data, message_class(TOPIC_TYPES[topic])))
-            for topic, data in TickMessages().fill(time_ns, state, flow, AMBIENT)}
+    return {
+        topic: (data, deserialize_message(data, message_class(TOPIC_TYPES[topic])))
+        for topic, data in TickMessages().fill(time_ns, state, flow, AMBIENT)
+    }
 
 
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize('seed', range(3))
 def test_tick_bytes_decode_to_the_state_and_match_an_independent_encoder(seed):
     rng = np.random.default_rng(seed)
     state = rng.normal(size=len(STATE_NAMES)) * [7e6, 6e6, 5e6, 1e5, 1e-3, 1e-2, 1e-4, 1e-2]
-    time_ns, flow = int(rng.integers(0, 2**31 * 1_000_000_000)), float(rng.uniform(0.0, 1e-3))   # sec: int32
+    time_ns, flow = (
+        int(rng.integers(0, 2**31 * 1_000_000_000)),
+        float(rng.uniform(0.0, 1e-3)),
+    )  # sec: int32
     messages = tick(time_ns, state, flow)
     assert list(messages) == list(TICK_TOPICS)
     for topic, (data, message) in messages.items():
         type_name = TOPIC_TYPES[topic]
-        assert serialize_dynamic(type_name, message_definition(type_name))[type_name](message) == data, topic
+        assert (
+            serialize_dynamic(type_name, message_definition(type_name))[type_name](message) == data
+        ), topic
         assert message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec == time_ns
         assert message.header.frame_id == topic
     for index, topic in enumerate(PRESSURE_TOPICS):
         pressure = messages[topic][1]
         assert pressure.fluid_pressure == state[index] + AMBIENT and pressure.variance == 0.0
-    joints = messages["joint_states"][1]
-    assert list(joints.name) == ["main_valve", "pilot_poppet"]
-    assert list(joints.position) == [state[4], state[6]] and list(joints.velocity) == [state[5], state[7]]
+    joints = messages['joint_states'][1]
+    assert list(joints.name) == ['main_valve', 'pilot_poppet']
+    assert list(joints.position) == [state[4], state[6]] and list(joints.velocity) == [
+        state[5],
+        state[7],
+    ]
     assert len(joints.effort) == 0
-    applied = messages["applied_inlet_flow"][1]
-    assert list(applied.name) == ["inlet_flow"] and list(applied.velocity) == [flow]
+    applied = messages['applied_inlet_flow'][1]
+    assert list(applied.name) == ['inlet_flow'] and list(applied.velocity) == [flow]
     assert len(applied.position) == 0 and len(applied.effort) == 0
 
 

@@ -6,20 +6,21 @@ topic, /clock, the parameter services and ~/reset. Its executor spins in a
 background thread; waiting happens on a condition variable, so tests never
 depend on how fast this machine is, only on generous timeouts.
 """
+
 import math
 import os
+from pathlib import Path
 import re
 import signal
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMessage
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
@@ -27,21 +28,29 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-
 from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 
+
 REPO = Path(__file__).resolve().parent.parent
-NODE_NAME = "relief_valve"
-TIMEOUT = 60.0   # [s] for anything that waits: start-up, discovery, a service answer
+NODE_NAME = 'relief_valve'
+TIMEOUT = 60.0  # [s] for anything that waits: start-up, discovery, a service answer
 
 
 def start_node(log_path, *ros_args, options=()):
     """valve_node in its own process (python -m valve_sim.ros.valve_node *options --ros-args ...), output to log_path."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
-    with open(log_path, "w") as log:
-        return subprocess.Popen([sys.executable, "-m", "valve_sim.ros.valve_node", *options, "--ros-args", *ros_args],
-                                stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
+    env = dict(
+        os.environ,
+        PYTHONUNBUFFERED='1',
+        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
+    )
+    with open(log_path, 'w') as log:
+        return subprocess.Popen(
+            [sys.executable, '-m', 'valve_sim.ros.valve_node', *options, '--ros-args', *ros_args],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            cwd=REPO,
+        )
 
 
 def stop_node(process, sig=signal.SIGINT):
@@ -70,25 +79,27 @@ class Probe:
     The probe lives in the valve's namespace, so relative topic names match.
     """
 
-    def __init__(self, context, namespace="/"):
-        self.node = rclpy.create_node("valve_probe", namespace=namespace, context=context)
-        self.valve_name = f"{namespace.rstrip('/')}/{NODE_NAME}"
+    def __init__(self, context, namespace='/'):
+        self.node = rclpy.create_node('valve_probe', namespace=namespace, context=context)
+        self.valve_name = f'{namespace.rstrip("/")}/{NODE_NAME}'
         self.condition = threading.Condition()
-        self.pressures = {topic: [] for topic in PRESSURE_TOPICS}   # [(stamp_ns, p [Pa abs])]
-        self.joints = []          # [(stamp_ns, x, y, x_dot, y_dot)]
-        self.applied = []         # [(stamp_ns, q_in)]
-        self.diagnostics = []     # [{key: value}] of this node's status
-        self.non_finite = 0       # published fields that were NaN or inf
-        self.clock_ns = None      # last /clock sent [ns]
+        self.pressures = {topic: [] for topic in PRESSURE_TOPICS}  # [(stamp_ns, p [Pa abs])]
+        self.joints = []  # [(stamp_ns, x, y, x_dot, y_dot)]
+        self.applied = []  # [(stamp_ns, q_in)]
+        self.diagnostics = []  # [{key: value}] of this node's status
+        self.non_finite = 0  # published fields that were NaN or inf
+        self.clock_ns = None  # last /clock sent [ns]
         for topic in PRESSURE_TOPICS:
-            self.node.create_subscription(FluidPressure, topic, self._pressure_callback(topic), 1000)
-        self.node.create_subscription(JointState, "joint_states", self._on_joints, 1000)
-        self.node.create_subscription(JointState, "applied_inlet_flow", self._on_applied, 1000)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        self.inlet = self.node.create_publisher(Float64, "inlet_flow", 100)
-        self.clock = self.node.create_publisher(Clock, "/clock", 10)
+            self.node.create_subscription(
+                FluidPressure, topic, self._pressure_callback(topic), 1000
+            )
+        self.node.create_subscription(JointState, 'joint_states', self._on_joints, 1000)
+        self.node.create_subscription(JointState, 'applied_inlet_flow', self._on_applied, 1000)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        self.inlet = self.node.create_publisher(Float64, 'inlet_flow', 100)
+        self.clock = self.node.create_publisher(Clock, '/clock', 10)
         self.parameters = AsyncParameterClient(self.node, self.valve_name)
-        self.reset_client = self.node.create_client(Trigger, f"{self.valve_name}/reset")
+        self.reset_client = self.node.create_client(Trigger, f'{self.valve_name}/reset')
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
@@ -110,6 +121,7 @@ class Probe:
     def _pressure_callback(self, topic):
         def callback(message):
             self._record(self.pressures[topic], (stamp_ns(message.header), message.fluid_pressure))
+
         return callback
 
     def _on_joints(self, message):
@@ -140,24 +152,24 @@ class Probe:
 
     def wait_for(self, condition, what, timeout=TIMEOUT):
         """Block until condition() holds; AssertionError after timeout [s]."""
-        assert self._wait(condition, timeout), f"timed out after {timeout} s waiting for {what}"
+        assert self._wait(condition, timeout), f'timed out after {timeout} s waiting for {what}'
 
-    def latest(self, topic="supply_pressure"):
+    def latest(self, topic='supply_pressure'):
         with self.condition:
             return self.pressures[topic][-1]
 
     def count(self):
         with self.condition:
-            return len(self.pressures["supply_pressure"])
+            return len(self.pressures['supply_pressure'])
 
-    def wait_for_new_samples(self, n=1, topic="supply_pressure"):
+    def wait_for_new_samples(self, n=1, topic='supply_pressure'):
         """Wait until n more samples of topic arrived; returns the last one."""
         with self.condition:
             start = len(self.pressures[topic])
-        self.wait_for(lambda: len(self.pressures[topic]) >= start + n, f"{n} new {topic} messages")
+        self.wait_for(lambda: len(self.pressures[topic]) >= start + n, f'{n} new {topic} messages')
         return self.latest(topic)
 
-    def wait_for_diagnostics(self, condition=lambda values: True, what="diagnostics"):
+    def wait_for_diagnostics(self, condition=lambda values: True, what='diagnostics'):
         """Wait for a diagnostics status from now on that satisfies condition; returns its values."""
         with self.condition:
             start = len(self.diagnostics)
@@ -169,13 +181,19 @@ class Probe:
 
     def wait_until_connected(self, use_sim_time=False):
         """Discovery: the valve hears inlet_flow (and /clock), the probe hears it, services answer."""
-        self.wait_for(lambda: self.inlet.get_subscription_count() > 0, "valve_node subscribing inlet_flow")
+        self.wait_for(
+            lambda: self.inlet.get_subscription_count() > 0, 'valve_node subscribing inlet_flow'
+        )
         if use_sim_time:
-            self.wait_for(lambda: self.clock.get_subscription_count() > 0, "valve_node subscribing /clock")
+            self.wait_for(
+                lambda: self.clock.get_subscription_count() > 0, 'valve_node subscribing /clock'
+            )
         else:
-            self.wait_for(lambda: len(self.pressures["supply_pressure"]) > 0, "supply_pressure messages")
-        assert self.parameters.wait_for_services(timeout_sec=TIMEOUT), "parameter services"
-        assert self.reset_client.wait_for_service(timeout_sec=TIMEOUT), "reset service"
+            self.wait_for(
+                lambda: len(self.pressures['supply_pressure']) > 0, 'supply_pressure messages'
+            )
+        assert self.parameters.wait_for_services(timeout_sec=TIMEOUT), 'parameter services'
+        assert self.reset_client.wait_for_service(timeout_sec=TIMEOUT), 'reset service'
 
     def send_flow(self, flow):
         """Publish an inlet flow [m^3/s]."""
@@ -195,7 +213,7 @@ class Probe:
         time_ns = start_ns
         self.send_clock(time_ns)
         while not self._wait(lambda: self.applied, 1.0):
-            assert time.monotonic() < deadline, "valve_node never ticked on /clock"
+            assert time.monotonic() < deadline, 'valve_node never ticked on /clock'
             time_ns += period_ns
             self.send_clock(time_ns)
         return self.applied[0][0]
@@ -205,19 +223,23 @@ class Probe:
 
         /clock is best effort, so it is sent again every second while waiting.
         """
+
         def published():
-            return all(rows and rows[-1][0] >= time_ns
-                       for rows in (self.pressures["supply_pressure"], self.joints, self.applied))
+            return all(
+                rows and rows[-1][0] >= time_ns
+                for rows in (self.pressures['supply_pressure'], self.joints, self.applied)
+            )
+
         deadline = time.monotonic() + TIMEOUT
         self.send_clock(time_ns)
         while not self._wait(published, 1.0):
-            assert time.monotonic() < deadline, f"no valve state stamped {time_ns} ns"
+            assert time.monotonic() < deadline, f'no valve state stamped {time_ns} ns'
             self.send_clock(time_ns)
 
     def _result(self, future):
         done = threading.Event()
         future.add_done_callback(lambda _: done.set())
-        assert done.wait(TIMEOUT), "service call timed out"
+        assert done.wait(TIMEOUT), 'service call timed out'
         return future.result()
 
     def set_parameters(self, **values):
@@ -232,19 +254,21 @@ class Probe:
     def get_parameters(self, *names):
         """Current values of names, as a dict."""
         values = self._result(self.parameters.get_parameters(list(names))).values
-        return {name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
-                for name, value in zip(names, values)}
+        return {
+            name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
+            for name, value in zip(names, values)
+        }
 
     def reset(self):
         """Call ~/reset; returns the model time [ns] of the reset state (from the response)."""
         response = self._result(self.reset_client.call_async(Trigger.Request()))
         assert response.success, response.message
-        seconds = re.search(r"model time (\d+)\.(\d{9}) s", response.message)
+        seconds = re.search(r'model time (\d+)\.(\d{9}) s', response.message)
         return int(seconds[1]) * 1_000_000_000 + int(seconds[2])
 
-    def first_after(self, time_ns, topic="supply_pressure"):
+    def first_after(self, time_ns, topic='supply_pressure'):
         """The first sample of topic stamped after time_ns [ns] (waits for it)."""
         rows = self.pressures[topic]
-        self.wait_for(lambda: rows and rows[-1][0] > time_ns, f"{topic} after {time_ns} ns")
+        self.wait_for(lambda: rows and rows[-1][0] > time_ns, f'{topic} after {time_ns} ns')
         with self.condition:
             return next(row for row in rows if row[0] > time_ns)

@@ -10,4 +10,5 @@ The package is built in wings, each importing only the wings below it:
 
 test/test_layering.py keeps it so.
 """
-__version__ = "0.1.0"
+
+__version__ = '0.1.0'

@@ -17,17 +17,19 @@ least-squares parabola through the lobe samples within PEAK_FIT_DEPTH of the
 extreme, which makes the result nearly independent of the sample rate
 (1 kHz from the node, 10 kHz offline).
 """
-import math
+
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
-MEASURE_NAMES = ("P_o_percent", "P_1_percent", "T_1_ms", "r_d", "T_d_ms", "T_s_ms")
-WINDOW = 1.0             # [s] analysis window after the step (metrics.md)
-SETTLED_SPAN = 0.05      # [s] p_inf and x_inf are means over the window's last 50 ms
-SETTLING_BAND = 0.05     # settling band: +-5 % of the main-valve step width
-PEAK_BAND = 0.1          # lobe hysteresis, fraction of the largest deviation
-PEAK_FIT_DEPTH = 0.2     # parabola fit over samples within 20 % of the lobe's extreme
+
+MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
+WINDOW = 1.0  # [s] analysis window after the step (metrics.md)
+SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
+SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
+PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
+PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
 
 
 @dataclass
@@ -40,8 +42,11 @@ class StepMeasures:
 
     def as_dict(self):
         """JSON-ready: the six names (None where undefined), 'reasons' and 'details'."""
-        return {**{name: self.values.get(name) for name in MEASURE_NAMES},
-                "reasons": dict(self.reasons), "details": dict(self.details)}
+        return {
+            **{name: self.values.get(name) for name in MEASURE_NAMES},
+            'reasons': dict(self.reasons),
+            'details': dict(self.details),
+        }
 
 
 def _interpolate(t, signal, time):
@@ -89,13 +94,16 @@ def _settling_time(t, x, x_0, x_inf, t_step):
     """Time after t_step from which x stays within x_inf +- 5 % of |x_inf - x_0| [s], or a reason."""
     width = abs(x_inf - x_0)
     if width == 0.0:
-        return None, "the main valve did not move (zero step width)"
+        return None, 'the main valve did not move (zero step width)'
     outside = np.flatnonzero(np.abs(x - x_inf) > SETTLING_BAND * width)
     if len(outside) == 0:
         return 0.0, None
     last = outside[-1]
     if last >= len(x) - 1 or t[last] >= t[-1] - SETTLED_SPAN:
-        return None, "the main valve does not settle inside the window (still outside the band in its last 50 ms)"
+        return (
+            None,
+            'the main valve does not settle inside the window (still outside the band in its last 50 ms)',
+        )
     # Interpolate the final entry into the band between samples last and last + 1.
     bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
     fraction = (x[last] - bound) / (x[last] - x[last + 1])
@@ -115,10 +123,12 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     x = np.asarray(main_valve_displacement, dtype=float)
     values, reasons = dict.fromkeys(MEASURE_NAMES), {}
     if not (len(t) == len(p) == len(x)) or len(t) < 3:
-        reasons.update(dict.fromkeys(MEASURE_NAMES, "fewer than 3 samples"))
+        reasons.update(dict.fromkeys(MEASURE_NAMES, 'fewer than 3 samples'))
         return StepMeasures(values, reasons)
     if not (t[0] <= t_step < t[-1]):
-        reasons.update(dict.fromkeys(MEASURE_NAMES, f"step time {t_step:.6f} s outside the samples"))
+        reasons.update(
+            dict.fromkeys(MEASURE_NAMES, f'step time {t_step:.6f} s outside the samples')
+        )
         return StepMeasures(values, reasons)
     end = min(t_step + window, t[-1])
     inside = (t >= t_step) & (t <= end)
@@ -126,41 +136,60 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     settled = tw >= end - SETTLED_SPAN
     p_0, x_0 = _interpolate(t, p, t_step), _interpolate(t, x, t_step)
     p_inf, x_inf = float(np.mean(pw[settled])), float(np.mean(xw[settled]))
-    details = {"t_step": t_step, "window_s": end - t_step, "p_0": p_0, "p_inf": p_inf,
-               "x_0": x_0, "x_inf": x_inf, "direction": direction}
+    details = {
+        't_step': t_step,
+        'window_s': end - t_step,
+        'p_0': p_0,
+        'p_inf': p_inf,
+        'x_0': x_0,
+        'x_inf': x_inf,
+        'direction': direction,
+    }
     if end - t_step < window:
-        details["note"] = f"window truncated to {end - t_step:.3f} s of the {window:.3f} s defined"
+        details['note'] = f'window truncated to {end - t_step:.3f} s of the {window:.3f} s defined'
     if p_0 == 0.0:
-        reasons.update(dict.fromkeys(MEASURE_NAMES, "supply pressure before the step is zero"))
+        reasons.update(dict.fromkeys(MEASURE_NAMES, 'supply pressure before the step is zero'))
         return StepMeasures(values, reasons, details)
 
-    values["P_o_percent"] = (p_inf - p_0) / p_0 * 100.0
-    values["T_s_ms"], reason = _settling_time(tw, xw, x_0, x_inf, t_step)
+    values['P_o_percent'] = (p_inf - p_0) / p_0 * 100.0
+    values['T_s_ms'], reason = _settling_time(tw, xw, x_0, x_inf, t_step)
     if reason:
-        reasons["T_s_ms"] = reason
+        reasons['T_s_ms'] = reason
     else:
-        values["T_s_ms"] *= 1e3
+        values['T_s_ms'] *= 1e3
 
     e = direction * (pw - p_inf)
     largest = float(np.max(e))
     lobes = _lobes(e, PEAK_BAND * largest) if largest > 0.0 else []
     # An extreme on the window's last sample is a pressure still moving, not a peak.
-    lobes = [(start, stop) for start, stop in lobes if start + int(np.argmax(e[start:stop])) < len(e) - 1]
+    lobes = [
+        (start, stop)
+        for start, stop in lobes
+        if start + int(np.argmax(e[start:stop])) < len(e) - 1
+    ]
     if not lobes:
-        reasons.update({name: "no overshoot peak inside the window (the pressure never swings above its settled value)"
-                        for name in ("P_1_percent", "T_1_ms", "r_d", "T_d_ms")})
+        reasons.update(
+            {
+                name: 'no overshoot peak inside the window (the pressure never swings above its settled value)'
+                for name in ('P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms')
+            }
+        )
         return StepMeasures(values, reasons, details)
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
-    values["P_1_percent"] = direction * e_1 / p_0 * 100.0
-    values["T_1_ms"] = (t_1 - t_step) * 1e3
+    values['P_1_percent'] = direction * e_1 / p_0 * 100.0
+    values['T_1_ms'] = (t_1 - t_step) * 1e3
     details.update(t_1=t_1, p_1=p_inf + direction * e_1)
     if len(lobes) < 2:
-        reasons.update({name: "no second overshoot (the response does not swing back above the settled value)"
-                        for name in ("r_d", "T_d_ms")})
+        reasons.update(
+            {
+                name: 'no second overshoot (the response does not swing back above the settled value)'
+                for name in ('r_d', 'T_d_ms')
+            }
+        )
         return StepMeasures(values, reasons, details)
     t_2, e_2 = _refined_extreme(tw, e, *lobes[1])
-    values["r_d"] = e_2 / e_1
-    values["T_d_ms"] = (t_2 - t_1) * 1e3
+    values['r_d'] = e_2 / e_1
+    values['T_d_ms'] = (t_2 - t_1) * 1e3
     details.update(t_2=t_2, p_2=p_inf + direction * e_2)
     return StepMeasures(values, reasons, details)
 

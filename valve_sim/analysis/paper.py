@@ -2,25 +2,31 @@
 
 Nothing in the model reads these; they are printed beside our results.
 """
+
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario
+
 
 # Figure 5 / Table 3, Table 1 conditions, under the names of metrics.md.
 FIGURE5_MEASURES = {
-    "P_o_percent": 0.144,
-    "P_1_percent": 3.18,
-    "T_1_ms": 6.7,
-    "r_d": 0.851,
-    "T_d_ms": 25.1,
-    "T_s_ms": 540.0,
+    'P_o_percent': 0.144,
+    'P_1_percent': 3.18,
+    'T_1_ms': 6.7,
+    'r_d': 0.851,
+    'T_d_ms': 25.1,
+    'T_s_ms': 540.0,
 }
 
 # The paper's test: 5 L/min, +15 L/min step at 0.25 s, end at 1.25 s.
-REFERENCE_SCENARIO = Scenario(initial_flow=5.0 * LITRE_PER_MINUTE, final_flow=20.0 * LITRE_PER_MINUTE,
-                              step_time=0.25, end_time=1.25)
+REFERENCE_SCENARIO = Scenario(
+    initial_flow=5.0 * LITRE_PER_MINUTE,
+    final_flow=20.0 * LITRE_PER_MINUTE,
+    step_time=0.25,
+    end_time=1.25,
+)
 
 # The parameter study: each varied one at a time by these percentages.
-STUDY_PARAMETERS = ("m_m", "m_p", "V_p", "V_c", "d_c", "k_p")
+STUDY_PARAMETERS = ('m_m', 'm_p', 'V_p', 'V_c', 'd_c', 'k_p')
 STUDY_VARIATIONS = (-20, -10, 0, 10, 20)
 
 # Table 2: the six parameters varied together [%].
-TABLE2_CHANGES = {"m_m": -20, "m_p": -20, "V_p": 20, "V_c": -20, "d_c": 10, "k_p": -20}
+TABLE2_CHANGES = {'m_m': -20, 'm_p': -20, 'V_p': 20, 'V_c': -20, 'd_c': 10, 'k_p': -20}

@@ -2,21 +2,23 @@
 
 Matplotlib with the Agg backend: files only, no display needed.
 """
+
 import matplotlib
 
-matplotlib.use("Agg")
+
+matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
-
 from valve_sim.analysis.measures import MEASURE_NAMES  # noqa: E402
 
+
 MEASURE_LABELS = {
-    "P_o_percent": "P_o, pressure increment [%]",
-    "P_1_percent": "P_1, pressure overshoot [%]",
-    "T_1_ms": "T_1, peak rising time [ms]",
-    "r_d": "r_d, damping ratio [-]",
-    "T_d_ms": "T_d, period of damped vibration [ms]",
-    "T_s_ms": "T_s, settling time [ms]",
+    'P_o_percent': 'P_o, pressure increment [%]',
+    'P_1_percent': 'P_1, pressure overshoot [%]',
+    'T_1_ms': 'T_1, peak rising time [ms]',
+    'r_d': 'r_d, damping ratio [-]',
+    'T_d_ms': 'T_d, period of damped vibration [ms]',
+    'T_s_ms': 'T_s, settling time [ms]',
 }
 
 
@@ -24,38 +26,55 @@ def _measure_text(measures):
     lines = []
     for name in MEASURE_NAMES:
         value = measures.get(name)
-        lines.append(f"{name} = {value:.4g}" if value is not None else f"{name}: none")
-    return "\n".join(lines)
+        lines.append(f'{name} = {value:.4g}' if value is not None else f'{name}: none')
+    return '\n'.join(lines)
 
 
-def plot_step_response(path, time, supply_pressure, main_valve_displacement, poppet_displacement,
-                       t_step, measures=None, title="Step response (paper Figure 5)"):
+def plot_step_response(
+    path,
+    time,
+    supply_pressure,
+    main_valve_displacement,
+    poppet_displacement,
+    t_step,
+    measures=None,
+    title='Step response (paper Figure 5)',
+):
     """Figure 5: p_s/p_0, x/x_0 and y/y_0 against time after the step; writes a PNG to path.
 
     time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
     StepMeasures.as_dict() to print beside the curves (optional).
     """
     time = np.asarray(time, dtype=float)
-    before = int(np.searchsorted(time, t_step, side="right")) - 1
+    before = int(np.searchsorted(time, t_step, side='right')) - 1
     before = max(before, 0)
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8), constrained_layout=True)
     curves = (
-        (supply_pressure, "P = p_s / p_s(t_step) [-]", "tab:blue"),
-        (main_valve_displacement, "X = x / x(t_step) [-]", "tab:red"),
-        (poppet_displacement, "Y = y / y(t_step) [-]", "tab:green"),
+        (supply_pressure, 'P = p_s / p_s(t_step) [-]', 'tab:blue'),
+        (main_valve_displacement, 'X = x / x(t_step) [-]', 'tab:red'),
+        (poppet_displacement, 'Y = y / y(t_step) [-]', 'tab:green'),
     )
     for axis, (signal, label, colour) in zip(axes, curves):
         signal = np.asarray(signal, dtype=float)
         reference = signal[before] if signal[before] != 0.0 else 1.0
         axis.plot(time, signal / reference, color=colour, linewidth=0.9)
-        axis.axvline(t_step, color="0.6", linestyle=":", linewidth=0.8)
+        axis.axvline(t_step, color='0.6', linestyle=':', linewidth=0.8)
         axis.set_ylabel(label)
         axis.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("time [s]")
+    axes[-1].set_xlabel('time [s]')
     axes[0].set_title(title)
     if measures:
-        axes[0].text(0.99, 0.05, _measure_text(measures), transform=axes[0].transAxes, ha="right", va="bottom",
-                     fontsize=8, family="monospace", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.8"})
+        axes[0].text(
+            0.99,
+            0.05,
+            _measure_text(measures),
+            transform=axes[0].transAxes,
+            ha='right',
+            va='bottom',
+            fontsize=8,
+            family='monospace',
+            bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': '0.8'},
+        )
     figure.savefig(path, dpi=120)
     plt.close(figure)
 
@@ -71,15 +90,21 @@ def plot_sensitivity(path, symbol, series, title):
     for axis, name in zip(axes.flat, MEASURE_NAMES):
         points = [(p, series[p][name]) for p in percents if series[p][name] is not None]
         if points:
-            axis.plot(*zip(*points), "o-", color="tab:blue")
+            axis.plot(*zip(*points), 'o-', color='tab:blue')
         missing = [p for p in percents if series[p][name] is None]
         if missing:
-            axis.text(0.02, 0.02, "undefined at " + ", ".join(f"{p:+d} %" for p in missing),
-                      transform=axis.transAxes, fontsize=8, color="tab:red")
+            axis.text(
+                0.02,
+                0.02,
+                'undefined at ' + ', '.join(f'{p:+d} %' for p in missing),
+                transform=axis.transAxes,
+                fontsize=8,
+                color='tab:red',
+            )
         axis.set_title(MEASURE_LABELS[name], fontsize=9)
-        axis.set_xlabel(f"variation of {symbol} [%]")
+        axis.set_xlabel(f'variation of {symbol} [%]')
         axis.grid(True, alpha=0.3)
-    figure.suptitle(f"{title}: effect of {symbol}")
+    figure.suptitle(f'{title}: effect of {symbol}')
     figure.savefig(path, dpi=110)
     plt.close(figure)
 
@@ -93,10 +118,15 @@ def plot_poppet_waveforms(path, waveforms, t_step):
     for percent in sorted(waveforms):
         time, y = waveforms[percent]
         window = (time >= t_step - 0.01) & (time <= t_step + 0.1)
-        axis.plot((time[window] - t_step) * 1e3, y[window] * 1e6, linewidth=0.9, label=f"m_p {percent:+d} %")
-    axis.set_xlabel("time after the step [ms]")
-    axis.set_ylabel("poppet displacement y [um]")
-    axis.set_title("Figure 8: pilot poppet displacement for the m_p variations")
+        axis.plot(
+            (time[window] - t_step) * 1e3,
+            y[window] * 1e6,
+            linewidth=0.9,
+            label=f'm_p {percent:+d} %',
+        )
+    axis.set_xlabel('time after the step [ms]')
+    axis.set_ylabel('poppet displacement y [um]')
+    axis.set_title('Figure 8: pilot poppet displacement for the m_p variations')
     axis.grid(True, alpha=0.3)
     axis.legend()
     figure.savefig(path, dpi=110)
@@ -108,10 +138,10 @@ def plot_pressure_increment(path, series):
     figure, axis = plt.subplots(figsize=(6, 4.5), constrained_layout=True)
     for symbol, values in series.items():
         points = [(p, v) for p, v in sorted(values.items()) if v is not None]
-        axis.plot(*zip(*points), "o-", label=symbol)
-    axis.set_xlabel("variation [%]")
-    axis.set_ylabel(MEASURE_LABELS["P_o_percent"])
-    axis.set_title("Figure 13: pressure increment against d_c and k_p")
+        axis.plot(*zip(*points), 'o-', label=symbol)
+    axis.set_xlabel('variation [%]')
+    axis.set_ylabel(MEASURE_LABELS['P_o_percent'])
+    axis.set_title('Figure 13: pressure increment against d_c and k_p')
     axis.grid(True, alpha=0.3)
     axis.legend()
     figure.savefig(path, dpi=110)

@@ -20,17 +20,21 @@ latest value at or before that time (Joiner). With valve_node all stamps of a ti
 are equal, so this is an exact join. The live analyser and bag analysis share this
 code, so both see the same rows.
 """
+
 from collections import deque
 from dataclasses import dataclass, field
 
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 
-FLUID_PRESSURE = "sensor_msgs/msg/FluidPressure"
-JOINT_STATE = "sensor_msgs/msg/JointState"
-FLOAT64 = "std_msgs/msg/Float64"
-CLOCKS = ("header", "receive")
-MAX_PENDING_ROWS = 10_000   # rows waiting for a silent role before the oldest are dropped (10 s at 1 kHz)
+
+FLUID_PRESSURE = 'sensor_msgs/msg/FluidPressure'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+FLOAT64 = 'std_msgs/msg/Float64'
+CLOCKS = ('header', 'receive')
+MAX_PENDING_ROWS = (
+    10_000  # rows waiting for a silent role before the oldest are dropped (10 s at 1 kHz)
+)
 
 
 @dataclass(frozen=True)
@@ -45,24 +49,44 @@ class Role:
 
 
 ROLES = (
-    Role("supply_pressure", "supply_pressure", "", "", "supply pressure p_s [Pa, absolute on the wire]"),
-    Role("main_valve", "joint_states", "main_valve", "position", "main-valve displacement x [m]"),
-    Role("pilot_poppet", "joint_states", "pilot_poppet", "position", "pilot-poppet displacement y [m]"),
-    Role("inlet_flow", "applied_inlet_flow", "inlet_flow", "velocity", "applied inlet flow q_in [m^3/s]"),
+    Role(
+        'supply_pressure',
+        'supply_pressure',
+        '',
+        '',
+        'supply pressure p_s [Pa, absolute on the wire]',
+    ),
+    Role('main_valve', 'joint_states', 'main_valve', 'position', 'main-valve displacement x [m]'),
+    Role(
+        'pilot_poppet',
+        'joint_states',
+        'pilot_poppet',
+        'position',
+        'pilot-poppet displacement y [m]',
+    ),
+    Role(
+        'inlet_flow',
+        'applied_inlet_flow',
+        'inlet_flow',
+        'velocity',
+        'applied inlet flow q_in [m^3/s]',
+    ),
 )
 ROLE = {role.name: role for role in ROLES}
-REQUIRED = ("supply_pressure", "main_valve", "inlet_flow")   # what the measures need
-TYPES = {"supply_pressure": (FLUID_PRESSURE, FLOAT64)}       # others: JOINT_STATE or FLOAT64
+REQUIRED = ('supply_pressure', 'main_valve', 'inlet_flow')  # what the measures need
+TYPES = {'supply_pressure': (FLUID_PRESSURE, FLOAT64)}  # others: JOINT_STATE or FLOAT64
 
 
 @dataclass
 class SignalMap:
     """Where each role is found: topics and joint names by role, ambient pressure [Pa], clock."""
 
-    topics: dict = field(default_factory=lambda: {role.name: "/" + role.topic for role in ROLES})
-    joints: dict = field(default_factory=lambda: {role.name: role.joint for role in ROLES if role.joint})
+    topics: dict = field(default_factory=lambda: {role.name: '/' + role.topic for role in ROLES})
+    joints: dict = field(
+        default_factory=lambda: {role.name: role.joint for role in ROLES if role.joint}
+    )
     ambient_pressure: float = STANDARD_ATMOSPHERE
-    clock: str = "header"
+    clock: str = 'header'
 
     def roles_of(self, topic):
         """Role names carried by a topic."""
@@ -90,10 +114,14 @@ class Extractor:
         for role in roles:
             allowed = TYPES.get(role, (JOINT_STATE, FLOAT64))
             if type_name not in allowed:
-                raise InputFileError(f"topic {topic} ({ROLE[role].meaning}) has type {type_name}; "
-                                     f"supported: {', '.join(allowed)}")
-        if signal_map.clock == "header" and type_name == FLOAT64:
-            raise InputFileError(f"topic {topic} is {FLOAT64}, which has no header stamp: use the receive clock")
+                raise InputFileError(
+                    f'topic {topic} ({ROLE[role].meaning}) has type {type_name}; '
+                    f'supported: {", ".join(allowed)}'
+                )
+        if signal_map.clock == 'header' and type_name == FLOAT64:
+            raise InputFileError(
+                f'topic {topic} is {FLOAT64}, which has no header stamp: use the receive clock'
+            )
         self.type_name, self.roles, self.map = type_name, roles, signal_map
 
     def _value(self, role, message):
@@ -107,11 +135,13 @@ class Extractor:
                 value = getattr(message, ROLE[role].joint_field)[list(message.name).index(joint)]
             except (ValueError, IndexError):
                 return None
-        return value - self.map.ambient_pressure if role == "supply_pressure" else value
+        return value - self.map.ambient_pressure if role == 'supply_pressure' else value
 
     def samples(self, message, receive_time_ns):
         """[(role, time_ns, value)] of one message; a JointState lacking the joint gives nothing for it."""
-        time_ns = receive_time_ns if self.map.clock == "receive" else stamp_ns(message.header.stamp)
+        time_ns = (
+            receive_time_ns if self.map.clock == 'receive' else stamp_ns(message.header.stamp)
+        )
         values = ((role, self._value(role, message)) for role in self.roles)
         return [(role, time_ns, value) for role, value in values if value is not None]
 
@@ -127,16 +157,16 @@ class Joiner:
     """
 
     def __init__(self, required=REQUIRED, optional=()):
-        self.required = set(required) - {"supply_pressure"}
+        self.required = set(required) - {'supply_pressure'}
         self.history = {role: deque() for role in self.required | set(optional)}
         self.pending = deque()
         self.dropped_rows = 0
 
     def add(self, role, time_ns, value):
         """Feed one sample; returns the rows it completes, in time order."""
-        if role == "supply_pressure":
+        if role == 'supply_pressure':
             if self.pending and time_ns <= self.pending[-1][0]:
-                self.pending.clear()          # time went back: what waits belongs to the past
+                self.pending.clear()  # time went back: what waits belongs to the past
             self.pending.append((time_ns, value))
             if len(self.pending) > MAX_PENDING_ROWS:
                 self.pending.popleft()
@@ -154,8 +184,10 @@ class Joiner:
 
     def _known_at(self, time_ns):
         """True when every required role, and every optional role that has begun, has reached time_ns."""
-        return all(history[-1][0] >= time_ns if history else role not in self.required
-                   for role, history in self.history.items())
+        return all(
+            history[-1][0] >= time_ns if history else role not in self.required
+            for role, history in self.history.items()
+        )
 
     def _complete_rows(self, final):
         rows = []
@@ -164,7 +196,7 @@ class Joiner:
             if not final and not self._known_at(time_ns):
                 break
             self.pending.popleft()
-            row = {"supply_pressure": pressure}
+            row = {'supply_pressure': pressure}
             for role, history in self.history.items():
                 while len(history) > 1 and history[1][0] <= time_ns:
                     history.popleft()

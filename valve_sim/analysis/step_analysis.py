@@ -13,20 +13,25 @@ Step records (the JSON file beside a bag, `valve-sim analyse --json`): t_step [s
 direction (+1 up, -1 down), flow_before [m^3/s], then the six measures
 (None where undefined), 'reasons' and 'details' of measures.StepMeasures.as_dict().
 """
+
+from collections import deque
 import json
 import os
-from collections import deque
 from pathlib import Path
 
 import numpy as np
-
-from valve_sim.analysis.measures import WINDOW, StepDetector, step_measures
+from valve_sim.analysis.measures import step_measures, StepDetector, WINDOW
 from valve_sim.analysis.signals import seconds
 
 
 def step_record(t_step, flow_before, direction, measures):
     """JSON-ready record of one step and its StepMeasures."""
-    return {"t_step": t_step, "direction": direction, "flow_before": flow_before, **measures.as_dict()}
+    return {
+        't_step': t_step,
+        'direction': direction,
+        'flow_before': flow_before,
+        **measures.as_dict(),
+    }
 
 
 class StepAnalysis:
@@ -38,14 +43,14 @@ class StepAnalysis:
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
-        self.rows = deque()        # (t, p_s, x) from the oldest open step on
-        self.open_steps = []       # (t_step, flow_before, direction) whose window is not complete
+        self.rows = deque()  # (t, p_s, x) from the oldest open step on
+        self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
 
     def add(self, t, supply_pressure, main_valve, inlet_flow):
         """Feed one row; returns the records of the steps whose window it completes."""
         records = []
         if self.rows and t <= self.rows[-1][0]:
-            records = self.finish()          # time went back (a new run): close the open steps
+            records = self.finish()  # time went back (a new run): close the open steps
         step = self.detector.update(t, inlet_flow)
         if step:
             self.open_steps.append(step)
@@ -59,8 +64,13 @@ class StepAnalysis:
 
     def add_rows(self, rows):
         """Feed rows (time_ns, {role: value}) of signals.Joiner; returns the records they complete."""
-        return [record for time_ns, row in rows
-                for record in self.add(seconds(time_ns), row["supply_pressure"], row["main_valve"], row["inlet_flow"])]
+        return [
+            record
+            for time_ns, row in rows
+            for record in self.add(
+                seconds(time_ns), row['supply_pressure'], row['main_valve'], row['inlet_flow']
+            )
+        ]
 
     def finish(self):
         """Records of the steps still open (their window truncated, as details say); then start over."""
@@ -77,7 +87,9 @@ class StepAnalysis:
     def _measure(self, step):
         t_step, flow_before, direction = step
         t, p, x = np.array(self.rows, dtype=float).T
-        return step_record(t_step, flow_before, direction, step_measures(t, p, x, t_step, direction, self.window))
+        return step_record(
+            t_step, flow_before, direction, step_measures(t, p, x, t_step, direction, self.window)
+        )
 
 
 class MeasuresFile:
@@ -88,7 +100,7 @@ class MeasuresFile:
     the file holds the records (memory stays bounded however many steps).
     """
 
-    TAIL = "\n]}\n"
+    TAIL = '\n]}\n'
 
     def __init__(self, path, bag_name):
         self.path, self.count = Path(path), 0
@@ -96,8 +108,8 @@ class MeasuresFile:
 
     def append(self, record):
         """Add one step record at the end of the steps list."""
-        text = ("," if self.count else "") + "\n" + json.dumps(record, indent=2) + self.TAIL
-        with open(self.path, "r+b") as stream:
+        text = (',' if self.count else '') + '\n' + json.dumps(record, indent=2) + self.TAIL
+        with open(self.path, 'r+b') as stream:
             stream.seek(-len(self.TAIL), os.SEEK_END)
             stream.write(text.encode())
         self.count += 1

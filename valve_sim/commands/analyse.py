@@ -6,31 +6,42 @@ and runs valve_sim.analysis.step_analysis.StepAnalysis over them. A file whose e
 missing (a recording killed before it closed) gives what its complete chunks
 hold, with a warning; a damaged or foreign file is an error.
 """
+
+from dataclasses import dataclass
 import json
 import sys
-from dataclasses import dataclass
 
 import numpy as np
-
-from valve_sim.recording.bag import BagReader
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
+from valve_sim.analysis.signals import (
+    CLOCKS,
+    Extractor,
+    Joiner,
+    REQUIRED,
+    ROLES,
+    seconds,
+    SignalMap,
+)
+from valve_sim.analysis.step_analysis import step_record, StepAnalysis
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
-from valve_sim.analysis.measures import MEASURE_NAMES, WINDOW, StepMeasures, step_measures
-from valve_sim.analysis.signals import CLOCKS, REQUIRED, ROLES, Extractor, Joiner, SignalMap, seconds
-from valve_sim.analysis.step_analysis import StepAnalysis, step_record
+from valve_sim.recording.bag import BagReader
 
-PLOT_LEAD = 0.25   # [s] shown before the step, which the plot puts at 0.25 s as in the paper's Figure 5
+
+PLOT_LEAD = (
+    0.25  # [s] shown before the step, which the plot puts at 0.25 s as in the paper's Figure 5
+)
 
 
 @dataclass
 class Recording:
     """Joined signals of a bag: arrays over the rows, and what was wrong with the file (or None)."""
 
-    time: np.ndarray              # [s]
-    supply_pressure: np.ndarray   # [Pa] gauge
-    main_valve: np.ndarray        # [m]
-    pilot_poppet: np.ndarray      # [m], NaN where the bag has none
-    inlet_flow: np.ndarray        # [m^3/s], NaN where not required and absent
+    time: np.ndarray  # [s]
+    supply_pressure: np.ndarray  # [Pa] gauge
+    main_valve: np.ndarray  # [m]
+    pilot_poppet: np.ndarray  # [m], NaN where the bag has none
+    inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
     problem: str = None
 
 
@@ -39,9 +50,14 @@ def read_recording(path, signal_map=None, required=REQUIRED):
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
-    reader, decoders, joiner, rows = BagReader(path), DecoderFactory(), Joiner(required, ["pilot_poppet"]), []
+    reader, decoders, joiner, rows = (
+        BagReader(path),
+        DecoderFactory(),
+        Joiner(required, ['pilot_poppet']),
+        [],
+    )
     extractors = {}
-    wanted = {signal_map.topics[role] for role in required + ("pilot_poppet",)}
+    wanted = {signal_map.topics[role] for role in required + ('pilot_poppet',)}
     for channel, schema, message in reader.messages(wanted):
         if channel.id not in extractors:
             extractors[channel.id] = _extractor(path, channel, schema, signal_map, decoders)
@@ -49,7 +65,9 @@ def read_recording(path, signal_map=None, required=REQUIRED):
         try:
             decoded = decode(message.data)
         except Exception as error:  # the decoder raises anything from struct.error to IndexError
-            raise InputFileError(f"{path}: a message on {channel.topic} does not decode: {error}") from error
+            raise InputFileError(
+                f'{path}: a message on {channel.topic} does not decode: {error}'
+            ) from error
         for role, time_ns, value in extractor.samples(decoded, message.log_time):
             rows.extend(joiner.add(role, time_ns, value))
     rows.extend(joiner.finish())
@@ -57,35 +75,50 @@ def read_recording(path, signal_map=None, required=REQUIRED):
     for role in required:
         if signal_map.topics[role] not in found:
             raise InputFileError(
-                f"{path} has no topic {signal_map.topics[role]} ({role}); its topics: "
-                f"{', '.join(sorted(found)) or 'none'} (map another with --topic-{role.replace('_', '-')})")
+                f'{path} has no topic {signal_map.topics[role]} ({role}); its topics: '
+                f'{", ".join(sorted(found)) or "none"} (map another with --topic-{role.replace("_", "-")})'
+            )
     if not rows:
-        raise InputFileError(f"{path}: no sample has all of {', '.join(required)} (nothing to analyse)")
-    column = {role: np.array([np.nan if row.get(role) is None else row[role] for _, row in rows])
-              for role in ("supply_pressure", "main_valve", "pilot_poppet", "inlet_flow")}
-    return Recording(np.array([seconds(time_ns) for time_ns, _ in rows]), problem=reader.problem, **column)
+        raise InputFileError(
+            f'{path}: no sample has all of {", ".join(required)} (nothing to analyse)'
+        )
+    column = {
+        role: np.array([np.nan if row.get(role) is None else row[role] for _, row in rows])
+        for role in ('supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow')
+    }
+    return Recording(
+        np.array([seconds(time_ns) for time_ns, _ in rows]), problem=reader.problem, **column
+    )
 
 
 def _extractor(path, channel, schema, signal_map, decoders):
     """(Extractor, decode function) for a channel."""
     decode = decoders.decoder_for(channel.message_encoding, schema)
     if decode is None:
-        raise InputFileError(f"{path}: topic {channel.topic} is not a ROS 2 message with a ros2msg schema "
-                             f"(encoding '{channel.message_encoding}')")
-    return Extractor(channel.topic, schema.name, signal_map.roles_of(channel.topic), signal_map), decode
+        raise InputFileError(
+            f'{path}: topic {channel.topic} is not a ROS 2 message with a ros2msg schema '
+            f"(encoding '{channel.message_encoding}')"
+        )
+    return Extractor(
+        channel.topic, schema.name, signal_map.roles_of(channel.topic), signal_map
+    ), decode
 
 
 def analyse(recording, threshold=1e-6, merge_time=0.05):
     """Step records of every step in a Recording (step_analysis.StepAnalysis over its rows)."""
     analysis, records = StepAnalysis(threshold, merge_time), []
-    for row in zip(recording.time, recording.supply_pressure, recording.main_valve, recording.inlet_flow):
+    for row in zip(
+        recording.time, recording.supply_pressure, recording.main_valve, recording.inlet_flow
+    ):
         records += analysis.add(*row)
     return records + analysis.finish()
 
 
 def analyse_step(recording, t_step, direction):
     """Step record of a step at a given time t_step [s] (no detection)."""
-    measures = step_measures(recording.time, recording.supply_pressure, recording.main_valve, t_step, direction)
+    measures = step_measures(
+        recording.time, recording.supply_pressure, recording.main_valve, t_step, direction
+    )
     return step_record(t_step, None, direction, measures)
 
 
@@ -97,12 +130,19 @@ def plot_steps(path, recording, records):
 
     path, written = Path(path), []
     for k, record in enumerate(records, start=1):
-        target = path if len(records) == 1 else path.with_name(f"{path.stem}_step{k}{path.suffix}")
-        t_step = record["t_step"]
+        target = path if len(records) == 1 else path.with_name(f'{path.stem}_step{k}{path.suffix}')
+        t_step = record['t_step']
         shown = (recording.time >= t_step - PLOT_LEAD) & (recording.time <= t_step + WINDOW)
-        plot_step_response(target, recording.time[shown] - t_step + PLOT_LEAD, recording.supply_pressure[shown],
-                           recording.main_valve[shown], recording.pilot_poppet[shown], PLOT_LEAD, record,
-                           title=f"Recorded step {k} at t = {t_step:.4f} s, shown at 0.25 s (paper Figure 5)")
+        plot_step_response(
+            target,
+            recording.time[shown] - t_step + PLOT_LEAD,
+            recording.supply_pressure[shown],
+            recording.main_valve[shown],
+            recording.pilot_poppet[shown],
+            PLOT_LEAD,
+            record,
+            title=f'Recorded step {k} at t = {t_step:.4f} s, shown at 0.25 s (paper Figure 5)',
+        )
         written.append(target)
     return written
 
@@ -112,65 +152,109 @@ def print_steps(records, start_time):
     from valve_sim.commands.simulate import print_table
 
     for k, record in enumerate(records, start=1):
-        direction = "up" if record["direction"] > 0 else "down"
-        print(f"step {k}: {direction} at t = {record['t_step']:.6f} s ({record['t_step'] - start_time:.4f} s "
-              f"after the first sample)")
-        print_table(StepMeasures({name: record[name] for name in MEASURE_NAMES}, record["reasons"]))
-        if "note" in record["details"]:
-            print(f"  note: {record['details']['note']}")
+        direction = 'up' if record['direction'] > 0 else 'down'
+        print(
+            f'step {k}: {direction} at t = {record["t_step"]:.6f} s ({record["t_step"] - start_time:.4f} s '
+            f'after the first sample)'
+        )
+        print_table(
+            StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons'])
+        )
+        if 'note' in record['details']:
+            print(f'  note: {record["details"]["note"]}')
 
 
 def add_arguments(parser):
-    parser.add_argument("bag", metavar="BAG.mcap", help="rosbag2 MCAP file (valve_node's topics, or mapped ones)")
-    parser.add_argument("--json", action="store_true", help="print the step records as JSON")
-    parser.add_argument("--plot", metavar="FILE.png", help="draw Figure 5 of each step")
+    parser.add_argument(
+        'bag', metavar='BAG.mcap', help="rosbag2 MCAP file (valve_node's topics, or mapped ones)"
+    )
+    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
+    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
     for role in ROLES:
-        option = role.name.replace("_", "-")
-        parser.add_argument(f"--topic-{option}", metavar="TOPIC", default="/" + role.topic,
-                            help=f"topic of the {role.meaning} (default /{role.topic})")
+        option = role.name.replace('_', '-')
+        parser.add_argument(
+            f'--topic-{option}',
+            metavar='TOPIC',
+            default='/' + role.topic,
+            help=f'topic of the {role.meaning} (default /{role.topic})',
+        )
         if role.joint:
-            parser.add_argument(f"--joint-{option}", metavar="NAME", default=role.joint,
-                                help=f"JointState joint name of the {role.meaning} (default {role.joint})")
-    parser.add_argument("--ambient-pressure", type=float, default=STANDARD_ATMOSPHERE, metavar="PA",
-                        help="subtracted from the recorded pressure to get gauge pressure; 0 for a gauge sensor "
-                             f"(default {STANDARD_ATMOSPHERE:g})")
-    parser.add_argument("--clock", choices=CLOCKS, default="header",
-                        help="time of a sample: its header stamp, or its receive time (needed for Float64 topics)")
-    parser.add_argument("--step-threshold", type=float, default=1e-6, metavar="Q",
-                        help="smallest inlet-flow change taken as a step [m^3/s] (default 1e-6)")
-    parser.add_argument("--step-time", type=float, metavar="S",
-                        help="analyse one step at this time [s, on the bag's time axis] instead of detecting steps; "
-                             "the inlet flow is then not needed")
-    parser.add_argument("--step-direction", choices=("up", "down"), default="up",
-                        help="direction of the inlet-flow change at --step-time (default up)")
+            parser.add_argument(
+                f'--joint-{option}',
+                metavar='NAME',
+                default=role.joint,
+                help=f'JointState joint name of the {role.meaning} (default {role.joint})',
+            )
+    parser.add_argument(
+        '--ambient-pressure',
+        type=float,
+        default=STANDARD_ATMOSPHERE,
+        metavar='PA',
+        help='subtracted from the recorded pressure to get gauge pressure; 0 for a gauge sensor '
+        f'(default {STANDARD_ATMOSPHERE:g})',
+    )
+    parser.add_argument(
+        '--clock',
+        choices=CLOCKS,
+        default='header',
+        help='time of a sample: its header stamp, or its receive time (needed for Float64 topics)',
+    )
+    parser.add_argument(
+        '--step-threshold',
+        type=float,
+        default=1e-6,
+        metavar='Q',
+        help='smallest inlet-flow change taken as a step [m^3/s] (default 1e-6)',
+    )
+    parser.add_argument(
+        '--step-time',
+        type=float,
+        metavar='S',
+        help="analyse one step at this time [s, on the bag's time axis] instead of detecting steps; "
+        'the inlet flow is then not needed',
+    )
+    parser.add_argument(
+        '--step-direction',
+        choices=('up', 'down'),
+        default='up',
+        help='direction of the inlet-flow change at --step-time (default up)',
+    )
 
 
 def signal_map_from(args):
     """SignalMap of the --topic-*, --joint-*, --ambient-pressure and --clock options."""
     options = vars(args)
-    topics = {role.name: options[f"topic_{role.name}"] for role in ROLES}
-    joints = {role.name: options[f"joint_{role.name}"] for role in ROLES if role.joint}
-    return SignalMap({role: topic if topic.startswith("/") else "/" + topic for role, topic in topics.items()},
-                     joints, args.ambient_pressure, args.clock)
+    topics = {role.name: options[f'topic_{role.name}'] for role in ROLES}
+    joints = {role.name: options[f'joint_{role.name}'] for role in ROLES if role.joint}
+    return SignalMap(
+        {role: topic if topic.startswith('/') else '/' + topic for role, topic in topics.items()},
+        joints,
+        args.ambient_pressure,
+        args.clock,
+    )
 
 
 def run(args):
-    required = REQUIRED if args.step_time is None else ("supply_pressure", "main_valve")
+    required = REQUIRED if args.step_time is None else ('supply_pressure', 'main_valve')
     recording = read_recording(args.bag, signal_map_from(args), required)
     if recording.problem:
-        print(f"valve-sim analyse: warning: {recording.problem}", file=sys.stderr)
+        print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)
     if args.step_time is None:
         records = analyse(recording, args.step_threshold)
     else:
-        records = [analyse_step(recording, args.step_time, 1 if args.step_direction == "up" else -1)]
+        records = [
+            analyse_step(recording, args.step_time, 1 if args.step_direction == 'up' else -1)
+        ]
     if args.plot and records:
         for target in plot_steps(args.plot, recording, records):
-            print(f"wrote {target}", file=sys.stderr)
+            print(f'wrote {target}', file=sys.stderr)
     if args.json:
-        print(json.dumps({"bag": str(args.bag), "steps": records}, indent=2))
+        print(json.dumps({'bag': str(args.bag), 'steps': records}, indent=2))
     elif records:
         print_steps(records, recording.time[0])
     else:
-        print(f"no inlet-flow step in {args.bag} ({len(recording.time)} samples, "
-              f"{recording.time[-1] - recording.time[0]:.3f} s)")
+        print(
+            f'no inlet-flow step in {args.bag} ({len(recording.time)} samples, '
+            f'{recording.time[-1] - recording.time[0]:.3f} s)'
+        )
     return 0

@@ -4,23 +4,34 @@ Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
 project's errors into one clear line on stderr and exit code 1.
 """
+
 import argparse
 import importlib
 import os
 import sys
 
+
 SUBCOMMANDS = {
-    "simulate": ("valve_sim.commands.simulate", "run the valve model offline for one inlet-flow step"),
-    "study": ("valve_sim.commands.study", "the paper's parameter study (Figures 6-13, Table 3)"),
-    "operating-point": ("valve_sim.commands.operating_point", "exact steady state, flows, forces and linear modes at a flow"),
-    "analyse": ("valve_sim.commands.analyse", "step measures of a recorded rosbag2 MCAP file"),
-    "demo": ("valve_sim.commands.demo", "valve_node + analyser_node over DDS: the paper's step, recorded and measured"),
+    'simulate': (
+        'valve_sim.commands.simulate',
+        'run the valve model offline for one inlet-flow step',
+    ),
+    'study': ('valve_sim.commands.study', "the paper's parameter study (Figures 6-13, Table 3)"),
+    'operating-point': (
+        'valve_sim.commands.operating_point',
+        'exact steady state, flows, forces and linear modes at a flow',
+    ),
+    'analyse': ('valve_sim.commands.analyse', 'step measures of a recorded rosbag2 MCAP file'),
+    'demo': (
+        'valve_sim.commands.demo',
+        "valve_node + analyser_node over DDS: the paper's step, recorded and measured",
+    ),
 }
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="valve-sim", description=__doc__.splitlines()[0])
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser = argparse.ArgumentParser(prog='valve-sim', description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         module = importlib.import_module(module_name)
         sub = commands.add_parser(name, help=help_text, description=module.__doc__.splitlines()[0])
@@ -35,16 +46,16 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
-    except BrokenPipeError:   # the reader went away (e.g. `| head`): stop quietly
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except USER_ERRORS as error:
-        print(f"valve-sim {args.command}: error: {error}", file=sys.stderr)
+        print(f'valve-sim {args.command}: error: {error}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"valve-sim {args.command}: interrupted", file=sys.stderr)
+        print(f'valve-sim {args.command}: interrupted', file=sys.stderr)
         return 130
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -8,49 +8,54 @@ measures beside the paper's, checks them against an offline analysis of the bag,
 and draws Figure 5. The folder gets the bag, its measures JSON, figure5.png and
 the two nodes' logs.
 """
+
 import json
 import os
+from pathlib import Path
 import random
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 
-INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow   # [m^3/s] 5 L/min
-FINAL_FLOW = REFERENCE_SCENARIO.final_flow       # [m^3/s] 20 L/min
-HOLD_TIME = 1.0             # [s] at the initial flow, once everything is recorded
-AFTER_MEASURES = 0.2        # [s] still recorded after the measures arrived
-COMMAND_PERIOD = 0.02       # [s] inlet_flow is published at 50 Hz (valve_node's input timeout is 1 s)
-READY_TIMEOUT = 90.0        # [s] for start-up and discovery
-MEASURES_TIMEOUT = 60.0     # [s] from the step to the analyser's measures
-STOP_TIMEOUT = 20.0         # [s] for each node to finish after SIGINT
-NODES = ("valve_node", "analyser_node")
+
+INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow  # [m^3/s] 5 L/min
+FINAL_FLOW = REFERENCE_SCENARIO.final_flow  # [m^3/s] 20 L/min
+HOLD_TIME = 1.0  # [s] at the initial flow, once everything is recorded
+AFTER_MEASURES = 0.2  # [s] still recorded after the measures arrived
+COMMAND_PERIOD = 0.02  # [s] inlet_flow is published at 50 Hz (valve_node's input timeout is 1 s)
+READY_TIMEOUT = 90.0  # [s] for start-up and discovery
+MEASURES_TIMEOUT = 60.0  # [s] from the step to the analyser's measures
+STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
+NODES = ('valve_node', 'analyser_node')
 
 
 def progress(text):
-    print(f"demo: {text}", flush=True)
+    print(f'demo: {text}', flush=True)
 
 
 def choose_domain():
     """Use ROS_DOMAIN_ID if set; otherwise pick a random domain and keep discovery on this machine."""
-    if "ROS_DOMAIN_ID" not in os.environ:
-        os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101))
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    return os.environ["ROS_DOMAIN_ID"]
+    if 'ROS_DOMAIN_ID' not in os.environ:
+        os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return os.environ['ROS_DOMAIN_ID']
 
 
 def start_nodes(folder):
     """{name: Popen} of valve_node and analyser_node (recording into folder), logs in folder."""
-    arguments = {"valve_node": [], "analyser_node": ["--ros-args", "-p", f"output_dir:={folder}"]}
+    arguments = {'valve_node': [], 'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}']}
     processes = {}
     for name in NODES:
-        with open(folder / f"{name}.log", "wb") as log:
-            processes[name] = subprocess.Popen([sys.executable, "-m", f"valve_sim.ros.{name}", *arguments[name]],
-                                               stdout=log, stderr=subprocess.STDOUT)
+        with open(folder / f'{name}.log', 'wb') as log:
+            processes[name] = subprocess.Popen(
+                [sys.executable, '-m', f'valve_sim.ros.{name}', *arguments[name]],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
     return processes
 
 
@@ -66,12 +71,14 @@ def stop_nodes(processes, folder):
         except subprocess.TimeoutExpired:
             process.kill()
             code = process.wait()
-            failures.append(f"{name} did not stop within {STOP_TIMEOUT:g} s of SIGINT and was killed")
+            failures.append(
+                f'{name} did not stop within {STOP_TIMEOUT:g} s of SIGINT and was killed'
+            )
             continue
         if code != 0:
-            failures.append(f"{name} exited with code {code}")
+            failures.append(f'{name} exited with code {code}')
     if failures:
-        raise ChildProcessError("; ".join(failures) + f" (logs in {folder})")
+        raise ChildProcessError('; '.join(failures) + f' (logs in {folder})')
 
 
 class Driver:
@@ -81,24 +88,27 @@ class Driver:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from std_msgs.msg import Float64
-
         from valve_sim.ros.analyser_node import MEASURES_QOS, RECORDING_STATUS
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
-        self.node = Node("valve_demo")
-        self.bag = None        # the analyser's file, once it records every topic
-        self.measures = []     # step_measures messages
-        publisher = self.node.create_publisher(Float64, "inlet_flow", 10)
+        self.node = Node('valve_demo')
+        self.bag = None  # the analyser's file, once it records every topic
+        self.measures = []  # step_measures messages
+        publisher = self.node.create_publisher(Float64, 'inlet_flow', 10)
         self.node.create_timer(COMMAND_PERIOD, lambda: publisher.publish(Float64(data=self.flow)))
 
         def on_status(array):
             for status in (s for s in array.status if s.name == RECORDING_STATUS):
                 values = {pair.key: pair.value for pair in status.values}
-                if all(int(count) > 0 for key, count in values.items() if key.startswith("messages /")):
-                    self.bag = Path(values["file"])
+                if all(
+                    int(count) > 0 for key, count in values.items() if key.startswith('messages /')
+                ):
+                    self.bag = Path(values['file'])
 
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", on_status, 10)
-        self.node.create_subscription(DiagnosticArray, "step_measures", self.measures.append, MEASURES_QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', on_status, 10)
+        self.node.create_subscription(
+            DiagnosticArray, 'step_measures', self.measures.append, MEASURES_QOS
+        )
 
     def spin_until(self, condition, timeout, what):
         """Spin until condition() holds; raises TimeoutError or ChildProcessError (a node died)."""
@@ -109,72 +119,88 @@ class Driver:
             rclpy.spin_once(self.node, timeout_sec=0.02)
             for name, process in self.processes.items():
                 if process.poll() is not None:
-                    raise ChildProcessError(f"{name} ended with code {process.returncode} while waiting for "
-                                            f"{what} (log: {self.folder / (name + '.log')})")
+                    raise ChildProcessError(
+                        f'{name} ended with code {process.returncode} while waiting for '
+                        f'{what} (log: {self.folder / (name + ".log")})'
+                    )
             if time.monotonic() > deadline:
-                raise TimeoutError(f"no {what} within {timeout:g} s (logs in {self.folder})")
+                raise TimeoutError(f'no {what} within {timeout:g} s (logs in {self.folder})')
 
     def run_step(self):
         """Wait for the recording, hold, step, and wait for the step's measures; returns the bag path."""
-        progress(f"waiting for the nodes to start and discover each other (commanding {self.flow * 6e4:g} L/min)")
-        self.spin_until(lambda: self.bag is not None, READY_TIMEOUT, "recording of every topic by the analyser")
-        progress(f"analyser records every topic to {self.bag}; holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s")
+        progress(
+            f'waiting for the nodes to start and discover each other (commanding {self.flow * 6e4:g} L/min)'
+        )
+        self.spin_until(
+            lambda: self.bag is not None, READY_TIMEOUT, 'recording of every topic by the analyser'
+        )
+        progress(
+            f'analyser records every topic to {self.bag}; holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s'
+        )
         self._spin_for(HOLD_TIME)
         self.flow = FINAL_FLOW
-        progress(f"inlet flow stepped to {self.flow * 6e4:g} L/min; waiting for the analyser's measures "
-                 "(1 s of model time after the step)")
-        self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, "step measures from the analyser")
+        progress(
+            f"inlet flow stepped to {self.flow * 6e4:g} L/min; waiting for the analyser's measures "
+            '(1 s of model time after the step)'
+        )
+        self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, 'step measures from the analyser')
         self._spin_for(AFTER_MEASURES)
         return self.bag
 
     def _spin_for(self, duration):
         end = time.monotonic() + duration
-        self.spin_until(lambda: time.monotonic() >= end, duration + 10.0, "the end of a hold")
+        self.spin_until(lambda: time.monotonic() >= end, duration + 10.0, 'the end of a hold')
 
 
 def report(folder, bag):
     """Print the live measures beside the paper's and the offline check; draw Figure 5. Returns the JSON path."""
     from valve_sim.commands.analyse import analyse, plot_steps, print_steps, read_recording
 
-    measures_path = bag.with_suffix(".measures.json")
-    live = json.loads(measures_path.read_text())["steps"]
+    measures_path = bag.with_suffix('.measures.json')
+    live = json.loads(measures_path.read_text())['steps']
     recording = read_recording(bag)
     offline = analyse(recording)
     print()
     print_steps(live, recording.time[0])
-    same = [[record[name] for name in MEASURE_NAMES] for record in offline] == \
-           [[record[name] for name in MEASURE_NAMES] for record in live]
-    print(f"\noffline analysis of the bag: {'the same measures' if same else 'DIFFERENT measures: ' + str(offline)}")
-    figure = plot_steps(folder / "figure5.png", recording, live[:1])[0] if live else None
+    same = [[record[name] for name in MEASURE_NAMES] for record in offline] == [
+        [record[name] for name in MEASURE_NAMES] for record in live
+    ]
+    print(
+        f'\noffline analysis of the bag: {"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
+    )
+    figure = plot_steps(folder / 'figure5.png', recording, live[:1])[0] if live else None
     for path in (bag, measures_path, figure):
         if path:
-            progress(f"wrote {path}")
+            progress(f'wrote {path}')
     return measures_path
 
 
 def add_arguments(parser):
-    parser.add_argument("--out", metavar="DIR",
-                        help="folder for the bag, measures JSON, figure and logs (default: a new "
-                             "demo_<date>-<time> folder in the current directory)")
+    parser.add_argument(
+        '--out',
+        metavar='DIR',
+        help='folder for the bag, measures JSON, figure and logs (default: a new '
+        'demo_<date>-<time> folder in the current directory)',
+    )
 
 
 def run(args):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    folder = Path(args.out) if args.out else Path.cwd() / time.strftime("demo_%Y%m%d-%H%M%S")
+    folder = Path(args.out) if args.out else Path.cwd() / time.strftime('demo_%Y%m%d-%H%M%S')
     folder.mkdir(parents=True, exist_ok=True)
     folder = folder.resolve()
-    progress(f"output folder {folder}; ROS_DOMAIN_ID={choose_domain()}")
-    progress("starting valve_node and analyser_node")
+    progress(f'output folder {folder}; ROS_DOMAIN_ID={choose_domain()}')
+    progress('starting valve_node and analyser_node')
     processes = start_nodes(folder)
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
         bag = Driver(processes, folder).run_step()
     finally:
         rclpy.try_shutdown()
-        progress("stopping both nodes (SIGINT)")
+        progress('stopping both nodes (SIGINT)')
         stop_nodes(processes, folder)
-    progress("both nodes stopped cleanly")
+    progress('both nodes stopped cleanly')
     report(folder, bag)
     return 0

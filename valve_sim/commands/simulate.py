@@ -4,140 +4,206 @@ Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 0.25 s, end at 1.25 s) with config/reference.yaml. Flows accept a unit suffix
 (5L/min) and are m^3/s otherwise; times are seconds.
 """
+
+from argparse import ArgumentTypeError
 import csv
 import json
 import math
-from argparse import ArgumentTypeError
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.core.model import STATE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
-from valve_sim.core.parameters import ParameterError, load_parameters
+from valve_sim.core.model import STATE_NAMES
+from valve_sim.core.parameters import load_parameters, ParameterError
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 
-STATE_UNITS = ("Pa", "Pa", "Pa", "Pa", "m", "m_s", "m", "m_s")
+
+STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 
 
 def flow_value(text):
     """A volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
     number, factor = text.strip(), 1.0
-    for suffix, scale in (("L/min", LITRE_PER_MINUTE), ("l/min", LITRE_PER_MINUTE), ("m^3/s", 1.0), ("m3/s", 1.0)):
+    for suffix, scale in (
+        ('L/min', LITRE_PER_MINUTE),
+        ('l/min', LITRE_PER_MINUTE),
+        ('m^3/s', 1.0),
+        ('m3/s', 1.0),
+    ):
         if number.endswith(suffix):
             number, factor = number[: -len(suffix)], scale
             break
     try:
         value = float(number) * factor
     except ValueError:
-        raise ArgumentTypeError(f"not a flow: {text!r} (use e.g. 5L/min or 8.33e-5)") from None
+        raise ArgumentTypeError(f'not a flow: {text!r} (use e.g. 5L/min or 8.33e-5)') from None
     if not math.isfinite(value) or value < 0.0:
-        raise ArgumentTypeError(f"flow must be finite and >= 0, got {text!r}")
+        raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
     return value
 
 
 def assignment(text):
     """'NAME=VALUE' -> (NAME, float) for --set."""
-    name, separator, value = text.partition("=")
+    name, separator, value = text.partition('=')
     if not separator:
-        raise ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+        raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
     try:
         return name.strip(), float(value)
     except ValueError:
-        raise ArgumentTypeError(f"value of {name.strip()!r} is not a number: {value!r}") from None
+        raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
 
 
 def add_parameter_arguments(parser):
     """--params and --set, shared by simulate and study."""
-    parser.add_argument("--params", metavar="FILE.yaml",
-                        help="ROS 2 parameter file overlaid on config/reference.yaml (e.g. config/table2.yaml)")
-    parser.add_argument("--set", metavar="NAME=VALUE", type=assignment, action="append", default=[],
-                        help="override one parameter (ROS name or paper symbol, SI units); repeatable")
+    parser.add_argument(
+        '--params',
+        metavar='FILE.yaml',
+        help='ROS 2 parameter file overlaid on config/reference.yaml (e.g. config/table2.yaml)',
+    )
+    parser.add_argument(
+        '--set',
+        metavar='NAME=VALUE',
+        type=assignment,
+        action='append',
+        default=[],
+        help='override one parameter (ROS name or paper symbol, SI units); repeatable',
+    )
 
 
 def load_from_arguments(args):
     """(params, settings) from --params, --set and --step-size (which overrides settings["step_size"])."""
     params, settings = load_parameters(args.params, dict(args.set))
-    if getattr(args, "step_size", None):
-        settings["step_size"] = args.step_size
-    if not 1e-7 <= settings["step_size"] <= 1e-4:
-        raise ParameterError(f"step size {settings['step_size']:g} s is outside [1e-07, 0.0001] s")
+    if getattr(args, 'step_size', None):
+        settings['step_size'] = args.step_size
+    if not 1e-7 <= settings['step_size'] <= 1e-4:
+        raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
     return params, settings
 
 
 def add_arguments(parser):
     add_parameter_arguments(parser)
     s = REFERENCE_SCENARIO
-    parser.add_argument("--initial-flow", type=flow_value, default=s.initial_flow, metavar="Q",
-                        help="inlet flow before the step; 0 starts from the closed, empty valve (default 5L/min)")
-    parser.add_argument("--final-flow", type=flow_value, default=s.final_flow, metavar="Q",
-                        help="inlet flow after the step (default 20L/min)")
-    parser.add_argument("--step-time", type=float, default=s.step_time, metavar="S", help="time of the step [s]")
-    parser.add_argument("--ramp-time", type=float, default=0.0, metavar="S",
-                        help="change the flow linearly over this time instead of at once [s]")
-    parser.add_argument("--end-time", type=float, default=s.end_time, metavar="S", help="end of the run [s]")
-    parser.add_argument("--step-size", type=float, metavar="S",
-                        help="RK4 step [s] (default: step_size of the parameter file, 1e-5)")
-    parser.add_argument("--record-interval", type=float, default=1e-4, metavar="S",
-                        help="sample interval of the output waveforms [s] (default 1e-4, the paper's)")
-    parser.add_argument("--json", action="store_true", help="print the six measures as JSON")
-    parser.add_argument("--csv", metavar="FILE", help="write the waveforms as CSV (SI units)")
-    parser.add_argument("--plot", metavar="FILE.png", help="draw the paper's Figure 5")
-    parser.add_argument("--mcap", metavar="FILE.mcap",
-                        help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
-                             "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)")
+    parser.add_argument(
+        '--initial-flow',
+        type=flow_value,
+        default=s.initial_flow,
+        metavar='Q',
+        help='inlet flow before the step; 0 starts from the closed, empty valve (default 5L/min)',
+    )
+    parser.add_argument(
+        '--final-flow',
+        type=flow_value,
+        default=s.final_flow,
+        metavar='Q',
+        help='inlet flow after the step (default 20L/min)',
+    )
+    parser.add_argument(
+        '--step-time', type=float, default=s.step_time, metavar='S', help='time of the step [s]'
+    )
+    parser.add_argument(
+        '--ramp-time',
+        type=float,
+        default=0.0,
+        metavar='S',
+        help='change the flow linearly over this time instead of at once [s]',
+    )
+    parser.add_argument(
+        '--end-time', type=float, default=s.end_time, metavar='S', help='end of the run [s]'
+    )
+    parser.add_argument(
+        '--step-size',
+        type=float,
+        metavar='S',
+        help='RK4 step [s] (default: step_size of the parameter file, 1e-5)',
+    )
+    parser.add_argument(
+        '--record-interval',
+        type=float,
+        default=1e-4,
+        metavar='S',
+        help="sample interval of the output waveforms [s] (default 1e-4, the paper's)",
+    )
+    parser.add_argument('--json', action='store_true', help='print the six measures as JSON')
+    parser.add_argument('--csv', metavar='FILE', help='write the waveforms as CSV (SI units)')
+    parser.add_argument('--plot', metavar='FILE.png', help="draw the paper's Figure 5")
+    parser.add_argument(
+        '--mcap',
+        metavar='FILE.mcap',
+        help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
+        "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
+    )
 
 
 def _scenario(args):
     if not 0.0 <= args.step_time < args.end_time or args.ramp_time < 0.0 or args.end_time > 3600.0:
-        raise ParameterError("need 0 <= --step-time < --end-time <= 3600 s and --ramp-time >= 0")
-    return Scenario(args.initial_flow, args.final_flow, args.step_time, args.end_time, args.ramp_time)
+        raise ParameterError('need 0 <= --step-time < --end-time <= 3600 s and --ramp-time >= 0')
+    return Scenario(
+        args.initial_flow, args.final_flow, args.step_time, args.end_time, args.ramp_time
+    )
 
 
 def write_csv(path, waveforms):
     """Waveforms as CSV: time, applied inlet flow and the eight states, SI units in the header."""
-    header = ["time_s", "inlet_flow_m3_s"] + [f"{name}_{unit}" for name, unit in zip(STATE_NAMES, STATE_UNITS)]
-    with open(path, "w", newline="") as stream:
+    header = ['time_s', 'inlet_flow_m3_s'] + [
+        f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)
+    ]
+    with open(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
         for t, q, state in zip(waveforms.time, waveforms.inlet_flow, waveforms.states):
-            writer.writerow([f"{t:.7f}", f"{q:.9e}"] + [f"{v:.9e}" for v in state])
+            writer.writerow([f'{t:.7f}', f'{q:.9e}'] + [f'{v:.9e}' for v in state])
 
 
 def print_table(measures):
     """Human-readable comparison with the paper's Figure 5."""
-    print(f"{'measure':<14}{'valve_sim':>12}{'paper':>10}")
+    print(f'{"measure":<14}{"valve_sim":>12}{"paper":>10}')
     for name in MEASURE_NAMES:
         value = measures.values[name]
-        shown = f"{value:12.4g}" if value is not None else f"{'-':>12}"
-        print(f"{name:<14}{shown}{FIGURE5_MEASURES[name]:>10.4g}")
+        shown = f'{value:12.4g}' if value is not None else f'{"-":>12}'
+        print(f'{name:<14}{shown}{FIGURE5_MEASURES[name]:>10.4g}')
     for name, reason in measures.reasons.items():
-        print(f"  {name}: {reason}")
+        print(f'  {name}: {reason}')
 
 
 def run(args):
     params, settings = load_from_arguments(args)
-    step_size = settings["step_size"]
+    step_size = settings['step_size']
     scenario = _scenario(args)
     if args.record_interval < step_size:
-        raise ParameterError(f"--record-interval must be >= the step size ({step_size:g} s)")
+        raise ParameterError(f'--record-interval must be >= the step size ({step_size:g} s)')
     waveforms = simulate(params, scenario, step_size, args.record_interval)
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
-    measures = step_measures(waveforms.time, waveforms["supply_pressure"], waveforms["main_valve_displacement"],
-                             scenario.step_time, direction)
+    measures = step_measures(
+        waveforms.time,
+        waveforms['supply_pressure'],
+        waveforms['main_valve_displacement'],
+        scenario.step_time,
+        direction,
+    )
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
         from valve_sim.analysis.plotting import plot_step_response
 
-        plot_step_response(args.plot, waveforms.time, waveforms["supply_pressure"],
-                           waveforms["main_valve_displacement"], waveforms["poppet_displacement"],
-                           scenario.step_time, measures.as_dict())
+        plot_step_response(
+            args.plot,
+            waveforms.time,
+            waveforms['supply_pressure'],
+            waveforms['main_valve_displacement'],
+            waveforms['poppet_displacement'],
+            scenario.step_time,
+            measures.as_dict(),
+        )
     if args.mcap:
         from valve_sim.recording.valve_topics import write_simulation_bag
 
         # valve_node's 1 kHz ticks where the samples allow it, else every sample.
         ratio = 1e-3 / args.record_interval
-        interval = 1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
-        write_simulation_bag(args.mcap, waveforms, settings["ambient_pressure"], publish_interval=interval)
+        interval = (
+            1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
+        )
+        write_simulation_bag(
+            args.mcap, waveforms, settings['ambient_pressure'], publish_interval=interval
+        )
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:

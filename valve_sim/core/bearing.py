@@ -15,6 +15,7 @@ qhat^2 + lam qhat - z = 0, lam = K_b / (G sqrt(p_s)), so the total bearing flow 
 Eq. (12) approximates f by K_1 z + K_2 z^2 + K_3 z^3; lam depends on p_s, so the
 fit is made at the design pressure (the paper fits at its operating point too).
 """
+
 import math
 
 import numpy as np
@@ -22,7 +23,7 @@ import numpy as np
 
 def land_conductance(width, length, clearance, viscosity):
     """G = w c^3 / (12 mu l): laminar conductance of a bearing land [m^3/(s Pa)]."""
-    return width * clearance ** 3 / (12.0 * viscosity * length)
+    return width * clearance**3 / (12.0 * viscosity * length)
 
 
 def bearing_flow_function(z, lam, count):
@@ -31,8 +32,16 @@ def bearing_flow_function(z, lam, count):
     return count * (np.sqrt(lam * lam + 4.0 * z) - lam) / 2.0
 
 
-def fit_bearing_coefficients(orifice_diameter, discharge_coefficient, density, conductance,
-                             design_pressure, count=4, z_max=1.0, samples=201):
+def fit_bearing_coefficients(
+    orifice_diameter,
+    discharge_coefficient,
+    density,
+    conductance,
+    design_pressure,
+    count=4,
+    z_max=1.0,
+    samples=201,
+):
     """Least-squares K_1, K_2, K_3 of Eq. (12) for the series bearing model.
 
     orifice_diameter d_b [m], discharge_coefficient C_b [-], density rho [kg/m^3],
@@ -41,11 +50,11 @@ def fit_bearing_coefficients(orifice_diameter, discharge_coefficient, density, c
     z = 1 - p_p/p_s in [0.01 z_max, z_max]: the flow matters in proportion to itself.
     Returns (K_1, K_2, K_3, lam, max_relative_error on [0.05 z_max, z_max]).
     """
-    gain = math.pi / 4.0 * discharge_coefficient * orifice_diameter ** 2 * math.sqrt(2.0 / density)
+    gain = math.pi / 4.0 * discharge_coefficient * orifice_diameter**2 * math.sqrt(2.0 / density)
     lam = gain / (conductance * math.sqrt(design_pressure))
     z = np.linspace(0.01 * z_max, z_max, samples)
     exact = bearing_flow_function(z, lam, count)
-    basis = np.column_stack([z, z ** 2, z ** 3])
+    basis = np.column_stack([z, z**2, z**3])
     k, *_ = np.linalg.lstsq(basis / exact[:, None], np.ones_like(z), rcond=None)
     relative_error = np.abs(basis @ k / exact - 1.0)
     error = float(np.max(relative_error[z >= 0.05 * z_max]))
@@ -57,18 +66,24 @@ def fit_bearing_coefficients(orifice_diameter, discharge_coefficient, density, c
 # 0.8 mm flow length, 15 um radial clearance) drains to the pilot chamber; fitted
 # at the 7 MPa preset. tests check that the parameter file holds this fit.
 REFERENCE_BEARING = {
-    "count": 4,
-    "orifice_diameter": 0.78e-3,   # d_b [m]
-    "land_width": 9e-3,            # w [m]
-    "land_length": 0.8e-3,         # l [m]
-    "clearance": 15e-6,            # c [m]
-    "design_pressure": 7e6,        # p_s [Pa]
+    'count': 4,
+    'orifice_diameter': 0.78e-3,  # d_b [m]
+    'land_width': 9e-3,  # w [m]
+    'land_length': 0.8e-3,  # l [m]
+    'clearance': 15e-6,  # c [m]
+    'design_pressure': 7e6,  # p_s [Pa]
 }
 
 
 def reference_bearing_fit(discharge_coefficient=0.67, density=988.0, viscosity=0.5482e-3):
     """fit_bearing_coefficients() for REFERENCE_BEARING with the Table 1 fluid and C_b."""
     b = REFERENCE_BEARING
-    conductance = land_conductance(b["land_width"], b["land_length"], b["clearance"], viscosity)
-    return fit_bearing_coefficients(b["orifice_diameter"], discharge_coefficient, density, conductance,
-                                    b["design_pressure"], b["count"])
+    conductance = land_conductance(b['land_width'], b['land_length'], b['clearance'], viscosity)
+    return fit_bearing_coefficients(
+        b['orifice_diameter'],
+        discharge_coefficient,
+        density,
+        conductance,
+        b['design_pressure'],
+        b['count'],
+    )

@@ -3,6 +3,7 @@
 The command line prints these as one line and exits 1; anything else is a bug
 and keeps its traceback.
 """
+
 from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.steady_state import SteadyStateError

@@ -6,10 +6,11 @@ each step the valves are kept at their seats and end stops (inelastic contact),
 and the state is checked: a non-finite or absurd state stops the integration
 and raises IntegrationError instead of returning numbers.
 """
-import numpy as np
 
+import numpy as np
 from valve_sim.core.jit import jit
-from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT, derivatives
+from valve_sim.core.model import derivatives, P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
+
 
 # A pressure beyond these limits [Pa, gauge] means the integration broke down:
 # water cannot hold 10 bar below vacuum, and nothing in the valve reaches 1 GPa.
@@ -45,7 +46,7 @@ def state_is_sane(state):
     total = 0.0
     for i in range(state.shape[0]):
         total += state[i]
-    if total - total != 0.0:   # inf or nan anywhere makes the sum non-finite
+    if total - total != 0.0:  # inf or nan anywhere makes the sum non-finite
         return False
     for i in range(P_S, P_C + 1):
         if state[i] < PRESSURE_FLOOR or state[i] > PRESSURE_CEILING:
@@ -97,7 +98,7 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
 
 
 def describe_state(state):
-    return ", ".join(f"{name}={value:.6g}" for name, value in zip(STATE_NAMES, state))
+    return ', '.join(f'{name}={value:.6g}' for name, value in zip(STATE_NAMES, state))
 
 
 def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
@@ -118,6 +119,7 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
         failed = describe_state(state)
         state[:] = start
         raise IntegrationError(
-            f"integration diverged at t = {time + (done + 1) * step:.6f} s (step {done + 1} of this call, "
-            f"step size {step:g} s): {failed}. Reduce the step size or check the parameters.")
+            f'integration diverged at t = {time + (done + 1) * step:.6f} s (step {done + 1} of this call, '
+            f'step size {step:g} s): {failed}. Reduce the step size or check the parameters.'
+        )
     return record

@@ -3,6 +3,7 @@
 The kernels are plain Python; numba only makes them fast enough for real time
 (a 1 ms tick is 100 RK4 steps). Without numba they run unchanged, slowly.
 """
+
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - exercised only on machines without numba
@@ -17,4 +18,4 @@ def jit(function):
     """
     if njit is None:
         return function
-    return njit(cache=True, nogil=True, error_model="numpy", inline="always")(function)
+    return njit(cache=True, nogil=True, error_model='numpy', inline='always')(function)

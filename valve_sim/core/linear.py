@@ -5,12 +5,13 @@ The Jacobian of the model's right-hand side is taken by central differences
 lambda give the modes: frequency |Im lambda| / 2 pi and damping ratio
 -Re lambda / |lambda|. Used to check stability margins (docs/model.md).
 """
-import numpy as np
 
+import numpy as np
 from valve_sim.core.model import coefficients, state_derivative
 from valve_sim.core.steady_state import steady_state
 
-STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])   # typical size of each state
+
+STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])  # typical size of each state
 
 
 def jacobian(params, state, inlet_flow, relative_step=1e-6):
@@ -20,8 +21,10 @@ def jacobian(params, state, inlet_flow, relative_step=1e-6):
     for j in range(8):
         delta = np.zeros(8)
         delta[j] = STATE_SCALE[j] * relative_step
-        matrix[:, j] = (state_derivative(state + delta, inlet_flow, c)
-                        - state_derivative(state - delta, inlet_flow, c)) / (2.0 * delta[j])
+        matrix[:, j] = (
+            state_derivative(state + delta, inlet_flow, c)
+            - state_derivative(state - delta, inlet_flow, c)
+        ) / (2.0 * delta[j])
     return matrix
 
 

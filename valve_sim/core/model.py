@@ -21,92 +21,122 @@ Departures from the printed equations, each explained in docs/model.md:
   printed p_s in forward flow and stays bounded in reverse flow or at zero pressure.
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
 """
-import math
+
 from collections import namedtuple
+import math
 
 import numpy as np
-
 from valve_sim.core.jit import jit
 
+
 STATE_NAMES = (
-    "supply_pressure", "intermediate_pressure", "pilot_pressure", "poppet_chamber_pressure",
-    "main_valve_displacement", "main_valve_velocity", "poppet_displacement", "poppet_velocity",
+    'supply_pressure',
+    'intermediate_pressure',
+    'pilot_pressure',
+    'poppet_chamber_pressure',
+    'main_valve_displacement',
+    'main_valve_velocity',
+    'poppet_displacement',
+    'poppet_velocity',
 )
 P_S, P_M, P_P, P_C, X, X_DOT, Y, Y_DOT = range(8)
 
 # Derived constants of Eqs. (5), (8), (9), (16), in the form the kernels use.
-Coefficients = namedtuple("Coefficients", (
-    "supply_compliance_inv",         # beta / V_s              [Pa/m^3]
-    "intermediate_compliance_inv",   # beta / V_m              [Pa/m^3]
-    "pilot_compliance_inv",          # beta / V_p              [Pa/m^3]
-    "poppet_chamber_compliance_inv",  # beta / V_c             [Pa/m^3]
-    "swept_area",                    # A_m1 = pi/4 (d_p^2 - d_i^2)  [m^2]
-    "rod_area",                      # A_s = pi/4 d_s^2        [m^2]
-    "back_area",                     # A_p = pi/4 d_p^2        [m^2]
-    "supply_force_area",             # alpha_s, Eq. (8)        [m^2]
-    "intermediate_force_area",       # alpha_m, Eq. (8)        [m^2]
-    "flow_force_gain",               # K_f, Eq. (9)            [m]
-    "first_throttle_gain",           # pi C_d D_1 sqrt(2/rho)  [m^2/s/sqrt(Pa) per m]
-    "second_throttle_gain",          # pi C_d D_2 sqrt(2/rho)
-    "first_throttle_clearance",      # h                       [m]
-    "bearing_gain",                  # K_b, Eq. (16)           [m^3/s/sqrt(Pa)]
-    "bearing_k1", "bearing_k2", "bearing_k3",  # K_1..K_3, Eq. (12)
-    "damping_orifice_gain",          # K_c, Eq. (16)           [m^3/s/sqrt(Pa)]
-    "rod_leakage_conductance",       # K_s, Eq. (16)           [m^3/s/Pa]
-    "poppet_gain",                   # K_p, Eq. (16)           [m^2/s/sqrt(Pa)]
-    "main_valve_mass", "main_valve_damping", "main_spring_stiffness", "main_spring_preload",
-    "main_valve_stroke",
-    "pilot_poppet_mass", "pilot_poppet_damping", "pilot_spring_stiffness", "pilot_spring_preload",
-    "poppet_stroke",
-    "transition_pressure",           # dp_tr                   [Pa]
-))
+Coefficients = namedtuple(
+    'Coefficients',
+    (
+        'supply_compliance_inv',  # beta / V_s              [Pa/m^3]
+        'intermediate_compliance_inv',  # beta / V_m              [Pa/m^3]
+        'pilot_compliance_inv',  # beta / V_p              [Pa/m^3]
+        'poppet_chamber_compliance_inv',  # beta / V_c             [Pa/m^3]
+        'swept_area',  # A_m1 = pi/4 (d_p^2 - d_i^2)  [m^2]
+        'rod_area',  # A_s = pi/4 d_s^2        [m^2]
+        'back_area',  # A_p = pi/4 d_p^2        [m^2]
+        'supply_force_area',  # alpha_s, Eq. (8)        [m^2]
+        'intermediate_force_area',  # alpha_m, Eq. (8)        [m^2]
+        'flow_force_gain',  # K_f, Eq. (9)            [m]
+        'first_throttle_gain',  # pi C_d D_1 sqrt(2/rho)  [m^2/s/sqrt(Pa) per m]
+        'second_throttle_gain',  # pi C_d D_2 sqrt(2/rho)
+        'first_throttle_clearance',  # h                       [m]
+        'bearing_gain',  # K_b, Eq. (16)           [m^3/s/sqrt(Pa)]
+        'bearing_k1',
+        'bearing_k2',
+        'bearing_k3',  # K_1..K_3, Eq. (12)
+        'damping_orifice_gain',  # K_c, Eq. (16)           [m^3/s/sqrt(Pa)]
+        'rod_leakage_conductance',  # K_s, Eq. (16)           [m^3/s/Pa]
+        'poppet_gain',  # K_p, Eq. (16)           [m^2/s/sqrt(Pa)]
+        'main_valve_mass',
+        'main_valve_damping',
+        'main_spring_stiffness',
+        'main_spring_preload',
+        'main_valve_stroke',
+        'pilot_poppet_mass',
+        'pilot_poppet_damping',
+        'pilot_spring_stiffness',
+        'pilot_spring_preload',
+        'poppet_stroke',
+        'transition_pressure',  # dp_tr                   [Pa]
+    ),
+)
 
 
 def land_pressure_term(outer, inner):
     """(D^2 - d^2) / ln(D/d) [m^2]: the log-profile integral of a flat annular land."""
-    return (outer ** 2 - inner ** 2) / math.log(outer / inner)
+    return (outer**2 - inner**2) / math.log(outer / inner)
 
 
 def coefficients(p):
     """Derived Coefficients from a validated parameter dict (see valve_sim.core.parameters)."""
-    root = math.sqrt(2.0 / p["fluid_density"])
-    land_1 = land_pressure_term(p["first_throttle_outer_diameter"], p["first_throttle_inner_diameter"])
-    land_2 = land_pressure_term(p["second_throttle_outer_diameter"], p["second_throttle_inner_diameter"])
-    d_p, theta = p["main_valve_back_diameter"], p["poppet_half_angle"]
-    c_d, d_v = p["discharge_coefficient"], p["pilot_seat_diameter"]
+    root = math.sqrt(2.0 / p['fluid_density'])
+    land_1 = land_pressure_term(
+        p['first_throttle_outer_diameter'], p['first_throttle_inner_diameter']
+    )
+    land_2 = land_pressure_term(
+        p['second_throttle_outer_diameter'], p['second_throttle_inner_diameter']
+    )
+    d_p, theta = p['main_valve_back_diameter'], p['poppet_half_angle']
+    c_d, d_v = p['discharge_coefficient'], p['pilot_seat_diameter']
     return Coefficients(
-        supply_compliance_inv=p["bulk_modulus"] / p["supply_volume"],
-        intermediate_compliance_inv=p["bulk_modulus"] / p["intermediate_volume"],
-        pilot_compliance_inv=p["bulk_modulus"] / p["pilot_volume"],
-        poppet_chamber_compliance_inv=p["bulk_modulus"] / p["poppet_chamber_volume"],
-        swept_area=math.pi / 4.0 * (d_p ** 2 - p["swept_inner_diameter"] ** 2),
-        rod_area=math.pi / 4.0 * p["sensing_rod_diameter"] ** 2,
-        back_area=math.pi / 4.0 * d_p ** 2,
-        supply_force_area=math.pi / 4.0 * (d_p ** 2 - land_1 / 2.0),
+        supply_compliance_inv=p['bulk_modulus'] / p['supply_volume'],
+        intermediate_compliance_inv=p['bulk_modulus'] / p['intermediate_volume'],
+        pilot_compliance_inv=p['bulk_modulus'] / p['pilot_volume'],
+        poppet_chamber_compliance_inv=p['bulk_modulus'] / p['poppet_chamber_volume'],
+        swept_area=math.pi / 4.0 * (d_p**2 - p['swept_inner_diameter'] ** 2),
+        rod_area=math.pi / 4.0 * p['sensing_rod_diameter'] ** 2,
+        back_area=math.pi / 4.0 * d_p**2,
+        supply_force_area=math.pi / 4.0 * (d_p**2 - land_1 / 2.0),
         intermediate_force_area=math.pi / 8.0 * (land_1 - land_2),
         flow_force_gain=math.pi * c_d * d_v * math.sin(2.0 * theta),
-        first_throttle_gain=math.pi * c_d * p["first_throttle_outer_diameter"] * root,
-        second_throttle_gain=math.pi * c_d * p["second_throttle_outer_diameter"] * root,
-        first_throttle_clearance=p["first_throttle_clearance"],
-        bearing_gain=math.pi / 4.0 * p["bearing_discharge_coefficient"] * p["bearing_orifice_diameter"] ** 2 * root,
-        bearing_k1=p["bearing_coefficient_1"],
-        bearing_k2=p["bearing_coefficient_2"],
-        bearing_k3=p["bearing_coefficient_3"],
-        damping_orifice_gain=math.pi / 4.0 * c_d * p["damping_orifice_diameter"] ** 2 * root,
-        rod_leakage_conductance=(math.pi * p["sensing_rod_diameter"] * p["sensing_rod_clearance"] ** 3
-                                 / (12.0 * p["fluid_viscosity"] * p["sensing_rod_length"])),
+        first_throttle_gain=math.pi * c_d * p['first_throttle_outer_diameter'] * root,
+        second_throttle_gain=math.pi * c_d * p['second_throttle_outer_diameter'] * root,
+        first_throttle_clearance=p['first_throttle_clearance'],
+        bearing_gain=math.pi
+        / 4.0
+        * p['bearing_discharge_coefficient']
+        * p['bearing_orifice_diameter'] ** 2
+        * root,
+        bearing_k1=p['bearing_coefficient_1'],
+        bearing_k2=p['bearing_coefficient_2'],
+        bearing_k3=p['bearing_coefficient_3'],
+        damping_orifice_gain=math.pi / 4.0 * c_d * p['damping_orifice_diameter'] ** 2 * root,
+        rod_leakage_conductance=(
+            math.pi
+            * p['sensing_rod_diameter']
+            * p['sensing_rod_clearance'] ** 3
+            / (12.0 * p['fluid_viscosity'] * p['sensing_rod_length'])
+        ),
         poppet_gain=math.pi * c_d * d_v * math.sin(theta) * root,
-        main_valve_mass=p["main_valve_mass"],
-        main_valve_damping=p["main_valve_damping"],
-        main_spring_stiffness=p["main_spring_stiffness"],
-        main_spring_preload=p["main_spring_preload"],
-        main_valve_stroke=p["main_valve_stroke"],
-        pilot_poppet_mass=p["pilot_poppet_mass"],
-        pilot_poppet_damping=p["pilot_poppet_damping"],
-        pilot_spring_stiffness=p["pilot_spring_stiffness"],
-        pilot_spring_preload=p["pilot_spring_preload"],
-        poppet_stroke=p["poppet_stroke"],
-        transition_pressure=p["orifice_transition_pressure"],
+        main_valve_mass=p['main_valve_mass'],
+        main_valve_damping=p['main_valve_damping'],
+        main_spring_stiffness=p['main_spring_stiffness'],
+        main_spring_preload=p['main_spring_preload'],
+        main_valve_stroke=p['main_valve_stroke'],
+        pilot_poppet_mass=p['pilot_poppet_mass'],
+        pilot_poppet_damping=p['pilot_poppet_damping'],
+        pilot_spring_stiffness=p['pilot_spring_stiffness'],
+        pilot_spring_preload=p['pilot_spring_preload'],
+        poppet_stroke=p['poppet_stroke'],
+        transition_pressure=p['orifice_transition_pressure'],
     )
 
 
@@ -138,15 +168,17 @@ def flows(state, c):
     x = min(max(state[X], 0.0), c.main_valve_stroke)
     y = min(max(state[Y], 0.0), c.poppet_stroke)
     tr = c.transition_pressure
-    q_m1 = c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root(p_s - p_m, tr)   # (10)
-    q_m2 = c.second_throttle_gain * x * orifice_root(p_m, tr)                                       # (11)
+    q_m1 = (
+        c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root(p_s - p_m, tr)
+    )  # (10)
+    q_m2 = c.second_throttle_gain * x * orifice_root(p_m, tr)  # (11)
     upstream = max(p_s, p_p, tr)
     z = abs(p_s - p_p) / upstream
     bearing = z * (c.bearing_k1 + z * (c.bearing_k2 + z * c.bearing_k3))
-    q_n = math.copysign(1.0, p_s - p_p) * c.bearing_gain * math.sqrt(upstream) * bearing             # (12)
-    q_c = c.damping_orifice_gain * orifice_root(p_p - p_c, tr)                                       # (13)
-    q_s = c.rod_leakage_conductance * (p_s - p_c)                                                    # (14)
-    q_p = c.poppet_gain * y * orifice_root(p_c, tr)                                                  # (15)
+    q_n = math.copysign(1.0, p_s - p_p) * c.bearing_gain * math.sqrt(upstream) * bearing  # (12)
+    q_c = c.damping_orifice_gain * orifice_root(p_p - p_c, tr)  # (13)
+    q_s = c.rod_leakage_conductance * (p_s - p_c)  # (14)
+    q_p = c.poppet_gain * y * orifice_root(p_c, tr)  # (15)
     return q_m1, q_m2, q_n, q_c, q_s, q_p
 
 
@@ -155,10 +187,19 @@ def net_forces(state, c):
     """Net forces on the main valve and the poppet [N], Eqs. (6)-(7) without inertia."""
     p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
     x, x_dot, y, y_dot = state[X], state[X_DOT], state[Y], state[Y_DOT]
-    force_x = (c.supply_force_area * p_s + c.intermediate_force_area * p_m - c.back_area * p_p
-               - c.main_spring_stiffness * (x + c.main_spring_preload) - c.main_valve_damping * x_dot)
-    force_y = (c.rod_area * p_s - c.flow_force_gain * max(y, 0.0) * p_c
-               - c.pilot_spring_stiffness * (y + c.pilot_spring_preload) - c.pilot_poppet_damping * y_dot)
+    force_x = (
+        c.supply_force_area * p_s
+        + c.intermediate_force_area * p_m
+        - c.back_area * p_p
+        - c.main_spring_stiffness * (x + c.main_spring_preload)
+        - c.main_valve_damping * x_dot
+    )
+    force_y = (
+        c.rod_area * p_s
+        - c.flow_force_gain * max(y, 0.0) * p_c
+        - c.pilot_spring_stiffness * (y + c.pilot_spring_preload)
+        - c.pilot_poppet_damping * y_dot
+    )
     return force_x, force_y
 
 
@@ -180,15 +221,21 @@ def derivatives(state, inlet_flow, c, out):
     """Write d(state)/dt into out for inlet flow q_in [m^3/s], Eqs. (1)-(7)."""
     q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
     x_dot, y_dot = state[X_DOT], state[Y_DOT]
-    out[P_S] = c.supply_compliance_inv * (inlet_flow - q_m1 - q_n - q_s - c.swept_area * x_dot - c.rod_area * y_dot)  # (1)
-    out[P_M] = c.intermediate_compliance_inv * (q_m1 - q_m2)                                                      # (2)
-    out[P_P] = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)                                         # (3)
-    out[P_C] = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)                                                # (4)
+    out[P_S] = c.supply_compliance_inv * (
+        inlet_flow - q_m1 - q_n - q_s - c.swept_area * x_dot - c.rod_area * y_dot
+    )  # (1)
+    out[P_M] = c.intermediate_compliance_inv * (q_m1 - q_m2)  # (2)
+    out[P_P] = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
+    out[P_C] = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)  # (4)
     force_x, force_y = net_forces(state, c)
     out[X] = x_dot
-    out[X_DOT] = stop_acceleration(state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke)   # (6)
+    out[X_DOT] = stop_acceleration(
+        state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke
+    )  # (6)
     out[Y] = y_dot
-    out[Y_DOT] = stop_acceleration(state[Y], y_dot, force_y, c.pilot_poppet_mass, c.poppet_stroke)     # (7)
+    out[Y_DOT] = stop_acceleration(
+        state[Y], y_dot, force_y, c.pilot_poppet_mass, c.poppet_stroke
+    )  # (7)
 
 
 def state_derivative(state, inlet_flow, c):

@@ -6,15 +6,17 @@ the command line and the ROS node read the same numbers. All values are SI.
 
 No ROS imports here: the node turns these specs into ParameterDescriptors.
 """
+
+from dataclasses import dataclass
 import math
+from pathlib import Path
 import re
 import sys
-from dataclasses import dataclass
-from pathlib import Path
 
 import yaml
 
-NODE_NAME = "relief_valve"
+
+NODE_NAME = 'relief_valve'
 
 
 class ParameterError(ValueError):
@@ -38,57 +40,295 @@ class ParameterSpec:
     source: str
 
     def describe(self):
-        return f"{self.description} ({self.symbol}) [{self.unit}]"
+        return f'{self.description} ({self.symbol}) [{self.unit}]'
 
 
-TABLE1 = "paper, Table 1"
-OURS = "our choice, see docs/model.md"
+TABLE1 = 'paper, Table 1'
+OURS = 'our choice, see docs/model.md'
 
 PARAMETERS = (
     # Fluid (water at about 50 degC), Table 1.
-    ParameterSpec("fluid_density", "rho", "kg/m^3", 500.0, 2000.0, "fluid density", TABLE1),
-    ParameterSpec("fluid_viscosity", "mu", "Pa*s", 1e-5, 1.0, "dynamic viscosity of the fluid", TABLE1),
-    ParameterSpec("bulk_modulus", "beta", "Pa", 1e7, 1e10, "bulk modulus of the fluid", TABLE1),
-    ParameterSpec("discharge_coefficient", "C_d", "1", 0.1, 1.0, "discharge coefficient of the valve throttles, damping orifice and poppet", TABLE1),
-    ParameterSpec("bearing_discharge_coefficient", "C_b", "1", 0.1, 1.0, "discharge coefficient of the hydrostatic bearing orifices", TABLE1),
+    ParameterSpec('fluid_density', 'rho', 'kg/m^3', 500.0, 2000.0, 'fluid density', TABLE1),
+    ParameterSpec(
+        'fluid_viscosity', 'mu', 'Pa*s', 1e-5, 1.0, 'dynamic viscosity of the fluid', TABLE1
+    ),
+    ParameterSpec('bulk_modulus', 'beta', 'Pa', 1e7, 1e10, 'bulk modulus of the fluid', TABLE1),
+    ParameterSpec(
+        'discharge_coefficient',
+        'C_d',
+        '1',
+        0.1,
+        1.0,
+        'discharge coefficient of the valve throttles, damping orifice and poppet',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'bearing_discharge_coefficient',
+        'C_b',
+        '1',
+        0.1,
+        1.0,
+        'discharge coefficient of the hydrostatic bearing orifices',
+        TABLE1,
+    ),
     # Moving parts, Table 1.
-    ParameterSpec("main_valve_mass", "m_m", "kg", 1e-4, 10.0, "mass of the main valve incl. 1/3 of its spring", TABLE1),
-    ParameterSpec("pilot_poppet_mass", "m_p", "kg", 1e-5, 1.0, "mass of the pilot poppet incl. 1/3 of its spring", TABLE1),
-    ParameterSpec("main_valve_damping", "c_m", "N*s/m", 0.0, 1e4, "viscous damping coefficient of the main valve", TABLE1),
-    ParameterSpec("pilot_poppet_damping", "c_p", "N*s/m", 0.0, 1e4, "viscous damping coefficient of the pilot poppet", TABLE1),
-    ParameterSpec("pilot_spring_stiffness", "k_p", "N/m", 1.0, 1e8, "pilot spring constant", TABLE1),
-    ParameterSpec("damping_orifice_diameter", "d_c", "m", 1e-5, 0.02, "damping orifice diameter between pilot chamber and poppet chamber", TABLE1),
+    ParameterSpec(
+        'main_valve_mass',
+        'm_m',
+        'kg',
+        1e-4,
+        10.0,
+        'mass of the main valve incl. 1/3 of its spring',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_poppet_mass',
+        'm_p',
+        'kg',
+        1e-5,
+        1.0,
+        'mass of the pilot poppet incl. 1/3 of its spring',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'main_valve_damping',
+        'c_m',
+        'N*s/m',
+        0.0,
+        1e4,
+        'viscous damping coefficient of the main valve',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_poppet_damping',
+        'c_p',
+        'N*s/m',
+        0.0,
+        1e4,
+        'viscous damping coefficient of the pilot poppet',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_spring_stiffness', 'k_p', 'N/m', 1.0, 1e8, 'pilot spring constant', TABLE1
+    ),
+    ParameterSpec(
+        'damping_orifice_diameter',
+        'd_c',
+        'm',
+        1e-5,
+        0.02,
+        'damping orifice diameter between pilot chamber and poppet chamber',
+        TABLE1,
+    ),
     # Chamber volumes, Table 1.
-    ParameterSpec("supply_volume", "V_s", "m^3", 1e-9, 10.0, "supply volume (valve inlet and connected line)", TABLE1),
-    ParameterSpec("intermediate_volume", "V_m", "m^3", 1e-9, 1.0, "volume between the two main throttles", TABLE1),
-    ParameterSpec("pilot_volume", "V_p", "m^3", 1e-9, 1.0, "pilot chamber volume behind the main valve", TABLE1),
-    ParameterSpec("poppet_chamber_volume", "V_c", "m^3", 1e-9, 1.0, "poppet chamber volume between damping orifice and pilot poppet", TABLE1),
+    ParameterSpec(
+        'supply_volume',
+        'V_s',
+        'm^3',
+        1e-9,
+        10.0,
+        'supply volume (valve inlet and connected line)',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'intermediate_volume',
+        'V_m',
+        'm^3',
+        1e-9,
+        1.0,
+        'volume between the two main throttles',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_volume',
+        'V_p',
+        'm^3',
+        1e-9,
+        1.0,
+        'pilot chamber volume behind the main valve',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'poppet_chamber_volume',
+        'V_c',
+        'm^3',
+        1e-9,
+        1.0,
+        'poppet chamber volume between damping orifice and pilot poppet',
+        TABLE1,
+    ),
     # Main valve geometry (paper Figure 2, values not printed).
-    ParameterSpec("main_valve_back_diameter", "d_p", "m", 1e-4, 0.2, "main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)", OURS),
-    ParameterSpec("swept_inner_diameter", "d_i", "m", 0.0, 0.2, "inner diameter of the supply-side swept annulus (A_m1 = pi/4 (d_p^2 - d_i^2))", OURS),
-    ParameterSpec("first_throttle_outer_diameter", "D_1", "m", 1e-4, 0.2, "outer diameter of the first (upstream) annular throttle land", OURS),
-    ParameterSpec("first_throttle_inner_diameter", "d_1", "m", 1e-4, 0.2, "inner diameter of the first annular throttle land", OURS),
-    ParameterSpec("second_throttle_outer_diameter", "D_2", "m", 1e-4, 0.2, "outer diameter of the second (downstream) annular throttle land", OURS),
-    ParameterSpec("second_throttle_inner_diameter", "d_2", "m", 1e-4, 0.2, "inner diameter of the second annular throttle land", OURS),
-    ParameterSpec("first_throttle_clearance", "h", "m", 0.0, 1e-3, "opening of the first throttle when the main valve is seated (x = 0)", OURS),
-    ParameterSpec("main_spring_stiffness", "k_m", "N/m", 0.0, 1e8, "main valve spring constant", OURS),
-    ParameterSpec("main_spring_preload", "x_0", "m", 0.0, 0.05, "initial compression of the main spring at x = 0", OURS),
-    ParameterSpec("main_valve_stroke", "x_max", "m", 1e-5, 0.05, "main valve stroke to its end stop", OURS),
+    ParameterSpec(
+        'main_valve_back_diameter',
+        'd_p',
+        'm',
+        1e-4,
+        0.2,
+        'main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)',
+        OURS,
+    ),
+    ParameterSpec(
+        'swept_inner_diameter',
+        'd_i',
+        'm',
+        0.0,
+        0.2,
+        'inner diameter of the supply-side swept annulus (A_m1 = pi/4 (d_p^2 - d_i^2))',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_outer_diameter',
+        'D_1',
+        'm',
+        1e-4,
+        0.2,
+        'outer diameter of the first (upstream) annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_inner_diameter',
+        'd_1',
+        'm',
+        1e-4,
+        0.2,
+        'inner diameter of the first annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'second_throttle_outer_diameter',
+        'D_2',
+        'm',
+        1e-4,
+        0.2,
+        'outer diameter of the second (downstream) annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'second_throttle_inner_diameter',
+        'd_2',
+        'm',
+        1e-4,
+        0.2,
+        'inner diameter of the second annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_clearance',
+        'h',
+        'm',
+        0.0,
+        1e-3,
+        'opening of the first throttle when the main valve is seated (x = 0)',
+        OURS,
+    ),
+    ParameterSpec(
+        'main_spring_stiffness', 'k_m', 'N/m', 0.0, 1e8, 'main valve spring constant', OURS
+    ),
+    ParameterSpec(
+        'main_spring_preload',
+        'x_0',
+        'm',
+        0.0,
+        0.05,
+        'initial compression of the main spring at x = 0',
+        OURS,
+    ),
+    ParameterSpec(
+        'main_valve_stroke', 'x_max', 'm', 1e-5, 0.05, 'main valve stroke to its end stop', OURS
+    ),
     # Hydrostatic bearings, Eq. (12).
-    ParameterSpec("bearing_orifice_diameter", "d_b", "m", 1e-5, 0.01, "diameter of one hydrostatic bearing orifice", OURS),
-    ParameterSpec("bearing_coefficient_1", "K_1", "1", -1e3, 1e3, "first-order coefficient of the bearing flow polynomial, Eq. (12)", OURS),
-    ParameterSpec("bearing_coefficient_2", "K_2", "1", -1e3, 1e3, "second-order coefficient of the bearing flow polynomial, Eq. (12)", OURS),
-    ParameterSpec("bearing_coefficient_3", "K_3", "1", -1e3, 1e3, "third-order coefficient of the bearing flow polynomial, Eq. (12)", OURS),
+    ParameterSpec(
+        'bearing_orifice_diameter',
+        'd_b',
+        'm',
+        1e-5,
+        0.01,
+        'diameter of one hydrostatic bearing orifice',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_1',
+        'K_1',
+        '1',
+        -1e3,
+        1e3,
+        'first-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_2',
+        'K_2',
+        '1',
+        -1e3,
+        1e3,
+        'second-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_3',
+        'K_3',
+        '1',
+        -1e3,
+        1e3,
+        'third-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
     # Pilot stage geometry (paper Figure 3, values not printed).
-    ParameterSpec("sensing_rod_diameter", "d_s", "m", 1e-4, 0.05, "diameter of the pressure-detecting rod (A_s = pi/4 d_s^2)", OURS),
-    ParameterSpec("sensing_rod_clearance", "delta_s", "m", 0.0, 1e-3, "radial clearance between pressure-detecting rod and sleeve", OURS),
-    ParameterSpec("sensing_rod_length", "l_s", "m", 1e-4, 0.2, "axial length of the rod clearance", OURS),
-    ParameterSpec("pilot_seat_diameter", "d_v", "m", 1e-4, 0.02, "pilot poppet seat diameter", OURS),
-    ParameterSpec("poppet_half_angle", "theta_p", "rad", 0.01, 1.56, "half cone angle of the pilot poppet", OURS),
-    ParameterSpec("pilot_spring_preload", "y_0", "m", 0.0, 0.05, "initial compression of the pilot spring at y = 0 (set by the adjusting screw)", OURS),
-    ParameterSpec("poppet_stroke", "y_max", "m", 1e-5, 0.01, "pilot poppet stroke to its end stop", OURS),
+    ParameterSpec(
+        'sensing_rod_diameter',
+        'd_s',
+        'm',
+        1e-4,
+        0.05,
+        'diameter of the pressure-detecting rod (A_s = pi/4 d_s^2)',
+        OURS,
+    ),
+    ParameterSpec(
+        'sensing_rod_clearance',
+        'delta_s',
+        'm',
+        0.0,
+        1e-3,
+        'radial clearance between pressure-detecting rod and sleeve',
+        OURS,
+    ),
+    ParameterSpec(
+        'sensing_rod_length', 'l_s', 'm', 1e-4, 0.2, 'axial length of the rod clearance', OURS
+    ),
+    ParameterSpec(
+        'pilot_seat_diameter', 'd_v', 'm', 1e-4, 0.02, 'pilot poppet seat diameter', OURS
+    ),
+    ParameterSpec(
+        'poppet_half_angle',
+        'theta_p',
+        'rad',
+        0.01,
+        1.56,
+        'half cone angle of the pilot poppet',
+        OURS,
+    ),
+    ParameterSpec(
+        'pilot_spring_preload',
+        'y_0',
+        'm',
+        0.0,
+        0.05,
+        'initial compression of the pilot spring at y = 0 (set by the adjusting screw)',
+        OURS,
+    ),
+    ParameterSpec(
+        'poppet_stroke', 'y_max', 'm', 1e-5, 0.01, 'pilot poppet stroke to its end stop', OURS
+    ),
     # Numerical regularisation.
-    ParameterSpec("orifice_transition_pressure", "dp_tr", "Pa", 1.0, 1e6, "pressure drop below which orifice laws turn linear (closed-valve start under fixed-step RK4)", OURS),
+    ParameterSpec(
+        'orifice_transition_pressure',
+        'dp_tr',
+        'Pa',
+        1.0,
+        1e6,
+        'pressure drop below which orifice laws turn linear (closed-valve start under fixed-step RK4)',
+        OURS,
+    ),
 )
 
 # [Pa] the tank's absolute pressure by default: the ambient_pressure of config/reference.yaml,
@@ -97,11 +337,45 @@ STANDARD_ATMOSPHERE = 101325.0
 
 # Run-time settings that share the parameter files with the model parameters.
 SETTINGS = (
-    ParameterSpec("step_size", "dt", "s", 1e-7, 1e-4, "fixed RK4 integration step (the paper's is 10 us)", "paper, Method for Simulation"),
-    ParameterSpec("publish_rate", "f_pub", "Hz", 1.0, 1e4, "valve_node tick and publish rate", OURS),
-    ParameterSpec("initial_inlet_flow", "q_in,0", "m^3/s", 0.0, 0.01, "inlet flow whose exact steady state the node starts from", "paper, Conditions for Calculation (5 L/min)"),
-    ParameterSpec("input_timeout", "t_timeout", "s", 0.0, 3600.0, "inlet_flow silence after which the node reports stale input (0 disables)", OURS),
-    ParameterSpec("ambient_pressure", "p_atm", "Pa", 0.0, 2e5, "absolute tank pressure, added to the model's gauge pressures on the wire", OURS),
+    ParameterSpec(
+        'step_size',
+        'dt',
+        's',
+        1e-7,
+        1e-4,
+        "fixed RK4 integration step (the paper's is 10 us)",
+        'paper, Method for Simulation',
+    ),
+    ParameterSpec(
+        'publish_rate', 'f_pub', 'Hz', 1.0, 1e4, 'valve_node tick and publish rate', OURS
+    ),
+    ParameterSpec(
+        'initial_inlet_flow',
+        'q_in,0',
+        'm^3/s',
+        0.0,
+        0.01,
+        'inlet flow whose exact steady state the node starts from',
+        'paper, Conditions for Calculation (5 L/min)',
+    ),
+    ParameterSpec(
+        'input_timeout',
+        't_timeout',
+        's',
+        0.0,
+        3600.0,
+        'inlet_flow silence after which the node reports stale input (0 disables)',
+        OURS,
+    ),
+    ParameterSpec(
+        'ambient_pressure',
+        'p_atm',
+        'Pa',
+        0.0,
+        2e5,
+        "absolute tank pressure, added to the model's gauge pressures on the wire",
+        OURS,
+    ),
 )
 
 SPECS = {spec.name: spec for spec in PARAMETERS}
@@ -111,11 +385,11 @@ SYMBOLS = {spec.symbol: spec.name for spec in PARAMETERS}
 # Pairs (larger, smaller) that must hold strictly: a land's outer diameter exceeds
 # its inner one, and the lands and the swept annulus lie inside the valve face.
 ORDERED_PAIRS = (
-    ("first_throttle_outer_diameter", "first_throttle_inner_diameter"),
-    ("second_throttle_outer_diameter", "second_throttle_inner_diameter"),
-    ("main_valve_back_diameter", "swept_inner_diameter"),
-    ("main_valve_back_diameter", "first_throttle_outer_diameter"),
-    ("main_valve_back_diameter", "second_throttle_outer_diameter"),
+    ('first_throttle_outer_diameter', 'first_throttle_inner_diameter'),
+    ('second_throttle_outer_diameter', 'second_throttle_inner_diameter'),
+    ('main_valve_back_diameter', 'swept_inner_diameter'),
+    ('main_valve_back_diameter', 'first_throttle_outer_diameter'),
+    ('main_valve_back_diameter', 'second_throttle_outer_diameter'),
 )
 
 
@@ -132,14 +406,19 @@ def check_value(name, value):
     """Return value as a float if it is a finite number inside the parameter's limits."""
     spec = SETTING_SPECS[name] if name in SETTING_SPECS else SPECS[resolve_name(name)]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, got {value!r}")
+        raise ParameterError(
+            f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, got {value!r}"
+        )
     value = float(value)
     if not math.isfinite(value):
-        raise ParameterError(f"parameter '{spec.name}' ({spec.symbol}) must be finite, got {value}")
+        raise ParameterError(
+            f"parameter '{spec.name}' ({spec.symbol}) must be finite, got {value}"
+        )
     if not spec.minimum <= value <= spec.maximum:
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) = {value:g} {spec.unit} is outside its limits "
-            f"[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}")
+            f'[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+        )
     return value
 
 
@@ -155,32 +434,38 @@ def validate(params):
         resolve_name(unknown[0])
     missing = [name for name in SPECS if name not in params]
     if missing:
-        raise ParameterError(f"missing parameter(s): {', '.join(missing)}")
+        raise ParameterError(f'missing parameter(s): {", ".join(missing)}')
     checked = {name: check_value(name, params[name]) for name in SPECS}
     for larger, smaller in ORDERED_PAIRS:
         if not checked[larger] > checked[smaller]:
             big, small = SPECS[larger], SPECS[smaller]
             raise ParameterError(
                 f"parameter '{larger}' ({big.symbol} = {checked[larger]:g} m) must exceed "
-                f"'{smaller}' ({small.symbol} = {checked[smaller]:g} m)")
-    k1, k2, k3 = (checked[f"bearing_coefficient_{i}"] for i in (1, 2, 3))
+                f"'{smaller}' ({small.symbol} = {checked[smaller]:g} m)"
+            )
+    k1, k2, k3 = (checked[f'bearing_coefficient_{i}'] for i in (1, 2, 3))
     for i in range(101):
         z = i / 100.0
         if k1 + 2.0 * k2 * z + 3.0 * k3 * z * z <= 0.0:
             raise ParameterError(
-                f"bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow that does not "
-                f"rise with the pressure drop at 1 - p_p/p_s = {z:.2f} (Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])")
+                f'bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow that does not '
+                f'rise with the pressure drop at 1 - p_p/p_s = {z:.2f} (Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])'
+            )
     return checked
 
 
 def config_path(filename):
     """Path of a file shipped in config/ (installed share/valve_sim/config or the source tree)."""
-    candidates = [Path(sys.prefix) / "share" / "valve_sim" / "config" / filename,
-                  Path(__file__).resolve().parents[2] / "config" / filename]
+    candidates = [
+        Path(sys.prefix) / 'share' / 'valve_sim' / 'config' / filename,
+        Path(__file__).resolve().parents[2] / 'config' / filename,
+    ]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
-    raise ParameterError(f"config file '{filename}' not found in: {', '.join(str(c) for c in candidates)}")
+    raise ParameterError(
+        f"config file '{filename}' not found in: {', '.join(str(c) for c in candidates)}"
+    )
 
 
 class _RosYamlLoader(yaml.SafeLoader):
@@ -188,9 +473,10 @@ class _RosYamlLoader(yaml.SafeLoader):
 
 
 _RosYamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$"),
-    list("-+0123456789."))
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$'),
+    list('-+0123456789.'),
+)
 
 
 def read_parameter_file(path, node_name=NODE_NAME):
@@ -203,15 +489,15 @@ def read_parameter_file(path, node_name=NODE_NAME):
     try:
         document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
     except OSError as error:
-        raise ParameterError(f"cannot read parameter file {path}: {error.strerror}") from error
+        raise ParameterError(f'cannot read parameter file {path}: {error.strerror}') from error
     except yaml.YAMLError as error:
-        raise ParameterError(f"parameter file {path} is not valid YAML: {error}") from error
+        raise ParameterError(f'parameter file {path} is not valid YAML: {error}') from error
     if not isinstance(document, dict):
         raise ParameterError(f"parameter file {path} must map node names to 'ros__parameters'")
-    for key in (node_name, "/" + node_name, "/**"):
+    for key in (node_name, '/' + node_name, '/**'):
         section = document.get(key)
-        if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-            return dict(section["ros__parameters"])
+        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
+            return dict(section['ros__parameters'])
     raise ParameterError(f"parameter file {path} has no '{node_name}: ros__parameters:' section")
 
 
@@ -224,11 +510,13 @@ def load_parameters(path=None, overrides=None):
     and returned separately; any other key is an error. overrides (name or paper
     symbol -> value) are applied last. Returns (params, settings).
     """
-    raw = read_parameter_file(config_path("reference.yaml"))
+    raw = read_parameter_file(config_path('reference.yaml'))
     if path is not None:
         raw.update(read_parameter_file(path))
     raw.update(overrides or {})
-    settings = {name: check_value(name, raw.pop(name)) for name in list(raw) if name in SETTING_SPECS}
+    settings = {
+        name: check_value(name, raw.pop(name)) for name in list(raw) if name in SETTING_SPECS
+    }
     params = {resolve_name(name): value for name, value in raw.items()}
     return validate(params), settings
 

@@ -6,16 +6,17 @@ model time and the clock, and carries the rest (less than one step) into the nex
 call, so the model time never drifts from the clock. A lag beyond the catch-up
 limit is skipped: the model time jumps and the state is held over that stretch.
 """
+
 from dataclasses import dataclass
 
 import numpy as np
-
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients
 from valve_sim.core.steady_state import steady_state
 
+
 NS_PER_S = 1_000_000_000
-TRIAL_STEPS = 2000   # steps a parameter change is trial-integrated for before it is accepted
+TRIAL_STEPS = 2000  # steps a parameter change is trial-integrated for before it is accepted
 
 
 def step_ns(step_size):
@@ -43,7 +44,7 @@ class RealTimeModel:
         self.state = steady_state(params, inlet_flow)
         self.time_ns = None
         self._use(params, step_size)
-        self._previous = None   # (params, step_size) before the last retune, for roll_back()
+        self._previous = None  # (params, step_size) before the last retune, for roll_back()
 
     def _use(self, params, step_size):
         self.params = params
@@ -64,8 +65,13 @@ class RealTimeModel:
         """
         skipped_ns = max(now_ns - self.time_ns - max_lag_ns, 0)
         steps = (now_ns - self.time_ns - skipped_ns) // self._step_ns
-        advance(self.state, np.full(steps, float(inlet_flow)), self._coefficients,
-                self._step_ns / NS_PER_S, time=self.time_ns / NS_PER_S)
+        advance(
+            self.state,
+            np.full(steps, float(inlet_flow)),
+            self._coefficients,
+            self._step_ns / NS_PER_S,
+            time=self.time_ns / NS_PER_S,
+        )
         self.time_ns += skipped_ns + steps * self._step_ns
         return Progress(steps, skipped_ns)
 
@@ -78,8 +84,12 @@ class RealTimeModel:
 
         Raises IntegrationError if they diverge; the model itself is not touched.
         """
-        advance(self.state.copy(), np.full(TRIAL_STEPS, float(inlet_flow)), coefficients(params),
-                step_ns(step_size) / NS_PER_S)
+        advance(
+            self.state.copy(),
+            np.full(TRIAL_STEPS, float(inlet_flow)),
+            coefficients(params),
+            step_ns(step_size) / NS_PER_S,
+        )
 
     def retune(self, params, step_size):
         """Use new parameters (validated dict) and step size [s] from the next step on."""

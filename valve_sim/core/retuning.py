@@ -7,16 +7,24 @@ screw; changing any model parameter moves the cracking pressure, which
 preset_pressure then reports. dependent_change() derives the partner of a
 change, check_preset() verifies that a change keeps the two consistent.
 """
+
 import math
 
-from valve_sim.core.parameters import SPECS, ParameterError, ParameterSpec, validate
+from valve_sim.core.parameters import ParameterError, ParameterSpec, SPECS, validate
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
+
 PRESET_PRESSURE = ParameterSpec(
-    "preset_pressure", "p_set", "Pa", 0.0, 1e8,
-    "preset pressure: supply pressure (gauge) at which the main valve cracks open; setting it sets "
-    "pilot_spring_preload, like turning the adjusting screw", "our definition, see docs/valve_node.md")
-PRESET_TOLERANCE = 1e-6   # relative agreement of preset_pressure and the cracking pressure
+    'preset_pressure',
+    'p_set',
+    'Pa',
+    0.0,
+    1e8,
+    'preset pressure: supply pressure (gauge) at which the main valve cracks open; setting it sets '
+    'pilot_spring_preload, like turning the adjusting screw',
+    'our definition, see docs/valve_node.md',
+)
+PRESET_TOLERANCE = 1e-6  # relative agreement of preset_pressure and the cracking pressure
 
 
 def merged_parameters(params, changes):
@@ -25,7 +33,9 @@ def merged_parameters(params, changes):
     changes: {name: value} of any parameters; only model parameters (SPECS) are used.
     Raises ParameterError.
     """
-    return validate({**params, **{name: value for name, value in changes.items() if name in SPECS}})
+    return validate(
+        {**params, **{name: value for name, value in changes.items() if name in SPECS}}
+    )
 
 
 def dependent_change(params, changes):
@@ -35,11 +45,15 @@ def dependent_change(params, changes):
     parameter gives the new cracking pressure as preset_pressure. Raises
     ParameterError or SteadyStateError if it cannot be derived.
     """
-    if "preset_pressure" in changes and "pilot_spring_preload" not in changes:
+    if 'preset_pressure' in changes and 'pilot_spring_preload' not in changes:
         merged = merged_parameters(params, changes)
-        return {"pilot_spring_preload": preload_for_cracking_pressure(merged, changes["preset_pressure"])}
-    if "preset_pressure" not in changes and changes.keys() & SPECS.keys():
-        return {"preset_pressure": cracking_pressure(merged_parameters(params, changes))}
+        return {
+            'pilot_spring_preload': preload_for_cracking_pressure(
+                merged, changes['preset_pressure']
+            )
+        }
+    if 'preset_pressure' not in changes and changes.keys() & SPECS.keys():
+        return {'preset_pressure': cracking_pressure(merged_parameters(params, changes))}
     return {}
 
 
@@ -49,15 +63,16 @@ def check_preset(params, changes):
     valve_node adds the dependent parameter to every change; where it is missing,
     deriving it failed, and repeating that raises the reason.
     """
-    preset = changes.get("preset_pressure")
+    preset = changes.get('preset_pressure')
     if preset is None:
         if changes.keys() & SPECS.keys():
             cracking_pressure(params)
         return
-    if "pilot_spring_preload" not in changes:
+    if 'pilot_spring_preload' not in changes:
         preload_for_cracking_pressure(params, preset)
     cracking = cracking_pressure(params)
     if not math.isclose(cracking, preset, rel_tol=PRESET_TOLERANCE):
         raise ParameterError(
-            f"preset_pressure = {preset:g} Pa disagrees with the cracking pressure {cracking:g} Pa given by "
-            f"pilot_spring_preload = {params['pilot_spring_preload']:g} m; set only one of the two")
+            f'preset_pressure = {preset:g} Pa disagrees with the cracking pressure {cracking:g} Pa given by '
+            f'pilot_spring_preload = {params["pilot_spring_preload"]:g} m; set only one of the two'
+        )

@@ -5,15 +5,16 @@ initial_flow, the inlet flow changed to final_flow at step_time (at once, or ove
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve.
 """
+
 from dataclasses import dataclass
 
 import numpy as np
-
 from valve_sim.core.integrator import advance
-from valve_sim.core.model import STATE_NAMES, coefficients
+from valve_sim.core.model import coefficients, STATE_NAMES
 from valve_sim.core.steady_state import steady_state
 
-LITRE_PER_MINUTE = 1e-3 / 60.0   # [m^3/s]
+
+LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
 
 
 @dataclass(frozen=True)

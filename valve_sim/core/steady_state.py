@@ -10,18 +10,30 @@ volume V_s and added valve damping, which change how fast the valve settles but
 not where. Either valve may rest on its seat or end stop; then its
 position is fixed there and its force balance is replaced by the contact condition.
 """
+
 import numpy as np
 from scipy.optimize import root
+from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.model import (
+    coefficients,
+    derivatives,
+    flows,
+    net_forces,
+    P_C,
+    P_M,
+    P_P,
+    P_S,
+    X,
+    Y,
+)
+from valve_sim.core.parameters import ParameterError, SPECS, validate
 
-from valve_sim.core.integrator import IntegrationError, advance
-from valve_sim.core.model import P_C, P_M, P_P, P_S, X, Y, coefficients, derivatives, flows, net_forces
-from valve_sim.core.parameters import SPECS, ParameterError, validate
 
-PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5   # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
-PSEUDO_TRANSIENT_TIME = 0.3             # [s]
-PSEUDO_TRANSIENT_STEP = 5e-6            # [s]
+PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5  # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
+PSEUDO_TRANSIENT_TIME = 0.3  # [s]
+PSEUDO_TRANSIENT_STEP = 5e-6  # [s]
 PSEUDO_TRANSIENT_DAMPING = (200.0, 50.0)  # [N s/m] added to main valve and poppet
-TOLERANCE = 1e-10                       # relative residual of flows and forces
+TOLERANCE = 1e-10  # relative residual of flows and forces
 
 
 class SteadyStateError(RuntimeError):
@@ -33,14 +45,16 @@ def _residuals(state, inlet_flow, c, flow_scale, force_scale):
     rates = np.empty(8)
     derivatives(state, inlet_flow, c, rates)
     force_x, force_y = net_forces(state, c)
-    return np.array([
-        rates[P_S] / c.supply_compliance_inv / flow_scale,
-        rates[P_M] / c.intermediate_compliance_inv / flow_scale,
-        rates[P_P] / c.pilot_compliance_inv / flow_scale,
-        rates[P_C] / c.poppet_chamber_compliance_inv / flow_scale,
-        force_x / force_scale,
-        force_y / force_scale,
-    ])
+    return np.array(
+        [
+            rates[P_S] / c.supply_compliance_inv / flow_scale,
+            rates[P_M] / c.intermediate_compliance_inv / flow_scale,
+            rates[P_P] / c.pilot_compliance_inv / flow_scale,
+            rates[P_C] / c.poppet_chamber_compliance_inv / flow_scale,
+            force_x / force_scale,
+            force_y / force_scale,
+        ]
+    )
 
 
 def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
@@ -49,7 +63,10 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
     flow_scale = max(inlet_flow, 1e-7)
     force_scale = c.back_area * pressure_scale
     free, equations, scale = [P_S, P_M, P_P, P_C], [0, 1, 2, 3], [pressure_scale] * 4
-    for index, equation, fixed, stroke in ((X, 4, fixed_x, c.main_valve_stroke), (Y, 5, fixed_y, c.poppet_stroke)):
+    for index, equation, fixed, stroke in (
+        (X, 4, fixed_x, c.main_valve_stroke),
+        (Y, 5, fixed_y, c.poppet_stroke),
+    ):
         if fixed is None:
             free.append(index)
             equations.append(equation)
@@ -66,7 +83,9 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
     def residual(u):
         return _residuals(compose(u), inlet_flow, c, flow_scale, force_scale)[equations]
 
-    solution = root(residual, np.asarray(guess)[free] / scale, method="hybr", options={"xtol": 1e-13})
+    solution = root(
+        residual, np.asarray(guess)[free] / scale, method='hybr', options={'xtol': 1e-13}
+    )
     return compose(solution.x), np.max(np.abs(residual(solution.x)))
 
 
@@ -82,7 +101,10 @@ def _contact_is_consistent(state, c):
     """A valve inside its stroke is free; one at a stop is pushed into it."""
     force_x, force_y = net_forces(state, c)
     slack = 1e-9 * c.back_area * max(state[P_S], 1.0)
-    for position, force, stroke in ((state[X], force_x, c.main_valve_stroke), (state[Y], force_y, c.poppet_stroke)):
+    for position, force, stroke in (
+        (state[X], force_x, c.main_valve_stroke),
+        (state[Y], force_y, c.poppet_stroke),
+    ):
         if position < 0.0 or position > stroke:
             return False
         if position == 0.0 and force > slack or position == stroke and force < -slack:
@@ -95,8 +117,11 @@ def _estimate(inlet_flow, c):
     state = np.zeros(8)
     p_s = c.pilot_spring_stiffness * c.pilot_spring_preload / c.rod_area
     p_m = 0.6 * p_s
-    p_p = (c.supply_force_area * p_s + c.intermediate_force_area * p_m
-           - c.main_spring_stiffness * c.main_spring_preload) / c.back_area
+    p_p = (
+        c.supply_force_area * p_s
+        + c.intermediate_force_area * p_m
+        - c.main_spring_stiffness * c.main_spring_preload
+    ) / c.back_area
     state[[P_S, P_M, P_P, P_C]] = p_s, p_m, min(max(p_p, 0.0), p_s), 0.0
     q_n = flows(state, c)[2]
     p_c = max(state[P_P] - (q_n / c.damping_orifice_gain) ** 2, 0.1 * state[P_P])
@@ -104,21 +129,25 @@ def _estimate(inlet_flow, c):
     q_pilot = min(q_n + c.rod_leakage_conductance * (p_s - p_c), inlet_flow)
     state[Y] = min(q_pilot / (c.poppet_gain * np.sqrt(max(p_c, 1.0))), c.poppet_stroke)
     q_main = inlet_flow - q_pilot
-    state[X] = min(max(q_main, 0.0) / (c.second_throttle_gain * np.sqrt(max(p_m, 1.0))), c.main_valve_stroke)
+    state[X] = min(
+        max(q_main, 0.0) / (c.second_throttle_gain * np.sqrt(max(p_m, 1.0))), c.main_valve_stroke
+    )
     return state
 
 
 def _pseudo_transient(params, inlet_flow, c):
     """State after integrating a fast-settling, damped copy of the model from the empty valve."""
-    fast = c._replace(supply_compliance_inv=params["bulk_modulus"] / PSEUDO_TRANSIENT_SUPPLY_VOLUME,
-                      main_valve_damping=c.main_valve_damping + PSEUDO_TRANSIENT_DAMPING[0],
-                      pilot_poppet_damping=c.pilot_poppet_damping + PSEUDO_TRANSIENT_DAMPING[1])
+    fast = c._replace(
+        supply_compliance_inv=params['bulk_modulus'] / PSEUDO_TRANSIENT_SUPPLY_VOLUME,
+        main_valve_damping=c.main_valve_damping + PSEUDO_TRANSIENT_DAMPING[0],
+        pilot_poppet_damping=c.pilot_poppet_damping + PSEUDO_TRANSIENT_DAMPING[1],
+    )
     state = np.zeros(8)
     steps = int(round(PSEUDO_TRANSIENT_TIME / PSEUDO_TRANSIENT_STEP))
     try:
         advance(state, np.full(steps, float(inlet_flow)), fast, PSEUDO_TRANSIENT_STEP)
     except IntegrationError as error:
-        raise SteadyStateError(f"no steady state at {inlet_flow:g} m^3/s: {error}") from error
+        raise SteadyStateError(f'no steady state at {inlet_flow:g} m^3/s: {error}') from error
     return state
 
 
@@ -141,7 +170,7 @@ def steady_state(params, inlet_flow):
     Raises SteadyStateError when no consistent steady state is found.
     """
     if not np.isfinite(inlet_flow) or inlet_flow < 0.0:
-        raise SteadyStateError(f"inlet flow must be finite and >= 0 m^3/s, got {inlet_flow}")
+        raise SteadyStateError(f'inlet flow must be finite and >= 0 m^3/s, got {inlet_flow}')
     if inlet_flow == 0.0:
         return np.zeros(8)
     c = coefficients(params)
@@ -150,8 +179,9 @@ def steady_state(params, inlet_flow):
         state, error = _solve_from(_pseudo_transient(params, inlet_flow, c), inlet_flow, c)
     if state is None:
         raise SteadyStateError(
-            f"no consistent steady state at inlet flow {inlet_flow:g} m^3/s "
-            f"(smallest relative residual {error:.2e}); check the parameters")
+            f'no consistent steady state at inlet flow {inlet_flow:g} m^3/s '
+            f'(smallest relative residual {error:.2e}); check the parameters'
+        )
     return state
 
 
@@ -177,11 +207,19 @@ def cracking_pressure(params):
     def residual(u):
         return _residuals(compose(u), 0.0, c, 1e-5, c.back_area * pressure_scale)[[2, 3, 4, 5]]
 
-    solution = root(residual, guess[[P_S, P_P, P_C, Y]] / scale, method="hybr", options={"xtol": 1e-13})
+    solution = root(
+        residual, guess[[P_S, P_P, P_C, Y]] / scale, method='hybr', options={'xtol': 1e-13}
+    )
     state = compose(solution.x)
-    if not solution.success or np.max(np.abs(residual(solution.x))) > TOLERANCE or not 0.0 < state[Y] < c.poppet_stroke:
-        raise SteadyStateError("no cracking point found: the pilot stage cannot hold the main valve at its seat "
-                               "with these parameters")
+    if (
+        not solution.success
+        or np.max(np.abs(residual(solution.x))) > TOLERANCE
+        or not 0.0 < state[Y] < c.poppet_stroke
+    ):
+        raise SteadyStateError(
+            'no cracking point found: the pilot stage cannot hold the main valve at its seat '
+            'with these parameters'
+        )
     return float(state[P_S])
 
 
@@ -193,26 +231,27 @@ def preload_for_cracking_pressure(params, pressure):
     secant steps from that estimate converge; raises ParameterError if the preload
     would leave its limits.
     """
-    spec = SPECS["pilot_spring_preload"]
+    spec = SPECS['pilot_spring_preload']
     trial = dict(params)
 
     def error(preload):
-        trial["pilot_spring_preload"] = preload
+        trial['pilot_spring_preload'] = preload
         return cracking_pressure(trial) - pressure
 
-    slope = coefficients(params).rod_area / params["pilot_spring_stiffness"]   # dy_0/dp [m/Pa]
-    y0 = params["pilot_spring_preload"]
+    slope = coefficients(params).rod_area / params['pilot_spring_stiffness']  # dy_0/dp [m/Pa]
+    y0 = params['pilot_spring_preload']
     e0 = error(y0)
     for _ in range(20):
         y1 = y0 - e0 * slope
         if not spec.minimum <= y1 <= spec.maximum:
             raise ParameterError(
-                f"preset pressure {pressure:g} Pa needs pilot_spring_preload (y_0) = {y1:g} m, "
-                f"outside its limits [{spec.minimum:g}, {spec.maximum:g}] m")
+                f'preset pressure {pressure:g} Pa needs pilot_spring_preload (y_0) = {y1:g} m, '
+                f'outside its limits [{spec.minimum:g}, {spec.maximum:g}] m'
+            )
         e1 = error(y1)
         if abs(e1) < 1e-9 * pressure:
-            return validate(trial)["pilot_spring_preload"]
+            return validate(trial)['pilot_spring_preload']
         if e1 != e0:
             slope = (y1 - y0) / (e1 - e0)
         y0, e0 = y1, e1
-    raise SteadyStateError(f"could not find a preload for a cracking pressure of {pressure:g} Pa")
+    raise SteadyStateError(f'could not find a preload for a cracking pressure of {pressure:g} Pa')

@@ -15,47 +15,77 @@ is missing (a recording killed before it was closed) still yields every message 
 its complete chunks; BagReader.problem then says what was missing. A file that is
 not MCAP, or whose records are damaged, raises InputFileError.
 """
+
 import json
 import os
+from pathlib import Path
 import re
 import struct
 import sys
-from pathlib import Path
 
-import yaml
 from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
-
 from valve_sim.core.errors import InputFileError
+import yaml
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-LIBRARY = "valve_sim (mcap-python writer, rosbag2 storage layout)"
-CHUNK_SIZE = 768 * 1024          # [bytes] rosbag2's (libmcap's) default chunk size
-SEPARATOR = "=" * 80
-PRIMITIVE_TYPES = frozenset((
-    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-    "int32", "uint32", "int64", "uint64", "string", "wstring"))
+
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+LIBRARY = 'valve_sim (mcap-python writer, rosbag2 storage layout)'
+CHUNK_SIZE = 768 * 1024  # [bytes] rosbag2's (libmcap's) default chunk size
+SEPARATOR = '=' * 80
+PRIMITIVE_TYPES = frozenset(
+    (
+        'bool',
+        'byte',
+        'char',
+        'float32',
+        'float64',
+        'int8',
+        'uint8',
+        'int16',
+        'uint16',
+        'int32',
+        'uint32',
+        'int64',
+        'uint64',
+        'string',
+        'wstring',
+    )
+)
 # A field's type at the start of a line, as rosbag2 finds nested types in .msg text.
-FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
+FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE [ns]
 # A damaged record, or one cut off by the end of the file.
-READ_ERRORS = (EndOfFile, CRCValidationError, McapError, struct.error, ValueError, UnicodeDecodeError)
+READ_ERRORS = (
+    EndOfFile,
+    CRCValidationError,
+    McapError,
+    struct.error,
+    ValueError,
+    UnicodeDecodeError,
+)
 
 # What DDS discovery reports for a publisher with the default reliable, volatile QoS
 # (history and depth are not part of a DDS offer): what valve_node offers.
 DEFAULT_OFFER = {
-    "history": "unknown", "depth": 0, "reliability": "reliable", "durability": "volatile",
-    "deadline_ns": INFINITE_NS, "lifespan_ns": INFINITE_NS, "liveliness": "automatic",
-    "liveliness_lease_duration_ns": INFINITE_NS, "avoid_ros_namespace_conventions": False,
+    'history': 'unknown',
+    'depth': 0,
+    'reliability': 'reliable',
+    'durability': 'volatile',
+    'deadline_ns': INFINITE_NS,
+    'lifespan_ns': INFINITE_NS,
+    'liveliness': 'automatic',
+    'liveliness_lease_duration_ns': INFINITE_NS,
+    'avoid_ros_namespace_conventions': False,
 }
 
 
 def _split_type(type_name):
     """('pkg', 'Type') of 'pkg/msg/Type' or 'pkg/Type'."""
-    parts = type_name.split("/")
-    if len(parts) == 3 and parts[1] == "msg":
+    parts = type_name.split('/')
+    if len(parts) == 3 and parts[1] == 'msg':
         return parts[0], parts[2]
     if len(parts) == 2:
         return parts[0], parts[1]
@@ -69,12 +99,14 @@ def interface_file(type_name, extension):
     and under this interpreter's prefix (the PyPI wheels).
     """
     package, name = _split_type(type_name)
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p] + [
+        sys.prefix
+    ]
     for prefix in prefixes:
-        path = Path(prefix) / "share" / package / "msg" / f"{name}{extension}"
+        path = Path(prefix) / 'share' / package / 'msg' / f'{name}{extension}'
         if path.is_file():
             return path
-    raise InputFileError(f"no {extension} file for {type_name} under {', '.join(prefixes)}")
+    raise InputFileError(f'no {extension} file for {type_name} under {", ".join(prefixes)}')
 
 
 def message_definition(type_name):
@@ -87,13 +119,18 @@ def message_definition(type_name):
 
     def text_with_dependencies(name):
         package = _split_type(name)[0]
-        text = interface_file(name, ".msg").read_text()
-        dependencies = sorted({found if "/" in found else f"{package}/{found}"
-                               for found in FIELD_TYPE.findall(text) if found not in PRIMITIVE_TYPES})
+        text = interface_file(name, '.msg').read_text()
+        dependencies = sorted(
+            {
+                found if '/' in found else f'{package}/{found}'
+                for found in FIELD_TYPE.findall(text)
+                if found not in PRIMITIVE_TYPES
+            }
+        )
         for dependency in dependencies:
             if dependency not in seen:
                 seen.add(dependency)
-                text += f"\n{SEPARATOR}\nMSG: {dependency}\n" + text_with_dependencies(dependency)
+                text += f'\n{SEPARATOR}\nMSG: {dependency}\n' + text_with_dependencies(dependency)
         return text
 
     return text_with_dependencies(type_name)
@@ -102,11 +139,13 @@ def message_definition(type_name):
 def type_hash(type_name):
     """REP-2011 type hash 'RIHS01_...' of an installed message type, '' if unknown."""
     try:
-        hashes = json.loads(interface_file(type_name, ".json").read_text())["type_hashes"]
+        hashes = json.loads(interface_file(type_name, '.json').read_text())['type_hashes']
     except (InputFileError, KeyError, ValueError):
-        return ""
+        return ''
     package, name = _split_type(type_name)
-    return next((h["hash_string"] for h in hashes if h["type_name"] == f"{package}/msg/{name}"), "")
+    return next(
+        (h['hash_string'] for h in hashes if h['type_name'] == f'{package}/msg/{name}'), ''
+    )
 
 
 def qos_profiles_yaml(offers):
@@ -115,19 +154,27 @@ def qos_profiles_yaml(offers):
     offers: dicts like DEFAULT_OFFER (policies as rmw's lower-case names, durations
     in ns). Returns YAML::Dump's text: a block list, no trailing newline ('[]' if empty).
     """
-    def duration(ns):
-        return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
-    profiles = [{
-        "history": offer["history"], "depth": offer["depth"], "reliability": offer["reliability"],
-        "durability": offer["durability"], "deadline": duration(offer["deadline_ns"]),
-        "lifespan": duration(offer["lifespan_ns"]), "liveliness": offer["liveliness"],
-        "liveliness_lease_duration": duration(offer["liveliness_lease_duration_ns"]),
-        "avoid_ros_namespace_conventions": offer["avoid_ros_namespace_conventions"],
-    } for offer in offers]
+    def duration(ns):
+        return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+
+    profiles = [
+        {
+            'history': offer['history'],
+            'depth': offer['depth'],
+            'reliability': offer['reliability'],
+            'durability': offer['durability'],
+            'deadline': duration(offer['deadline_ns']),
+            'lifespan': duration(offer['lifespan_ns']),
+            'liveliness': offer['liveliness'],
+            'liveliness_lease_duration': duration(offer['liveliness_lease_duration_ns']),
+            'avoid_ros_namespace_conventions': offer['avoid_ros_namespace_conventions'],
+        }
+        for offer in offers
+    ]
     if not profiles:
-        return "[]"
-    return yaml.safe_dump(profiles, sort_keys=False, default_flow_style=False).rstrip("\n")
+        return '[]'
+    return yaml.safe_dump(profiles, sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
 class BagWriter:
@@ -136,25 +183,31 @@ class BagWriter:
     def __init__(self, path, chunk_size=CHUNK_SIZE):
         self.path = Path(path)
         try:
-            self._file = open(self.path, "wb")
+            self._file = open(self.path, 'wb')
         except OSError as error:
-            raise InputFileError(f"cannot write {self.path}: {error.strerror}") from error
+            raise InputFileError(f'cannot write {self.path}: {error.strerror}') from error
         self._mcap = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.NONE)
-        self._mcap.start(profile="ros2", library=LIBRARY)
+        self._mcap.start(profile='ros2', library=LIBRARY)
         self._schemas = {}
-        self._encoders = {}           # type name -> CDR encoder (write_message)
-        self._channel_types = {}      # channel id -> type name
-        self.channels = {}            # topic -> channel id
+        self._encoders = {}  # type name -> CDR encoder (write_message)
+        self._channel_types = {}  # channel id -> type name
+        self.channels = {}  # topic -> channel id
         self.message_count = 0
-        self.bytes_written = 0        # [bytes] message payloads
+        self.bytes_written = 0  # [bytes] message payloads
 
     def add_topic(self, topic, type_name, offers=(DEFAULT_OFFER,)):
         """Register a topic of type 'pkg/msg/Type' with its publishers' offered QoS; returns its channel id."""
         if type_name not in self._schemas:
             self._schemas[type_name] = self._mcap.register_schema(
-                type_name, "ros2msg", message_definition(type_name).encode())
-        metadata = {"offered_qos_profiles": qos_profiles_yaml(offers), "topic_type_hash": type_hash(type_name)}
-        self.channels[topic] = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], metadata)
+                type_name, 'ros2msg', message_definition(type_name).encode()
+            )
+        metadata = {
+            'offered_qos_profiles': qos_profiles_yaml(offers),
+            'topic_type_hash': type_hash(type_name),
+        }
+        self.channels[topic] = self._mcap.register_channel(
+            topic, 'cdr', self._schemas[type_name], metadata
+        )
         self._channel_types[self.channels[topic]] = type_name
         return self.channels[topic]
 
@@ -176,7 +229,9 @@ class BagWriter:
         if type_name not in self._encoders:
             from mcap_ros2._dynamic import serialize_dynamic
 
-            self._encoders[type_name] = serialize_dynamic(type_name, message_definition(type_name))[type_name]
+            self._encoders[type_name] = serialize_dynamic(
+                type_name, message_definition(type_name)
+            )[type_name]
         self.write(channel_id, self._encoders[type_name](message), log_time, publish_time)
 
     def flush(self):
@@ -200,28 +255,32 @@ class BagReader:
     def __init__(self, path):
         self.path = Path(path)
         self.problem = None
-        self.channels = {}            # id -> Channel
-        self.schemas = {}             # id -> Schema
+        self.channels = {}  # id -> Channel
+        self.schemas = {}  # id -> Schema
         if self.path.is_dir():
-            raise InputFileError(f"{self.path} is a directory; give the .mcap file in it")
+            raise InputFileError(f'{self.path} is a directory; give the .mcap file in it')
         try:
-            with open(self.path, "rb") as file:
+            with open(self.path, 'rb') as file:
                 magic = file.read(len(MCAP_MAGIC))
         except OSError as error:
-            raise InputFileError(f"cannot read {self.path}: {error.strerror}") from error
+            raise InputFileError(f'cannot read {self.path}: {error.strerror}') from error
         if magic != MCAP_MAGIC:
-            raise InputFileError(f"{self.path} is not an MCAP file" + (" (it is empty)" if not magic else ""))
+            raise InputFileError(
+                f'{self.path} is not an MCAP file' + (' (it is empty)' if not magic else '')
+            )
 
     def messages(self, topics=None):
         """Yield (channel, schema, message) for every message (of the given topics, if any)."""
         size = self.path.stat().st_size
-        with open(self.path, "rb") as file:
+        with open(self.path, 'rb') as file:
             try:
                 for record in StreamReader(file, validate_crcs=True).records:
                     if isinstance(record, Message):
                         channel = self.channels.get(record.channel_id)
                         if channel is None:
-                            raise McapError(f"a message refers to channel {record.channel_id}, never defined")
+                            raise McapError(
+                                f'a message refers to channel {record.channel_id}, never defined'
+                            )
                         if topics is None or channel.topic in topics:
                             yield channel, self.schemas.get(channel.schema_id), record
                     elif isinstance(record, Channel):
@@ -230,7 +289,11 @@ class BagReader:
                         self.schemas[record.id] = record
             except READ_ERRORS as error:
                 if file.tell() < size:
-                    raise InputFileError(f"{self.path} is damaged before byte {file.tell()}: "
-                                         f"{error or type(error).__name__}") from error
-                self.problem = (f"{self.path} ends before its footer (a recording that was not closed, "
-                                f"{size} bytes): read what its complete chunks hold")
+                    raise InputFileError(
+                        f'{self.path} is damaged before byte {file.tell()}: '
+                        f'{error or type(error).__name__}'
+                    ) from error
+                self.problem = (
+                    f'{self.path} ends before its footer (a recording that was not closed, '
+                    f'{size} bytes): read what its complete chunks hold'
+                )

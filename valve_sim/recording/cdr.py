@@ -11,11 +11,13 @@ every primitive aligned to its size, counted from the end of the 4-byte
 encapsulation header; strings as uint32 length (with the NUL) + bytes + NUL;
 sequences as uint32 count + elements.
 """
+
 import struct
 
-ENCAPSULATION = b"\x00\x01\x00\x00"   # CDR little endian, no options
-STAMP = struct.Struct("<iI")          # builtin_interfaces/Time: sec, nanosec
-STAMP_OFFSET = len(ENCAPSULATION)     # every message here begins with std_msgs/Header
+
+ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR little endian, no options
+STAMP = struct.Struct('<iI')  # builtin_interfaces/Time: sec, nanosec
+STAMP_OFFSET = len(ENCAPSULATION)  # every message here begins with std_msgs/Header
 
 
 class CdrMessage:
@@ -27,42 +29,42 @@ class CdrMessage:
     def __init__(self, frame_id):
         """Start with a std_msgs/Header: stamp 0, frame_id (a str)."""
         self._data = bytearray(ENCAPSULATION)
-        self._add("iI", 0, 0)
+        self._add('iI', 0, 0)
         self.string(frame_id)
 
     def _add(self, codes, *values):
         """Append values packed as struct codes (all of one size), aligned to that size."""
-        size = struct.calcsize("<" + codes[-1])
+        size = struct.calcsize('<' + codes[-1])
         self._data += bytes(-(len(self._data) - len(ENCAPSULATION)) % size)
         offset = len(self._data)
-        self._data += struct.pack("<" + codes, *values)
+        self._data += struct.pack('<' + codes, *values)
         return offset
 
     def string(self, text):
-        encoded = text.encode() + b"\0"
-        offset = self._add("I", len(encoded))
+        encoded = text.encode() + b'\0'
+        offset = self._add('I', len(encoded))
         self._data += encoded
         return offset
 
     def strings(self, texts):
-        offset = self._add("I", len(texts))
+        offset = self._add('I', len(texts))
         for text in texts:
             self.string(text)
         return offset
 
     def float64(self, value=0.0):
-        return self._add("d", value)
+        return self._add('d', value)
 
     def float64s(self, count):
         """A sequence of count float64 (zeros); returns the offset of the first element."""
-        self._add("I", count)
-        return self._add(f"{count}d", *[0.0] * count) if count else len(self._data)
+        self._add('I', count)
+        return self._add(f'{count}d', *[0.0] * count) if count else len(self._data)
 
     def set_stamp(self, sec, nanosec):
         STAMP.pack_into(self._data, STAMP_OFFSET, sec, nanosec)
 
     def set_float64s(self, offset, *values):
-        struct.pack_into(f"<{len(values)}d", self._data, offset, *values)
+        struct.pack_into(f'<{len(values)}d', self._data, offset, *values)
 
     def bytes(self):
         """The message as bytes (what rclpy's Publisher.publish and the bag writer take)."""

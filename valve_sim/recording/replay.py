@@ -8,12 +8,20 @@ its queue is full, so the depth must cover the longest stall of the machine (a
 loaded 2-core machine stalls for a few hundred ms at times). wait_for_subscribers()
 before publish() makes sure that nothing published is lost to discovery.
 """
+
 import time
 
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
-from valve_sim.recording.valve_topics import NS_PER_S, TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
+from valve_sim.recording.valve_topics import (
+    message_class,
+    NS_PER_S,
+    TICK_TOPICS,
+    TickMessages,
+    TOPIC_TYPES,
+)
 
-QUEUE_DEPTH = 1000   # [messages] 1 s at 1 kHz
+
+QUEUE_DEPTH = 1000  # [messages] 1 s at 1 kHz
 
 
 class Replay:
@@ -21,8 +29,10 @@ class Replay:
 
     def __init__(self, node, ambient_pressure=STANDARD_ATMOSPHERE):
         self.node, self.ambient_pressure = node, ambient_pressure
-        self.publishers = {topic: node.create_publisher(message_class(TOPIC_TYPES[topic]), topic, QUEUE_DEPTH)
-                           for topic in TICK_TOPICS}
+        self.publishers = {
+            topic: node.create_publisher(message_class(TOPIC_TYPES[topic]), topic, QUEUE_DEPTH)
+            for topic in TICK_TOPICS
+        }
         self.published = dict.fromkeys(TICK_TOPICS, 0)
 
     def wait_for_subscribers(self, count=1, timeout=60.0):
@@ -30,7 +40,9 @@ class Replay:
         deadline = time.monotonic() + timeout
         while any(p.get_subscription_count() < count for p in self.publishers.values()):
             if time.monotonic() > deadline:
-                raise TimeoutError(f"not {count} subscriber(s) for every valve topic within {timeout:g} s")
+                raise TimeoutError(
+                    f'not {count} subscriber(s) for every valve topic within {timeout:g} s'
+                )
             time.sleep(0.01)
 
     def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
@@ -42,7 +54,11 @@ class Replay:
             if delay > 0.0:
                 time.sleep(delay)
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
-            for topic, data in messages.fill(time_ns, waveforms.states[index], waveforms.inlet_flow[index],
-                                             self.ambient_pressure):
+            for topic, data in messages.fill(
+                time_ns,
+                waveforms.states[index],
+                waveforms.inlet_flow[index],
+                self.ambient_pressure,
+            ):
                 self.publishers[topic].publish(data)
                 self.published[topic] += 1

@@ -8,31 +8,32 @@ in absolute Pa (model gauge pressure + ambient_pressure), joint_states
 the stamp), all stamped with the model time. The inlet_flow command is
 std_msgs/msg/Float64 [m^3/s].
 """
+
 import importlib
 
 from std_msgs.msg import Float64
-
+from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
+from valve_sim.core.parameters import ParameterError, STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.cdr import CdrMessage
-from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
-from valve_sim.core.parameters import STANDARD_ATMOSPHERE, ParameterError
 
-PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
-TICK_TOPICS = PRESSURE_TOPICS + ("joint_states", "applied_inlet_flow")
-JOINT_NAMES = ("main_valve", "pilot_poppet")   # joint_states: x and y
+
+PRESSURE_TOPICS = STATE_NAMES[P_S : P_C + 1]
+TICK_TOPICS = PRESSURE_TOPICS + ('joint_states', 'applied_inlet_flow')
+JOINT_NAMES = ('main_valve', 'pilot_poppet')  # joint_states: x and y
 TOPIC_TYPES = {
-    **{name: "sensor_msgs/msg/FluidPressure" for name in PRESSURE_TOPICS},
-    "joint_states": "sensor_msgs/msg/JointState",
-    "applied_inlet_flow": "sensor_msgs/msg/JointState",
-    "inlet_flow": "std_msgs/msg/Float64",
+    **{name: 'sensor_msgs/msg/FluidPressure' for name in PRESSURE_TOPICS},
+    'joint_states': 'sensor_msgs/msg/JointState',
+    'applied_inlet_flow': 'sensor_msgs/msg/JointState',
+    'inlet_flow': 'std_msgs/msg/Float64',
 }
 NS_PER_S = 1_000_000_000
 
 
 def message_class(type_name):
     """The Python class of a message type 'pkg/msg/Type'."""
-    package, namespace, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{package}.{namespace}"), name)
+    package, namespace, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{package}.{namespace}'), name)
 
 
 class TickMessages:
@@ -47,26 +48,28 @@ class TickMessages:
     def __init__(self):
         self._messages = []
         self._pressure_offsets = []
-        for name in PRESSURE_TOPICS:                          # sensor_msgs/FluidPressure
+        for name in PRESSURE_TOPICS:  # sensor_msgs/FluidPressure
             message = CdrMessage(frame_id=name)
             self._pressure_offsets.append(message.float64())  # fluid_pressure
-            message.float64()                                 # variance: 0, unknown
+            message.float64()  # variance: 0, unknown
             self._messages.append((name, message))
-        self._joints = CdrMessage(frame_id="joint_states")    # sensor_msgs/JointState
+        self._joints = CdrMessage(frame_id='joint_states')  # sensor_msgs/JointState
         self._joints.strings(JOINT_NAMES)
         self._joint_positions = self._joints.float64s(len(JOINT_NAMES))
         self._joint_velocities = self._joints.float64s(len(JOINT_NAMES))
-        self._joints.float64s(0)                              # effort
-        self._applied = CdrMessage(frame_id="applied_inlet_flow")
-        self._applied.strings(["inlet_flow"])
-        self._applied.float64s(0)                             # position
+        self._joints.float64s(0)  # effort
+        self._applied = CdrMessage(frame_id='applied_inlet_flow')
+        self._applied.strings(['inlet_flow'])
+        self._applied.float64s(0)  # position
         self._applied_velocity = self._applied.float64s(1)
-        self._applied.float64s(0)                             # effort
-        self._messages += [("joint_states", self._joints), ("applied_inlet_flow", self._applied)]
+        self._applied.float64s(0)  # effort
+        self._messages += [('joint_states', self._joints), ('applied_inlet_flow', self._applied)]
 
     def fill(self, time_ns, state, applied_flow, ambient_pressure):
         """The tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
-        for (_, message), offset, pressure in zip(self._messages, self._pressure_offsets, state[P_S:P_C + 1]):
+        for (_, message), offset, pressure in zip(
+            self._messages, self._pressure_offsets, state[P_S : P_C + 1]
+        ):
             message.set_float64s(offset, pressure + ambient_pressure)
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
         self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
@@ -79,7 +82,9 @@ class TickMessages:
         return tick
 
 
-def write_simulation_bag(path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0):
+def write_simulation_bag(
+    path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0
+):
     """Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
 
     waveforms: simulation.Waveforms; every sample publish_interval [s] apart (a
@@ -92,24 +97,30 @@ def write_simulation_bag(path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, 
     record_interval = waveforms.time[1] - waveforms.time[0]
     every = round(publish_interval / record_interval)
     if every < 1 or abs(every * record_interval - publish_interval) > 1e-9 * publish_interval:
-        raise ParameterError(f"publish interval {publish_interval:g} s is not a whole multiple of the "
-                             f"waveforms' sample interval {record_interval:g} s")
+        raise ParameterError(
+            f'publish interval {publish_interval:g} s is not a whole multiple of the '
+            f"waveforms' sample interval {record_interval:g} s"
+        )
     bag = BagWriter(path)
     tick = TickMessages()
     try:
         for topic, type_name in TOPIC_TYPES.items():
-            bag.add_topic("/" + topic, type_name)
+            bag.add_topic('/' + topic, type_name)
         indices = range(0, len(waveforms.time), every)
         commanded = None
         for previous, index in zip([None, *indices], indices):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
             flow = float(waveforms.inlet_flow[index])
             if flow != commanded:
-                command_ns = time_ns if previous is None else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
-                bag.write_message("/inlet_flow", Float64(data=flow), command_ns, command_ns)
+                command_ns = (
+                    time_ns
+                    if previous is None
+                    else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
+                )
+                bag.write_message('/inlet_flow', Float64(data=flow), command_ns, command_ns)
                 commanded = flow
             for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
-                bag.write(bag.channels["/" + topic], data, time_ns, time_ns)
+                bag.write(bag.channels['/' + topic], data, time_ns, time_ns)
         return len(indices)
     finally:
         bag.close()

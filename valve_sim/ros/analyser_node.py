@@ -28,51 +28,99 @@ operating system, so a hard kill loses at most that much. SIGINT and SIGTERM
 end the spin; the node then takes what is still queued, measures (and
 publishes) the open steps on what it has, and closes the file.
 """
-import sys
-import time
+
 from dataclasses import dataclass
 from pathlib import Path
+import sys
+import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+import rclpy
 from rclpy.callback_groups import CallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-
-from valve_sim.ros import spinning
-from valve_sim.recording.bag import BagWriter
-from valve_sim.core.errors import InputFileError
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.core.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE, ParameterError, ParameterSpec
-from valve_sim.ros.ros_parameters import declare_double
-from valve_sim.analysis.signals import REQUIRED, ROLE, Extractor, Joiner, SignalMap
+from valve_sim.analysis.signals import Extractor, Joiner, REQUIRED, ROLE, SignalMap
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
-from valve_sim.recording.valve_topics import message_class
-
-NODE_NAME = "valve_analyser"
-DEFAULT_TOPICS = ["inlet_flow", "applied_inlet_flow", "supply_pressure", "intermediate_pressure", "pilot_pressure",
-                  "poppet_chamber_pressure", "joint_states", "/diagnostics"]
-MEASURES_STATUS = "valve_analyser: step measures"
-RECORDING_STATUS = "valve_analyser: recording"
-MEASURES_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-DISCOVERY_PERIOD = 0.1   # [s] how often topics not yet seen are looked for (as rosbag2 does)
-SOURCE = "valve_sim analyser_node"
-DOUBLE_PARAMETERS = (
-    ParameterSpec("step_threshold", "dq_step", "m^3/s", 0.0, 1.0,
-                  "smallest change of the applied inlet flow taken as a step", SOURCE),
-    ParameterSpec("step_merge_time", "t_merge", "s", 0.0, 10.0,
-                  "changes this soon after a step belong to it (a ramp, a noisy edge)", SOURCE),
-    ParameterSpec("drain_period", "t_drain", "s", 1e-3, 0.1,
-                  "period of taking the queued messages, writing and analysing them", SOURCE),
-    ParameterSpec("flush_interval", "t_flush", "s", 0.05, 60.0,
-                  "longest time recorded data waits before its chunk is handed to the operating system", SOURCE),
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import (
+    ParameterError,
+    ParameterSpec,
+    SETTING_SPECS,
+    STANDARD_ATMOSPHERE,
 )
-DOUBLE_DEFAULTS = {"step_threshold": 1e-6, "step_merge_time": 0.05, "drain_period": 0.005, "flush_interval": 1.0}
+from valve_sim.recording.bag import BagWriter
+from valve_sim.recording.valve_topics import message_class
+from valve_sim.ros import spinning
+from valve_sim.ros.ros_parameters import declare_double
+
+
+NODE_NAME = 'valve_analyser'
+DEFAULT_TOPICS = [
+    'inlet_flow',
+    'applied_inlet_flow',
+    'supply_pressure',
+    'intermediate_pressure',
+    'pilot_pressure',
+    'poppet_chamber_pressure',
+    'joint_states',
+    '/diagnostics',
+]
+MEASURES_STATUS = 'valve_analyser: step measures'
+RECORDING_STATUS = 'valve_analyser: recording'
+MEASURES_QOS = QoSProfile(
+    depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
+SOURCE = 'valve_sim analyser_node'
+DOUBLE_PARAMETERS = (
+    ParameterSpec(
+        'step_threshold',
+        'dq_step',
+        'm^3/s',
+        0.0,
+        1.0,
+        'smallest change of the applied inlet flow taken as a step',
+        SOURCE,
+    ),
+    ParameterSpec(
+        'step_merge_time',
+        't_merge',
+        's',
+        0.0,
+        10.0,
+        'changes this soon after a step belong to it (a ramp, a noisy edge)',
+        SOURCE,
+    ),
+    ParameterSpec(
+        'drain_period',
+        't_drain',
+        's',
+        1e-3,
+        0.1,
+        'period of taking the queued messages, writing and analysing them',
+        SOURCE,
+    ),
+    ParameterSpec(
+        'flush_interval',
+        't_flush',
+        's',
+        0.05,
+        60.0,
+        'longest time recorded data waits before its chunk is handed to the operating system',
+        SOURCE,
+    ),
+)
+DOUBLE_DEFAULTS = {
+    'step_threshold': 1e-6,
+    'step_merge_time': 0.05,
+    'drain_period': 0.005,
+    'flush_interval': 1.0,
+}
 
 
 class RecorderGroup(CallbackGroup):
@@ -97,45 +145,67 @@ class RecordedTopic:
     extractor: Extractor = None
     channel: int = None
     count: int = 0
-    single_publisher: bool = False   # then gaps in the publication sequence numbers are lost messages
+    single_publisher: bool = (
+        False  # then gaps in the publication sequence numbers are lost messages
+    )
     last_sequence: int = None
     lost: int = 0
 
 
 def qos_offer(qos):
     """An rclpy QoSProfile as the offer dict of valve_sim.recording.bag.qos_profiles_yaml()."""
-    return {"history": qos.history.name.lower(), "depth": qos.depth, "reliability": qos.reliability.name.lower(),
-            "durability": qos.durability.name.lower(), "deadline_ns": qos.deadline.nanoseconds,
-            "lifespan_ns": qos.lifespan.nanoseconds, "liveliness": qos.liveliness.name.lower(),
-            "liveliness_lease_duration_ns": qos.liveliness_lease_duration.nanoseconds,
-            "avoid_ros_namespace_conventions": qos.avoid_ros_namespace_conventions}
+    return {
+        'history': qos.history.name.lower(),
+        'depth': qos.depth,
+        'reliability': qos.reliability.name.lower(),
+        'durability': qos.durability.name.lower(),
+        'deadline_ns': qos.deadline.nanoseconds,
+        'lifespan_ns': qos.lifespan.nanoseconds,
+        'liveliness': qos.liveliness.name.lower(),
+        'liveliness_lease_duration_ns': qos.liveliness_lease_duration.nanoseconds,
+        'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions,
+    }
 
 
 def measures_message(record, hardware_id):
     """The step_measures DiagnosticArray of a step record (valve_sim.analysis.step_analysis)."""
-    def number(value):
-        return "none" if value is None else repr(float(value))
 
-    values = {"t_step_s": number(record["t_step"]), "direction": str(record["direction"]),
-              "flow_before_m3_s": number(record["flow_before"]), "window_s": number(record["details"].get("window_s"))}
+    def number(value):
+        return 'none' if value is None else repr(float(value))
+
+    values = {
+        't_step_s': number(record['t_step']),
+        'direction': str(record['direction']),
+        'flow_before_m3_s': number(record['flow_before']),
+        'window_s': number(record['details'].get('window_s')),
+    }
     values.update({name: number(record[name]) for name in MEASURE_NAMES})
-    values.update({f"{name}_reason": reason for name, reason in record["reasons"].items()})
-    if "note" in record["details"]:
-        values["note"] = record["details"]["note"]
-    summary = ", ".join(f"{name} = {record[name]:.4g}" for name in MEASURE_NAMES if record[name] is not None)
+    values.update({f'{name}_reason': reason for name, reason in record['reasons'].items()})
+    if 'note' in record['details']:
+        values['note'] = record['details']['note']
+    summary = ', '.join(
+        f'{name} = {record[name]:.4g}' for name in MEASURE_NAMES if record[name] is not None
+    )
     status = DiagnosticStatus(
-        level=DiagnosticStatus.WARN if record["reasons"] else DiagnosticStatus.OK, name=MEASURES_STATUS,
-        hardware_id=hardware_id, message=f"step {'up' if record['direction'] > 0 else 'down'}: {summary}",
-        values=[KeyValue(key=key, value=value) for key, value in values.items()])
+        level=DiagnosticStatus.WARN if record['reasons'] else DiagnosticStatus.OK,
+        name=MEASURES_STATUS,
+        hardware_id=hardware_id,
+        message=f'step {"up" if record["direction"] > 0 else "down"}: {summary}',
+        values=[KeyValue(key=key, value=value) for key, value in values.items()],
+    )
     array = DiagnosticArray(status=[status])
-    array.header.stamp.sec, array.header.stamp.nanosec = divmod(round(record["t_step"] * 1e9), 1_000_000_000)
+    array.header.stamp.sec, array.header.stamp.nanosec = divmod(
+        round(record['t_step'] * 1e9), 1_000_000_000
+    )
     return array
 
 
 def measures_from_message(array):
     """{measure name: float or None} of a step_measures DiagnosticArray."""
     values = {pair.key: pair.value for pair in array.status[0].values}
-    return {name: None if values[name] == "none" else float(values[name]) for name in MEASURE_NAMES}
+    return {
+        name: None if values[name] == 'none' else float(values[name]) for name in MEASURE_NAMES
+    }
 
 
 class ValveAnalyser(Node):
@@ -145,49 +215,78 @@ class ValveAnalyser(Node):
         super().__init__(NODE_NAME, **kwargs)
         settings = self._declare_parameters()
         self.signal_map = SignalMap(
-            topics={role: self.resolve_topic_name(settings[f"{role}_topic"]) for role in REQUIRED},
-            joints={role: settings[f"{role}_joint"] for role in REQUIRED if ROLE[role].joint},
-            ambient_pressure=settings["ambient_pressure"])
-        self.wanted = dict.fromkeys([self.resolve_topic_name(t) for t in settings["topics"]]
-                                    + list(self.signal_map.topics.values()))
-        self.bag = BagWriter(self._new_bag_path(Path(settings["output_dir"])))
-        self.measures = MeasuresFile(self.bag.path.with_suffix(".measures.json"), self.bag.path.name)
+            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in REQUIRED},
+            joints={role: settings[f'{role}_joint'] for role in REQUIRED if ROLE[role].joint},
+            ambient_pressure=settings['ambient_pressure'],
+        )
+        self.wanted = dict.fromkeys(
+            [self.resolve_topic_name(t) for t in settings['topics']]
+            + list(self.signal_map.topics.values())
+        )
+        self.bag = BagWriter(self._new_bag_path(Path(settings['output_dir'])))
+        self.measures = MeasuresFile(
+            self.bag.path.with_suffix('.measures.json'), self.bag.path.name
+        )
         self.joiner = Joiner()
-        self.analysis = StepAnalysis(settings["step_threshold"], settings["step_merge_time"])
-        self.flush_interval = settings["flush_interval"]
+        self.analysis = StepAnalysis(settings['step_threshold'], settings['step_merge_time'])
+        self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
         self.recorded = {}
-        self.queue = QoSProfile(depth=settings["queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        self.queue = QoSProfile(
+            depth=settings['queue_depth'], reliability=ReliabilityPolicy.RELIABLE
+        )
         self.recorder_group = RecorderGroup()
-        self.measures_publisher = self.create_publisher(DiagnosticArray, "step_measures", MEASURES_QOS)
-        self.status_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.measures_publisher = self.create_publisher(
+            DiagnosticArray, 'step_measures', MEASURES_QOS
+        )
+        self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_timer(DISCOVERY_PERIOD, self._discover)
-        self.create_timer(settings["drain_period"], self.drain)
+        self.create_timer(settings['drain_period'], self.drain)
         self.create_timer(1.0, self._publish_status)
-        self.get_logger().info(f"recording {', '.join(self.wanted)} to {self.bag.path}")
+        self.get_logger().info(f'recording {", ".join(self.wanted)} to {self.bag.path}')
 
     def _declare_parameters(self):
         """Declare the parameters (all read-only: restart to change); returns {name: value}."""
+
         def declare(name, default, description, **constraints):
-            descriptor = ParameterDescriptor(name=name, description=description, read_only=True, **constraints)
+            descriptor = ParameterDescriptor(
+                name=name, description=description, read_only=True, **constraints
+            )
             return self.declare_parameter(name, default, descriptor).value
 
         settings = {
-            "topics": declare("topics", DEFAULT_TOPICS, "topics to record (relative names resolve in the "
-                              "node's namespace); the analysed topics are always recorded"),
-            "output_dir": declare("output_dir", ".", "folder of the recordings (created if missing)"),
-            "queue_depth": declare("queue_depth", 1000, "reliable subscription queue per topic [messages]",
-                                   integer_range=[IntegerRange(from_value=10, to_value=1_000_000, step=1)]),
-            "ambient_pressure": declare_double(self, SETTING_SPECS["ambient_pressure"], STANDARD_ATMOSPHERE, read_only=True),
+            'topics': declare(
+                'topics',
+                DEFAULT_TOPICS,
+                'topics to record (relative names resolve in the '
+                "node's namespace); the analysed topics are always recorded",
+            ),
+            'output_dir': declare(
+                'output_dir', '.', 'folder of the recordings (created if missing)'
+            ),
+            'queue_depth': declare(
+                'queue_depth',
+                1000,
+                'reliable subscription queue per topic [messages]',
+                integer_range=[IntegerRange(from_value=10, to_value=1_000_000, step=1)],
+            ),
+            'ambient_pressure': declare_double(
+                self, SETTING_SPECS['ambient_pressure'], STANDARD_ATMOSPHERE, read_only=True
+            ),
         }
         for spec in DOUBLE_PARAMETERS:
-            settings[spec.name] = declare_double(self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True)
+            settings[spec.name] = declare_double(
+                self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True
+            )
         for name in REQUIRED:
             role = ROLE[name]
-            settings[f"{name}_topic"] = declare(f"{name}_topic", role.topic, f"topic of the {role.meaning}")
+            settings[f'{name}_topic'] = declare(
+                f'{name}_topic', role.topic, f'topic of the {role.meaning}'
+            )
             if role.joint:
-                settings[f"{name}_joint"] = declare(f"{name}_joint", role.joint,
-                                                    f"JointState joint of the {role.meaning}")
+                settings[f'{name}_joint'] = declare(
+                    f'{name}_joint', role.joint, f'JointState joint of the {role.meaning}'
+                )
         return settings
 
     @staticmethod
@@ -196,12 +295,14 @@ class ValveAnalyser(Node):
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
-            raise InputFileError(f"output_dir {folder} cannot be created: {error.strerror}") from error
-        stem = time.strftime("valve_%Y%m%d-%H%M%S")
-        path, k = folder / f"{stem}.mcap", 1
+            raise InputFileError(
+                f'output_dir {folder} cannot be created: {error.strerror}'
+            ) from error
+        stem = time.strftime('valve_%Y%m%d-%H%M%S')
+        path, k = folder / f'{stem}.mcap', 1
         while path.exists():
             k += 1
-            path = folder / f"{stem}_{k}.mcap"
+            path = folder / f'{stem}_{k}.mcap'
         return path
 
     def _discover(self):
@@ -212,13 +313,23 @@ class ValveAnalyser(Node):
             try:
                 message_type = message_class(type_name)
             except (ImportError, AttributeError, ValueError) as error:
-                self.get_logger().error(f"cannot record {topic}: no message type {type_name} ({error})")
+                self.get_logger().error(
+                    f'cannot record {topic}: no message type {type_name} ({error})'
+                )
                 self.wanted.pop(topic)
                 continue
             self.recorded[topic] = RecordedTopic(
-                self.create_subscription(message_type, topic, lambda _: None, self.queue,
-                                         callback_group=self.recorder_group, raw=True),
-                type_name, self._extractor(topic, type_name))
+                self.create_subscription(
+                    message_type,
+                    topic,
+                    lambda _: None,
+                    self.queue,
+                    callback_group=self.recorder_group,
+                    raw=True,
+                ),
+                type_name,
+                self._extractor(topic, type_name),
+            )
         for topic, recorded in self.recorded.items():
             recorded.single_publisher = self.count_publishers(topic) == 1
 
@@ -228,7 +339,7 @@ class ValveAnalyser(Node):
         try:
             return Extractor(topic, type_name, roles, self.signal_map) if roles else None
         except InputFileError as error:
-            self.get_logger().error(f"{error}: {topic} is recorded but not analysed")
+            self.get_logger().error(f'{error}: {topic} is recorded but not analysed')
             return None
 
     def drain(self):
@@ -236,7 +347,9 @@ class ValveAnalyser(Node):
         for topic, recorded in self.recorded.items():
             subscription = recorded.subscription
             with subscription.handle:
-                while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+                while (
+                    taken := subscription.handle.take_message(subscription.msg_type, True)
+                ) is not None:
                     self._record(topic, recorded, *taken)
         if time.monotonic() - self.last_flush >= self.flush_interval:
             self.bag.flush()
@@ -244,26 +357,39 @@ class ValveAnalyser(Node):
 
     def _record(self, topic, recorded, data, info):
         if recorded.channel is None:
-            offers = [qos_offer(endpoint.qos_profile) for endpoint in self.get_publishers_info_by_topic(topic)]
+            offers = [
+                qos_offer(endpoint.qos_profile)
+                for endpoint in self.get_publishers_info_by_topic(topic)
+            ]
             recorded.channel = self.bag.add_topic(topic, recorded.type_name, offers)
-        self.bag.write(recorded.channel, data, info["received_timestamp"], info["source_timestamp"])
+        self.bag.write(
+            recorded.channel, data, info['received_timestamp'], info['source_timestamp']
+        )
         recorded.count += 1
-        sequence = info["publication_sequence_number"]
-        if recorded.single_publisher and recorded.last_sequence is not None and sequence > recorded.last_sequence + 1:
+        sequence = info['publication_sequence_number']
+        if (
+            recorded.single_publisher
+            and recorded.last_sequence is not None
+            and sequence > recorded.last_sequence + 1
+        ):
             recorded.lost += sequence - recorded.last_sequence - 1
             self._warn_lost(topic, recorded.lost)
         recorded.last_sequence = sequence
         if recorded.extractor:
             message = deserialize_message(data, recorded.subscription.msg_type)
-            for role, time_ns, value in recorded.extractor.samples(message, info["received_timestamp"]):
+            for role, time_ns, value in recorded.extractor.samples(
+                message, info['received_timestamp']
+            ):
                 self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
 
     def _warn_lost(self, topic, lost):
         """Log lost messages at most once a second (rclpy's own throttling inspects the stack: too slow here)."""
         if time.monotonic() - self.last_loss_warning >= 1.0:
             self.last_loss_warning = time.monotonic()
-            self.get_logger().warn(f"{topic}: {lost} message(s) lost so far before reaching the analyser "
-                                   "(gaps in the publication sequence numbers)")
+            self.get_logger().warn(
+                f'{topic}: {lost} message(s) lost so far before reaching the analyser '
+                '(gaps in the publication sequence numbers)'
+            )
 
     def _measured(self, records):
         """Append step records to the JSON file and publish them."""
@@ -275,20 +401,33 @@ class ValveAnalyser(Node):
 
     def _publish_status(self):
         """The recording status on /diagnostics: WARN while a topic has no message or when some were lost."""
-        counts = {topic: (self.recorded[topic].count if topic in self.recorded else 0) for topic in self.wanted}
+        counts = {
+            topic: (self.recorded[topic].count if topic in self.recorded else 0)
+            for topic in self.wanted
+        }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
         waiting = [topic for topic, count in counts.items() if count == 0]
-        values = {"file": str(self.bag.path), "messages": str(self.bag.message_count),
-                  "steps measured": str(self.measures.count),
-                  **{f"messages {topic}": str(count) for topic, count in counts.items()},
-                  **{f"lost {topic}": str(count) for topic, count in lost.items()}}
-        message = (f"no messages yet on {', '.join(waiting)}" if waiting else
-                   f"{sum(lost.values())} message(s) lost before reaching the analyser" if lost else
-                   f"recording to {self.bag.path.name}")
+        values = {
+            'file': str(self.bag.path),
+            'messages': str(self.bag.message_count),
+            'steps measured': str(self.measures.count),
+            **{f'messages {topic}': str(count) for topic, count in counts.items()},
+            **{f'lost {topic}': str(count) for topic, count in lost.items()},
+        }
+        message = (
+            f'no messages yet on {", ".join(waiting)}'
+            if waiting
+            else f'{sum(lost.values())} message(s) lost before reaching the analyser'
+            if lost
+            else f'recording to {self.bag.path.name}'
+        )
         status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if waiting or lost else DiagnosticStatus.OK, name=RECORDING_STATUS,
-            hardware_id=self.bag.path.name, message=message,
-            values=[KeyValue(key=key, value=value) for key, value in values.items()])
+            level=DiagnosticStatus.WARN if waiting or lost else DiagnosticStatus.OK,
+            name=RECORDING_STATUS,
+            hardware_id=self.bag.path.name,
+            message=message,
+            values=[KeyValue(key=key, value=value) for key, value in values.items()],
+        )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.status_publisher.publish(array)
@@ -298,8 +437,10 @@ class ValveAnalyser(Node):
         self.drain()
         self._measured(self.analysis.add_rows(self.joiner.finish()) + self.analysis.finish())
         self.bag.close()
-        self.get_logger().info(f"closed {self.bag.path}: {self.bag.message_count} messages, "
-                               f"{self.measures.count} steps measured")
+        self.get_logger().info(
+            f'closed {self.bag.path}: {self.bag.message_count} messages, '
+            f'{self.measures.count} steps measured'
+        )
 
 
 def record(stop):
@@ -329,5 +470,5 @@ def main(args=None):
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -4,13 +4,17 @@ Counters run from node start. Each report (1 Hz) also covers the window since th
 previous one: the real-time factor (model time advanced / steady time elapsed)
 and the tick compute time (p50, p99, max) of the ticks in that window.
 """
+
 from dataclasses import dataclass, fields, replace
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+
 
 NS_PER_S = 1e9
-LATE_FRACTION = 0.5   # a tick is late if it starts, long if it computes, more than this fraction of a period
+LATE_FRACTION = (
+    0.5  # a tick is late if it starts, long if it computes, more than this fraction of a period
+)
 
 
 @dataclass
@@ -45,10 +49,10 @@ class NodeStatus:
 
     def __init__(self, steady_now_ns):
         self.counters = Counters()
-        self.last_failure = ""
+        self.last_failure = ''
         self._reported = Counters()
         self._durations_ns = []
-        self._window = (steady_now_ns, None)   # (steady time, model time) at the last report
+        self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
 
     def tick_done(self, compute_ns, period_ns):
         """Count a tick that took compute_ns [ns] of wall time, at a tick period of period_ns [ns]."""
@@ -64,17 +68,17 @@ class NodeStatus:
         InputReport; settings: {name: value} shown as they are (units in the names).
         """
         counters, previous = self.counters, self._reported
-        status = DiagnosticStatus(name=f"{name}: valve model", hardware_id=name)
+        status = DiagnosticStatus(name=f'{name}: valve model', hardware_id=name)
         status.level, status.message = self._summary(counters, previous, inputs)
         values = {
-            "real_time_factor": self._real_time_factor(steady_now_ns, model_time_ns),
+            'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
             **self._compute_times(),
             **{field.name: getattr(counters, field.name) for field in fields(Counters)},
-            "last_integration_failure": self.last_failure,
-            "inlet_flow_m3_s": inputs.inlet_flow,
-            "seconds_since_input": inputs.seconds_since_input,
-            "input_stale": inputs.stale,
-            "model_time_s": None if model_time_ns is None else model_time_ns / NS_PER_S,
+            'last_integration_failure': self.last_failure,
+            'inlet_flow_m3_s': inputs.inlet_flow,
+            'seconds_since_input': inputs.seconds_since_input,
+            'input_stale': inputs.stale,
+            'model_time_s': None if model_time_ns is None else model_time_ns / NS_PER_S,
             **settings,
         }
         status.values = [KeyValue(key=key, value=_text(value)) for key, value in values.items()]
@@ -91,19 +95,21 @@ class NodeStatus:
         failures = counters.integration_failures - previous.integration_failures
         if failures:
             level = DiagnosticStatus.ERROR
-            problems.append(f"integration diverged {failures}x, state held: {self.last_failure}")
+            problems.append(f'integration diverged {failures}x, state held: {self.last_failure}')
         if inputs.stale:
             level = max(level, DiagnosticStatus.WARN)
-            problems.append(f"input stale: no inlet_flow for {inputs.seconds_since_input:.1f} s, "
-                            f"holding {inputs.inlet_flow:g} m^3/s")
+            problems.append(
+                f'input stale: no inlet_flow for {inputs.seconds_since_input:.1f} s, '
+                f'holding {inputs.inlet_flow:g} m^3/s'
+            )
         skipped = counters.skipped_ticks - previous.skipped_ticks
         if skipped:
             level = max(level, DiagnosticStatus.WARN)
-            problems.append(f"{skipped} tick periods skipped (lag beyond the catch-up limit)")
+            problems.append(f'{skipped} tick periods skipped (lag beyond the catch-up limit)')
         late = counters.late_ticks - previous.late_ticks
         if late:
-            problems.append(f"{late} late ticks")
-        return level, "; ".join(problems) or "running"
+            problems.append(f'{late} late ticks')
+        return level, '; '.join(problems) or 'running'
 
     def _real_time_factor(self, steady_now_ns, model_time_ns):
         steady_start, model_start = self._window
@@ -113,7 +119,7 @@ class NodeStatus:
 
     def _compute_times(self):
         """Tick compute time p50, p99 and max of the window [ms] (None without ticks)."""
-        names = ("tick_compute_p50_ms", "tick_compute_p99_ms", "tick_compute_max_ms")
+        names = ('tick_compute_p50_ms', 'tick_compute_p99_ms', 'tick_compute_max_ms')
         if not self._durations_ns:
             return dict.fromkeys(names)
         durations = np.asarray(self._durations_ns) / 1e6
@@ -126,7 +132,7 @@ def _text(value):
     if isinstance(value, bool):
         return str(value).lower()
     if value is None:
-        return ""
+        return ''
     if isinstance(value, float) or isinstance(value, np.floating):
         return repr(float(value))
     return str(value)

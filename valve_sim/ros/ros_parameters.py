@@ -10,9 +10,15 @@ an integer for a double parameter and store it as a double. value_problem()
 explains a bad value with the parameter's symbol, limits and unit (rclpy's own
 type refusal names neither the parameter nor the expected unit).
 """
+
 import math
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType, ParameterValue
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    ParameterDescriptor,
+    ParameterType,
+    ParameterValue,
+)
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.parameter import Parameter
 
@@ -22,11 +28,14 @@ def descriptor(spec, read_only=False):
     return ParameterDescriptor(
         name=spec.name,
         type=ParameterType.PARAMETER_DOUBLE,
-        description=f"{spec.describe()}; source: {spec.source}",
-        additional_constraints=f"{spec.minimum:g} <= {spec.symbol} <= {spec.maximum:g} {spec.unit}",
+        description=f'{spec.describe()}; source: {spec.source}',
+        additional_constraints=f'{spec.minimum:g} <= {spec.symbol} <= {spec.maximum:g} {spec.unit}',
         read_only=read_only,
-        floating_point_range=[FloatingPointRange(
-            from_value=float(spec.minimum), to_value=float(spec.maximum), step=0.0)],
+        floating_point_range=[
+            FloatingPointRange(
+                from_value=float(spec.minimum), to_value=float(spec.maximum), step=0.0
+            )
+        ],
     )
 
 
@@ -47,28 +56,38 @@ def declare_double(node, spec, default, read_only=False):
     untyped = ParameterDescriptor(dynamic_typing=True)
     value = node.declare_parameter(spec.name, float(default), untyped).value
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InvalidParameterTypeException(Parameter(spec.name, value=value), Parameter.Type.DOUBLE)
-    node.set_descriptor(spec.name, wanted,
-                        ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value)))
+        raise InvalidParameterTypeException(
+            Parameter(spec.name, value=value), Parameter.Type.DOUBLE
+        )
+    node.set_descriptor(
+        spec.name,
+        wanted,
+        ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value)),
+    )
     return float(value)
 
 
 def integers_as_doubles(parameters, double_names):
     """Copy of a list of rclpy Parameters with integer values of double_names turned into doubles."""
-    return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
-            if p.name in double_names and p.type_ == Parameter.Type.INTEGER else p
-            for p in parameters]
+    return [
+        Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+        if p.name in double_names and p.type_ == Parameter.Type.INTEGER
+        else p
+        for p in parameters
+    ]
 
 
 def value_problem(spec, parameter):
     """Why the rclpy Parameter is no valid value for spec (naming parameter, limit and unit), or None."""
     label = f"parameter '{spec.name}' ({spec.symbol})"
     if parameter.type_ not in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
-        return f"{label} must be a number in {spec.unit}, got {parameter.type_.name.lower()} {parameter.value!r}"
+        return f'{label} must be a number in {spec.unit}, got {parameter.type_.name.lower()} {parameter.value!r}'
     value = float(parameter.value)
     if not math.isfinite(value):
-        return f"{label} must be finite, got {value}"
+        return f'{label} must be finite, got {value}'
     if not spec.minimum <= value <= spec.maximum:
-        return (f"{label} = {value:g} {spec.unit} is outside its limits "
-                f"[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}")
+        return (
+            f'{label} = {value:g} {spec.unit} is outside its limits '
+            f'[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+        )
     return None

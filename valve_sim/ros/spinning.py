@@ -6,6 +6,7 @@ middleware still up, and no exception is raised inside a callback or under a
 running executor (rclpy's EventsExecutor.spin() does not return on a signal,
 but its spin_once() does).
 """
+
 import signal
 import threading
 
@@ -13,16 +14,17 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+
 try:
     from rclpy.experimental import EventsExecutor
-except ImportError:   # rclpy releases before the EventsExecutor (early Jazzy)
+except ImportError:  # rclpy releases before the EventsExecutor (early Jazzy)
     EventsExecutor = None
 
-EXECUTORS = {"single-threaded": SingleThreadedExecutor}
+EXECUTORS = {'single-threaded': SingleThreadedExecutor}
 if EventsExecutor is not None:
-    EXECUTORS = {"events": EventsExecutor, **EXECUTORS}
-DEFAULT_EXECUTOR = next(iter(EXECUTORS))   # events where there is one
-SPIN_TIMEOUT = 0.1   # [s] the longest a signal waits for the spin loop to notice it
+    EXECUTORS = {'events': EventsExecutor, **EXECUTORS}
+DEFAULT_EXECUTOR = next(iter(EXECUTORS))  # events where there is one
+SPIN_TIMEOUT = 0.1  # [s] the longest a signal waits for the spin loop to notice it
 
 
 def init(args=None):

@@ -18,15 +18,16 @@ The model itself (valve_sim.core.realtime_model) has no ROS in it; this module o
 adapts it: parameters, topics, the tick timer and the reset service.
 See docs/valve_node.md for the behaviour in detail.
 """
+
 import argparse
 import gc
 import math
 import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
+import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
@@ -34,25 +35,51 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-
-from valve_sim.ros import spinning
 from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.model import P_S
-from valve_sim.ros.node_status import LATE_FRACTION, InputReport, NodeStatus
 from valve_sim.core.parameters import (
-    NODE_NAME, PARAMETERS, SETTING_SPECS, SETTINGS, SPECS, ParameterError, check_value, load_parameters, validate)
-from valve_sim.core.realtime_model import NS_PER_S, TRIAL_STEPS, RealTimeModel
-from valve_sim.core.retuning import PRESET_PRESSURE, check_preset, dependent_change, merged_parameters
+    check_value,
+    load_parameters,
+    NODE_NAME,
+    ParameterError,
+    PARAMETERS,
+    SETTING_SPECS,
+    SETTINGS,
+    SPECS,
+    validate,
+)
+from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, TRIAL_STEPS
+from valve_sim.core.retuning import (
+    check_preset,
+    dependent_change,
+    merged_parameters,
+    PRESET_PRESSURE,
+)
+from valve_sim.core.steady_state import (
+    cracking_pressure,
+    preload_for_cracking_pressure,
+    SteadyStateError,
+)
+from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
+from valve_sim.ros import spinning
+from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
-from valve_sim.core.steady_state import SteadyStateError, cracking_pressure, preload_for_cracking_pressure
-from valve_sim.recording.valve_topics import TICK_TOPICS, TOPIC_TYPES, TickMessages, message_class
 
-READ_ONLY = ("initial_inlet_flow",)   # only the start (and a parameter file) use it
-CATCH_UP_LIMIT_PERIODS = 50    # a tick integrates at most this many tick periods of lag
-YOUNG_GENERATIONS = 1          # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
-STATE_QUEUE_DEPTH = 1000       # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
+
+READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
+CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
+YOUNG_GENERATIONS = (
+    1  # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
+)
+STATE_QUEUE_DEPTH = (
+    1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
+)
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
-VALVE_SPECS = {**SPECS, **SETTING_SPECS, PRESET_PRESSURE.name: PRESET_PRESSURE}   # all double parameters
+VALVE_SPECS = {
+    **SPECS,
+    **SETTING_SPECS,
+    PRESET_PRESSURE.name: PRESET_PRESSURE,
+}  # all double parameters
 
 
 class ReliefValveNode(Node):
@@ -61,27 +88,32 @@ class ReliefValveNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         params, self.settings = self._declare_parameters()
-        self.model = RealTimeModel(params, self.settings["step_size"], self.settings["initial_inlet_flow"])
-        self.inlet_flow = self.settings["initial_inlet_flow"]   # [m^3/s], last good input
-        self.applied_flow = self.inlet_flow                     # [m^3/s], over the last tick
+        self.model = RealTimeModel(
+            params, self.settings['step_size'], self.settings['initial_inlet_flow']
+        )
+        self.inlet_flow = self.settings['initial_inlet_flow']  # [m^3/s], last good input
+        self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
         self.last_input_ns = None
         self.input_stale = False
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
         self._previous_slot_ns = None
         self._create_outputs()
-        self.create_subscription(Float64, "inlet_flow", self._on_inlet_flow, 10)
-        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, 10)
+        self.create_service(Trigger, '~/reset', self._on_reset)
         self._housekeeping_due = False
         self._ticks_at_housekeeping = 0
-        self.create_timer(1.0, self._on_housekeeping_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(
+            1.0, self._on_housekeeping_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
         self._tick_timer = self._create_tick_timer()
         self.add_pre_set_parameters_callback(self._complete_parameter_change)
         self.add_on_set_parameters_callback(self._check_parameter_change)
         self.add_post_set_parameters_callback(self._apply_parameter_change)
         self.get_logger().info(
-            f"valve at the steady state of {self.inlet_flow:g} m^3/s: p_s = {self.model.state[P_S]:.6g} Pa "
-            f"(gauge); {self.settings['publish_rate']:g} Hz, steps of {self.settings['step_size']:g} s")
+            f'valve at the steady state of {self.inlet_flow:g} m^3/s: p_s = {self.model.state[P_S]:.6g} Pa '
+            f'(gauge); {self.settings["publish_rate"]:g} Hz, steps of {self.settings["step_size"]:g} s'
+        )
 
     # --- parameters -------------------------------------------------------------------------
 
@@ -89,8 +121,10 @@ class ReliefValveNode(Node):
         """Declare all parameters, defaults from config/reference.yaml; returns (params, settings)."""
         reference, reference_settings = load_parameters()
         defaults = {**reference, **reference_settings}
-        values = {spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
-                  for spec in PARAMETERS + SETTINGS}
+        values = {
+            spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
+            for spec in PARAMETERS + SETTINGS
+        }
         params = validate({name: values[name] for name in SPECS})
         settings = {name: values[name] for name in SETTING_SPECS}
         return self._declare_preset_pressure(params), settings
@@ -102,8 +136,8 @@ class ReliefValveNode(Node):
         if preset == cracking:
             return params
         preload = preload_for_cracking_pressure(params, preset)
-        self.set_parameters([Parameter("pilot_spring_preload", value=preload)])
-        return {**params, "pilot_spring_preload": preload}
+        self.set_parameters([Parameter('pilot_spring_preload', value=preload)])
+        return {**params, 'pilot_spring_preload': preload}
 
     def set_parameters_atomically(self, parameter_list):
         """Node.set_parameters_atomically, which both parameter services call.
@@ -111,11 +145,16 @@ class ReliefValveNode(Node):
         Checks each value against its spec first, for a reason with symbol, limits
         and unit, and counts and logs every refusal.
         """
-        problems = (value_problem(VALVE_SPECS[p.name], p) for p in parameter_list if p.name in VALVE_SPECS)
+        problems = (
+            value_problem(VALVE_SPECS[p.name], p) for p in parameter_list if p.name in VALVE_SPECS
+        )
         reason = next(filter(None, problems), None)
         try:
-            result = (SetParametersResult(successful=False, reason=reason) if reason
-                      else super().set_parameters_atomically(parameter_list))
+            result = (
+                SetParametersResult(successful=False, reason=reason)
+                if reason
+                else super().set_parameters_atomically(parameter_list)
+            )
         except ParameterNotDeclaredException as error:
             self._count_refusal(str(error))
             raise
@@ -125,7 +164,7 @@ class ReliefValveNode(Node):
 
     def _count_refusal(self, reason):
         self.status.counters.rejected_parameter_changes += 1
-        self.get_logger().warn(f"parameter change refused: {reason}")
+        self.get_logger().warn(f'parameter change refused: {reason}')
 
     def _complete_parameter_change(self, parameters):
         """Pre-set callback: integers taken as doubles, and the dependent parameter added."""
@@ -133,8 +172,10 @@ class ReliefValveNode(Node):
         try:
             dependent = dependent_change(self.model.params, {p.name: p.value for p in parameters})
         except VALUE_ERRORS:
-            return parameters   # the on-set callback refuses the change and says why
-        return parameters + [Parameter(name, Parameter.Type.DOUBLE, value) for name, value in dependent.items()]
+            return parameters  # the on-set callback refuses the change and says why
+        return parameters + [
+            Parameter(name, Parameter.Type.DOUBLE, value) for name, value in dependent.items()
+        ]
 
     def _check_parameter_change(self, parameters):
         """On-set callback: validate the merged set and trial-integrate it from the current state."""
@@ -144,10 +185,14 @@ class ReliefValveNode(Node):
         try:
             params, settings = self._merged(changes)
             check_preset(params, changes)
-            self.model.trial(params, settings["step_size"], self.inlet_flow)
+            self.model.trial(params, settings['step_size'], self.inlet_flow)
         except IntegrationError as error:
-            return SetParametersResult(successful=False, reason=(
-                f"the integration would diverge (trial of {TRIAL_STEPS} steps from the current state): {error}"))
+            return SetParametersResult(
+                successful=False,
+                reason=(
+                    f'the integration would diverge (trial of {TRIAL_STEPS} steps from the current state): {error}'
+                ),
+            )
         except (ParameterError, SteadyStateError) as error:
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
@@ -158,25 +203,34 @@ class ReliefValveNode(Node):
         if not changes or self._restoring:
             return
         params, settings = self._merged(changes)
-        rate_changed = settings["publish_rate"] != self.settings["publish_rate"]
-        self.model.retune(params, settings["step_size"])
+        rate_changed = settings['publish_rate'] != self.settings['publish_rate']
+        self.model.retune(params, settings['step_size'])
         self.settings = settings
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()
-        self.get_logger().info(f"parameters set: {changes}")
+        self.get_logger().info(f'parameters set: {changes}')
 
     def _merged(self, changes):
         """(params, settings) with changes applied, checked; raises ParameterError."""
-        settings = {**self.settings,
-                    **{name: check_value(name, value) for name, value in changes.items() if name in SETTING_SPECS}}
+        settings = {
+            **self.settings,
+            **{
+                name: check_value(name, value)
+                for name, value in changes.items()
+                if name in SETTING_SPECS
+            },
+        }
         return merged_parameters(self.model.params, changes), settings
 
     def _restore_parameters(self):
         """Report the rolled-back model parameters and step size as the node's parameter values."""
-        in_use = {**self.model.params, "step_size": self.model.step_size}
-        changed = [Parameter(name, value=value) for name, value in in_use.items()
-                   if self.get_parameter(name).value != value]
+        in_use = {**self.model.params, 'step_size': self.model.step_size}
+        changed = [
+            Parameter(name, value=value)
+            for name, value in in_use.items()
+            if self.get_parameter(name).value != value
+        ]
         if not changed:
             return
         self._restoring = True
@@ -189,7 +243,7 @@ class ReliefValveNode(Node):
 
     def _create_tick_timer(self):
         self._previous_slot_ns = None
-        return self.create_timer(1.0 / self.settings["publish_rate"], self._tick)
+        return self.create_timer(1.0 / self.settings['publish_rate'], self._tick)
 
     def _tick(self):
         """Advance the model to the clock and publish its state."""
@@ -209,8 +263,10 @@ class ReliefValveNode(Node):
     def _start(self, now_ns):
         """Anchor the model time to the clock: at the first tick, or when the clock jumped back."""
         if self.model.time_ns is not None:
-            self.get_logger().warn(f"clock jumped back by {(self.model.time_ns - now_ns) / NS_PER_S:g} s; "
-                                   "model time restarts from the clock")
+            self.get_logger().warn(
+                f'clock jumped back by {(self.model.time_ns - now_ns) / NS_PER_S:g} s; '
+                'model time restarts from the clock'
+            )
         self.model.start(now_ns)
         self.last_input_ns = self.last_input_ns or now_ns
         self._previous_slot_ns = None
@@ -222,14 +278,18 @@ class ReliefValveNode(Node):
         if now_ns - slot_ns > LATE_FRACTION * period_ns:
             self.status.counters.late_ticks += 1
         if self._previous_slot_ns is not None:
-            self.status.counters.missed_ticks += max(round((slot_ns - self._previous_slot_ns) / period_ns) - 1, 0)
+            self.status.counters.missed_ticks += max(
+                round((slot_ns - self._previous_slot_ns) / period_ns) - 1, 0
+            )
         self._previous_slot_ns = slot_ns
 
     def _advance(self, now_ns):
         """Integrate up to now_ns; False if it diverged (then nothing is published)."""
         period_ns = self._tick_timer.timer_period_ns
         try:
-            progress = self.model.advance_to(now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns)
+            progress = self.model.advance_to(
+                now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns
+            )
         except IntegrationError as error:
             self._recover(now_ns, error)
             return False
@@ -238,17 +298,22 @@ class ReliefValveNode(Node):
             counters = self.status.counters
             counters.skipped_ticks += max(round(progress.skipped_ns / period_ns), 1)
             counters.skipped_time_s += progress.skipped_ns / NS_PER_S
-            self.get_logger().warn(f"{progress.skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit "
-                                   f"{CATCH_UP_LIMIT_PERIODS} tick periods)", throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'{progress.skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit '
+                f'{CATCH_UP_LIMIT_PERIODS} tick periods)',
+                throttle_duration_sec=1.0,
+            )
         return True
 
     def _recover(self, now_ns, error):
         """After a divergence: hold the last good state, undo the last parameter change."""
         self.status.counters.integration_failures += 1
         self.status.last_failure = str(error)
-        self.get_logger().error(f"{error} The last good state is held.", throttle_duration_sec=1.0)
+        self.get_logger().error(f'{error} The last good state is held.', throttle_duration_sec=1.0)
         if self.model.roll_back():
-            self.get_logger().error("parameters rolled back to the ones in use before the last change")
+            self.get_logger().error(
+                'parameters rolled back to the ones in use before the last change'
+            )
             self._restore_parameters()
         self.model.hold_until(now_ns)
 
@@ -257,14 +322,22 @@ class ReliefValveNode(Node):
     def _create_outputs(self):
         """Publishers of the tick topics and the messages they reuse every tick."""
         self._tick_messages = TickMessages()
-        self._tick_publishers = {topic: self.create_publisher(message_class(TOPIC_TYPES[topic]), topic,
-                                                              STATE_QUEUE_DEPTH) for topic in TICK_TOPICS}
-        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._tick_publishers = {
+            topic: self.create_publisher(
+                message_class(TOPIC_TYPES[topic]), topic, STATE_QUEUE_DEPTH
+            )
+            for topic in TICK_TOPICS
+        }
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
-        for topic, data in self._tick_messages.fill(self.model.time_ns, self.model.state, self.applied_flow,
-                                                    self.settings["ambient_pressure"]):
+        for topic, data in self._tick_messages.fill(
+            self.model.time_ns,
+            self.model.state,
+            self.applied_flow,
+            self.settings['ambient_pressure'],
+        ):
             self._tick_publishers[topic].publish(data)
 
     def _on_inlet_flow(self, message):
@@ -275,8 +348,11 @@ class ReliefValveNode(Node):
             self.last_input_ns = self.get_clock().now().nanoseconds
             return
         self.status.counters.rejected_inputs += 1
-        self.get_logger().warn(f"inlet_flow {flow!r} rejected (must be finite and >= 0 m^3/s); "
-                               f"holding {self.inlet_flow:g} m^3/s", throttle_duration_sec=1.0)
+        self.get_logger().warn(
+            f'inlet_flow {flow!r} rejected (must be finite and >= 0 m^3/s); '
+            f'holding {self.inlet_flow:g} m^3/s',
+            throttle_duration_sec=1.0,
+        )
 
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
@@ -287,9 +363,11 @@ class ReliefValveNode(Node):
             return response
         time_ns = self.model.time_ns or 0
         response.success = True
-        response.message = (f"re-initialised at model time {time_ns // NS_PER_S}.{time_ns % NS_PER_S:09d} s "
-                            f"at the steady state of {self.inlet_flow:g} m^3/s: "
-                            f"p_s = {self.model.state[P_S]:.6g} Pa (gauge)")
+        response.message = (
+            f're-initialised at model time {time_ns // NS_PER_S}.{time_ns % NS_PER_S:09d} s '
+            f'at the steady state of {self.inlet_flow:g} m^3/s: '
+            f'p_s = {self.model.state[P_S]:.6g} Pa (gauge)'
+        )
         self.get_logger().info(response.message)
         return response
 
@@ -317,21 +395,33 @@ class ReliefValveNode(Node):
         now = self.get_clock().now()
         inputs = self._input_report(now.nanoseconds)
         if inputs.stale and not self.input_stale:
-            self.get_logger().warn(f"no inlet_flow for {inputs.seconds_since_input:.1f} s: input stale, "
-                                   f"holding {self.inlet_flow:g} m^3/s")
+            self.get_logger().warn(
+                f'no inlet_flow for {inputs.seconds_since_input:.1f} s: input stale, '
+                f'holding {self.inlet_flow:g} m^3/s'
+            )
         elif self.input_stale and not inputs.stale:
-            self.get_logger().info("inlet_flow received again: input fresh")
+            self.get_logger().info('inlet_flow received again: input fresh')
         self.input_stale = inputs.stale
-        settings = {"publish_rate_hz": self.settings["publish_rate"], "step_size_s": self.model.step_size,
-                    "input_timeout_s": self.settings["input_timeout"]}
-        self._diagnostics.publish(self.status.report(
-            now.to_msg(), self.get_fully_qualified_name(), time.monotonic_ns(), self.model.time_ns,
-            inputs, settings))
+        settings = {
+            'publish_rate_hz': self.settings['publish_rate'],
+            'step_size_s': self.model.step_size,
+            'input_timeout_s': self.settings['input_timeout'],
+        }
+        self._diagnostics.publish(
+            self.status.report(
+                now.to_msg(),
+                self.get_fully_qualified_name(),
+                time.monotonic_ns(),
+                self.model.time_ns,
+                inputs,
+                settings,
+            )
+        )
 
     def _input_report(self, now_ns):
         """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
         age = 0.0 if self.last_input_ns is None else max(now_ns - self.last_input_ns, 0) / NS_PER_S
-        timeout = self.settings["input_timeout"]
+        timeout = self.settings['input_timeout']
         return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
 
 
@@ -340,10 +430,18 @@ STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
 
 def parse_arguments(args):
     """valve_node's own command line (ROS arguments removed): the executor."""
-    parser = argparse.ArgumentParser(prog="valve_node", description="The virtual relief valve as a ROS 2 node.")
-    parser.add_argument("--executor", choices=spinning.EXECUTORS, default=spinning.DEFAULT_EXECUTOR, help=(
-        f"rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
-        "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"))
+    parser = argparse.ArgumentParser(
+        prog='valve_node', description='The virtual relief valve as a ROS 2 node.'
+    )
+    parser.add_argument(
+        '--executor',
+        choices=spinning.EXECUTORS,
+        default=spinning.DEFAULT_EXECUTOR,
+        help=(
+            f"rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
+            "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
+        ),
+    )
     return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
 
 
@@ -354,13 +452,13 @@ def main(args=None):
     try:
         node = ReliefValveNode()
     except STARTUP_ERRORS as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {error}")
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {error}')
         rclpy.try_shutdown()
         return 1
     try:
-        node.get_logger().info(f"executor: {options.executor}")
-        gc.freeze()    # start-up objects stay out of the garbage collector's scans
-        gc.disable()   # the node collects in its housekeeping, between ticks
+        node.get_logger().info(f'executor: {options.executor}')
+        gc.freeze()  # start-up objects stay out of the garbage collector's scans
+        gc.disable()  # the node collects in its housekeeping, between ticks
         spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
     finally:
         node.destroy_node()
@@ -368,5 +466,5 @@ def main(args=None):
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())
