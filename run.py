@@ -13,7 +13,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The README's two commands, for a machine with nothing but Python 3 and git.
+"""
+The README's two commands, for a machine with nothing but Python 3 and git.
 
     python3 run.py demo [options]   the main job: valve_node + analyser_node, the paper's step
     python3 run.py test [pytest options]   the test suite

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ament_python package valve_sim: builds with colcon on ROS 2 Jazzy and installs with pip.
+"""
+ament_python package valve_sim: builds with colcon on ROS 2 Jazzy and installs with pip.
 
 On a ROS install, rclpy and the message packages come from ROS (package.xml). In a
 plain virtual environment `pip install -e .[wheels,test]` brings them from PyPI.
@@ -85,7 +86,9 @@ setup(
     zip_safe=True,
     maintainer='valve_sim developers',
     maintainer_email='dev@valve-sim.local',
-    description='Virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches',
+    description=(
+        'Virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

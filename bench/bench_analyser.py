@@ -12,23 +12,24 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark of analyser_node: recording all valve topics at 1 kHz, next to a bare rclpy subscriber.
+"""Benchmark analyser_node recording all valve topics at 1 kHz, beside a bare rclpy subscriber."""
 
-    .venv/bin/python bench/bench_analyser.py [--duration 60] [--json FILE]
-
-One run, three processes on this machine's DDS (own random ROS_DOMAIN_ID,
-discovery on localhost):
-- this script publishes valve_node's six tick topics at 1 kHz (valve_sim.recording.replay)
-  for --duration seconds: a simulated 5 <-> 20 L/min step every 1.25 s, so the
-  analyser also measures a step every 1.25 s;
-- analyser_node records them (and everything else it records by default) to MCAP;
-- a bare subscriber counts the same six topics through rclpy's executor
-  (raw callbacks, the same reliable QoS and --queue-depth), doing nothing else.
-Reported: messages published against recorded (analyser) and counted (bare
-subscriber), each process's CPU share of one core over the publishing time,
-the analyser's write throughput, and resident memory after 10 s and at the end
-(target: none lost, memory flat).
-"""
+# The summary above is also this script's --help description.
+#
+#     .venv/bin/python bench/bench_analyser.py [--duration 60] [--json FILE]
+#
+# One run, three processes on this machine's DDS (own random ROS_DOMAIN_ID,
+# discovery on localhost):
+# - this script publishes valve_node's six tick topics at 1 kHz (valve_sim.recording.replay)
+#   for --duration seconds: a simulated 5 <-> 20 L/min step every 1.25 s, so the
+#   analyser also measures a step every 1.25 s;
+# - analyser_node records them (and everything else it records by default) to MCAP;
+# - a bare subscriber counts the same six topics through rclpy's executor
+#   (raw callbacks, the same reliable QoS and --queue-depth), doing nothing else.
+# Reported: messages published against recorded (analyser) and counted (bare
+# subscriber), each process's CPU share of one core over the publishing time,
+# the analyser's write throughput, and resident memory after 10 s and at the end
+# (target: none lost, memory flat).
 
 import argparse
 import json
@@ -54,7 +55,11 @@ LOW, HIGH = 5.0 * LITRE_PER_MINUTE, 20.0 * LITRE_PER_MINUTE
 
 
 def step_cycle(params):
-    """Waveforms of one 2.5 s cycle at 1 kHz: up 5 -> 20 L/min at 0, down at 1.25 s (each step's last sample)."""
+    """
+    Return the waveforms of one 2.5 s cycle at 1 kHz.
+
+    Up 5 -> 20 L/min at 0, down at 1.25 s (each step's last sample).
+    """
     up = simulate(
         params, Scenario(LOW, HIGH, step_time=0.0, end_time=1.25), record_interval=PERIOD
     )
@@ -69,7 +74,7 @@ def step_cycle(params):
 
 
 def repeated(cycle, duration):
-    """cycle repeated to cover duration [s], time continuous."""
+    """Repeat cycle to cover duration [s], time continuous."""
     count = int(np.ceil(duration / cycle.time[-1]))
     length = len(cycle.time)
     ticks = int(round(duration / PERIOD))
@@ -82,7 +87,11 @@ def repeated(cycle, duration):
 
 
 def count_only(queue_depth):
-    """The bare subscriber: count the tick topics in raw callbacks until SIGINT, print the counts as JSON."""
+    """
+    Run the bare subscriber: count the tick topics in raw callbacks until SIGINT.
+
+    Then print the counts as JSON.
+    """
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -146,7 +155,11 @@ def recorded_counts(bag):
 
 
 def run_processes(folder, waveforms, queue_depth):
-    """Publish waveforms to analyser_node (recording into folder) and the bare subscriber; the figures as a dict."""
+    """
+    Publish waveforms to analyser_node (recording into folder) and the bare subscriber.
+
+    Returns the figures as a dict.
+    """
     import rclpy
     from valve_sim.recording.replay import Replay
 
@@ -229,7 +242,8 @@ def main():
     published, elapsed = figures['published'], figures['duration_s']
     print(
         f'published {published} messages in {elapsed:.1f} s ({published / elapsed:.0f} msg/s); '
-        f'analyser recorded {figures["recorded"]} (lost: {figures["lost_by_analyser"] or "none"}), '
+        f'analyser recorded {figures["recorded"]} '
+        f'(lost: {figures["lost_by_analyser"] or "none"}), '
         f'bare subscriber counted {figures["counted_by_bare_subscriber"]}; '
         f'{figures["steps_measured"]} steps measured'
     )

@@ -12,24 +12,25 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark of the model core: the paper's 1.25 s run and the parameter study.
+"""Benchmark of the model core: the paper's 1.25 s run and the parameter study."""
 
-    .venv/bin/python bench/bench_model.py [--repeats 5] [--json FILE]
-
-Measured side by side in one run (this machine is shared and noisy, so compare
-the ratios, not the absolute times):
-1. Fixed-step RK4 at 10 us (our kernel, one core) against real time.
-2. scipy.integrate.solve_ivp, LSODA and Radau, on the same right-hand side
-   (valve_sim.core.model.derivatives), at matched accuracy. Error measure: the
-   largest deviation of p_s from a reference run (RK4 at 1.25 us), sampled every
-   0.1 ms over the whole run, relative to the overshoot p_1 - p_0. For each
-   solver the loosest rtol (atol scaled per state) whose error is no larger than
-   RK4's at 10 us is used.
-3. The full parameter study (valve-sim study: 26 distinct runs of the 31 cases),
-   on all cores.
-Targets (issue 2): the single run >= 50x faster than real time and faster than
-solve_ivp; the study < 15 s on 2 cores.
-"""
+# The summary above is also this script's --help description.
+#
+#     .venv/bin/python bench/bench_model.py [--repeats 5] [--json FILE]
+#
+# Measured side by side in one run (this machine is shared and noisy, so compare
+# the ratios, not the absolute times):
+# 1. Fixed-step RK4 at 10 us (our kernel, one core) against real time.
+# 2. scipy.integrate.solve_ivp, LSODA and Radau, on the same right-hand side
+#    (valve_sim.core.model.derivatives), at matched accuracy. Error measure: the
+#    largest deviation of p_s from a reference run (RK4 at 1.25 us), sampled every
+#    0.1 ms over the whole run, relative to the overshoot p_1 - p_0. For each
+#    solver the loosest rtol (atol scaled per state) whose error is no larger than
+#    RK4's at 10 us is used.
+# 3. The full parameter study (valve-sim study: 26 distinct runs of the 31 cases),
+#    on all cores.
+# Targets (issue 2): the single run >= 50x faster than real time and faster than
+# solve_ivp; the study < 15 s on 2 cores.
 
 import argparse
 import json
@@ -149,11 +150,13 @@ def main():
         )
 
     print(
-        f"paper's run: {SCENARIO.end_time} s of model time; error = max|p_s - p_s,ref| / (p_1 - p_0), "
+        f"paper's run: {SCENARIO.end_time} s of model time; "
+        'error = max|p_s - p_s,ref| / (p_1 - p_0), '
         f'reference RK4 1.25 us'
     )
     print(
-        f'{"method":<24}{"rtol":>8}{"error":>11}{"wall [ms]":>11}{"x real time":>13}{"x vs RK4":>10}'
+        f'{"method":<24}{"rtol":>8}{"error":>11}{"wall [ms]":>11}'
+        f'{"x real time":>13}{"x vs RK4":>10}'
     )
     for row in rows:
         rtol = f'{row["rtol"]:.0e}' if row['rtol'] else '-'
@@ -166,7 +169,8 @@ def main():
         )
     print(
         f'parameter study, 26 runs on {os.cpu_count()} cores: {study_seconds:.2f} s computing; '
-        f'the whole `valve-sim study` command with CSV and figures: {command_seconds:.2f} s (target < 15 s)'
+        'the whole `valve-sim study` command with CSV and figures: '
+        f'{command_seconds:.2f} s (target < 15 s)'
     )
     if args.json:
         with open(args.json, 'w') as stream:

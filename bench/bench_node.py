@@ -13,39 +13,40 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark valve_node at 1 kHz with 10 us steps (issue 3).
+"""Benchmark valve_node at 1 kHz with 10 us steps (issue 3)."""
 
-    python bench/bench_node.py [--duration 60] [--json out/bench_node.json]
-                               [--executor {events,single-threaded}] [--rt-priority 50]
-
-Starts valve_node and a bare rclpy echo node, each in its own process, on a
-private ROS domain (localhost only), and measures from this process:
-
-- on-time ticks: (ticks - late) / (ticks + missed), from the node's diagnostics
-  (late: started more than half a period after its timer slot; missed: a slot
-  without a tick), and the looser share of slots that got a tick at all;
-- tick compute time: p50 and p99 of each 1-s diagnostics window, and the
-  share of ticks that computed for more than half a period (the node's
-  long_ticks): the whole run's p99 is at most 0.5 ms exactly when that share is
-  at most 1 %;
-- latency: from publishing an inlet_flow (a value never sent before) to receiving
-  the first supply_pressure message of the tick that applied it (the tick is
-  found on applied_inlet_flow by its value and stamp); floor: the round trip
-  of a Float64 through the bare echo node, measured in the same run;
-- the node's resident memory (psutil) after 10 s and at the end;
-- the CPU time of the node, the echo and this process over the measured span;
-- the timer floor: a bare Python loop sleeping to 1 kHz slots in its own process,
-  counted as the node counts its ticks, in the same run (what the OS scheduler
-  alone allows).
-
-Prints a table and writes the figures as JSON. Targets (issue 3): on-time
->= 99.9 %, compute p99 <= 0.5 ms, latency p99 <= 3 ms, memory growth a few MB.
---executor picks the rclpy executor of all three processes (valve_node's
---executor). --rt-priority P runs valve_node and the echo node under SCHED_FIFO
-priority P and this measuring process at P - 1 (needs the privilege), as a test
-rig would run its nodes. The load average at start and end is reported: other
-work on the machine shows in every figure here.
-"""
+# The summary above is also this script's --help description.
+#
+#     python bench/bench_node.py [--duration 60] [--json out/bench_node.json]
+#                                [--executor {events,single-threaded}] [--rt-priority 50]
+#
+# Starts valve_node and a bare rclpy echo node, each in its own process, on a
+# private ROS domain (localhost only), and measures from this process:
+#
+# - on-time ticks: (ticks - late) / (ticks + missed), from the node's diagnostics
+#   (late: started more than half a period after its timer slot; missed: a slot
+#   without a tick), and the looser share of slots that got a tick at all;
+# - tick compute time: p50 and p99 of each 1-s diagnostics window, and the
+#   share of ticks that computed for more than half a period (the node's
+#   long_ticks): the whole run's p99 is at most 0.5 ms exactly when that share is
+#   at most 1 %;
+# - latency: from publishing an inlet_flow (a value never sent before) to receiving
+#   the first supply_pressure message of the tick that applied it (the tick is
+#   found on applied_inlet_flow by its value and stamp); floor: the round trip
+#   of a Float64 through the bare echo node, measured in the same run;
+# - the node's resident memory (psutil) after 10 s and at the end;
+# - the CPU time of the node, the echo and this process over the measured span;
+# - the timer floor: a bare Python loop sleeping to 1 kHz slots in its own process,
+#   counted as the node counts its ticks, in the same run (what the OS scheduler
+#   alone allows).
+#
+# Prints a table and writes the figures as JSON. Targets (issue 3): on-time
+# >= 99.9 %, compute p99 <= 0.5 ms, latency p99 <= 3 ms, memory growth a few MB.
+# --executor picks the rclpy executor of all three processes (valve_node's
+# --executor). --rt-priority P runs valve_node and the echo node under SCHED_FIFO
+# priority P and this measuring process at P - 1 (needs the privilege), as a test
+# rig would run its nodes. The load average at start and end is reported: other
+# work on the machine shows in every figure here.
 
 import argparse
 import json
@@ -76,7 +77,11 @@ APPLIED_FLOW_FROM_END = 12  # ... ends where the empty effort sequence (a uint32
 
 
 def run_echo(executor):
-    """The floor: a bare rclpy node that republishes echo_in on echo_out, on the valve's executor kind."""
+    """
+    Run the floor: a bare rclpy node that republishes echo_in on echo_out.
+
+    It spins on the valve's executor kind.
+    """
     import rclpy
     from std_msgs.msg import Float64
     from valve_sim.ros import spinning
@@ -91,8 +96,10 @@ def run_echo(executor):
 
 
 def run_timer_floor(path):
-    """The timer floor: a bare Python loop sleeping to 1 kHz slots, counted as valve_node counts its ticks.
+    """
+    Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
 
+    Its ticks are counted as valve_node counts its ticks.
     Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
     A tick is late if it starts more than LATE_FRACTION of a period after its slot;
     slots that passed while it was late are missed (the loop goes on at the next slot).
@@ -138,7 +145,8 @@ class Bench:
         self.diagnostics = []  # (receive time [s], {key: value})
         self.probes = 0
         self.measuring = False
-        # Raw CDR: only a stamp and a value are needed, read straight from the bytes (less load on this process).
+        # Raw CDR: only a stamp and a value are needed, read straight from the bytes
+        # (less load on this process).
         node.create_subscription(
             JointState, 'applied_inlet_flow', self._on_applied, 1000, raw=True
         )
@@ -162,13 +170,21 @@ class Bench:
             self.echo.publish(self.Float64(data=float(self.probes)))
 
     def _on_applied(self, data):
-        """The stamp of the tick that first applied a probe flow (velocity[0], before the empty effort)."""
+        """
+        Record the stamp of the tick that first applied a probe flow.
+
+        The flow is velocity[0], before the empty effort.
+        """
         (flow,) = APPLIED_FLOW.unpack_from(data, len(data) - APPLIED_FLOW_FROM_END)
         if flow in self.inlet_sent and flow not in self.applied:
             self.applied[flow] = STAMP.unpack_from(data, STAMP_OFFSET)
 
     def _on_pressure(self, data):
-        """Receive time of a raw supply_pressure message, by its header stamp (after the CDR header)."""
+        """
+        Record the receive time of a raw supply_pressure message, by its header stamp.
+
+        The stamp follows the CDR header.
+        """
         if self.measuring:
             self.pressure_received[STAMP.unpack_from(data, STAMP_OFFSET)] = time.monotonic_ns()
 
@@ -185,7 +201,11 @@ class Bench:
                 )
 
     def latencies_ns(self):
-        """inlet_flow publish -> receipt of the supply pressure of the tick that applied it [ns]."""
+        """
+        Return the latencies [ns] of the probes that were applied.
+
+        Each from inlet_flow publish to receipt of the supply pressure of the tick that applied it.
+        """
         return [
             self.pressure_received[stamp] - self.inlet_sent[flow]
             for flow, stamp in self.applied.items()
@@ -374,7 +394,8 @@ def table(figures):
             f'{figures["timer_floor_on_time_percent"]:.3f} %',
             '',
             f'{figures["timer_floor"]["ticks"]} ticks, {figures["timer_floor"]["late"]} late, '
-            f'{figures["timer_floor"]["missed"]} missed (a Python loop sleeping to 1 kHz slots, same run)',
+            f'{figures["timer_floor"]["missed"]} missed '
+            '(a Python loop sleeping to 1 kHz slots, same run)',
         ),
         (
             'timer slots with a tick',
@@ -394,7 +415,8 @@ def table(figures):
             'ticks computing > 0.5 ms',
             f'{ticks["long_percent"]:.3f} %',
             '<= 1 %',
-            f"{ticks['long_ticks']} of {ticks['ticks']}: the run's compute p99 is <= 0.5 ms iff this is <= 1 %",
+            f"{ticks['long_ticks']} of {ticks['ticks']}: "
+            "the run's compute p99 is <= 0.5 ms iff this is <= 1 %",
         ),
         (
             'latency inlet -> pressure p50',
@@ -445,7 +467,8 @@ def table(figures):
         f'valve_node benchmark: {figures["duration_s"]:g} s at {figures["publish_rate_hz"]:g} Hz, '
         f'steps of {figures["step_size_s"] * 1e6:g} us, executor {figures["executor"]}, '
         f'scheduler {figures["scheduler"]}, '
-        f'{figures["cpus"]} CPUs, load average (1 min) {figures["load_average_at_start"][0]:.2f} at start, '
+        f'{figures["cpus"]} CPUs, load average (1 min) '
+        f'{figures["load_average_at_start"][0]:.2f} at start, '
         f'{figures["load_average_at_end"][0]:.2f} at end',
         f'{"measure":<{width}}  {"value":>12}  {"target":<16}  notes',
     ]
@@ -476,7 +499,10 @@ def main(argv=None):
         '--executor',
         choices=EXECUTORS,
         default=DEFAULT_EXECUTOR,
-        help=f'the executor of valve_node, the echo node and this process (default {DEFAULT_EXECUTOR})',
+        help=(
+            'the executor of valve_node, the echo node and this process '
+            f'(default {DEFAULT_EXECUTOR})'
+        ),
     )
     parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
     parser.add_argument('--timer-floor', metavar='FILE', help=argparse.SUPPRESS)

@@ -12,25 +12,30 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Test isolation (../shared/spec/platform.md): every test session picks its own
-ROS_DOMAIN_ID and keeps discovery on localhost, before anything imports rclpy,
-so parallel or leftover runs never cross-talk. Child processes inherit both."""
+"""
+Test isolation: a ROS domain of this session's own, discovery on localhost.
+
+Every test session claims a ROS_DOMAIN_ID that no other run on this machine holds
+(valve_sim.ros.isolation, a lock file per domain) and keeps discovery on localhost,
+before anything imports rclpy, so parallel or leftover runs never cross-talk.
+Child processes inherit both.
+"""
 
 import os
-import random
 
+from valve_sim.ros.isolation import claim_domain
 
-os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+claim_domain(keep_existing=False)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
-import pytest  # noqa: E402  (after the environment is set)
+import pytest  # noqa: E402, I100  (after the environment is set)
 
 
 @pytest.fixture(scope='module')
 def context():
-    """An rclpy context of its own for a test module (nodes in the test process)."""
+    """Provide an rclpy context of its own for a test module (nodes in the test process)."""
     import rclpy
 
     context = rclpy.Context()
@@ -41,7 +46,7 @@ def context():
 
 @pytest.fixture(scope='session')
 def reference():
-    """The validated parameters of config/reference.yaml."""
+    """Return the validated parameters of config/reference.yaml."""
     from valve_sim.core.parameters import load_parameters
 
     return load_parameters()[0]

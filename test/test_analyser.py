@@ -12,7 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""analyser_node over real DDS: a simulated step published at 1 kHz, recorded, measured live and offline."""
+"""
+analyser_node over real DDS.
+
+A simulated step published at 1 kHz, recorded, measured live and offline.
+"""
 
 from contextlib import contextmanager
 import json
@@ -43,7 +47,7 @@ TIMEOUT = 60.0  # [s] for anything that waits on another process
 
 @pytest.fixture(scope='module')
 def node():
-    """A node of this test process, in its own rclpy context."""
+    """Provide a node of this test process, in its own rclpy context."""
     context = rclpy.Context()
     rclpy.init(context=context)
     test_node = rclpy.create_node('analyser_test', context=context)
@@ -54,7 +58,7 @@ def node():
 
 @pytest.fixture(scope='module')
 def waveforms():
-    """The paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
+    """Simulate the paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
     return simulate(
         load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
     )
@@ -62,7 +66,11 @@ def waveforms():
 
 @contextmanager
 def running_analyser(folder, *parameters):
-    """An analyser_node process recording into folder; killed on the way out if a test left it running."""
+    """
+    Run an analyser_node process recording into folder.
+
+    The process is killed on the way out if a test left it running.
+    """
     arguments = [
         argument
         for parameter in (f'output_dir:={folder}', *parameters)
@@ -84,7 +92,11 @@ def running_analyser(folder, *parameters):
 
 @pytest.fixture(scope='module')
 def recording(node, waveforms, tmp_path_factory):
-    """One analyser run: the step replayed, its measures received, the analyser stopped with SIGTERM."""
+    """
+    Run the analyser once.
+
+    The step replayed, its measures received, the analyser stopped with SIGTERM.
+    """
     folder = tmp_path_factory.mktemp('recording')
     messages = []
     node.create_subscription(DiagnosticArray, 'step_measures', messages.append, MEASURES_QOS)

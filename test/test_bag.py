@@ -12,7 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""MCAP files as rosbag2 writes them (valve_sim.recording.bag, valve_topics) and their offline analysis (bag_analysis)."""
+"""
+MCAP files as rosbag2 writes them, and their offline analysis.
+
+The files: valve_sim.recording.bag, valve_topics; the offline analysis: bag_analysis.
+"""
 
 import json
 from pathlib import Path
@@ -51,7 +55,11 @@ START_NS = 1_700_000_000 * 10**9
 
 @pytest.fixture(scope='module')
 def waveforms():
-    """The paper's step, shortened to 0.6 s (step at 0.25 s; its window is then truncated)."""
+    """
+    Simulate the paper's step, shortened to 0.6 s.
+
+    The step is at 0.25 s; its window is then truncated.
+    """
     return simulate(load_parameters()[0], Scenario(step_time=0.25, end_time=0.6))
 
 
@@ -183,7 +191,11 @@ def test_analyse_prints_table_and_plots(tmp_path, capsys):
 
 
 def write_rig_bag(path, waveforms, every=10):
-    """The simulated run as a rig might record it: other topic names, Float64 flow, no shared layout."""
+    """
+    Write the simulated run as a rig might record it.
+
+    Other topic names, Float64 flow, no shared layout.
+    """
     bag = BagWriter(path)
     bag.add_topic('/rig/p_supply', 'sensor_msgs/msg/FluidPressure')
     bag.add_topic('/rig/joints', 'sensor_msgs/msg/JointState')
@@ -250,7 +262,7 @@ def test_step_time_option_needs_no_flow(simulation_bag, capsys):
 
 
 def chunked_bag(path, chunks=8, per_chunk=50):
-    """A bag of supply-pressure messages in chunks of per_chunk messages each."""
+    """Write a bag of supply-pressure messages in chunks of per_chunk messages each."""
     bag = BagWriter(path)
     bag.add_topic('/supply_pressure', 'sensor_msgs/msg/FluidPressure')
     for k in range(chunks * per_chunk):
@@ -282,7 +294,7 @@ def test_damaged_file_is_a_clear_error(tmp_path, capsys):
     path = tmp_path / 'damaged.mcap'
     chunked_bag(path, chunks=2)
     data = bytearray(path.read_bytes())
-    data[len(data) // 4 : len(data) // 4 + 16] = bytes(16)
+    data[len(data) // 4:len(data) // 4 + 16] = bytes(16)
     path.write_bytes(bytes(data))
     with pytest.raises(InputFileError, match='is damaged'):
         list(BagReader(path).messages())

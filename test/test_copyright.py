@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Every source file carries a copyright notice and the Apache-2.0 licence of package.xml.
+"""
+Every source file carries a copyright notice and the Apache-2.0 licence of package.xml.
 
 ament_copyright is not on PyPI, so this follows its rules where it is missing: the
 first comment block of each Python file (after a shebang) names a year and a

@@ -12,7 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""`valve-sim demo` end to end: valve_node and analyser_node over DDS, the paper's step recorded and measured."""
+"""
+`valve-sim demo` end to end: valve_node and analyser_node over DDS.
+
+The paper's step recorded and measured.
+"""
 
 import json
 import os
@@ -26,7 +30,8 @@ from valve_sim.recording.bag import BagReader
 
 
 def run_demo(folder, timeout=300):
-    """`valve-sim demo --out folder` in its own process group: (exit code, stdout, stderr).
+    """
+    `valve-sim demo --out folder` in its own process group: (exit code, stdout, stderr).
 
     On a time-out the whole group goes, so no node outlives the test.
     """

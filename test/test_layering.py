@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The wings of valve_sim import only downward, and only ros and commands use rclpy.
+"""
+The wings of valve_sim import only downward, and only ros and commands use rclpy.
 
 Reads every module's imports with ast (nothing is executed), module-level and
 inside functions alike.
@@ -32,7 +33,7 @@ RCLPY_INSIDE_FUNCTIONS = {'recording'}
 
 
 def imported_modules(path):
-    """(module name, at module level) for every import statement of a file."""
+    """Yield (module name, at module level) for every import statement of a file."""
     tree = ast.parse(path.read_text(), filename=str(path))
     top_level = {id(node) for node in tree.body}
     for node in ast.walk(tree):
@@ -85,7 +86,8 @@ def test_imports_go_only_downward(path):
         if parts[0] == 'rclpy' and wing in NO_RCLPY:
             if top_level or wing not in RCLPY_INSIDE_FUNCTIONS:
                 problems.append(
-                    f'{module} ({wing} must not import rclpy{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})'
+                    f'{module} ({wing} must not import rclpy'
+                    f'{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})'
                 )
     assert problems == [], f'{path.relative_to(PACKAGE)} imports upward: {problems}'
 

@@ -29,7 +29,11 @@ X0, X_INF, TAU = 2e-5, 1.5e-4, 0.1  # main valve: first-order move [m], time con
 
 
 def synthetic(rate=1e4, ripple=0.0, direction=1):
-    """p = p0 + d (DELTA + A e^{-s tau} sin(w tau)), x first order; exact peaks and settling known."""
+    """
+    Synthesize a step response whose peaks and settling are known exactly.
+
+    p = p0 + d (DELTA + A e^{-s tau} sin(w tau)), x first order.
+    """
     t = np.arange(0.0, T_STEP + 1.0 + 0.5 / rate, 1.0 / rate)
     tau = np.clip(t - T_STEP, 0.0, None)
     p = P0 + direction * (
@@ -93,7 +97,8 @@ def test_falling_step_gives_undershoot_as_negative_overshoot():
 def test_no_second_peak_is_an_explicit_null_with_reason():
     t = np.arange(0.0, 1.3, 1e-4)
     tau = np.clip(t - T_STEP, 0.0, None)
-    # Critically damped rise with one overshoot lobe that never swings back below the settled value.
+    # Critically damped rise with one overshoot lobe that never swings back below the settled
+    # value.
     p = P0 + DELTA * (1 - np.exp(-tau / 0.01)) + 3e4 * tau / 0.02 * np.exp(1 - tau / 0.02)
     x = X0 + (X_INF - X0) * (1 - np.exp(-tau / TAU))
     result = step_measures(t, p, x, T_STEP)

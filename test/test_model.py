@@ -85,13 +85,17 @@ def test_steady_state_is_exact_no_start_up_transient(params, flow_lpm):
     start = steady_state(params, q_in)
     state = start.copy()
     record = advance(state, np.full(20000, q_in), coefficients(params), 1e-5, record_every=100)
-    pressures = record[:, P_S : P_C + 1]
-    assert np.max(np.abs(pressures - start[P_S : P_C + 1])) < 1e-6 * start[P_S]
+    pressures = record[:, P_S:P_C + 1]
+    assert np.max(np.abs(pressures - start[P_S:P_C + 1])) < 1e-6 * start[P_S]
     assert np.max(np.abs(record[:, X] - start[X])) < 1e-6 * max(start[X], 1e-6)
 
 
 def test_volume_conservation_identity(params):
-    """Sum of V/beta dp/dt over the chambers equals inflow - outflow - net displacement, at any state."""
+    """
+    Sum of V/beta dp/dt over the chambers equals inflow - outflow - net displacement.
+
+    This holds at any state.
+    """
     c = coefficients(params)
     rng = np.random.default_rng(1)
     volumes = np.array(
@@ -117,7 +121,7 @@ def test_volume_conservation_identity(params):
         )
         q_in = rng.uniform(0, 6e-4)
         rates = state_derivative(state, q_in, c)
-        stored = np.sum(volumes / params['bulk_modulus'] * rates[P_S : P_C + 1])
+        stored = np.sum(volumes / params['bulk_modulus'] * rates[P_S:P_C + 1])
         _, q_m2, _, _, _, q_p = flows(state, c)
         displaced = (c.swept_area - c.back_area) * state[X_DOT] + c.rod_area * state[Y_DOT]
         assert stored == pytest.approx(q_in - q_m2 - q_p - displaced, rel=1e-9, abs=1e-15)
@@ -146,7 +150,7 @@ def test_volume_is_conserved_over_a_step_response(params):
         ]
     )
     stored = np.sum(
-        volumes / params['bulk_modulus'] * (state[P_S : P_C + 1] - start[P_S : P_C + 1])
+        volumes / params['bulk_modulus'] * (state[P_S:P_C + 1] - start[P_S:P_C + 1])
     )
     displaced = (c.swept_area - c.back_area) * (state[X] - start[X]) + c.rod_area * (
         state[Y] - start[Y]
@@ -187,7 +191,7 @@ def test_measures_agree_across_step_sizes(params):
 
 
 def test_closed_valve_start_cracks_and_settles_near_the_preset(params):
-    """0 -> 20 L/min from the empty valve: the pilot cracks, then the main valve, no NaN, settles."""
+    """0 -> 20 L/min from the empty valve: pilot cracks, then the main valve, no NaN, settles."""
     w = simulate(
         params,
         Scenario(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.01, end_time=1.2),
@@ -208,7 +212,11 @@ def test_closed_valve_start_cracks_and_settles_near_the_preset(params):
 
 
 def test_ramp_from_closed_valve_and_back_down(params):
-    """Closed -> ramp to rated flow -> ramp back to zero: the valves reseat and nothing goes negative."""
+    """
+    Closed -> ramp to rated flow -> ramp back to zero.
+
+    The valves reseat and nothing goes negative.
+    """
     w = simulate(
         params,
         Scenario(

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ament_pep257 (docstring style, ROS's selection of checks) over the package, tests and benchmarks."""
+"""ament_pep257 (docstring style, ROS's selection of checks) over package, tests and benchmarks."""
 from pathlib import Path
 
 from ament_pep257.main import main

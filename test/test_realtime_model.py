@@ -53,7 +53,7 @@ def test_runs_from_the_closed_valve(reference):
 
 
 def test_model_time_follows_an_irregular_clock_without_drift(model, reference):
-    """Clock ticks of 1.000123 ms: whole 10 us steps, the remainder carried, same result as one run."""
+    """Clock ticks of 1.000123 ms: whole 10 us steps, remainder carried, same result as one run."""
     offline = steady_state(reference, FLOW)
     now_ns, steps = START_NS, 0
     for _ in range(500):

@@ -35,7 +35,7 @@ MASS = SPECS['main_valve_mass']
 
 
 def node_with(context, **overrides):
-    """An rclpy node in this process with parameter overrides, as a parameter file would give."""
+    """Create an rclpy node in this process with overrides, as a parameter file would give."""
     overrides = [Parameter(name, value=value) for name, value in overrides.items()]
     return rclpy.create_node('declaring', context=context, parameter_overrides=overrides)
 

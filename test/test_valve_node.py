@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node over real DDS, the node in its own process (issue 3, "done means").
+"""
+valve_node over real DDS, the node in its own process (issue 3, "done means").
 
 The step-response test runs the node on simulated time (use_sim_time, /clock
 published here in lockstep), so the comparison with the offline simulation
@@ -57,7 +58,11 @@ def reference_settings():
 
 @pytest.fixture(scope='module')
 def valve_process(context, tmp_path_factory):
-    """The shared wall-clock node and a probe connected to it; checks a clean SIGINT exit at the end."""
+    """
+    Start the shared wall-clock node and a probe connected to it.
+
+    Checks a clean SIGINT exit at the end.
+    """
     log = tmp_path_factory.mktemp('valve_node') / 'valve_node.log'
     process = start_node(log)
     probe = Probe(context)
@@ -73,7 +78,7 @@ def valve_process(context, tmp_path_factory):
 
 @pytest.fixture
 def valve(valve_process, reference, reference_settings):
-    """The probe, with the node at the reference parameters, 5 L/min and its steady state."""
+    """Yield the probe, with the node at the reference parameters, 5 L/min and steady state."""
     process, probe = valve_process
     yield probe
     assert process.poll() is None, 'valve_node died'
@@ -103,9 +108,12 @@ def after_reset(probe):
 
 @pytest.fixture(scope='module')
 def sim_valve(context, tmp_path_factory):
-    """A node on /clock (use_sim_time) in its own namespace, started from the reference parameter
-    file plus a file with an integer for a double parameter (lenient typing); the probe has
-    anchored its clock."""
+    """
+    Start a node on /clock (use_sim_time) in its own namespace; the probe has anchored its clock.
+
+    The node starts from the reference parameter file plus a file with an integer for a
+    double parameter (lenient typing).
+    """
     directory = tmp_path_factory.mktemp('sim_valve')
     integers = directory / 'integers.yaml'
     integers.write_text('relief_valve:\n  ros__parameters:\n    main_valve_damping: 0\n')
@@ -186,7 +194,7 @@ def test_publish_rate_change_recreates_the_timer(sim_valve):
 
 
 def test_diagnostics_go_on_while_the_clock_is_paused(sim_valve):
-    """Housekeeping runs after a tick; with /clock paused (no ticks) the 1 Hz report still comes."""
+    """Housekeeping follows a tick; with /clock paused (no ticks) the 1 Hz report still comes."""
     first = sim_valve.wait_for_diagnostics()
     second = sim_valve.wait_for_diagnostics()
     assert first['model_time_s'] == second['model_time_s'] == repr(sim_valve.clock_ns / 1e9)

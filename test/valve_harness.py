@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Drive valve_node over DDS from a test: the node runs in its own process, a probe node here.
+"""
+Drive valve_node over DDS from a test: the node runs in its own process, a probe node here.
 
 The probe records everything the valve publishes (as plain floats, keyed by the
 header stamp in ns), counts any non-finite field, and wraps the inlet_flow
@@ -51,7 +52,11 @@ TIMEOUT = 60.0  # [s] for anything that waits: start-up, discovery, a service an
 
 
 def start_node(log_path, *ros_args, options=()):
-    """valve_node in its own process (python -m valve_sim.ros.valve_node *options --ros-args ...), output to log_path."""
+    """
+    Start valve_node in its own process, output to log_path.
+
+    The command: python -m valve_sim.ros.valve_node *options --ros-args ...
+    """
     env = dict(
         os.environ,
         PYTHONUNBUFFERED='1',
@@ -88,7 +93,8 @@ def stamp_time(time_ns):
 
 
 class Probe:
-    """Test-side node: records the valve's outputs and drives its inputs and services.
+    """
+    Test-side node: records the valve's outputs and drives its inputs and services.
 
     The probe lives in the valve's namespace, so relative topic names match.
     """
@@ -154,7 +160,11 @@ class Probe:
                     self.condition.notify_all()
 
     def _wait(self, condition, timeout):
-        """Block until condition() holds (checked on every message) or timeout [s]; returns whether it holds."""
+        """
+        Block until condition() holds (checked on every message) or timeout [s].
+
+        Returns whether it holds.
+        """
         deadline = time.monotonic() + timeout
         with self.condition:
             while not condition():
@@ -184,7 +194,7 @@ class Probe:
         return self.latest(topic)
 
     def wait_for_diagnostics(self, condition=lambda values: True, what='diagnostics'):
-        """Wait for a diagnostics status from now on that satisfies condition; returns its values."""
+        """Wait for a diagnostics status from now on satisfying condition; returns its values."""
         with self.condition:
             start = len(self.diagnostics)
         self.wait_for(lambda: any(condition(d) for d in self.diagnostics[start:]), what)
@@ -194,7 +204,11 @@ class Probe:
     # --- driving ----------------------------------------------------------------------------
 
     def wait_until_connected(self, use_sim_time=False):
-        """Discovery: the valve hears inlet_flow (and /clock), the probe hears it, services answer."""
+        """
+        Wait for discovery.
+
+        The valve hears inlet_flow (and /clock), the probe hears it, services answer.
+        """
         self.wait_for(
             lambda: self.inlet.get_subscription_count() > 0, 'valve_node subscribing inlet_flow'
         )
@@ -219,7 +233,8 @@ class Probe:
         self.clock.publish(Clock(clock=stamp_time(time_ns)))
 
     def start_clock(self, start_ns, period_ns):
-        """Publish /clock from start_ns on, a period at a time, until the valve's first state arrives.
+        """
+        Publish /clock from start_ns, a period at a time, until the valve's first state arrives.
 
         Returns that state's stamp [ns]: the valve anchors its model time at its first tick.
         """
@@ -233,7 +248,8 @@ class Probe:
         return self.applied[0][0]
 
     def tick_at(self, time_ns):
-        """Lockstep: publish /clock = time_ns until the valve's state stamped time_ns arrived.
+        """
+        Lockstep: publish /clock = time_ns until the valve's state stamped time_ns arrived.
 
         /clock is best effort, so it is sent again every second while waiting.
         """
@@ -257,7 +273,7 @@ class Probe:
         return future.result()
 
     def set_parameters(self, **values):
-        """Set parameters one by one (SetParameters service); returns their SetParametersResults."""
+        """Set parameters one by one (SetParameters service); returns the SetParametersResults."""
         parameters = [Parameter(name, value=value) for name, value in values.items()]
         return self._result(self.parameters.set_parameters(parameters)).results
 
@@ -266,7 +282,7 @@ class Probe:
         return self._result(self.parameters.set_parameters_atomically(parameters)).result
 
     def get_parameters(self, *names):
-        """Current values of names, as a dict."""
+        """Return the current values of names, as a dict."""
         values = self._result(self.parameters.get_parameters(list(names))).values
         return {
             name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
@@ -281,7 +297,7 @@ class Probe:
         return int(seconds[1]) * 1_000_000_000 + int(seconds[2])
 
     def first_after(self, time_ns, topic='supply_pressure'):
-        """The first sample of topic stamped after time_ns [ns] (waits for it)."""
+        """Return the first sample of topic stamped after time_ns [ns] (waits for it)."""
         rows = self.pressures[topic]
         self.wait_for(lambda: rows and rows[-1][0] > time_ns, f'{topic} after {time_ns} ns')
         with self.condition:

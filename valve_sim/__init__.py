@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_sim: a virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches.
+"""
+valve_sim: a virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches.
 
 The package is built in wings, each importing only the wings below it:
 

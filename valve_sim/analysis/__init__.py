@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Response analysis on arrays: the six step-response measures, signals, plots.
+"""
+Response analysis on arrays: the six step-response measures, signals, plots.
 
 Lives here: the measures and step detection, streaming step analysis, signal
 mapping and joining, the paper's reference data, matplotlib figures.

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The paper's six step-response measures, as ../shared/spec/metrics.md defines them.
+"""
+The paper's six step-response measures, as ../shared/spec/metrics.md defines them.
 
 This is the only implementation: the command line, the live analyser and bag
 analysis all call step_measures() and StepDetector.
@@ -25,11 +26,11 @@ How overshoot peaks are found (so that pilot-stage ripple is never taken for a
 peak): the deviation e = direction * (p_s - p_inf) is split into lobes with a
 hysteresis band of PEAK_BAND times the largest deviation in the window. A lobe
 starts when e rises above +band and ends when e falls below -band; the k-th
-overshoot is the extreme of the k-th lobe (a lobe must begin with a rise). Ripple much smaller than the band
-cannot start or end a lobe. The extreme's time and value are refined by a
-least-squares parabola through the lobe samples within PEAK_FIT_DEPTH of the
-extreme, which makes the result nearly independent of the sample rate
-(1 kHz from the node, 10 kHz offline).
+overshoot is the extreme of the k-th lobe (a lobe must begin with a rise).
+Ripple much smaller than the band cannot start or end a lobe. The extreme's
+time and value are refined by a least-squares parabola through the lobe
+samples within PEAK_FIT_DEPTH of the extreme, which makes the result nearly
+independent of the sample rate (1 kHz from the node, 10 kHz offline).
 """
 
 from dataclasses import dataclass, field
@@ -85,7 +86,8 @@ def _refined_extreme(t, e, start, stop):
 
 
 def _lobes(e, band):
-    """(start, stop) index ranges where e stays above -band after rising above +band.
+    """
+    (start, stop) index ranges where e stays above -band after rising above +band.
 
     Only a rise counts: samples that start above +band (a response that begins
     above its settled value) open no lobe until e has been below +band once.
@@ -105,7 +107,11 @@ def _lobes(e, band):
 
 
 def _settling_time(t, x, x_0, x_inf, t_step):
-    """Time after t_step from which x stays within x_inf +- 5 % of |x_inf - x_0| [s], or a reason."""
+    """
+    Return the time [s] after t_step from which x stays within x_inf +- 5 % of |x_inf - x_0|.
+
+    Returns (time, None), or (None, a reason) when there is no such time.
+    """
     width = abs(x_inf - x_0)
     if width == 0.0:
         return None, 'the main valve did not move (zero step width)'
@@ -116,7 +122,8 @@ def _settling_time(t, x, x_0, x_inf, t_step):
     if last >= len(x) - 1 or t[last] >= t[-1] - SETTLED_SPAN:
         return (
             None,
-            'the main valve does not settle inside the window (still outside the band in its last 50 ms)',
+            'the main valve does not settle inside the window '
+            '(still outside the band in its last 50 ms)',
         )
     # Interpolate the final entry into the band between samples last and last + 1.
     bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
@@ -125,7 +132,8 @@ def _settling_time(t, x, x_0, x_inf, t_step):
 
 
 def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
-    """The six measures of the step at t_step [s] (metrics.md), as StepMeasures.
+    """
+    Compute the six measures of the step at t_step [s] (metrics.md), as StepMeasures.
 
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
     arrays. direction: +1 for a rising inlet flow (overshoot peaks are maxima),
@@ -183,10 +191,11 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     ]
     if not lobes:
         reasons.update(
-            {
-                name: 'no overshoot peak inside the window (the pressure never swings above its settled value)'
-                for name in ('P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms')
-            }
+            dict.fromkeys(
+                ('P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms'),
+                'no overshoot peak inside the window '
+                '(the pressure never swings above its settled value)',
+            )
         )
         return StepMeasures(values, reasons, details)
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
@@ -195,10 +204,11 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     details.update(t_1=t_1, p_1=p_inf + direction * e_1)
     if len(lobes) < 2:
         reasons.update(
-            {
-                name: 'no second overshoot (the response does not swing back above the settled value)'
-                for name in ('r_d', 'T_d_ms')
-            }
+            dict.fromkeys(
+                ('r_d', 'T_d_ms'),
+                'no second overshoot '
+                '(the response does not swing back above the settled value)',
+            )
         )
         return StepMeasures(values, reasons, details)
     t_2, e_2 = _refined_extreme(tw, e, *lobes[1])
@@ -209,7 +219,8 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
 
 
 class StepDetector:
-    """Finds steps in an inlet-flow signal, one sample at a time.
+    """
+    Finds steps in an inlet-flow signal, one sample at a time.
 
     A step is a change of more than `threshold` [m^3/s] from the current level;
     it is dated at the last sample before the change (where the model state was

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Reference data from the paper (../shared/paper/relief_valve_paper.txt), for comparison only.
+"""
+Reference data from the paper (../shared/paper/relief_valve_paper.txt), for comparison only.
 
 Nothing in the model reads these; they are printed beside our results.
 """

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Figures: the paper's Figure 5 (step response) and the parameter-study plots.
+"""
+Figures: the paper's Figure 5 (step response) and the parameter-study plots.
 
 Matplotlib with the Agg backend: files only, no display needed.
 """
@@ -54,7 +55,8 @@ def plot_step_response(
     measures=None,
     title='Step response (paper Figure 5)',
 ):
-    """Figure 5: p_s/p_0, x/x_0 and y/y_0 against time after the step; writes a PNG to path.
+    """
+    Figure 5: p_s/p_0, x/x_0 and y/y_0 against time after the step; writes a PNG to path.
 
     time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
     StepMeasures.as_dict() to print beside the curves (optional).
@@ -94,7 +96,8 @@ def plot_step_response(
 
 
 def plot_sensitivity(path, symbol, series, title):
-    """Figures 6, 7, 9-12: the six measures against the variation of one parameter.
+    """
+    Figures 6, 7, 9-12: the six measures against the variation of one parameter.
 
     series: {variation_percent: measures dict}; undefined measures are named on the plot
     (their reasons are in the measures' "reasons").
@@ -124,7 +127,8 @@ def plot_sensitivity(path, symbol, series, title):
 
 
 def plot_poppet_waveforms(path, waveforms, t_step):
-    """Figure 8: pilot poppet displacement y against time for the m_p variations.
+    """
+    Figure 8: pilot poppet displacement y against time for the m_p variations.
 
     waveforms: {variation_percent: (time [s], y [m])}.
     """

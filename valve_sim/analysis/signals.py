@@ -12,14 +12,18 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The signals of a step test in recorded messages, sampled on one time axis.
+"""
+The signals of a step test in recorded messages, sampled on one time axis.
 
 Four roles, each carried by a topic (valve_node's by default, any other by mapping):
 
   role            default topic        supported types (value taken)
-  supply_pressure supply_pressure      sensor_msgs/msg/FluidPressure (fluid_pressure), std_msgs/msg/Float64 (data)
-  main_valve      joint_states         sensor_msgs/msg/JointState (position of joint main_valve), Float64 (data)
-  pilot_poppet    joint_states         JointState (position of joint pilot_poppet), Float64 (data); optional
+  supply_pressure supply_pressure      sensor_msgs/msg/FluidPressure (fluid_pressure),
+                                       std_msgs/msg/Float64 (data)
+  main_valve      joint_states         sensor_msgs/msg/JointState (position of joint main_valve),
+                                       Float64 (data)
+  pilot_poppet    joint_states         JointState (position of joint pilot_poppet),
+                                       Float64 (data); optional
   inlet_flow      applied_inlet_flow   JointState (velocity of joint inlet_flow), Float64 (data)
 
 Pressures on the wire are absolute [Pa]; ambient_pressure [Pa] is subtracted to get
@@ -113,7 +117,8 @@ def stamp_ns(stamp):
 
 
 def seconds(time_ns):
-    """Seconds [s] of integer nanoseconds: the time axis of every analysis.
+    """
+    Seconds [s] of integer nanoseconds: the time axis of every analysis.
 
     int / int is correctly rounded (1700000000250000000 ns -> 1700000000.25 s);
     time_ns / 1e9 would first round the integer to a float and miss by up to 128 ns.
@@ -152,7 +157,11 @@ class Extractor:
         return value - self.map.ambient_pressure if role == 'supply_pressure' else value
 
     def samples(self, message, receive_time_ns):
-        """[(role, time_ns, value)] of one message; a JointState lacking the joint gives nothing for it."""
+        """
+        Return [(role, time_ns, value)] of one message.
+
+        A JointState lacking the joint gives nothing for it.
+        """
         time_ns = (
             receive_time_ns if self.map.clock == 'receive' else stamp_ns(message.header.stamp)
         )
@@ -161,7 +170,8 @@ class Extractor:
 
 
 class Joiner:
-    """Rows (time_ns, {role: value}) at the supply-pressure times, fed one sample at a time.
+    """
+    Rows (time_ns, {role: value}) at the supply-pressure times, fed one sample at a time.
 
     A row is complete once every other role has a sample at or after its time
     (samples of each role arrive in time order); the role's value is then its
@@ -193,11 +203,15 @@ class Joiner:
         return self._complete_rows(final=False)
 
     def finish(self):
-        """The rows still waiting (end of the recording), from the samples there are."""
+        """Return the rows still waiting (end of the recording), from the samples there are."""
         return self._complete_rows(final=True)
 
     def _known_at(self, time_ns):
-        """True when every required role, and every optional role that has begun, has reached time_ns."""
+        """
+        Return True when every role that counts has reached time_ns.
+
+        The roles that count are every required role and every optional role that has begun.
+        """
         return all(
             history[-1][0] >= time_ns if history else role not in self.required
             for role, history in self.history.items()

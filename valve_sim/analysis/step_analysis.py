@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The six measures of every inlet-flow step in a stream of samples, and their JSON file.
+"""
+The six measures of every inlet-flow step in a stream of samples, and their JSON file.
 
 StepAnalysis is fed joined rows (valve_sim.analysis.signals) in time order: time t [s],
 supply pressure p_s [Pa, gauge], main-valve displacement x [m] and applied inlet
@@ -77,7 +78,11 @@ class StepAnalysis:
         return records
 
     def add_rows(self, rows):
-        """Feed rows (time_ns, {role: value}) of signals.Joiner; returns the records they complete."""
+        """
+        Feed rows (time_ns, {role: value}) of signals.Joiner.
+
+        Returns the records they complete.
+        """
         return [
             record
             for time_ns, row in rows
@@ -87,13 +92,21 @@ class StepAnalysis:
         ]
 
     def finish(self):
-        """Records of the steps still open (their window truncated, as details say); then start over."""
+        """
+        Return the records of the steps still open; then start over.
+
+        Their window is truncated, as their details say.
+        """
         records = [self._measure(step) for step in self.open_steps]
         self._restart()
         return records
 
     def _trim(self):
-        """Keep the rows from the oldest open step on; with none open, the last row (a next step's t_step)."""
+        """
+        Keep the rows from the oldest open step on.
+
+        With none open, keep the last row (a next step's t_step).
+        """
         oldest = min((step[0] for step in self.open_steps), default=self.rows[-1][0])
         while self.rows[0][0] < oldest:
             self.rows.popleft()
@@ -107,7 +120,8 @@ class StepAnalysis:
 
 
 class MeasuresFile:
-    """The step records of a bag as one JSON document {"bag": name, "steps": [...]}, appended in place.
+    """
+    A bag's step records as one JSON document {"bag": name, "steps": [...]}, appended in place.
 
     Each append() overwrites the closing brackets with the new record and the
     brackets again, so the file is valid JSON after every step and nothing but

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Step measures of a recorded rosbag2 MCAP file: every inlet-flow step in it, as the analyser computes them live.
+"""
+Step measures of each inlet-flow step in a rosbag2 MCAP file, as the analyser computes them live.
 
 Reads the signals of valve_sim.analysis.signals (topics mappable by option, so a real rig's
 bag with other names or types works), joins them on the supply-pressure times,
@@ -49,7 +50,7 @@ PLOT_LEAD = (
 
 @dataclass
 class Recording:
-    """Joined signals of a bag: arrays over the rows, and what was wrong with the file (or None)."""
+    """A bag's joined signals: arrays over the rows, and what was wrong with the file (or None)."""
 
     time: np.ndarray  # [s]
     supply_pressure: np.ndarray  # [Pa] gauge
@@ -60,7 +61,11 @@ class Recording:
 
 
 def read_recording(path, signal_map=None, required=REQUIRED):
-    """Recording of a bag file; raises InputFileError if a required signal is missing or unreadable."""
+    """
+    Read a bag file as a Recording.
+
+    Raises InputFileError if a required signal is missing or unreadable.
+    """
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
@@ -90,7 +95,8 @@ def read_recording(path, signal_map=None, required=REQUIRED):
         if signal_map.topics[role] not in found:
             raise InputFileError(
                 f'{path} has no topic {signal_map.topics[role]} ({role}); its topics: '
-                f'{", ".join(sorted(found)) or "none"} (map another with --topic-{role.replace("_", "-")})'
+                f'{", ".join(sorted(found)) or "none"} '
+                f'(map another with --topic-{role.replace("_", "-")})'
             )
     if not rows:
         raise InputFileError(
@@ -137,7 +143,12 @@ def analyse_step(recording, t_step, direction):
 
 
 def plot_steps(path, recording, records):
-    """Figure 5 of each step: path itself for one, path with _step<k> before the suffix for several."""
+    """
+    Draw Figure 5 of each step.
+
+    The figure goes to path itself for one step, and to path with _step<k> before
+    the suffix for several.
+    """
     from pathlib import Path
 
     from valve_sim.analysis.plotting import plot_step_response
@@ -168,8 +179,8 @@ def print_steps(records, start_time):
     for k, record in enumerate(records, start=1):
         direction = 'up' if record['direction'] > 0 else 'down'
         print(
-            f'step {k}: {direction} at t = {record["t_step"]:.6f} s ({record["t_step"] - start_time:.4f} s '
-            f'after the first sample)'
+            f'step {k}: {direction} at t = {record["t_step"]:.6f} s '
+            f'({record["t_step"] - start_time:.4f} s after the first sample)'
         )
         print_table(
             StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons'])
@@ -224,8 +235,8 @@ def add_arguments(parser):
         '--step-time',
         type=float,
         metavar='S',
-        help="analyse one step at this time [s, on the bag's time axis] instead of detecting steps; "
-        'the inlet flow is then not needed',
+        help="analyse one step at this time [s, on the bag's time axis] "
+        'instead of detecting steps; the inlet flow is then not needed',
     )
     parser.add_argument(
         '--step-direction',
@@ -236,7 +247,7 @@ def add_arguments(parser):
 
 
 def signal_map_from(args):
-    """SignalMap of the --topic-*, --joint-*, --ambient-pressure and --clock options."""
+    """Build the SignalMap of the --topic-*, --joint-*, --ambient-pressure and --clock options."""
     options = vars(args)
     topics = {role.name: options[f'topic_{role.name}'] for role in ROLES}
     joints = {role.name: options[f'joint_{role.name}'] for role in ROLES if role.joint}

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The `valve-sim` command line: simulate, study, operating-point, analyse, demo.
+"""
+The `valve-sim` command line: simulate, study, operating-point, analyse, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -44,11 +45,12 @@ SUBCOMMANDS = {
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog='valve-sim', description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog='valve-sim', description=__doc__.strip().splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         module = importlib.import_module(module_name)
-        sub = commands.add_parser(name, help=help_text, description=module.__doc__.splitlines()[0])
+        description = module.__doc__.strip().splitlines()[0]
+        sub = commands.add_parser(name, help=help_text, description=description)
         module.add_arguments(sub)
         sub.set_defaults(run=module.run)
     return parser

@@ -12,9 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The paper's step over real DDS: valve_node and analyser_node as processes, 5 -> 20 L/min, recorded and measured.
+"""
+The paper's step over real DDS: valve_node and analyser_node, 5 -> 20 L/min, recorded and measured.
 
-Starts both nodes (in ROS_DOMAIN_ID if set, otherwise in a random domain with
+Starts both nodes as processes (in ROS_DOMAIN_ID if set, otherwise in a random domain with
 discovery kept on this machine), commands 5 L/min until the analyser records every
 topic, holds it HOLD_TIME, steps to 20 L/min, waits for the analyser's live
 measures of the step, and stops both nodes with SIGINT. Then it prints the six
@@ -52,7 +53,11 @@ def progress(text):
 
 
 def choose_domain():
-    """Use ROS_DOMAIN_ID if set; otherwise pick a random domain and keep discovery on this machine."""
+    """
+    Use ROS_DOMAIN_ID if set; otherwise pick a random domain.
+
+    A random domain keeps discovery on this machine. Returns the domain id.
+    """
     if 'ROS_DOMAIN_ID' not in os.environ:
         os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -141,21 +146,27 @@ class Driver:
                 raise TimeoutError(f'no {what} within {timeout:g} s (logs in {self.folder})')
 
     def run_step(self):
-        """Wait for the recording, hold, step, and wait for the step's measures; returns the bag path."""
+        """
+        Wait for the recording, hold, step, and wait for the step's measures.
+
+        Returns the bag path.
+        """
         progress(
-            f'waiting for the nodes to start and discover each other (commanding {self.flow * 6e4:g} L/min)'
+            'waiting for the nodes to start and discover each other '
+            f'(commanding {self.flow * 6e4:g} L/min)'
         )
         self.spin_until(
             lambda: self.bag is not None, READY_TIMEOUT, 'recording of every topic by the analyser'
         )
         progress(
-            f'analyser records every topic to {self.bag}; holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s'
+            f'analyser records every topic to {self.bag}; '
+            f'holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s'
         )
         self._spin_for(HOLD_TIME)
         self.flow = FINAL_FLOW
         progress(
-            f"inlet flow stepped to {self.flow * 6e4:g} L/min; waiting for the analyser's measures "
-            '(1 s of model time after the step)'
+            f'inlet flow stepped to {self.flow * 6e4:g} L/min; '
+            "waiting for the analyser's measures (1 s of model time after the step)"
         )
         self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, 'step measures from the analyser')
         self._spin_for(AFTER_MEASURES)
@@ -167,7 +178,11 @@ class Driver:
 
 
 def report(folder, bag):
-    """Print the live measures beside the paper's and the offline check; draw Figure 5. Returns the JSON path."""
+    """
+    Print the live measures beside the paper's and the offline check; draw Figure 5.
+
+    Returns the JSON path.
+    """
     from valve_sim.commands.analyse import analyse, plot_steps, print_steps, read_recording
 
     measures_path = bag.with_suffix('.measures.json')
@@ -180,7 +195,8 @@ def report(folder, bag):
         [record[name] for name in MEASURE_NAMES] for record in live
     ]
     print(
-        f'\noffline analysis of the bag: {"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
+        '\noffline analysis of the bag: '
+        f'{"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
     )
     figure = plot_steps(folder / 'figure5.png', recording, live[:1])[0] if live else None
     for path in (bag, measures_path, figure):

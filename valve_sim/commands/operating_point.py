@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Report the exact steady state at an inlet flow: pressures, openings, flows, forces and modes.
+"""
+Report the exact steady state at an inlet flow: pressures, openings, flows, forces and modes.
 
 The numbers behind docs/model.md's force and flow balances and stability margins.
 """
@@ -42,23 +43,29 @@ def report(params, inlet_flow):
     _, q_m2, _, q_c, q_s, q_p = (q / LITRE_PER_MINUTE for q in flows(state, c))
     print(f'inlet flow {inlet_flow / LITRE_PER_MINUTE:.3f} L/min ({inlet_flow:.4e} m^3/s)')
     print(
-        f'  pressures [MPa]  p_s {p_s / 1e6:.4f}  p_m {p_m / 1e6:.4f}  p_p {p_p / 1e6:.4f}  p_c {p_c / 1e6:.4f}'
+        f'  pressures [MPa]  p_s {p_s / 1e6:.4f}  p_m {p_m / 1e6:.4f}  '
+        f'p_p {p_p / 1e6:.4f}  p_c {p_c / 1e6:.4f}'
     )
     print(
-        f'  openings [um]    x {x * 1e6:.2f}  (first throttle x + h = {(x + c.first_throttle_clearance) * 1e6:.2f})'
+        f'  openings [um]    x {x * 1e6:.2f}  '
+        f'(first throttle x + h = {(x + c.first_throttle_clearance) * 1e6:.2f})'
         f'  y {y * 1e6:.2f}'
     )
     print(
-        f'  flows [L/min]    main q_m1 = q_m2 = {q_m2:.4f}  bearings q_n = orifice q_c = {q_c:.4f}  '
+        f'  flows [L/min]    main q_m1 = q_m2 = {q_m2:.4f}  '
+        f'bearings q_n = orifice q_c = {q_c:.4f}  '
         f'rod leak q_s {q_s:.4f}  poppet q_p {q_p:.4f}'
     )
     print(
-        f'  main valve [N]   alpha_s p_s {c.supply_force_area * p_s:.2f}  alpha_m p_m {c.intermediate_force_area * p_m:.2f}'
-        f'  -A_p p_p {-c.back_area * p_p:.2f}  -k_m (x + x_0) {-c.main_spring_stiffness * (x + c.main_spring_preload):.2f}'
+        f'  main valve [N]   alpha_s p_s {c.supply_force_area * p_s:.2f}  '
+        f'alpha_m p_m {c.intermediate_force_area * p_m:.2f}'
+        f'  -A_p p_p {-c.back_area * p_p:.2f}  '
+        f'-k_m (x + x_0) {-c.main_spring_stiffness * (x + c.main_spring_preload):.2f}'
     )
     print(
         f'  poppet [N]       A_s p_s {c.rod_area * p_s:.2f}  -k_p (y + y_0) '
-        f'{-c.pilot_spring_stiffness * (y + c.pilot_spring_preload):.2f}  -K_f y p_c {-c.flow_force_gain * y * p_c:.3f}'
+        f'{-c.pilot_spring_stiffness * (y + c.pilot_spring_preload):.2f}  '
+        f'-K_f y p_c {-c.flow_force_gain * y * p_c:.3f}'
     )
     modes = ', '.join(
         f'{f:.1f} Hz (zeta {z:.4f})' for f, z in oscillatory_modes(params, inlet_flow)

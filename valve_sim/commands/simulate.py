@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Run the valve model offline for one inlet-flow step and report the six measures.
+"""
+Run the valve model offline for one inlet-flow step and report the six measures.
 
 Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 0.25 s, end at 1.25 s) with config/reference.yaml. Flows accept a unit suffix
@@ -35,7 +36,7 @@ STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 
 
 def flow_value(text):
-    """A volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
+    """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
     number, factor = text.strip(), 1.0
     for suffix, scale in (
         ('L/min', LITRE_PER_MINUTE),
@@ -84,7 +85,11 @@ def add_parameter_arguments(parser):
 
 
 def load_from_arguments(args):
-    """(params, settings) from --params, --set and --step-size (which overrides settings["step_size"])."""
+    """
+    Return (params, settings) from --params, --set and --step-size.
+
+    --step-size overrides settings["step_size"].
+    """
     params, settings = load_parameters(args.params, dict(args.set))
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size

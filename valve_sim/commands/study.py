@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Reproduce the paper's parameter study: Figures 6-13 and Table 3.
+"""
+Reproduce the paper's parameter study: Figures 6-13 and Table 3.
 
 m_m, m_p, V_p, V_c, d_c and k_p are varied one at a time by -20, -10, 0, +10 and
 +20 % of their reference values (30 cases; the five 0 % cases are one run), and

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The valve model: parameters, equations (1)-(16), integration, steady state.
+"""
+The valve model: parameters, equations (1)-(16), integration, steady state.
 
 Lives here: parameter specs and files, the model equations, the RK4 integrator,
 the exact steady state, bearing design, linear modes, offline simulation, real-time

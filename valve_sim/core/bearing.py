@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Hydrostatic bearing flow of Eq. (12) and the fit of its coefficients K_1..K_3.
+"""
+Hydrostatic bearing flow of Eq. (12) and the fit of its coefficients K_1..K_3.
 
 Each of the n bearings that carry the main valve is an orifice (diameter d_b,
 discharge coefficient C_b) feeding a pocket, in series with the laminar flow
@@ -56,7 +57,8 @@ def fit_bearing_coefficients(
     z_max=1.0,
     samples=201,
 ):
-    """Least-squares K_1, K_2, K_3 of Eq. (12) for the series bearing model.
+    """
+    Least-squares K_1, K_2, K_3 of Eq. (12) for the series bearing model.
 
     orifice_diameter d_b [m], discharge_coefficient C_b [-], density rho [kg/m^3],
     conductance G of one bearing land [m^3/(s Pa)], design_pressure p_s [Pa],

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The errors a user can cause (bad parameters, bad files, a diverging run).
+"""
+The errors a user can cause (bad parameters, bad files, a diverging run).
 
 The command line prints these as one line and exits 1; anything else is a bug
 and keeps its traceback.

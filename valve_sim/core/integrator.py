@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Fixed-step fourth-order Runge-Kutta integration of the valve model.
+"""
+Fixed-step fourth-order Runge-Kutta integration of the valve model.
 
 The paper integrates Eqs. (1)-(16) with classical RK4 at a fixed 10 us step; so
 do we, in one kernel shared by the offline tools and the real-time node. After
@@ -70,7 +71,8 @@ def state_is_sane(state):
 
 @jit
 def rk4_steps(state, inlet_flows, c, step, record_every, record):
-    """Advance state in place by len(inlet_flows) RK4 steps of size step [s].
+    """
+    Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
     inlet_flows[k] [m^3/s] is held during step k. Every record_every steps the
     state is copied into the next row of record. Returns the number of steps
@@ -116,7 +118,8 @@ def describe_state(state):
 
 
 def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
-    """Advance state (modified in place) through inlet_flows, one RK4 step each.
+    """
+    Advance state (modified in place) through inlet_flows, one RK4 step each.
 
     state: float64 array of 8; inlet_flows: array of q_in [m^3/s] per step;
     step: step size [s]; record_every: record the state every so many steps (0: no record);
@@ -133,7 +136,8 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
         failed = describe_state(state)
         state[:] = start
         raise IntegrationError(
-            f'integration diverged at t = {time + (done + 1) * step:.6f} s (step {done + 1} of this call, '
+            f'integration diverged at t = {time + (done + 1) * step:.6f} s '
+            f'(step {done + 1} of this call, '
             f'step size {step:g} s): {failed}. Reduce the step size or check the parameters.'
         )
     return record

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Compile the numerical kernels with numba when it is installed.
+"""
+Compile the numerical kernels with numba when it is installed.
 
 The kernels are plain Python; numba only makes them fast enough for real time
 (a 1 ms tick is 100 RK4 steps). Without numba they run unchanged, slowly.
@@ -25,7 +26,8 @@ except ImportError:  # pragma: no cover - exercised only on machines without num
 
 
 def jit(function):
-    """numba.njit if available, else the function itself.
+    """
+    numba.njit if available, else the function itself.
 
     error_model="numpy": a division by zero gives inf (caught by the state check)
     instead of a Python exception, which keeps branches out of the inner loop.

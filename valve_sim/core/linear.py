@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Linear modes of the valve about a steady state: how fast and how damped it rings.
+"""
+Linear modes of the valve about a steady state: how fast and how damped it rings.
 
 The Jacobian of the model's right-hand side is taken by central differences
 (steps scaled per state) at the exact steady state; its complex eigenvalues
@@ -43,7 +44,11 @@ def jacobian(params, state, inlet_flow, relative_step=1e-6):
 
 
 def oscillatory_modes(params, inlet_flow):
-    """[(frequency [Hz], damping ratio [-])] of the oscillatory modes at the steady state, slowest first."""
+    """
+    Return [(frequency [Hz], damping ratio [-])] of the oscillatory modes at the steady state.
+
+    The slowest mode comes first.
+    """
     state = steady_state(params, inlet_flow)
     eigenvalues = np.linalg.eigvals(jacobian(params, state, inlet_flow))
     modes = [(abs(e.imag) / (2 * np.pi), -e.real / abs(e)) for e in eigenvalues if e.imag > 1e-6]

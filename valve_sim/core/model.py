@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Equations (1)-(16) of the paper: the right-hand side of the valve model.
+"""
+Equations (1)-(16) of the paper: the right-hand side of the valve model.
 
 State vector (SI units, pressures gauge, i.e. relative to the tank):
 
@@ -100,7 +101,7 @@ def land_pressure_term(outer, inner):
 
 
 def coefficients(p):
-    """Derived Coefficients from a validated parameter dict (see valve_sim.core.parameters)."""
+    """Derive the Coefficients from a validated parameter dict (see valve_sim.core.parameters)."""
     root = math.sqrt(2.0 / p['fluid_density'])
     land_1 = land_pressure_term(
         p['first_throttle_outer_diameter'], p['first_throttle_inner_diameter']
@@ -156,7 +157,8 @@ def coefficients(p):
 
 @jit
 def orifice_root(dp, transition):
-    """sgn(dp) sqrt(|dp|) [sqrt(Pa)], with a laminar region for |dp| < transition.
+    """
+    sgn(dp) sqrt(|dp|) [sqrt(Pa)], with a laminar region for |dp| < transition.
 
     Exactly the paper's turbulent law for |dp| >= transition; below it the cubic
     sqrt(tr) (1.25 r - 0.25 r^3), r = dp / tr, which matches it in value and slope
@@ -172,7 +174,8 @@ def orifice_root(dp, transition):
 
 @jit
 def flows(state, c):
-    """Flows of Eqs. (10)-(15) [m^3/s] as (q_m1, q_m2, q_n, q_c, q_s, q_p).
+    """
+    Flows of Eqs. (10)-(15) [m^3/s] as (q_m1, q_m2, q_n, q_c, q_s, q_p).
 
     q_m1 first main throttle p_s -> p_m, q_m2 second main throttle p_m -> tank,
     q_n hydrostatic bearings p_s -> p_p, q_c damping orifice p_p -> p_c,
@@ -219,7 +222,8 @@ def net_forces(state, c):
 
 @jit
 def stop_acceleration(position, velocity, force, mass, stroke):
-    """Acceleration of a body between a seat at 0 and an end stop at stroke.
+    """
+    Acceleration of a body between a seat at 0 and an end stop at stroke.
 
     At a stop, and pushed into it, the body does not accelerate: the stop takes the force.
     """

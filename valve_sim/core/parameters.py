@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Model parameters: names, units, ranges, validation and parameter files.
+"""
+Model parameters: names, units, ranges, validation and parameter files.
 
 Every physical parameter of the valve model has one entry in PARAMETERS. The
 values themselves live in config/reference.yaml (ROS 2 parameter-file format), so
@@ -34,12 +35,17 @@ NODE_NAME = 'relief_valve'
 
 
 class ParameterError(ValueError):
-    """A parameter value, name or file is invalid; the message names the parameter and the limit."""
+    """
+    A parameter value, name or file is invalid.
+
+    The message names the parameter and the limit.
+    """
 
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One model parameter.
+    """
+    One model parameter.
 
     name: the ROS parameter name; symbol: the paper's symbol; unit: SI unit;
     minimum/maximum: inclusive physical limits; source: where the value comes from.
@@ -340,7 +346,8 @@ PARAMETERS = (
         'Pa',
         1.0,
         1e6,
-        'pressure drop below which orifice laws turn linear (closed-valve start under fixed-step RK4)',
+        'pressure drop below which orifice laws turn linear '
+        '(closed-valve start under fixed-step RK4)',
         OURS,
     ),
 )
@@ -421,7 +428,8 @@ def check_value(name, value):
     spec = SETTING_SPECS[name] if name in SETTING_SPECS else SPECS[resolve_name(name)]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(
-            f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, got {value!r}"
+            f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, "
+            f'got {value!r}'
         )
     value = float(value)
     if not math.isfinite(value):
@@ -430,14 +438,15 @@ def check_value(name, value):
         )
     if not spec.minimum <= value <= spec.maximum:
         raise ParameterError(
-            f"parameter '{spec.name}' ({spec.symbol}) = {value:g} {spec.unit} is outside its limits "
-            f'[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+            f"parameter '{spec.name}' ({spec.symbol}) = {value:g} {spec.unit} "
+            f'is outside its limits [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
         )
     return value
 
 
 def validate(params):
-    """Check a complete parameter set; return a new dict of floats or raise ParameterError.
+    """
+    Check a complete parameter set; return a new dict of floats or raise ParameterError.
 
     Checks every value against its limits, that no parameter is missing or unknown,
     the geometric order of the diameters, and that the bearing flow of Eq. (12)
@@ -462,8 +471,9 @@ def validate(params):
         z = i / 100.0
         if k1 + 2.0 * k2 * z + 3.0 * k3 * z * z <= 0.0:
             raise ParameterError(
-                f'bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow that does not '
-                f'rise with the pressure drop at 1 - p_p/p_s = {z:.2f} (Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])'
+                f'bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow '
+                f'that does not rise with the pressure drop at 1 - p_p/p_s = {z:.2f} '
+                '(Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])'
             )
     return checked
 
@@ -494,7 +504,8 @@ _RosYamlLoader.add_implicit_resolver(
 
 
 def read_parameter_file(path, node_name=NODE_NAME):
-    """Read the parameters of one node from a ROS 2 parameter file.
+    """
+    Read the parameters of one node from a ROS 2 parameter file.
 
     Accepts the node's own section or the wildcard '/**'; returns the raw dict of
     ros__parameters (values unvalidated) or raises ParameterError.
@@ -516,7 +527,8 @@ def read_parameter_file(path, node_name=NODE_NAME):
 
 
 def load_parameters(path=None, overrides=None):
-    """Validated model parameters: config/reference.yaml, overlaid by a parameter file.
+    """
+    Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
     path: a ROS 2 parameter file that sets some or all parameters (like a second
     --params-file for the node); the rest keep their reference values. Run-time
@@ -536,7 +548,8 @@ def load_parameters(path=None, overrides=None):
 
 
 def scaled(params, changes):
-    """Copy of params with each named parameter multiplied by (1 + percent/100), validated.
+    """
+    Copy of params with each named parameter multiplied by (1 + percent/100), validated.
 
     changes: {name or symbol: percent}. Used for the paper's parameter study and Table 2.
     """

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The valve model advanced in step with a clock: the core of valve_node, without ROS.
+"""
+The valve model advanced in step with a clock: the core of valve_node, without ROS.
 
 Model time is kept in integer nanoseconds of the clock it follows. Each call of
 advance_to() integrates the whole number of fixed steps that fit between the
@@ -34,7 +35,11 @@ TRIAL_STEPS = 2000  # steps a parameter change is trial-integrated for before it
 
 
 def step_ns(step_size):
-    """A step size [s] as whole nanoseconds (at least 1), the grid the model time moves on."""
+    """
+    Return a step size [s] as whole nanoseconds (at least 1).
+
+    Whole nanoseconds are the grid the model time moves on.
+    """
     return max(1, round(step_size * NS_PER_S))
 
 
@@ -47,7 +52,8 @@ class Progress:
 
 
 class RealTimeModel:
-    """The valve state, its parameters and its model time [ns].
+    """
+    The valve state, its parameters and its model time [ns].
 
     params: validated parameter dict; step_size [s]; inlet_flow [m^3/s]: the
     flow whose exact steady state is the initial state. The model time is None
@@ -71,7 +77,8 @@ class RealTimeModel:
         self.time_ns = now_ns
 
     def advance_to(self, now_ns, inlet_flow, max_lag_ns):
-        """Integrate with inlet_flow [m^3/s] held, up to the clock time now_ns [ns].
+        """
+        Integrate with inlet_flow [m^3/s] held, up to the clock time now_ns [ns].
 
         Clock time beyond max_lag_ns [ns] behind now_ns is skipped first. Returns
         Progress. On divergence raises IntegrationError and leaves state and
@@ -94,7 +101,8 @@ class RealTimeModel:
         self.time_ns += (now_ns - self.time_ns) // self._step_ns * self._step_ns
 
     def trial(self, params, step_size, inlet_flow):
-        """Integrate TRIAL_STEPS steps from a copy of the state with new parameters.
+        """
+        Integrate TRIAL_STEPS steps from a copy of the state with new parameters.
 
         Raises IntegrationError if they diverge; the model itself is not touched.
         """
@@ -111,7 +119,8 @@ class RealTimeModel:
         self._use(params, step_size)
 
     def roll_back(self):
-        """Return to the parameters and step size in use before the last retune().
+        """
+        Return to the parameters and step size in use before the last retune().
 
         Returns False if there is nothing to return to (never retuned, or rolled back already).
         """
@@ -122,5 +131,9 @@ class RealTimeModel:
         return True
 
     def reset(self, inlet_flow):
-        """Re-initialise at the exact steady state for inlet_flow [m^3/s]; raises SteadyStateError."""
+        """
+        Re-initialise at the exact steady state for inlet_flow [m^3/s].
+
+        Raises SteadyStateError.
+        """
         self.state = steady_state(self.params, inlet_flow)

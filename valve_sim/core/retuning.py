@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""What a live parameter change of valve_node implies, without ROS.
+"""
+What a live parameter change of valve_node implies, without ROS.
 
 preset_pressure is the valve's cracking pressure: the steady supply pressure
 (gauge) at which the main valve lifts off its seat (steady_state.cracking_pressure).
@@ -34,18 +35,19 @@ PRESET_PRESSURE = ParameterSpec(
     'Pa',
     0.0,
     1e8,
-    'preset pressure: supply pressure (gauge) at which the main valve cracks open; setting it sets '
-    'pilot_spring_preload, like turning the adjusting screw',
+    'preset pressure: supply pressure (gauge) at which the main valve cracks open; '
+    'setting it sets pilot_spring_preload, like turning the adjusting screw',
     'our definition, see docs/valve_node.md',
 )
 PRESET_TOLERANCE = 1e-6  # relative agreement of preset_pressure and the cracking pressure
 
 
 def merged_parameters(params, changes):
-    """Validated copy of the model parameters params with the model parameters in changes applied.
+    """
+    Return a validated copy of params with the model parameters in changes applied.
 
-    changes: {name: value} of any parameters; only model parameters (SPECS) are used.
-    Raises ParameterError.
+    params: the model parameters. changes: {name: value} of any parameters; only
+    model parameters (SPECS) are used. Raises ParameterError.
     """
     return validate(
         {**params, **{name: value for name, value in changes.items() if name in SPECS}}
@@ -53,7 +55,8 @@ def merged_parameters(params, changes):
 
 
 def dependent_change(params, changes):
-    """The parameter a change implies, as {name: value}.
+    """
+    Return the parameter a change implies, as {name: value}.
 
     preset_pressure [Pa] sets pilot_spring_preload [m]; a change of any model
     parameter gives the new cracking pressure as preset_pressure. Raises
@@ -72,7 +75,8 @@ def dependent_change(params, changes):
 
 
 def check_preset(params, changes):
-    """Raise unless a change keeps preset_pressure the cracking pressure of params (merged).
+    """
+    Raise unless a change keeps preset_pressure the cracking pressure of params (merged).
 
     valve_node adds the dependent parameter to every change; where it is missing,
     deriving it failed, and repeating that raises the reason.
@@ -87,6 +91,7 @@ def check_preset(params, changes):
     cracking = cracking_pressure(params)
     if not math.isclose(cracking, preset, rel_tol=PRESET_TOLERANCE):
         raise ParameterError(
-            f'preset_pressure = {preset:g} Pa disagrees with the cracking pressure {cracking:g} Pa given by '
+            f'preset_pressure = {preset:g} Pa disagrees with the cracking pressure '
+            f'{cracking:g} Pa given by '
             f'pilot_spring_preload = {params["pilot_spring_preload"]:g} m; set only one of the two'
         )

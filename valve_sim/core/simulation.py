@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms out.
+"""
+Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms out.
 
 A Scenario is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
@@ -53,8 +54,11 @@ class Scenario:
 
 @dataclass
 class Waveforms:
-    """Sampled run: time [s], states (rows of the 8 model states, SI), and the
-    inlet flow [m^3/s] applied over the interval that ends at each sample."""
+    """
+    Sampled run: time [s], states (rows of the 8 model states, SI), and inlet flow.
+
+    inlet_flow [m^3/s] is the flow applied over the interval that ends at each sample.
+    """
 
     time: np.ndarray
     states: np.ndarray
@@ -65,14 +69,16 @@ class Waveforms:
 
 
 def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
-    """Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
+    """
+    Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
     Raises IntegrationError if the run diverges, SteadyStateError if the start fails.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     steps = int(round(scenario.end_time / step_size))
     step_starts = np.arange(steps) * step_size
-    # Each step holds the flow at its midpoint: exact for a step on the grid, second order for a ramp.
+    # Each step holds the flow at its midpoint: exact for a step on the grid,
+    # second order for a ramp.
     flows = scenario.inlet_flow(step_starts + 0.5 * step_size)
     state = steady_state(params, scenario.initial_flow)
     initial = state.copy()

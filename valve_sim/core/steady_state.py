@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Exact steady state of the valve for a constant inlet flow.
+"""
+Exact steady state of the valve for a constant inlet flow.
 
 At steady state every chamber's net flow and every net force vanish (Eqs. 1-7
 with all time derivatives zero). The solution is found by Newton's method
@@ -112,7 +113,7 @@ def _contacts(position, stroke):
 
 
 def _contact_is_consistent(state, c):
-    """A valve inside its stroke is free; one at a stop is pushed into it."""
+    """Check that a valve inside its stroke is free and one at a stop is pushed into it."""
     force_x, force_y = net_forces(state, c)
     slack = 1e-9 * c.back_area * max(state[P_S], 1.0)
     for position, force, stroke in (
@@ -178,7 +179,8 @@ def _solve_from(guess, inlet_flow, c):
 
 
 def steady_state(params, inlet_flow):
-    """Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
+    """
+    Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
 
     params: validated parameter dict. inlet_flow = 0 gives the empty, closed valve.
     Raises SteadyStateError when no consistent steady state is found.
@@ -200,7 +202,8 @@ def steady_state(params, inlet_flow):
 
 
 def cracking_pressure(params):
-    """Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
+    """
+    Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
 
     At that point the main valve rests at x = 0 with zero net force, no flow
     passes the main throttles (so p_m = p_s) and all inlet flow goes through the
@@ -238,7 +241,8 @@ def cracking_pressure(params):
 
 
 def preload_for_cracking_pressure(params, pressure):
-    """Pilot spring preload y_0 [m] that makes the main valve crack at pressure [Pa].
+    """
+    Pilot spring preload y_0 [m] that makes the main valve crack at pressure [Pa].
 
     What a technician does with the adjusting screw. The cracking pressure rises
     almost linearly with y_0 (poppet balance A_s p_s ~ k_p (y + y_0)), so a few

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Bag I/O: MCAP as rosbag2 writes it, the tick messages as CDR bytes, replay.
+"""
+Bag I/O: MCAP as rosbag2 writes it, the tick messages as CDR bytes, replay.
 
 Lives here: the MCAP writer and reader, the CDR message layout, valve_node's topic
 layout, a replay publisher.

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""MCAP files as rosbag2 (ROS 2 Jazzy, storage plugin mcap) writes them, and reading them back.
+"""
+MCAP files as rosbag2 (ROS 2 Jazzy, storage plugin mcap) writes them, and reading them back.
 
 Writing (BagWriter) follows ../shared/spec/platform.md and rosbag2's own code:
 header profile "ros2"; one schema per type, named "pkg/msg/Type", encoding
@@ -107,7 +108,8 @@ def _split_type(type_name):
 
 
 def interface_file(type_name, extension):
-    """Path of the installed interface file (.msg or .json) of a message type.
+    """
+    Path of the installed interface file (.msg or .json) of a message type.
 
     Looks in share/<pkg>/msg/ under every AMENT_PREFIX_PATH entry (a ROS install)
     and under this interpreter's prefix (the PyPI wheels).
@@ -124,7 +126,8 @@ def interface_file(type_name, extension):
 
 
 def message_definition(type_name):
-    """Full ros2msg definition of a message type, exactly as rosbag2 stores it in a schema.
+    """
+    Full ros2msg definition of a message type, exactly as rosbag2 stores it in a schema.
 
     The type's .msg text, then for each nested type (sorted, depth first, each once):
     a newline, a line of 80 '=', a line 'MSG: <type as the .msg names it>' and its text.
@@ -163,7 +166,8 @@ def type_hash(type_name):
 
 
 def qos_profiles_yaml(offers):
-    """Channel metadata 'offered_qos_profiles' as rosbag2 Jazzy (metadata version 9) writes it.
+    """
+    Channel metadata 'offered_qos_profiles' as rosbag2 Jazzy (metadata version 9) writes it.
 
     offers: dicts like DEFAULT_OFFER (policies as rmw's lower-case names, durations
     in ns). Returns YAML::Dump's text: a block list, no trailing newline ('[]' if empty).
@@ -192,7 +196,11 @@ def qos_profiles_yaml(offers):
 
 
 class BagWriter:
-    """Writes one rosbag2-style MCAP file: add_topic() once per topic, then write() serialized messages."""
+    """
+    Writes one rosbag2-style MCAP file.
+
+    add_topic() once per topic, then write() serialized messages.
+    """
 
     def __init__(self, path, chunk_size=CHUNK_SIZE):
         self.path = Path(path)
@@ -210,7 +218,11 @@ class BagWriter:
         self.bytes_written = 0  # [bytes] message payloads
 
     def add_topic(self, topic, type_name, offers=(DEFAULT_OFFER,)):
-        """Register a topic of type 'pkg/msg/Type' with its publishers' offered QoS; returns its channel id."""
+        """
+        Register a topic of type 'pkg/msg/Type' with its publishers' offered QoS.
+
+        Returns its channel id.
+        """
         if type_name not in self._schemas:
             self._schemas[type_name] = self._mcap.register_schema(
                 type_name, 'ros2msg', message_definition(type_name).encode()
@@ -232,11 +244,13 @@ class BagWriter:
         self.bytes_written += len(data)
 
     def write_message(self, topic, message, log_time, publish_time):
-        """Serialize a message (an rclpy message or a dict of its fields) for a topic's type and add it.
+        """
+        Serialize a message for a topic's type and add it.
 
-        The CDR encoder is mcap_ros2's, built from the schema's definition text: it
-        writes the bytes DDS sends (rclpy.serialization pads some types, e.g.
-        JointState, with 4 stray bytes that strict readers such as rosbags refuse).
+        message: an rclpy message or a dict of its fields. The CDR encoder is
+        mcap_ros2's, built from the schema's definition text: it writes the bytes DDS
+        sends (rclpy.serialization pads some types, e.g. JointState, with 4 stray
+        bytes that strict readers such as rosbags refuse).
         """
         channel_id = self.channels[topic]
         type_name = self._channel_types[channel_id]
@@ -253,14 +267,19 @@ class BagWriter:
         self._mcap.flush()
 
     def close(self):
-        """Write the summary (schemas, channels, statistics, indexes) and the footer; close the file."""
+        """
+        Write the summary and the footer; close the file.
+
+        The summary holds the schemas, channels, statistics and indexes.
+        """
         if not self._file.closed:
             self._mcap.finish()
             self._file.close()
 
 
 class BagReader:
-    """Messages of an MCAP file in file order, tolerant of a missing end.
+    """
+    Messages of an MCAP file in file order, tolerant of a missing end.
 
     Iterate messages() for (channel, schema, message) of mcap.records. After the
     iteration, problem is None for a complete file, or says what was missing.

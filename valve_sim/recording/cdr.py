@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Serialized messages with fixed strings and sequence lengths, refilled in place.
+"""
+Serialized messages with fixed strings and sequence lengths, refilled in place.
 
 valve_node publishes six messages every millisecond. Filling an rclpy message
 and letting rclpy convert and serialize it costs about twice as much as
@@ -35,7 +36,8 @@ STAMP_OFFSET = len(ENCAPSULATION)  # every message here begins with std_msgs/Hea
 
 
 class CdrMessage:
-    """One message's CDR bytes, built field by field in definition order.
+    """
+    One message's CDR bytes, built field by field in definition order.
 
     The builders return the offset of what they wrote, for set_float64s() later.
     """
@@ -70,7 +72,7 @@ class CdrMessage:
         return self._add('d', value)
 
     def float64s(self, count):
-        """A sequence of count float64 (zeros); returns the offset of the first element."""
+        """Append a sequence of count float64 (zeros); return the offset of the first element."""
         self._add('I', count)
         return self._add(f'{count}d', *[0.0] * count) if count else len(self._data)
 
@@ -80,6 +82,6 @@ class CdrMessage:
     def set_float64s(self, offset, *values):
         struct.pack_into(f'<{len(values)}d', self._data, offset, *values)
 
-    def bytes(self):
-        """The message as bytes (what rclpy's Publisher.publish and the bag writer take)."""
+    def bytes(self):  # noqa: A003  (named after the type it returns; a rename changes the API)
+        """Return the message's bytes: what rclpy's Publisher.publish and the bag writer take."""
         return bytes(self._data)

@@ -12,8 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Publish a simulated run as valve_node would, tick by tick: a known load for the analyser's tests and bench.
+"""
+Publish a simulated run as valve_node would, tick by tick.
 
+It is a known load for the analyser's tests and bench.
 Every tick publishes valve_topics.TickMessages filled with one waveform sample, paced at
 the tick period on the monotonic clock (a late tick is published at once, so the
 count is exact and the mean rate holds). Publishers are reliable, KEEP_LAST
@@ -60,7 +62,11 @@ class Replay:
             time.sleep(0.01)
 
     def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
-        """Publish every every-th sample of waveforms, one tick each period [s], stamped start_time_ns + model time."""
+        """
+        Publish every every-th sample of waveforms, one tick each period [s].
+
+        Each tick is stamped start_time_ns + its model time.
+        """
         started = time.monotonic()
         messages = TickMessages()
         for tick, index in enumerate(range(0, len(waveforms.time), every)):

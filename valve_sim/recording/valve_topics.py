@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node's topics and messages, for writing offline runs as bags and for test publishers.
+"""
+valve_node's topics and messages, for writing offline runs as bags and for test publishers.
 
 The layout (names relative, types, contents) is valve_node's wire interface:
 each tick publishes the four chamber pressures as sensor_msgs/msg/FluidPressure
@@ -32,11 +33,11 @@ from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.cdr import CdrMessage
 
 
-PRESSURE_TOPICS = STATE_NAMES[P_S : P_C + 1]
+PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
 TICK_TOPICS = PRESSURE_TOPICS + ('joint_states', 'applied_inlet_flow')
 JOINT_NAMES = ('main_valve', 'pilot_poppet')  # joint_states: x and y
 TOPIC_TYPES = {
-    **{name: 'sensor_msgs/msg/FluidPressure' for name in PRESSURE_TOPICS},
+    **dict.fromkeys(PRESSURE_TOPICS, 'sensor_msgs/msg/FluidPressure'),
     'joint_states': 'sensor_msgs/msg/JointState',
     'applied_inlet_flow': 'sensor_msgs/msg/JointState',
     'inlet_flow': 'std_msgs/msg/Float64',
@@ -45,13 +46,14 @@ NS_PER_S = 1_000_000_000
 
 
 def message_class(type_name):
-    """The Python class of a message type 'pkg/msg/Type'."""
+    """Return the Python class of a message type 'pkg/msg/Type'."""
     package, namespace, name = type_name.split('/')
     return getattr(importlib.import_module(f'{package}.{namespace}'), name)
 
 
 class TickMessages:
-    """The serialized messages of one valve_node tick, built once and refilled every tick.
+    """
+    The serialized messages of one valve_node tick, built once and refilled every tick.
 
     fill() writes the state (8 model states, SI, gauge pressures) at time_ns [ns]
     into them and returns [(topic, CDR bytes)]. valve_node publishes these; the
@@ -80,9 +82,9 @@ class TickMessages:
         self._messages += [('joint_states', self._joints), ('applied_inlet_flow', self._applied)]
 
     def fill(self, time_ns, state, applied_flow, ambient_pressure):
-        """The tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
+        """Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
         for (_, message), offset, pressure in zip(
-            self._messages, self._pressure_offsets, state[P_S : P_C + 1]
+            self._messages, self._pressure_offsets, state[P_S:P_C + 1]
         ):
             message.set_float64s(offset, pressure + ambient_pressure)
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
@@ -99,7 +101,8 @@ class TickMessages:
 def write_simulation_bag(
     path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0
 ):
-    """Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
+    """
+    Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
 
     waveforms: simulation.Waveforms; every sample publish_interval [s] apart (a
     whole multiple of the waveforms' sample interval) becomes one tick, stamped

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ROS 2 adapters: valve_node, analyser_node and their helpers.
+"""
+ROS 2 adapters: valve_node, analyser_node and their helpers.
 
 Lives here: the nodes, parameter descriptors from specs, diagnostics, spinning.
 The home of rclpy; nodes stay thin around valve_sim.core and valve_sim.analysis.

@@ -12,7 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""analyser_node: records valve_node's topics to MCAP as rosbag2 does, and measures every inlet-flow step live.
+"""
+analyser_node: records valve_node's topics to MCAP and measures every inlet-flow step live.
+
+It records as rosbag2 does.
 
   sub  every topic of the parameter `topics` (relative names resolve in the node's
        namespace), serialized, of whatever type the graph reports for it
@@ -138,7 +141,11 @@ DOUBLE_DEFAULTS = {
 
 
 class RecorderGroup(CallbackGroup):
-    """A callback group the executor never runs: the recorder takes its subscriptions' messages itself."""
+    """
+    A callback group the executor never runs.
+
+    The recorder takes its subscriptions' messages itself.
+    """
 
     def can_execute(self, entity):
         return False
@@ -152,7 +159,11 @@ class RecorderGroup(CallbackGroup):
 
 @dataclass
 class RecordedTopic:
-    """A subscribed topic: subscription, type, bag channel (from the first message), extractor, counters."""
+    """
+    A subscribed topic.
+
+    Its subscription, type, bag channel (from the first message), extractor, counters.
+    """
 
     subscription: object
     type_name: str
@@ -167,7 +178,11 @@ class RecordedTopic:
 
 
 def qos_offer(qos):
-    """An rclpy QoSProfile as the offer dict of valve_sim.recording.bag.qos_profiles_yaml()."""
+    """
+    Convert an rclpy QoSProfile to an offer dict.
+
+    The dict is one offer as valve_sim.recording.bag.qos_profiles_yaml() takes them.
+    """
     return {
         'history': qos.history.name.lower(),
         'depth': qos.depth,
@@ -182,7 +197,11 @@ def qos_offer(qos):
 
 
 def measures_message(record, hardware_id):
-    """The step_measures DiagnosticArray of a step record (valve_sim.analysis.step_analysis)."""
+    """
+    Build the step_measures DiagnosticArray of a step record.
+
+    The record is one of valve_sim.analysis.step_analysis.
+    """
 
     def number(value):
         return 'none' if value is None else repr(float(value))
@@ -223,7 +242,11 @@ def measures_from_message(array):
 
 
 class ValveAnalyser(Node):
-    """Records the configured topics to one MCAP file and measures every step of the applied inlet flow."""
+    """
+    Records the configured topics to one MCAP file.
+
+    It also measures every step of the applied inlet flow.
+    """
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
@@ -305,7 +328,11 @@ class ValveAnalyser(Node):
 
     @staticmethod
     def _new_bag_path(folder):
-        """A new file name in folder (created); raises InputFileError if it cannot be written."""
+        """
+        Return a new file name in folder (created).
+
+        Raises InputFileError if it cannot be written.
+        """
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
@@ -320,7 +347,11 @@ class ValveAnalyser(Node):
         return path
 
     def _discover(self):
-        """Subscribe to each wanted topic once the graph knows its type; note who publishes what."""
+        """
+        Subscribe to each wanted topic once the graph knows its type.
+
+        Also note who publishes what.
+        """
         types = dict(self.get_topic_names_and_types())
         for topic in [t for t in self.wanted if t not in self.recorded and t in types]:
             type_name = types[topic][0]
@@ -348,7 +379,11 @@ class ValveAnalyser(Node):
             recorded.single_publisher = self.count_publishers(topic) == 1
 
     def _extractor(self, topic, type_name):
-        """The Extractor of an analysed topic; None for the others, or (logged) for a type it cannot read."""
+        """
+        Return the Extractor of an analysed topic.
+
+        None for the others, or (logged) for a type it cannot read.
+        """
         roles = self.signal_map.roles_of(topic)
         try:
             return Extractor(topic, type_name, roles, self.signal_map) if roles else None
@@ -397,7 +432,11 @@ class ValveAnalyser(Node):
                 self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
 
     def _warn_lost(self, topic, lost):
-        """Log lost messages at most once a second (rclpy's own throttling inspects the stack: too slow here)."""
+        """
+        Log lost messages at most once a second.
+
+        rclpy's own throttling inspects the stack: too slow here.
+        """
         if time.monotonic() - self.last_loss_warning >= 1.0:
             self.last_loss_warning = time.monotonic()
             self.get_logger().warn(
@@ -414,7 +453,11 @@ class ValveAnalyser(Node):
             self.measures_publisher.publish(message)
 
     def _publish_status(self):
-        """The recording status on /diagnostics: WARN while a topic has no message or when some were lost."""
+        """
+        Publish the recording status on /diagnostics.
+
+        WARN while a topic has no message or when some were lost.
+        """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
             for topic in self.wanted
@@ -468,7 +511,8 @@ def record(stop):
 
 
 def main(args=None):
-    """Run analyser_node until SIGINT or SIGTERM; returns the exit code.
+    """
+    Run analyser_node until SIGINT or SIGTERM; returns the exit code.
 
     The node closes its file with the middleware still up, so the last
     measures are still published.

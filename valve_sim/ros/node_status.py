@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Health counters of valve_node and the /diagnostics status built from them.
+"""
+Health counters of valve_node and the /diagnostics status built from them.
 
 Counters run from node start. Each report (1 Hz) also covers the window since the
 previous one: the real-time factor (model time advanced / steady time elapsed)
@@ -33,10 +34,14 @@ LATE_FRACTION = (
 
 @dataclass
 class Counters:
-    """Events since node start. A late tick ran more than half a period after it was due;
+    """
+    Events since node start.
+
+    A late tick ran more than half a period after it was due;
     a long tick computed for more than half a period; a missed tick never ran (its time
     was integrated by the next one); skipped time was not integrated at all because
-    the lag exceeded the catch-up limit."""
+    the lag exceeded the catch-up limit.
+    """
 
     ticks: int = 0
     late_ticks: int = 0
@@ -69,13 +74,18 @@ class NodeStatus:
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
 
     def tick_done(self, compute_ns, period_ns):
-        """Count a tick that took compute_ns [ns] of wall time, at a tick period of period_ns [ns]."""
+        """
+        Count a tick that took compute_ns [ns] of wall time.
+
+        The tick period is period_ns [ns].
+        """
         self.counters.ticks += 1
         self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
     def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings):
-        """DiagnosticArray for the window that ends now; starts the next window.
+        """
+        Build the DiagnosticArray for the window that ends now; start the next window.
 
         stamp: header stamp (builtin_interfaces Time); name: the node's full name;
         model_time_ns: model time [ns] or None before the first tick; inputs:
@@ -104,7 +114,11 @@ class NodeStatus:
         return array
 
     def _summary(self, counters, previous, inputs):
-        """(level, message): ERROR on a divergence in the window, WARN on stale input or skipped time."""
+        """
+        Return (level, message) of the status.
+
+        ERROR on a divergence in the window, WARN on stale input or skipped time.
+        """
         problems, level = [], DiagnosticStatus.OK
         failures = counters.integration_failures - previous.integration_failures
         if failures:
@@ -142,7 +156,7 @@ class NodeStatus:
 
 
 def _text(value):
-    """A diagnostics value as text: numbers with full precision, booleans as true/false."""
+    """Format a diagnostics value as text: numbers with full precision, booleans as true/false."""
     if isinstance(value, bool):
         return str(value).lower()
     if value is None:

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ROS 2 parameter declarations for valve_sim's parameter specs.
+"""
+ROS 2 parameter declarations for valve_sim's parameter specs.
 
 Turns a ParameterSpec (valve_sim.core.parameters) into a ParameterDescriptor: the
 description carries the symbol, unit and source, and a FloatingPointRange holds
@@ -38,12 +39,14 @@ from rclpy.parameter import Parameter
 
 
 def descriptor(spec, read_only=False):
-    """ParameterDescriptor of a double parameter from a ParameterSpec."""
+    """Build the ParameterDescriptor of a double parameter from a ParameterSpec."""
     return ParameterDescriptor(
         name=spec.name,
         type=ParameterType.PARAMETER_DOUBLE,
         description=f'{spec.describe()}; source: {spec.source}',
-        additional_constraints=f'{spec.minimum:g} <= {spec.symbol} <= {spec.maximum:g} {spec.unit}',
+        additional_constraints=(
+            f'{spec.minimum:g} <= {spec.symbol} <= {spec.maximum:g} {spec.unit}'
+        ),
         read_only=read_only,
         floating_point_range=[
             FloatingPointRange(
@@ -54,7 +57,8 @@ def descriptor(spec, read_only=False):
 
 
 def declare_double(node, spec, default, read_only=False):
-    """Declare the double parameter of spec on node; returns its value as a float.
+    """
+    Declare the double parameter of spec on node; returns its value as a float.
 
     The value is default [spec.unit] unless a parameter file or -p override sets
     it; an integer override (e.g. `main_valve_damping: 0`) is taken as a double.
@@ -82,7 +86,7 @@ def declare_double(node, spec, default, read_only=False):
 
 
 def integers_as_doubles(parameters, double_names):
-    """Copy of a list of rclpy Parameters with integer values of double_names turned into doubles."""
+    """Copy a list of rclpy Parameters with integer values of double_names turned into doubles."""
     return [
         Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
         if p.name in double_names and p.type_ == Parameter.Type.INTEGER
@@ -92,10 +96,17 @@ def integers_as_doubles(parameters, double_names):
 
 
 def value_problem(spec, parameter):
-    """Why the rclpy Parameter is no valid value for spec (naming parameter, limit and unit), or None."""
+    """
+    Explain why the rclpy Parameter is no valid value for spec, or return None.
+
+    The explanation names the parameter, the limit and the unit.
+    """
     label = f"parameter '{spec.name}' ({spec.symbol})"
     if parameter.type_ not in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
-        return f'{label} must be a number in {spec.unit}, got {parameter.type_.name.lower()} {parameter.value!r}'
+        return (
+            f'{label} must be a number in {spec.unit}, '
+            f'got {parameter.type_.name.lower()} {parameter.value!r}'
+        )
     value = float(parameter.value)
     if not math.isfinite(value):
         return f'{label} must be finite, got {value}'

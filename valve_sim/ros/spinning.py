@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""How valve_sim's node processes run: one node on an executor until SIGINT or SIGTERM.
+"""
+How valve_sim's node processes run: one node on an executor until SIGINT or SIGTERM.
 
 The signals only set a flag that ends the spin loop; rclpy's own handlers are
 off. So a node finishes its work (the analyser closes its file) with the
@@ -42,7 +43,11 @@ SPIN_TIMEOUT = 0.1  # [s] the longest a signal waits for the spin loop to notice
 
 
 def init(args=None):
-    """rclpy.init with valve_sim's signal handling; returns the Event that SIGINT and SIGTERM set."""
+    """
+    Call rclpy.init with valve_sim's signal handling.
+
+    Returns the Event that SIGINT and SIGTERM set.
+    """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     for number in (signal.SIGINT, signal.SIGTERM):
@@ -51,7 +56,11 @@ def init(args=None):
 
 
 def spin_until(node, executor, stop):
-    """Spin node on executor until the Event stop is set; the executor then lets go of it, as rclpy.spin() does."""
+    """
+    Spin node on executor until the Event stop is set.
+
+    The executor then lets go of it, as rclpy.spin() does.
+    """
     executor.add_node(node)
     try:
         while not stop.is_set():

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node: the virtual relief valve as a real-time ROS 2 node.
+"""
+valve_node: the virtual relief valve as a real-time ROS 2 node.
 
 Topic and service names are relative, so namespaces and remapping work:
 
@@ -23,9 +24,11 @@ Topic and service names are relative, so namespaces and remapping work:
   pub  joint_states             sensor_msgs/JointState      main_valve, pilot_poppet:
                                                             position [m], velocity [m/s]
   pub  applied_inlet_flow       sensor_msgs/JointState      inlet_flow: velocity = q_in [m^3/s]
-                                                            applied over the tick ending at the stamp
+                                                            applied over the tick ending at
+                                                            the stamp
   pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
-  srv  ~/reset                  std_srvs/Trigger            exact steady state of the current inlet flow
+  srv  ~/reset                  std_srvs/Trigger            exact steady state of the current
+                                                            inlet flow
 
 All messages of one tick carry the model time of the state as header.stamp.
 The model itself (valve_sim.core.realtime_model) has no ROS in it; this module only
@@ -125,14 +128,19 @@ class ReliefValveNode(Node):
         self.add_on_set_parameters_callback(self._check_parameter_change)
         self.add_post_set_parameters_callback(self._apply_parameter_change)
         self.get_logger().info(
-            f'valve at the steady state of {self.inlet_flow:g} m^3/s: p_s = {self.model.state[P_S]:.6g} Pa '
-            f'(gauge); {self.settings["publish_rate"]:g} Hz, steps of {self.settings["step_size"]:g} s'
+            f'valve at the steady state of {self.inlet_flow:g} m^3/s: '
+            f'p_s = {self.model.state[P_S]:.6g} Pa (gauge); '
+            f'{self.settings["publish_rate"]:g} Hz, steps of {self.settings["step_size"]:g} s'
         )
 
     # --- parameters -------------------------------------------------------------------------
 
     def _declare_parameters(self):
-        """Declare all parameters, defaults from config/reference.yaml; returns (params, settings)."""
+        """
+        Declare all parameters, defaults from config/reference.yaml.
+
+        Returns (params, settings).
+        """
         reference, reference_settings = load_parameters()
         defaults = {**reference, **reference_settings}
         values = {
@@ -144,7 +152,11 @@ class ReliefValveNode(Node):
         return self._declare_preset_pressure(params), settings
 
     def _declare_preset_pressure(self, params):
-        """Declare preset_pressure, by default the cracking pressure; an override sets the preload."""
+        """
+        Declare preset_pressure, by default the cracking pressure.
+
+        An override sets the preload.
+        """
         cracking = cracking_pressure(params)
         preset = declare_double(self, PRESET_PRESSURE, cracking)
         if preset == cracking:
@@ -154,7 +166,8 @@ class ReliefValveNode(Node):
         return {**params, 'pilot_spring_preload': preload}
 
     def set_parameters_atomically(self, parameter_list):
-        """Node.set_parameters_atomically, which both parameter services call.
+        """
+        Node.set_parameters_atomically, which both parameter services call.
 
         Checks each value against its spec first, for a reason with symbol, limits
         and unit, and counts and logs every refusal.
@@ -192,7 +205,11 @@ class ReliefValveNode(Node):
         ]
 
     def _check_parameter_change(self, parameters):
-        """On-set callback: validate the merged set and trial-integrate it from the current state."""
+        """
+        On-set callback: validate the merged set.
+
+        Then trial-integrate it from the current state.
+        """
         changes = {p.name: p.value for p in parameters if p.name in VALVE_SPECS}
         if not changes or self._restoring:
             return SetParametersResult(successful=True)
@@ -204,7 +221,8 @@ class ReliefValveNode(Node):
             return SetParametersResult(
                 successful=False,
                 reason=(
-                    f'the integration would diverge (trial of {TRIAL_STEPS} steps from the current state): {error}'
+                    f'the integration would diverge (trial of {TRIAL_STEPS} steps '
+                    f'from the current state): {error}'
                 ),
             )
         except (ParameterError, SteadyStateError) as error:
@@ -334,7 +352,7 @@ class ReliefValveNode(Node):
     # --- inputs and outputs -----------------------------------------------------------------
 
     def _create_outputs(self):
-        """Publishers of the tick topics and the messages they reuse every tick."""
+        """Create the publishers of the tick topics and the messages they reuse every tick."""
         self._tick_messages = TickMessages()
         self._tick_publishers = {
             topic: self.create_publisher(
@@ -386,7 +404,8 @@ class ReliefValveNode(Node):
         return response
 
     def _on_housekeeping_timer(self):
-        """1 Hz: housekeeping runs right after the next tick, in the slack before the one after.
+        """
+        1 Hz: housekeeping runs right after the next tick, in the slack before the one after.
 
         Run from this timer's callback it could delay a tick: it takes up to about a
         millisecond. Without ticks (none since the last housekeeping, or none for a
@@ -398,8 +417,12 @@ class ReliefValveNode(Node):
             self._housekeeping_due = True
 
     def _housekeeping(self):
-        """The diagnostics report, and the young generations' garbage collection (main() turns automatic
-        collection off: a collection that starts inside a tick stalls it for up to a millisecond)."""
+        """
+        Publish the diagnostics report, and collect the young generations' garbage.
+
+        main() turns automatic collection off: a collection that starts inside a tick
+        stalls it for up to a millisecond.
+        """
         self._housekeeping_due = False
         self._ticks_at_housekeeping = self.status.counters.ticks
         self._publish_diagnostics()
@@ -452,7 +475,8 @@ def parse_arguments(args):
         choices=spinning.EXECUTORS,
         default=spinning.DEFAULT_EXECUTOR,
         help=(
-            f"rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; events, rclpy's EventsExecutor, "
+            f'rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; '
+            "events, rclpy's EventsExecutor, "
             "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
         ),
     )

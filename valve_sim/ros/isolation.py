@@ -1,0 +1,58 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A DDS domain of its own for a run of nodes on this machine, discovery kept on localhost.
+
+Test sessions, the demo and the benchmarks each start nodes that must not hear
+another run's nodes. A random ROS_DOMAIN_ID alone collides now and then when
+several runs share a machine, so the domain is also claimed with an exclusive
+lock file (released when the process ends, even on kill -9).
+"""
+import fcntl
+import os
+from pathlib import Path
+import random
+import tempfile
+
+DOMAIN_IDS = range(1, 102)   # 0-101 are the IDs Fast DDS maps to ports; 0 is the default
+LOCK_FOLDER = Path(tempfile.gettempdir()) / 'valve_sim_domains'
+_held_locks = []
+
+
+def claim_domain(keep_existing=True):
+    """
+    Set ROS_DOMAIN_ID to a domain no other run on this machine holds; return it.
+
+    With keep_existing, a ROS_DOMAIN_ID already in the environment (the user's, or a
+    parent run's) is kept. ROS_AUTOMATIC_DISCOVERY_RANGE is set to LOCALHOST unless
+    set. Child processes inherit both.
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if keep_existing and 'ROS_DOMAIN_ID' in os.environ:
+        return int(os.environ['ROS_DOMAIN_ID'])
+    LOCK_FOLDER.mkdir(exist_ok=True)
+    candidates = list(DOMAIN_IDS)
+    random.SystemRandom().shuffle(candidates)
+    for domain in candidates:
+        handle = open(LOCK_FOLDER / f'{domain}.lock', 'w')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _held_locks.append(handle)   # held until this process ends
+        os.environ['ROS_DOMAIN_ID'] = str(domain)
+        return domain
+    raise RuntimeError(f'every ROS domain 1-101 is held by another run (locks in {LOCK_FOLDER})')
