@@ -316,6 +316,14 @@ def test_invalid_parameter_changes_are_rejected_with_their_reason(valve, referen
     )
 
 
+def test_an_undeclared_name_is_refused_with_the_declared_name_meant(valve):
+    (symbol,) = valve.set_parameters(m_m=0.07)
+    assert not symbol.successful
+    assert "'m_m'" in symbol.reason and "'main_valve_mass'" in symbol.reason, symbol.reason
+    (typo,) = valve.set_parameters(main_valve_mas=0.07)
+    assert not typo.successful and "did you mean 'main_valve_mass'" in typo.reason, typo.reason
+
+
 def test_inconsistent_geometry_set_atomically_is_rejected_as_a_whole(valve, reference):
     mass = reference['main_valve_mass'] * 1.1
     result = valve.set_parameters_atomically(

@@ -36,6 +36,7 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.commands.cli import make_folder
 from valve_sim.core.errors import IncompleteRunError
 
 
@@ -262,13 +263,7 @@ def run(args):
     from valve_sim.ros.isolation import claim_domain
 
     folder = Path(args.out) if args.out else Path.cwd() / time.strftime('demo_%Y%m%d-%H%M%S')
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise IncompleteRunError(
-            f'output folder {folder} cannot be created: {error.strerror}'
-        ) from error
-    folder = folder.resolve()
+    folder = make_folder(folder).resolve()
     progress(f'output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
     progress('starting valve_node and analyser_node')
     processes = start_nodes(folder)

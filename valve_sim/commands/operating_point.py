@@ -19,10 +19,7 @@ The numbers behind docs/model.md's force and flow balances and stability margins
 """
 
 from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
-from valve_sim.core.linear import oscillatory_modes
-from valve_sim.core.model import coefficients, flows
-from valve_sim.core.simulation import LITRE_PER_MINUTE
-from valve_sim.core.steady_state import cracking_pressure, steady_state
+from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def add_arguments(parser):
@@ -37,6 +34,10 @@ def add_arguments(parser):
 
 
 def report(params, inlet_flow):
+    from valve_sim.core.linear import oscillatory_modes
+    from valve_sim.core.model import coefficients, flows
+    from valve_sim.core.steady_state import steady_state
+
     c = coefficients(params)
     state = steady_state(params, inlet_flow)
     p_s, p_m, p_p, p_c, x, _, y, _ = state
@@ -74,6 +75,8 @@ def report(params, inlet_flow):
 
 
 def run(args):
+    from valve_sim.core.steady_state import cracking_pressure
+
     params, _ = load_from_arguments(args)
     print(f'main valve cracking pressure: {cracking_pressure(params) / 1e6:.4f} MPa')
     for inlet_flow in args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE):

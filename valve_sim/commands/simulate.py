@@ -27,10 +27,11 @@ import math
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
-from valve_sim.core.model import STATE_NAMES
 from valve_sim.core.parameters import check_value, load_parameters, ParameterError
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.core.steady_state import with_preset_pressure
+from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim simulate --help` stays quick.
 
 
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
@@ -115,6 +116,8 @@ def load_from_arguments(args):
     --step-size overrides settings["step_size"]. A preset pressure (--preset-pressure,
     else preset_pressure of --set or the file) sets the pilot spring preload last.
     """
+    from valve_sim.core.steady_state import with_preset_pressure
+
     params, settings = load_parameters(args.params, dict(args.set))
     preset = settings.pop('preset_pressure', None)
     preset = getattr(args, 'preset_pressure', None) or preset
@@ -191,6 +194,8 @@ def _scenario(args):
 
 def write_csv(path, waveforms):
     """Waveforms as CSV: time, applied inlet flow and the eight states, SI units in the header."""
+    from valve_sim.core.model import STATE_NAMES
+
     header = ['time_s', 'inlet_flow_m3_s'] + [
         f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)
     ]
@@ -226,6 +231,8 @@ def is_papers_run(params, scenario):
 
 
 def run(args):
+    from valve_sim.core.simulation import simulate
+
     params, settings = load_from_arguments(args)
     step_size = settings['step_size']
     scenario = _scenario(args)

@@ -50,15 +50,13 @@ from valve_sim.analysis.paper import (
     STUDY_VARIATIONS,
     TABLE2_CHANGES,
 )
+from valve_sim.commands.cli import make_folder
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
-from valve_sim.core.integrator import IntegrationError
+from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.parameters import ParameterError, scaled
-from valve_sim.core.simulation import simulate
-from valve_sim.core.steady_state import (
-    cracking_pressure,
-    SteadyStateError,
-    with_preset_pressure,
-)
+
+# The model's modules (numba, scipy) are imported where a case runs, so that
+# `valve-sim study --help` stays quick.
 
 
 PROTOCOLS = {
@@ -130,6 +128,8 @@ def case_parameters(params, changes, protocol, preset_pressure):
     valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
     Raises ParameterError or SteadyStateError when the case has no such preload.
     """
+    from valve_sim.core.steady_state import with_preset_pressure
+
     case = scaled(params, changes)
     if protocol == 'held-preset':
         case = with_preset_pressure(case, preset_pressure)
@@ -145,6 +145,9 @@ def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_press
     preset_pressure [Pa] defaults to the cracking pressure of params. A case that
     cannot run gets every measure None with the reason; it never raises for the physics.
     """
+    from valve_sim.core.simulation import simulate
+    from valve_sim.core.steady_state import cracking_pressure
+
     if preset_pressure is None:
         preset_pressure = cracking_pressure(params)
     case = dict.fromkeys(CASE_COLUMNS)
@@ -195,6 +198,8 @@ def run_all(
     params, step_size, jobs, protocol=DEFAULT_PROTOCOL, preset_pressure=None, progress=print
 ):
     """Run every case in parallel; returns {label: run_case result}."""
+    from valve_sim.core.steady_state import cracking_pressure
+
     if preset_pressure is None and protocol == 'held-preset':
         preset_pressure = cracking_pressure(params)
     cases = study_cases()
@@ -293,10 +298,11 @@ def write_figures(out, results, protocol):
 
 
 def run(args):
+    from valve_sim.core.steady_state import cracking_pressure
+
     params, settings = load_from_arguments(args)
     step_size = settings['step_size']
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(args.out))
     preset = cracking_pressure(params)
     held = args.protocol == 'held-preset'
     print(

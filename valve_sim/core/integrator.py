@@ -23,6 +23,7 @@ and raises IntegrationError instead of returning numbers.
 """
 
 import numpy as np
+from valve_sim.core.errors import IntegrationError
 from valve_sim.core.jit import jit
 from valve_sim.core.model import derivatives, P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
 
@@ -31,10 +32,6 @@ from valve_sim.core.model import derivatives, P_C, P_S, STATE_NAMES, X, X_DOT, Y
 # water cannot hold 10 bar below vacuum, and nothing in the valve reaches 1 GPa.
 PRESSURE_FLOOR = -1e6
 PRESSURE_CEILING = 1e9
-
-
-class IntegrationError(RuntimeError):
-    """The integration diverged or produced a non-finite state."""
 
 
 @jit

@@ -15,7 +15,7 @@
 """
 Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms out.
 
-A Scenario is the paper's test: the valve at the exact steady state of
+A Scenario (valve_sim.core.scenario) is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve.
@@ -26,30 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients, STATE_NAMES
+from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario  # noqa: F401 (also offered here)
 from valve_sim.core.steady_state import steady_state
-
-
-LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """Inlet-flow step test. Flows in m^3/s, times in s."""
-
-    initial_flow: float = 5.0 * LITRE_PER_MINUTE
-    final_flow: float = 20.0 * LITRE_PER_MINUTE
-    step_time: float = 0.25
-    end_time: float = 1.25
-    ramp_time: float = 0.0
-
-    def inlet_flow(self, t):
-        """q_in(t) [m^3/s] (vectorised)."""
-        t = np.asarray(t, dtype=float)
-        if self.ramp_time > 0.0:
-            progress = np.clip((t - self.step_time) / self.ramp_time, 0.0, 1.0)
-        else:
-            progress = (t >= self.step_time).astype(float)
-        return self.initial_flow + (self.final_flow - self.initial_flow) * progress
 
 
 @dataclass

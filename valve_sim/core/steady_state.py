@@ -28,7 +28,8 @@ position is fixed there and its force balance is replaced by the contact conditi
 
 import numpy as np
 from scipy.optimize import root
-from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.errors import IntegrationError, SteadyStateError
+from valve_sim.core.integrator import advance
 from valve_sim.core.model import (
     coefficients,
     derivatives,
@@ -49,10 +50,6 @@ PSEUDO_TRANSIENT_TIME = 0.3  # [s]
 PSEUDO_TRANSIENT_STEP = 5e-6  # [s]
 PSEUDO_TRANSIENT_DAMPING = (200.0, 50.0)  # [N s/m] added to main valve and poppet
 TOLERANCE = 1e-10  # relative residual of flows and forces
-
-
-class SteadyStateError(RuntimeError):
-    """No steady state could be found."""
 
 
 def _residuals(state, inlet_flow, c, flow_scale, force_scale):
