@@ -206,7 +206,7 @@ def test_paper_column_only_beside_the_papers_step():
     assert 'paper' not in table2.splitlines()[0]
 
 
-def test_an_output_folder_that_cannot_be_made_is_named(tmp_path):
+def test_a_path_that_cannot_be_written_is_named(tmp_path):
     blocker = tmp_path / 'file'
     blocker.write_text('')
     result = valve_sim('study', '--out', str(blocker / 'out'), check=False)
@@ -215,3 +215,7 @@ def test_an_output_folder_that_cannot_be_made_is_named(tmp_path):
         f'valve-sim study: error: output folder {blocker / "out"} cannot be created: '
         'Not a directory'
     )
+    csv_path = blocker / 'run.csv'
+    result = valve_sim('simulate', '--end-time', '0.3', '--csv', str(csv_path), check=False)
+    assert result.returncode == 1
+    assert result.stderr.strip() == f'valve-sim simulate: error: {csv_path}: Not a directory'

@@ -73,6 +73,13 @@ def make_folder(path):
     return path
 
 
+def explained(error):
+    """Return an error's one-line message; a file the system refused is named first."""
+    if isinstance(error, OSError) and error.filename and error.strerror:
+        return f'{error.filename}: {error.strerror}'
+    return str(error)
+
+
 def main(argv=None):
     from valve_sim.core.errors import USER_ERRORS
 
@@ -84,7 +91,7 @@ def main(argv=None):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except USER_ERRORS as error:
-        print(f'valve-sim {args.command}: error: {error}', file=sys.stderr)
+        print(f'valve-sim {args.command}: error: {explained(error)}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f'valve-sim {args.command}: interrupted', file=sys.stderr)
