@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from valve_sim.core.integrator import advance, advance_lanes
 from valve_sim.core.linear import jacobian
-from valve_sim.core.model import coefficients, STATE_NAMES
+from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
@@ -80,6 +80,12 @@ class Waveforms:
         return self.states[:, STATE_NAMES.index(name)]
 
 
+def main_stage_flow(params, states):
+    """Flow through the main stage q_m2 [m^3/s] (Eq. 11) for each row of states."""
+    c = coefficients(params)
+    return np.array([model_flows(state, c)[1] for state in np.asarray(states, dtype=float)])
+
+
 def step_flows(scenario, step_size):
     """
     Inlet flow [m^3/s] held during each RK4 step of a run.
@@ -100,18 +106,42 @@ def _waveforms(initial, record, flows, record_every, step_size, initial_flow):
     )
 
 
+def ramp_flows(max_flow, ramp_time, hold_time, step_size):
+    """
+    Inlet flow [m^3/s] per RK4 step of a static-characteristic test.
+
+    0 -> max_flow linearly over ramp_time [s], held for hold_time [s], back to 0
+    over ramp_time (midpoint flows, as step_flows).
+    """
+    ramp = int(round(ramp_time / step_size))
+    up = (np.arange(ramp) + 0.5) / ramp * max_flow
+    return np.concatenate([up, np.full(int(round(hold_time / step_size)), max_flow), up[::-1]])
+
+
+def run_flows(params, flows, step_size=1e-5, record_interval=1e-4, initial_flow=0.0):
+    """
+    Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
+
+    The run starts at the exact steady state of initial_flow [m^3/s] (0: the empty,
+    closed valve). Returns Waveforms sampled every record_interval [s]. Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails.
+    """
+    record_every = max(1, int(round(record_interval / step_size)))
+    flows = np.ascontiguousarray(flows, dtype=float)
+    state = steady_state(params, initial_flow)
+    initial = state.copy()
+    record = advance(state, flows, coefficients(params), step_size, record_every)
+    return _waveforms(initial, record, flows, record_every, step_size, initial_flow)
+
+
 def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
     Raises IntegrationError if the run diverges, SteadyStateError if the start fails.
     """
-    record_every = max(1, int(round(record_interval / step_size)))
     flows = step_flows(scenario, step_size)
-    state = steady_state(params, scenario.initial_flow)
-    initial = state.copy()
-    record = advance(state, flows, coefficients(params), step_size, record_every)
-    return _waveforms(initial, record, flows, record_every, step_size, scenario.initial_flow)
+    return run_flows(params, flows, step_size, record_interval, scenario.initial_flow)
 
 
 def steady_lead(flows, initial_flow, record_every):
