@@ -32,7 +32,6 @@ from valve_sim.analysis.signals import (
     CLOCKS,
     Extractor,
     Joiner,
-    REQUIRED,
     ROLES,
     seconds,
     SignalMap,
@@ -43,6 +42,9 @@ from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
 
 
+# What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
+# (then T_s comes from the pressure, valve_sim.analysis.measures).
+BAG_REQUIRED = ('supply_pressure', 'inlet_flow')
 PLOT_LEAD = (
     0.25  # [s] shown before the step, which the plot puts at 0.25 s as in the paper's Figure 5
 )
@@ -54,29 +56,30 @@ class Recording:
 
     time: np.ndarray  # [s]
     supply_pressure: np.ndarray  # [Pa] gauge
-    main_valve: np.ndarray  # [m]
+    main_valve: np.ndarray  # [m], NaN where the bag has none
     pilot_poppet: np.ndarray  # [m], NaN where the bag has none
     inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
     problem: str = None
 
 
-def read_recording(path, signal_map=None, required=REQUIRED):
+def read_recording(path, signal_map=None, required=BAG_REQUIRED):
     """
-    Read a bag file as a Recording.
+    Read a bag file as a Recording; roles not required are NaN where the bag lacks them.
 
     Raises InputFileError if a required signal is missing or unreadable.
     """
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
+    optional = [role.name for role in ROLES if role.name not in required]
     reader, decoders, joiner, rows = (
         BagReader(path),
         DecoderFactory(),
-        Joiner(required, ['pilot_poppet']),
+        Joiner(required, optional),
         [],
     )
     extractors = {}
-    wanted = {signal_map.topics[role] for role in required + ('pilot_poppet',)}
+    wanted = {signal_map.topics[role] for role in (*required, *optional)}
     for channel, schema, message in reader.messages(wanted):
         if channel.id not in extractors:
             extractors[channel.id] = _extractor(path, channel, schema, signal_map, decoders)
@@ -185,16 +188,17 @@ def print_steps(records, start_time):
         print_table(
             StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons'])
         )
+        if record['details'].get('T_s_from') == 'supply_pressure':
+            print(
+                '  T_s_ms: from the supply pressure (main valve not recorded): the time after '
+                'which |p_s - p_inf| stays below 5 % of p_1 - p_inf'
+            )
         if 'note' in record['details']:
             print(f'  note: {record["details"]["note"]}')
 
 
-def add_arguments(parser):
-    parser.add_argument(
-        'bag', metavar='BAG.mcap', help="rosbag2 MCAP file (valve_node's topics, or mapped ones)"
-    )
-    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
-    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+def add_signal_arguments(parser):
+    """--topic-*, --joint-*, --ambient-pressure and --clock: where a bag's signals are."""
     for role in ROLES:
         option = role.name.replace('_', '-')
         parser.add_argument(
@@ -224,6 +228,15 @@ def add_arguments(parser):
         default='header',
         help='time of a sample: its header stamp, or its receive time (needed for Float64 topics)',
     )
+
+
+def add_arguments(parser):
+    parser.add_argument(
+        'bag', metavar='BAG.mcap', help="rosbag2 MCAP file (valve_node's topics, or mapped ones)"
+    )
+    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
+    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+    add_signal_arguments(parser)
     parser.add_argument(
         '--step-threshold',
         type=float,
@@ -260,7 +273,7 @@ def signal_map_from(args):
 
 
 def run(args):
-    required = REQUIRED if args.step_time is None else ('supply_pressure', 'main_valve')
+    required = BAG_REQUIRED if args.step_time is None else ('supply_pressure',)
     recording = read_recording(args.bag, signal_map_from(args), required)
     if recording.problem:
         print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)

@@ -179,6 +179,22 @@ def add_arguments(parser):
         help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
         "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
     )
+    parser.add_argument(
+        '--rig-topics',
+        metavar='PRESSURE,FLOW',
+        help='with --mcap: write what a test rig records instead, the supply pressure and the '
+        'inlet flow as std_msgs/msg/Float64 on these two topics (no main-valve position)',
+    )
+    parser.add_argument(
+        '--pressure-noise',
+        type=float,
+        default=0.0,
+        metavar='PA',
+        help='with --rig-topics: Gaussian noise on the recorded pressure, standard deviation [Pa]',
+    )
+    parser.add_argument(
+        '--seed', type=int, default=0, metavar='N', help='seed of the --pressure-noise generator'
+    )
 
 
 def _scenario(args):
@@ -199,6 +215,36 @@ def write_csv(path, waveforms):
         writer.writerow(header)
         for t, q, state in zip(waveforms.time, waveforms.inlet_flow, waveforms.states):
             writer.writerow([f'{t:.7f}', f'{q:.9e}'] + [f'{v:.9e}' for v in state])
+
+
+def write_bag(args, waveforms, ambient_pressure):
+    """--mcap: valve_node's layout, or a rig's two Float64 topics with --rig-topics."""
+    from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
+
+    # valve_node's 1 kHz ticks where the samples allow it, else every sample.
+    ratio = 1e-3 / args.record_interval
+    interval = 1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
+    if not args.rig_topics:
+        write_simulation_bag(args.mcap, waveforms, ambient_pressure, publish_interval=interval)
+        return
+    topics = [topic.strip() for topic in args.rig_topics.split(',')]
+    if len(topics) != 2 or not all(topics) or topics[0] == topics[1]:
+        raise ParameterError(
+            f'--rig-topics needs two different topics PRESSURE,FLOW, got {args.rig_topics!r}'
+        )
+    if not (math.isfinite(args.pressure_noise) and args.pressure_noise >= 0.0):
+        raise ParameterError(
+            f'--pressure-noise must be finite and >= 0 Pa, got {args.pressure_noise}'
+        )
+    write_rig_bag(
+        args.mcap,
+        waveforms,
+        *('/' + topic.lstrip('/') for topic in topics),
+        ambient_pressure,
+        args.pressure_noise,
+        args.seed,
+        interval,
+    )
 
 
 def print_table(measures):
@@ -242,16 +288,7 @@ def run(args):
             measures.as_dict(),
         )
     if args.mcap:
-        from valve_sim.recording.valve_topics import write_simulation_bag
-
-        # valve_node's 1 kHz ticks where the samples allow it, else every sample.
-        ratio = 1e-3 / args.record_interval
-        interval = (
-            1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
-        )
-        write_simulation_bag(
-            args.mcap, waveforms, settings['ambient_pressure'], publish_interval=interval
-        )
+        write_bag(args, waveforms, settings['ambient_pressure'])
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:

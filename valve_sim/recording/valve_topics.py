@@ -26,6 +26,7 @@ std_msgs/msg/Float64 [m^3/s].
 
 import importlib
 
+import numpy as np
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
 from valve_sim.core.parameters import ParameterError, STANDARD_ATMOSPHERE
@@ -138,6 +139,50 @@ def write_simulation_bag(
                 commanded = flow
             for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
                 bag.write(bag.channels['/' + topic], data, time_ns, time_ns)
+        return len(indices)
+    finally:
+        bag.close()
+
+
+def write_rig_bag(
+    path,
+    waveforms,
+    pressure_topic,
+    flow_topic,
+    ambient_pressure=STANDARD_ATMOSPHERE,
+    pressure_noise=0.0,
+    seed=0,
+    publish_interval=1e-3,
+    start_time_ns=0,
+):
+    """
+    Write an offline run as a test rig records it: two std_msgs/msg/Float64 topics.
+
+    pressure_topic: supply pressure [Pa absolute: gauge + ambient_pressure] with
+    Gaussian noise of standard deviation pressure_noise [Pa] (generator seeded with
+    seed); flow_topic: the inlet flow [m^3/s] over the interval ending at each
+    sample, as a flow meter reports it. No main-valve position, no headers: the
+    receive time (log_time) is the sample time. Returns the number of samples.
+    """
+    record_interval = waveforms.time[1] - waveforms.time[0]
+    every = round(publish_interval / record_interval)
+    if every < 1 or abs(every * record_interval - publish_interval) > 1e-9 * publish_interval:
+        raise ParameterError(
+            f'publish interval {publish_interval:g} s is not a whole multiple of the '
+            f"waveforms' sample interval {record_interval:g} s"
+        )
+    indices = np.arange(0, len(waveforms.time), every)
+    noise = np.random.default_rng(seed).normal(0.0, pressure_noise, len(indices))
+    pressure = waveforms.states[indices, P_S] + ambient_pressure + noise
+    bag = BagWriter(path)
+    try:
+        for topic in (pressure_topic, flow_topic):
+            bag.add_topic(topic, 'std_msgs/msg/Float64')
+        for index, value in zip(indices, pressure):
+            time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
+            bag.write_message(pressure_topic, Float64(data=float(value)), time_ns, time_ns)
+            flow = float(waveforms.inlet_flow[index])
+            bag.write_message(flow_topic, Float64(data=flow), time_ns, time_ns)
         return len(indices)
     finally:
         bag.close()
