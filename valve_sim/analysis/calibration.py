@@ -633,6 +633,11 @@ def calibrate(
         objective.label = f'start {k}/{len(points)}'
         objective.best = (math.inf, None)
         try:
+            if np.all(objective(point) == FAILED_RESIDUAL):
+                runs.append({'start': list(point * start), 'values': None, 'cost': math.inf,
+                             'message': 'skipped: the model cannot run at this start',
+                             'checks': [], 'u': None})
+                continue
             solution = least_squares(
                 objective,
                 point,
@@ -674,8 +679,11 @@ def calibrate(
             break
     if not runs:
         raise CalibrationError('interrupted before any evaluation finished')
-    feasible = [run for run in runs if all(c['satisfied'] for c in run['checks'])]
-    best = min(feasible or runs, key=lambda run: run['cost'])
+    ran = [run for run in runs if run['u'] is not None]
+    if not ran:
+        raise CalibrationError('the model cannot run at any start: check the start values')
+    feasible = [run for run in ran if all(c['satisfied'] for c in run['checks'])]
+    best = min(feasible or ran, key=lambda run: run['cost'])
     u = best['u']
     result = CalibrationResult(
         parameters=objective.parameters(u),

@@ -122,6 +122,11 @@ def _settling_time(t, x, x_0, x_inf, t_step, width=None, signal='the main valve'
     """
     width = abs(x_inf - x_0) if width is None else width
     if width == 0.0:
+        if x_0 == 0.0:
+            return None, (
+                'no relief through the main stage: the main valve stayed on its seat '
+                '(the pilot alone passes this flow)'
+            )
         return None, 'the main valve did not move (zero step width)'
     outside = np.flatnonzero(np.abs(x - x_inf) > SETTLING_BAND * width)
     if len(outside) == 0:
@@ -136,7 +141,28 @@ def _settling_time(t, x, x_0, x_inf, t_step, width=None, signal='the main valve'
     # Interpolate the final entry into the band between samples last and last + 1.
     bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
     fraction = (x[last] - bound) / (x[last] - x[last + 1])
-    return t[last] + fraction * (t[last + 1] - t[last]) - t_step, None
+    entry = t[last] + fraction * (t[last + 1] - t[last])
+    # A later swing whose samples stay inside but whose peak leaves the band between
+    # samples (seen at 1 kHz, not at 10 kHz) is an exit too: refine each later local
+    # extreme by the parabola through it and its neighbours, as the overshoot peaks.
+    deviation = np.abs(x - x_inf)
+    band = SETTLING_BAND * width
+    for j in range(last + 2, len(x) - 1):
+        if deviation[j] >= deviation[j - 1] and deviation[j] >= deviation[j + 1]:
+            exit_time = _parabola_exit(t[j - 1:j + 2], deviation[j - 1:j + 2], band)
+            if exit_time is not None:
+                entry = exit_time
+    return entry - t_step, None
+
+
+def _parabola_exit(t, deviation, band):
+    """Return where the parabola through 3 samples falls back below band after its peak."""
+    tc = t - t[1]
+    a, b, c = np.polyfit(tc, deviation, 2)
+    if a >= 0.0 or c - b * b / (4.0 * a) <= band:
+        return None
+    root = (-b - math.sqrt(b * b - 4.0 * a * (c - band))) / (2.0 * a)  # the later root
+    return t[1] + min(root, tc[-1])
 
 
 def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
@@ -180,7 +206,13 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     if end - t_step < window:
         details['note'] = f'window truncated to {end - t_step:.3f} s of the {window:.3f} s defined'
     if p_0 == 0.0:
-        reasons.update(dict.fromkeys(MEASURE_NAMES, 'supply pressure before the step is zero'))
+        reasons.update(
+            dict.fromkeys(
+                MEASURE_NAMES,
+                'no step response: the valve was empty and closed before the step '
+                '(supply pressure zero), so there is no relieving state to measure from',
+            )
+        )
         return StepMeasures(values, reasons, details)
 
     values['P_o_percent'] = (p_inf - p_0) / p_0 * 100.0
