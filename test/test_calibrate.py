@@ -119,8 +119,8 @@ def test_ctrl_c_writes_the_best_result_so_far(rig_bag, tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     deadline = time.monotonic() + 300.0
-    for line in process.stderr:  # wait for the fit to be under way
-        if 'evaluation' in line or time.monotonic() > deadline:
+    for line in process.stderr:  # wait for the fit itself to be under way
+        if 'start 1/' in line or time.monotonic() > deadline:
             break
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=300)

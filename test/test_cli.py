@@ -108,12 +108,15 @@ def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_pat
     preset = float(rows[0]['preset_pressure_Pa'])
     assert preset == pytest.approx(7e6, rel=1e-3)  # the paper's preset, config/reference.yaml
     for row in rows:
+        case = (row['parameter'], row['variation_percent'])
         assert row['protocol'] == 'held-preset'
-        for name in MEASURE_NAMES:  # a value, or the reason why there is none
-            assert row[name] != '' or name in row['reasons'], (row['parameter'], name)
-        if row['initial_supply_pressure_Pa']:  # the preset is held: p_s before the step
-            assert float(row['cracking_pressure_Pa']) == pytest.approx(preset, rel=1e-6)
-            assert float(row['initial_supply_pressure_Pa']) > preset
+        for name in MEASURE_NAMES:  # every case relieves and has all six measures
+            assert row[name] != '', (case, name, row['reasons'])
+        assert float(row['initial_main_valve_displacement_m']) > 0.0, case  # main stage open
+        # The preset held: the case cracks at it, and p_s before the step reads the preset
+        # plus the override from cracking to 5 L/min.
+        assert float(row['cracking_pressure_Pa']) == pytest.approx(preset, rel=1e-6), case
+        assert preset < float(row['initial_supply_pressure_Pa']) < 1.01 * preset, case
     k_p_rows = [row for row in rows if row['parameter'] == 'k_p']
     initial = [float(row['initial_supply_pressure_Pa']) for row in k_p_rows]
     assert max(initial) - min(initial) < 1e-3 * preset  # frozen, k_p +-20 % moves it ~ +-20 %

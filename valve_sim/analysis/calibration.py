@@ -606,10 +606,14 @@ def calibrate(
     start = np.array([_start_value(params, p.name) for p in fitted])
     objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
+    objective.label = 'identifiability check:'
     try:
         base, jacobian = _jacobian(objective, np.ones(len(fitted)), 0.01)
     except KeyboardInterrupt:
-        raise CalibrationError('interrupted before the first evaluation finished') from None
+        if objective.best[1] is None:
+            raise CalibrationError('interrupted before the first evaluation finished') from None
+        cost, u = objective.best
+        return _interrupted(params, fitted, start, target, constraints, objective, u, cost, began)
     if np.all(base == FAILED_RESIDUAL):
         raise CalibrationError(
             'the model cannot run the target with the start values (no steady state or a '
@@ -706,6 +710,24 @@ def calibrate(
     result.evaluations = objective.count
     result.wall_time = clock.monotonic() - began
     return result
+
+
+def _interrupted(params, fitted, start, target, constraints, objective, u, cost, began):
+    """Return the result of a fit stopped before its first start ran: the best so far."""
+    return CalibrationResult(
+        parameters=objective.parameters(u),
+        fitted=fitted,
+        values=list(u * start),
+        start_values=list(start),
+        residuals=objective(u),
+        residual_names=list(target.residual_names) + [c.name for c in constraints],
+        cost=cost,
+        constraints=[],
+        starts=[],
+        evaluations=objective.count,
+        wall_time=clock.monotonic() - began,
+        interrupted=True,
+    )
 
 
 def _uncertainty(result, target, jacobian, start):
