@@ -36,7 +36,10 @@ SUBCOMMANDS = {
         'valve_sim.commands.operating_point',
         'exact steady state, flows, forces and linear modes at a flow',
     ),
-    'analyse': ('valve_sim.commands.analyse', 'step measures of a recorded rosbag2 MCAP file'),
+    'analyse': (
+        'valve_sim.commands.analyse',
+        'step measures of a recorded rosbag2 MCAP file or bag folder',
+    ),
     'demo': (
         'valve_sim.commands.demo',
         "valve_node + analyser_node over DDS: the paper's step, recorded and measured",

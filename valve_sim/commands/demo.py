@@ -64,9 +64,16 @@ def choose_domain():
     return os.environ['ROS_DOMAIN_ID']
 
 
-def start_nodes(folder):
-    """{name: Popen} of valve_node and analyser_node (recording into folder), logs in folder."""
-    arguments = {'valve_node': [], 'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}']}
+def start_nodes(folder, foxglove_port=None):
+    """
+    Start valve_node and analyser_node (recording into folder), logs in folder.
+
+    foxglove_port: valve_node serves its live view there. Returns {name: Popen}.
+    """
+    arguments = {
+        'valve_node': [] if foxglove_port is None else ['--foxglove', str(foxglove_port)],
+        'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}'],
+    }
     processes = {}
     for name in NODES:
         with open(folder / f'{name}.log', 'wb') as log:
@@ -107,7 +114,7 @@ class Driver:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from std_msgs.msg import Float64
-        from valve_sim.ros.analyser_node import MEASURES_QOS, RECORDING_STATUS
+        from valve_sim.ros.analyser_node import MEASURES_QOS, NODE_NAME, RECORDING_TASK
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
         self.node = Node('valve_demo')
@@ -117,7 +124,8 @@ class Driver:
         self.node.create_timer(COMMAND_PERIOD, lambda: publisher.publish(Float64(data=self.flow)))
 
         def on_status(array):
-            for status in (s for s in array.status if s.name == RECORDING_STATUS):
+            recording = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its name
+            for status in (s for s in array.status if s.name == recording):
                 values = {pair.key: pair.value for pair in status.values}
                 if all(
                     int(count) > 0 for key, count in values.items() if key.startswith('messages /')
@@ -206,11 +214,23 @@ def report(folder, bag):
 
 
 def add_arguments(parser):
+    from valve_sim.ros.live_view import DEFAULT_PORT
+
     parser.add_argument(
         '--out',
         metavar='DIR',
         help='folder for the bag, measures JSON, figure and logs (default: a new '
         'demo_<date>-<time> folder in the current directory)',
+    )
+    parser.add_argument(
+        '--foxglove',
+        nargs='?',
+        const=DEFAULT_PORT,
+        type=int,
+        metavar='PORT',
+        help='valve_node serves a live view over the Foxglove WebSocket protocol on this port '
+        f'of this machine (default {DEFAULT_PORT}): open ws://localhost:PORT in the Foxglove app '
+        'with the layout share/valve_sim/foxglove/valve_layout.json',
     )
 
 
@@ -223,7 +243,14 @@ def run(args):
     folder = folder.resolve()
     progress(f'output folder {folder}; ROS_DOMAIN_ID={choose_domain()}')
     progress('starting valve_node and analyser_node')
-    processes = start_nodes(folder)
+    processes = start_nodes(folder, args.foxglove)
+    if args.foxglove is not None:
+        from valve_sim.ros.live_view import layout_path
+
+        progress(
+            f'Foxglove live view: open ws://localhost:{args.foxglove} in the Foxglove app '
+            f'(layout {layout_path()})'
+        )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
         bag = Driver(processes, folder).run_step()
