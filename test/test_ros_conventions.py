@@ -22,8 +22,11 @@ replayed run into a bag folder.
 
 import asyncio
 import json
+from pathlib import Path
 import re
 import struct
+import subprocess
+import sys
 import threading
 import time
 
@@ -145,6 +148,21 @@ def test_layout_parses_and_names_only_what_the_node_serves(renamed_valve):
         assert index is None or TOPIC_TYPES['joint_states'].endswith('JointState')
     layout_panels = json.dumps(layout['layout'])
     assert all(panel in layout_panels for panel in panels)
+
+
+def test_layout_is_installed_with_the_package(tmp_path):
+    """setup.py's data files put the layout in share/valve_sim/foxglove, as colcon would."""
+    repo = Path(__file__).resolve().parent.parent
+    done = subprocess.run(
+        [sys.executable, 'setup.py', '-q', 'install_data', '--install-dir', str(tmp_path)],
+        cwd=repo,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert done.returncode == 0, done.stderr
+    installed = tmp_path / 'share' / 'valve_sim' / 'foxglove' / 'valve_layout.json'
+    assert installed.read_bytes() == (repo / 'foxglove' / 'valve_layout.json').read_bytes()
 
 
 def test_diagnostics_names_levels_and_hardware_id_after_a_rename(renamed_valve):

@@ -316,3 +316,12 @@ def test_sample_bag_has_receive_times_and_rosbag2_metadata():
     assert records[-1]['ros_distro'] == 'jazzy'
     assert records[-1]['message_count'] == statistics.message_count
     assert layout_problems(records[-1], BAG_METADATA) == []
+
+
+def test_bag_files_of_an_unclosed_split_bag_in_split_order(tmp_path):
+    for number in (10, 2, 0, 1):
+        (tmp_path / f'bag_{number}.mcap').write_bytes(b'')
+    assert [f.name for f in bag_files(tmp_path)] == [
+        'bag_0.mcap', 'bag_1.mcap', 'bag_2.mcap', 'bag_10.mcap'
+    ]
+    assert bag_files(tmp_path / 'bag_2.mcap') == [tmp_path / 'bag_2.mcap']

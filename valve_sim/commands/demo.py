@@ -28,6 +28,7 @@ import json
 import os
 from pathlib import Path
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -110,13 +111,14 @@ def stop_nodes(processes, folder):
 class Driver:
     """The demo's own node: commands the inlet flow and listens to the analyser."""
 
-    def __init__(self, processes, folder):
+    def __init__(self, processes, folder, live_view=False):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from std_msgs.msg import Float64
         from valve_sim.ros.analyser_node import MEASURES_QOS, NODE_NAME, RECORDING_TASK
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
+        self.live_view = live_view  # valve_node serves one: say where, once it runs
         self.node = Node('valve_demo')
         self.bag = None  # the analyser's file, once it records every topic
         self.measures = []  # step_measures messages
@@ -170,6 +172,8 @@ class Driver:
             f'analyser records every topic to {self.bag}; '
             f'holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s'
         )
+        if self.live_view:
+            self._announce_live_view()
         self._spin_for(HOLD_TIME)
         self.flow = FINAL_FLOW
         progress(
@@ -179,6 +183,15 @@ class Driver:
         self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, 'step measures from the analyser')
         self._spin_for(AFTER_MEASURES)
         return self.bag
+
+    def _announce_live_view(self):
+        """Print the address valve_node logged for its Foxglove server, and the layout."""
+        from valve_sim.ros.live_view import layout_path
+
+        log = self.folder / 'valve_node.log'
+        found = re.search(r'Foxglove live view on ws://[\w.]+:(\d+)', log.read_text())
+        address = f'ws://localhost:{found[1]}' if found else f'nowhere (see {log})'
+        progress(f'Foxglove live view: {address}; layout {layout_path()}')
 
     def _spin_for(self, duration):
         end = time.monotonic() + duration
@@ -214,7 +227,7 @@ def report(folder, bag):
 
 
 def add_arguments(parser):
-    from valve_sim.ros.live_view import DEFAULT_PORT
+    from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT
 
     parser.add_argument(
         '--out',
@@ -222,15 +235,11 @@ def add_arguments(parser):
         help='folder for the bag, measures JSON, figure and logs (default: a new '
         'demo_<date>-<time> folder in the current directory)',
     )
-    parser.add_argument(
-        '--foxglove',
-        nargs='?',
-        const=DEFAULT_PORT,
-        type=int,
-        metavar='PORT',
-        help='valve_node serves a live view over the Foxglove WebSocket protocol on this port '
-        f'of this machine (default {DEFAULT_PORT}): open ws://localhost:PORT in the Foxglove app '
-        'with the layout share/valve_sim/foxglove/valve_layout.json',
+    add_port_option(
+        parser,
+        'valve_node serves a live view over the Foxglove WebSocket protocol on this port '
+        f'of this machine (default {DEFAULT_PORT}; 0: any free port): open it in the Foxglove '
+        'app with the layout share/valve_sim/foxglove/valve_layout.json',
     )
 
 
@@ -244,16 +253,9 @@ def run(args):
     progress(f'output folder {folder}; ROS_DOMAIN_ID={choose_domain()}')
     progress('starting valve_node and analyser_node')
     processes = start_nodes(folder, args.foxglove)
-    if args.foxglove is not None:
-        from valve_sim.ros.live_view import layout_path
-
-        progress(
-            f'Foxglove live view: open ws://localhost:{args.foxglove} in the Foxglove app '
-            f'(layout {layout_path()})'
-        )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
-        bag = Driver(processes, folder).run_step()
+        bag = Driver(processes, folder, args.foxglove is not None).run_step()
     finally:
         rclpy.try_shutdown()
         progress('stopping both nodes (SIGINT)')

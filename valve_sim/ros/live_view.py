@@ -43,6 +43,13 @@ def layout_path():
     return installed if installed.is_file() else source
 
 
+def add_port_option(parser, help_text):
+    """Add --foxglove [PORT] (DEFAULT_PORT when given without a number) to an argparse parser."""
+    parser.add_argument(
+        '--foxglove', nargs='?', const=DEFAULT_PORT, type=int, metavar='PORT', help=help_text
+    )
+
+
 class LiveView:
     """A Foxglove WebSocket server for given topics; log() hands it serialized messages."""
 

@@ -83,8 +83,7 @@ from valve_sim.core.steady_state import (
     SteadyStateError,
 )
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
-from valve_sim.ros import diagnostics, spinning
-from valve_sim.ros.live_view import DEFAULT_HOST, DEFAULT_PORT, LiveView
+from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
 
@@ -407,7 +406,9 @@ class ReliefValveNode(Node):
             for topic, publisher in self._tick_publishers.items()
         }
         topics[self._diagnostics.topic_name] = 'diagnostic_msgs/msg/DiagnosticArray'
-        self.live_view = LiveView(topics, port, host, name=self.get_fully_qualified_name())
+        self.live_view = live_view.LiveView(
+            topics, port, host, name=self.get_fully_qualified_name()
+        )
         self.get_logger().info(
             f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
         )
@@ -524,21 +525,18 @@ def parse_arguments(args):
             "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
         ),
     )
-    parser.add_argument(
-        '--foxglove',
-        nargs='?',
-        const=DEFAULT_PORT,
-        type=int,
-        metavar='PORT',
-        help='serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
-        f'(default port {DEFAULT_PORT}; 0: any free port). On a ROS install, run '
+    live_view.add_port_option(
+        parser,
+        'serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
+        f'(default port {live_view.DEFAULT_PORT}; 0: any free port). On a ROS install, run '
         'foxglove_bridge instead',
     )
     parser.add_argument(
         '--foxglove-host',
-        default=DEFAULT_HOST,
+        default=live_view.DEFAULT_HOST,
         metavar='HOST',
-        help=f'address the Foxglove server listens on (default {DEFAULT_HOST}, this machine; '
+        help='address the Foxglove server listens on '
+        f'(default {live_view.DEFAULT_HOST}, this machine; '
         '0.0.0.0 for the network)',
     )
     return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
