@@ -76,6 +76,8 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/foxglove', glob('foxglove/*.json')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
+        ('share/' + PACKAGE, ['LICENSE']),
     ],
     install_requires=['setuptools'],
     extras_require={
