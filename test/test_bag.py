@@ -66,7 +66,7 @@ def waveforms():
 @pytest.fixture(scope='module')
 def simulation_bag(waveforms, tmp_path_factory):
     path = tmp_path_factory.mktemp('bags') / 'simulation.mcap'
-    write_simulation_bag(path, waveforms, START_NS)
+    write_simulation_bag(path, waveforms, start_time_ns=START_NS)
     return path
 
 

@@ -117,7 +117,7 @@ def waveforms():
 @pytest.fixture(scope='module')
 def bag_folder(waveforms, tmp_path_factory):
     folder = tmp_path_factory.mktemp('bags') / 'step'
-    write_simulation_bag(folder, waveforms, START_NS, folder=True)
+    write_simulation_bag(folder, waveforms, start_time_ns=START_NS, folder=True)
     return folder
 
 

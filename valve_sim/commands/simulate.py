@@ -297,9 +297,9 @@ def run(args):
         write_simulation_bag(
             args.mcap,
             waveforms,
-            start_ns,
             settings['ambient_pressure'],
             publish_interval=interval,
+            start_time_ns=start_ns,
             folder=args.bag_folder,
         )
     if args.json:

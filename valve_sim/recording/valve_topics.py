@@ -128,9 +128,10 @@ def transport_delays(count, seed=TRANSPORT_SEED):
 def write_simulation_bag(
     path,
     waveforms,
-    start_time_ns,
     ambient_pressure=STANDARD_ATMOSPHERE,
     publish_interval=1e-3,
+    *,
+    start_time_ns,
     folder=False,
     frame_prefix=DEFAULT_FRAME_PREFIX,
 ):
