@@ -76,6 +76,7 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/calibration', glob('config/calibration/*')),
+        ('share/' + PACKAGE + '/foxglove', glob('foxglove/*.json')),
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
         ('share/' + PACKAGE, ['LICENSE']),
     ],
