@@ -13,8 +13,9 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line: simulate, study, operating-point, characteristic, analyse,
-calibrate, demo.
+The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
+
+Subcommands: simulate, study, operating-point, characteristic, analyse, calibrate, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
