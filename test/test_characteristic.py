@@ -74,6 +74,10 @@ def test_bad_input_is_named():
     short = characteristic(p, q, 2 * RATED, main)  # rated flow never reached
     assert short.rated_pressure is None and 'never reaches' in short.reasons['rated_pressure']
     assert short.override is None
+    closed = characteristic(p, q, RATED, np.zeros_like(q))  # the main stage never opens
+    assert closed.cracking_pressure is None and closed.reseat_pressure is None
+    assert closed.hysteresis is None
+    assert {'cracking_pressure', 'reseat_pressure'} <= set(closed.reasons)
 
 
 def test_ramp_cracking_equals_the_steady_state_solver(reference):
@@ -111,7 +115,7 @@ def test_a_missing_flow_topic_is_named(tmp_path, capsys, reference):
     """Name the missing inlet-flow topic: analyse --characteristic needs it."""
     waveforms = run_flows(reference, ramp_flows(RATED, 1.0, 0.1, 1e-5), 1e-5, 1e-3)
     bag = tmp_path / 'rig.mcap'
-    write_simulation_bag(bag, waveforms, 101325.0, publish_interval=1e-3)
+    write_simulation_bag(bag, waveforms, 101325.0, publish_interval=1e-3, start_time_ns=0)
     code = valve_sim(
         ['analyse', '--characteristic', str(bag), '--topic-inlet-flow', '/no_such_topic']
     )

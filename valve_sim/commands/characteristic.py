@@ -37,7 +37,14 @@ from valve_sim.analysis.characteristic import (
     CRACKING_FRACTION,
     split_ramps,
 )
-from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
+from valve_sim.commands.simulate import (
+    add_bag_arguments,
+    add_parameter_arguments,
+    check_bag_arguments,
+    flow_value,
+    load_from_arguments,
+    write_bag,
+)
 from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -95,6 +102,7 @@ def add_arguments(parser):
         help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
         '(for valve-sim analyse --characteristic)',
     )
+    add_bag_arguments(parser)
 
 
 def _check(args, step_size):
@@ -164,9 +172,9 @@ def _ramp_labels(inlet_flow):
     return labels
 
 
-def print_marks(marks, steady):
-    """Print the ramp's marks beside the steady state's, in MPa and L/min."""
-    print(f'{"mark":<22}{"ramp":>12}{"steady state":>14}')
+def print_marks(marks, steady=None):
+    """Print the marks in MPa and L/min, beside the steady state's if given (a dict)."""
+    print(f'{"mark":<22}{"ramp":>12}' + (f'{"steady state":>14}' if steady is not None else ''))
     rows = (
         ('cracking [MPa]', 'cracking_pressure', 1e-6),
         ('cracking flow [L/min]', 'cracking_flow', 1 / LITRE_PER_MINUTE),
@@ -176,15 +184,18 @@ def print_marks(marks, steady):
         ('hysteresis [MPa]', 'hysteresis', 1e-6),
     )
     for label, key, scale in rows:
-        value, exact = getattr(marks, key), steady.get(key)
-        shown = f'{value * scale:12.5f}' if value is not None else f'{"-":>12}'
-        exact_shown = f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
-        print(f'{label:<22}{shown}{exact_shown}')
+        value = getattr(marks, key)
+        line = f'{label:<22}' + (f'{value * scale:12.5f}' if value is not None else f'{"-":>12}')
+        if steady is not None:
+            exact = steady.get(key)
+            line += f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
+        print(line)
     for name, reason in marks.reasons.items():
         print(f'  {name}: {reason}')
 
 
 def run(args):
+    check_bag_arguments(args)
     params, settings = load_from_arguments(args)
     step_size = settings['step_size']
     rated = _check(args, step_size)
@@ -206,10 +217,7 @@ def run(args):
         write_outputs(Path(args.out), params, waveforms, main, marks['main_stage_flow'], steady,
                       report, args.max_flow)
     if args.mcap:
-        from valve_sim.recording.valve_topics import write_simulation_bag
-
-        write_simulation_bag(args.mcap, waveforms, settings['ambient_pressure'],
-                             publish_interval=args.record_interval)
+        write_bag(args, waveforms, settings['ambient_pressure'], args.record_interval)
     if args.json:
         print(json.dumps(report, indent=2))
     else:
@@ -230,9 +238,8 @@ def run(args):
 
 def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow):
     """CSV files, JSON and the figure into out."""
-    from valve_sim.core.steady_state import steady_curve
-
     from valve_sim.analysis.plotting import plot_characteristic
+    from valve_sim.core.steady_state import steady_curve
 
     out.mkdir(parents=True, exist_ok=True)
     q_in, p_s = waveforms.inlet_flow, waveforms['supply_pressure']
