@@ -328,7 +328,7 @@ def test_bag_files_of_an_unclosed_split_bag_in_split_order(tmp_path):
 
 
 def test_calibrate_reads_a_bag_folder(tmp_path, capsys):
-    """calibrate --bag takes a bag folder as analyse does (read_recording, bag_files)."""
+    """`calibrate --bag` takes a bag folder as analyse does (read_recording, bag_files)."""
     folder = tmp_path / 'flat'
     start = ('--start-time', '2026-11-29T12:00:00Z')
     flat = ('--final-flow', '5L/min', '--end-time', '0.3', '--mcap', folder, '--bag-folder')
