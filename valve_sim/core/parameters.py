@@ -339,6 +339,18 @@ PARAMETERS = (
     ParameterSpec(
         'poppet_stroke', 'y_max', 'm', 1e-5, 0.01, 'pilot poppet stroke to its end stop', OURS
     ),
+    # The test bench's supply (not the valve).
+    ParameterSpec(
+        'supply_pressure_limit',
+        'p_s,max',
+        'Pa',
+        1e5,
+        1e8,
+        "highest supply pressure (gauge) the bench's supply delivers: its own relief "
+        "takes the inflow beyond it (3x the paper's 7 MPa preset; where a valve fault "
+        'drives p_s there, valve_node raises an overpressure alarm)',
+        OURS,
+    ),
     # Numerical regularisation.
     ParameterSpec(
         'orifice_transition_pressure',

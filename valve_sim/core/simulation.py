@@ -18,14 +18,18 @@ Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms ou
 A Scenario is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
-empty, closed valve.
+empty, closed valve. Faults (a FaultSet) hold from the start; a fault schedule
+(valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from valve_sim.core.fault_schedule import tick_index
+from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, STATE_NAMES
+from valve_sim.core.model import coefficients, STATE_NAMES, X_DOT
+from valve_sim.core.parameters import ParameterError
 from valve_sim.core.steady_state import steady_state
 
 
@@ -63,16 +67,62 @@ class Waveforms:
     time: np.ndarray
     states: np.ndarray
     inlet_flow: np.ndarray
+    events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
 
 
-def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
+def apply_faults(state, faults, changes):
+    """
+    Return the FaultSet after the fault parameters in changes; state updated in place.
+
+    A main valve that becomes stuck stops where it is: its velocity becomes zero.
+    """
+    new = faults.changed({n: v for n, v in changes.items() if n in FAULT_NAMES})
+    if new.main_valve_stuck and not faults.main_valve_stuck:
+        state[X_DOT] = 0.0
+    return new
+
+
+def _event_steps(schedule, steps, step_size, record_every, tick_interval):
+    """[(step index, changes)] of the schedule's events, at their ticks, within the run."""
+    tick_steps = int(round(tick_interval / step_size))
+    if schedule and (
+        tick_steps < 1
+        or abs(tick_steps * step_size - tick_interval) > 1e-9 * tick_interval
+        or tick_steps % record_every
+    ):
+        raise ParameterError(
+            f'a fault schedule needs the tick interval ({tick_interval:g} s) to be a whole '
+            f'multiple of the step size ({step_size:g} s) and of the record interval'
+        )
+    tick_ns = int(round(tick_interval * 1e9))
+    grouped = {}
+    for event in schedule:
+        k = tick_index(event.time_ns, tick_ns) * tick_steps
+        if k <= steps:
+            grouped.setdefault(k, {}).update(event.changes)
+    return sorted(grouped.items())
+
+
+def simulate(
+    params,
+    scenario=Scenario(),
+    step_size=1e-5,
+    record_interval=1e-4,
+    faults=HEALTHY,
+    schedule=(),
+    tick_interval=1e-3,
+):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
-    Raises IntegrationError if the run diverges, SteadyStateError if the start fails.
+    faults: FaultSet from the start (the start is its steady state); schedule: FaultEvents,
+    each applied at the first tick (every tick_interval [s], valve_node's publish period)
+    at or after its time. Waveforms.events lists what was applied when (sensor settings
+    included, for the sensor stage). Raises IntegrationError if the run diverges,
+    SteadyStateError if the start fails, ParameterError for a bad fault or tick interval.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     steps = int(round(scenario.end_time / step_size))
@@ -80,12 +130,42 @@ def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
     # Each step holds the flow at its midpoint: exact for a step on the grid,
     # second order for a ramp.
     flows = scenario.inlet_flow(step_starts + 0.5 * step_size)
-    state = steady_state(params, scenario.initial_flow)
+    state = steady_state(params, scenario.initial_flow, faults)
     initial = state.copy()
-    record = advance(state, flows, coefficients(params), step_size, record_every)
+    records, events, start = [], [], 0
+    for stop, changes in _event_steps(schedule, steps, step_size, record_every, tick_interval):
+        records.append(
+            advance(
+                state,
+                flows[start:stop],
+                coefficients(params, faults),
+                step_size,
+                record_every,
+                start * step_size,
+            )
+        )
+        faults = apply_faults(state, faults, changes)
+        if stop == 0:
+            initial = state.copy()
+        elif len(records[-1]):
+            records[-1][-1] = state  # the tick's sample shows the state after the event
+        events.append((stop * step_size, changes))
+        start = stop
+    records.append(
+        advance(
+            state,
+            flows[start:],
+            coefficients(params, faults),
+            step_size,
+            record_every,
+            start * step_size,
+        )
+    )
+    record = np.vstack(records)
     sample_steps = np.arange(1, len(record) + 1) * record_every
     return Waveforms(
         time=np.concatenate([[0.0], sample_steps * step_size]),
         states=np.vstack([initial, record]),
         inlet_flow=np.concatenate([[scenario.initial_flow], flows[sample_steps - 1]]),
+        events=events,
     )

@@ -1,0 +1,322 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Pressure transducers: what valve_node publishes of the four chamber pressures.
+
+Only the published samples change; the model's state never does. Per topic
+(sensor.<topic>.<setting>, topic one of PRESSURE_NAMES), applied in this order to
+the absolute pressure u [Pa] of each published sample:
+
+  bandwidth   Hz   first-order lag, f += (1 - exp(-2 pi bandwidth dt)) (u - f); 0: none
+  bias        Pa   added offset
+  noise_std   Pa   Gaussian noise, standard deviation (seeded: sensor.noise_seed)
+  resolution  Pa   quantisation step, round to the nearest multiple; 0: none
+  range_min   Pa   lower end of the measuring range (absolute, >= 0): output saturates there
+  range_max   Pa   upper end of the measuring range (absolute); 0: no upper limit
+  stuck       bool output frozen (sensor fault)
+  stuck_at    Pa   the frozen value (absolute); negative: the last output before sticking
+  dropout     bool nothing published (sensor fault)
+
+The defaults are an ideal transducer: the output is the model's pressure, never below
+0 Pa absolute (the model has no cavitation; below vacuum it publishes 0 Pa).
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from valve_sim.core.faults import SwitchSpec
+from valve_sim.core.model import P_C, P_S, STATE_NAMES
+from valve_sim.core.parameters import ParameterError, ParameterSpec
+
+
+PREFIX = 'sensor.'
+PRESSURE_NAMES = STATE_NAMES[P_S:P_C + 1]
+OURS = 'our transducer model, see docs/faults.md'
+NOISE_BLOCK = 1024  # standard normal draws taken from the generator at a time
+SETTING_DOUBLES = (
+    ParameterSpec(
+        'bandwidth', 'f_c', 'Hz', 0.0, 1e6, 'first-order lag bandwidth; 0: no lag', OURS
+    ),
+    ParameterSpec('bias', 'b', 'Pa', -1e8, 1e8, 'offset added to the reading', OURS),
+    ParameterSpec(
+        'noise_std', 'sigma', 'Pa', 0.0, 1e8, 'standard deviation of Gaussian noise', OURS
+    ),
+    ParameterSpec(
+        'resolution', 'q', 'Pa', 0.0, 1e8, 'quantisation step of the reading; 0: none', OURS
+    ),
+    ParameterSpec(
+        'range_min',
+        'p_min',
+        'Pa',
+        0.0,
+        1e9,
+        'lower end of the measuring range (absolute): the reading saturates there',
+        OURS,
+    ),
+    ParameterSpec(
+        'range_max',
+        'p_max',
+        'Pa',
+        0.0,
+        1e9,
+        'upper end of the measuring range (absolute): the reading saturates there; 0: none',
+        OURS,
+    ),
+    ParameterSpec(
+        'stuck_at',
+        'p_stuck',
+        'Pa',
+        -1.0,
+        1e9,
+        'reading of a stuck sensor (absolute); negative: the last reading before it stuck',
+        OURS,
+    ),
+)
+SETTING_SWITCHES = (
+    SwitchSpec('stuck', 'sensor fault: the reading frozen (at stuck_at)', OURS),
+    SwitchSpec('dropout', 'sensor fault: nothing published on this topic', OURS),
+)
+NOISE_SEED = ParameterSpec(
+    'sensor.noise_seed',
+    'seed',
+    '1',
+    0,
+    2**31 - 1,
+    'seed of the sensor noise (one stream per topic): the same seed repeats a run',
+    OURS,
+)
+DEFAULTS = {
+    'bandwidth': 0.0,
+    'bias': 0.0,
+    'noise_std': 0.0,
+    'resolution': 0.0,
+    'range_min': 0.0,
+    'range_max': 0.0,
+    'stuck_at': -1.0,
+    'stuck': False,
+    'dropout': False,
+}
+
+
+def _specs():
+    doubles, switches = {}, {}
+    for topic in PRESSURE_NAMES:
+        for spec in SETTING_DOUBLES:
+            name = f'{PREFIX}{topic}.{spec.name}'
+            doubles[name] = ParameterSpec(
+                name,
+                spec.symbol,
+                spec.unit,
+                spec.minimum,
+                spec.maximum,
+                f'{topic} sensor: {spec.description}',
+                spec.source,
+            )
+        for spec in SETTING_SWITCHES:
+            name = f'{PREFIX}{topic}.{spec.name}'
+            switches[name] = SwitchSpec(name, f'{topic} sensor: {spec.description}', spec.source)
+    return doubles, switches
+
+
+SENSOR_DOUBLE_SPECS, SENSOR_SWITCH_SPECS = _specs()
+SENSOR_NAMES = tuple(SENSOR_DOUBLE_SPECS) + tuple(SENSOR_SWITCH_SPECS) + (NOISE_SEED.name,)
+
+
+def default_settings():
+    """{'sensor.<topic>.<setting>': default, 'sensor.noise_seed': 0}: ideal transducers."""
+    settings = {
+        f'{PREFIX}{topic}.{key}': value
+        for topic in PRESSURE_NAMES
+        for key, value in DEFAULTS.items()
+    }
+    settings[NOISE_SEED.name] = 0
+    return settings
+
+
+def check_sensor(name, value):
+    """Return value checked for the sensor parameter name; raise ParameterError naming it."""
+    if name in SENSOR_SWITCH_SPECS:
+        if not isinstance(value, bool):
+            raise ParameterError(f"sensor parameter '{name}' must be true or false, got {value!r}")
+        return value
+    if name == NOISE_SEED.name:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParameterError(f"sensor parameter '{name}' must be an integer, got {value!r}")
+        if not NOISE_SEED.minimum <= value <= NOISE_SEED.maximum:
+            raise ParameterError(
+                f"sensor parameter '{name}' = {value} is outside [0, {NOISE_SEED.maximum}]"
+            )
+        return value
+    spec = SENSOR_DOUBLE_SPECS.get(name)
+    if spec is None:
+        raise ParameterError(
+            f"unknown sensor setting '{name}'; known: sensor.<topic>.<setting> with topic in "
+            f"{', '.join(PRESSURE_NAMES)} and setting in "
+            f"{', '.join(DEFAULTS)}, and {NOISE_SEED.name}"
+        )
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(
+            f"sensor parameter '{name}' ({spec.symbol}) must be a number in {spec.unit}, "
+            f'got {value!r}'
+        )
+    value = float(value)
+    if not math.isfinite(value) or not spec.minimum <= value <= spec.maximum:
+        raise ParameterError(
+            f"sensor parameter '{name}' ({spec.symbol}) = {value:g} {spec.unit} is outside "
+            f'its limits [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+        )
+    return value
+
+
+def checked_settings(settings, changes):
+    """
+    Return settings with changes applied, every value and each measuring range checked.
+
+    Raises ParameterError naming the parameter at fault.
+    """
+    new = dict(settings)
+    for name, value in changes.items():
+        new[name] = check_sensor(name, value)
+    for topic in PRESSURE_NAMES:
+        low, high = new[f'{PREFIX}{topic}.range_min'], new[f'{PREFIX}{topic}.range_max']
+        if high and high <= low:
+            raise ParameterError(
+                f"sensor parameter '{PREFIX}{topic}.range_max' = {high:g} Pa must exceed "
+                f"'{PREFIX}{topic}.range_min' = {low:g} Pa (or be 0: no upper limit)"
+            )
+    return new
+
+
+@dataclass
+class _Channel:
+    """One transducer's settings and memory."""
+
+    bandwidth: float = 0.0
+    bias: float = 0.0
+    noise_std: float = 0.0
+    resolution: float = 0.0
+    range_min: float = 0.0
+    range_max: float = 0.0
+    stuck_at: float = -1.0
+    stuck: bool = False
+    dropout: bool = False
+    filtered: float = math.nan  # lag state [Pa]; nan until the first sample
+    output: float = math.nan  # last reading [Pa]
+    time_ns: int = 0  # time of the last sample [ns]
+    noise: np.ndarray = None
+    noise_index: int = NOISE_BLOCK
+    generator: object = None
+
+    def ideal(self):
+        return not (
+            self.bandwidth
+            or self.bias
+            or self.noise_std
+            or self.resolution
+            or self.range_min
+            or self.range_max
+            or self.stuck
+            or self.dropout
+        )
+
+    def normal(self):
+        if self.noise_index == NOISE_BLOCK:
+            self.noise = self.generator.standard_normal(NOISE_BLOCK)
+            self.noise_index = 0
+        self.noise_index += 1
+        return self.noise[self.noise_index - 1]
+
+    def read(self, time_ns, pressure):
+        """Return the reading of pressure [Pa absolute] at time_ns [ns]."""
+        if self.bandwidth and self.filtered == self.filtered:
+            dt = (time_ns - self.time_ns) * 1e-9
+            self.filtered += (1.0 - math.exp(-2.0 * math.pi * self.bandwidth * dt)) * (
+                pressure - self.filtered
+            )
+        else:
+            self.filtered = pressure
+        self.time_ns = time_ns
+        value = self.filtered + self.bias
+        if self.noise_std:
+            value += self.noise_std * self.normal()
+        if self.resolution:
+            value = round(value / self.resolution) * self.resolution
+        value = max(value, self.range_min)
+        if self.range_max:
+            value = min(value, self.range_max)
+        if self.stuck:
+            if self.stuck_at >= 0.0:
+                value = self.stuck_at
+            elif self.output == self.output:  # not nan: there was a reading before
+                value = self.output
+        self.output = value
+        return value
+
+
+class SensorStage:
+    """
+    The four pressure transducers between the model and the wire.
+
+    read(time_ns, pressures) turns the absolute pressures [Pa] of one published
+    sample into what is published: a list with None for a topic that drops out.
+    """
+
+    def __init__(self, settings=None):
+        self.settings = checked_settings(default_settings(), settings or {})
+        self._channels = [_Channel() for _ in PRESSURE_NAMES]
+        self._seed = None
+        self.configure(self.settings)
+
+    def configure(self, settings):
+        """Use new settings (as checked_settings returns them); the transducers' memory stays."""
+        self.settings = settings
+        for topic, channel in zip(PRESSURE_NAMES, self._channels):
+            for key in DEFAULTS:
+                setattr(channel, key, settings[f'{PREFIX}{topic}.{key}'])
+        seed = settings[NOISE_SEED.name]
+        if seed != self._seed:
+            self._seed = seed
+            for index, channel in enumerate(self._channels):
+                channel.generator = np.random.default_rng([seed, index])
+                channel.noise_index = NOISE_BLOCK
+        self.ideal = all(channel.ideal() for channel in self._channels)
+
+    def change(self, changes):
+        """Apply {name: value} of sensor parameters, checked; raises ParameterError."""
+        self.configure(checked_settings(self.settings, changes))
+
+    def read(self, time_ns, pressures):
+        """Return the readings [Pa absolute] of pressures [Pa absolute]; None: dropped out."""
+        if self.ideal:
+            return [max(p, 0.0) for p in pressures]
+        readings = []
+        for channel, pressure in zip(self._channels, pressures):
+            value = channel.read(time_ns, pressure)
+            readings.append(None if channel.dropout else value)
+        return readings
+
+    def describe_faults(self):
+        """Names of the sensor faults and non-ideal settings in effect, for diagnostics."""
+        active = []
+        for name, value in self.settings.items():
+            default = DEFAULTS.get(name.rsplit('.', 1)[-1])
+            if name != NOISE_SEED.name and value != default:
+                active.append(name if isinstance(value, bool) else f'{name} = {value:g}')
+        return active
+
+    def dropped_topics(self):
+        """Topics that publish nothing (dropout)."""
+        return [t for t, c in zip(PRESSURE_NAMES, self._channels) if c.dropout]
