@@ -190,8 +190,9 @@ def check_fault(name, value):
         )
     value = float(value)
     if not math.isfinite(value) or not spec.minimum <= value <= spec.maximum:
+        unit = '' if spec.unit == '1' else f' {spec.unit}'
         raise ParameterError(
-            f"fault parameter '{name}' ({spec.symbol}) = {value:g} {spec.unit} is outside "
-            f'its limits [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+            f"fault parameter '{name}' ({spec.symbol}) = {value:g}{unit} is outside "
+            f'its limits [{spec.minimum:g}, {spec.maximum:g}]{unit}'
         )
     return value

@@ -35,8 +35,8 @@ Departures from the printed equations, each explained in docs/model.md:
 - Eq. (12) is normalised by the upstream pressure max(p_s, p_p), which equals the
   printed p_s in forward flow and stays bounded in reverse flow or at zero pressure.
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
-- The supply is pressure-limited: at supply_pressure_limit its own relief (the bench
-  pump's) takes the inflow the valve does not pass, so p_s stops rising there.
+- The supply may be pressure-limited: at supply_pressure_limit (if set) its own relief
+  (the bench pump's) takes the inflow the valve does not pass, so p_s stops rising there.
 
 Valve faults (valve_sim.core.faults, docs/faults.md) enter as physical terms here and
 nowhere else: orifice blockage and spring weakening scale K_c, K_b and k_p in
@@ -107,7 +107,7 @@ Coefficients = namedtuple(
         'pilot_spring_preload',
         'poppet_stroke',
         'transition_pressure',  # dp_tr                   [Pa]
-        'supply_pressure_limit',  # p_s,max                 [Pa]
+        'supply_pressure_limit',  # p_s,max (inf: none)     [Pa]
         'coulomb_friction',  # F_c, fault               [N]
         'static_friction',  # max(F_st, F_c), fault    [N]
         'seat_leakage_gain',  # K_l, fault             [m^3/s/sqrt(Pa)]
@@ -177,7 +177,7 @@ def coefficients(p, faults=HEALTHY):
         pilot_spring_preload=p['pilot_spring_preload'],
         poppet_stroke=p['poppet_stroke'],
         transition_pressure=p['orifice_transition_pressure'],
-        supply_pressure_limit=p['supply_pressure_limit'],
+        supply_pressure_limit=p['supply_pressure_limit'] or math.inf,
         coulomb_friction=0.0,
         static_friction=0.0,
         seat_leakage_gain=0.0,

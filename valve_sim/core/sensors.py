@@ -294,9 +294,14 @@ class SensorStage:
                 channel.noise_index = NOISE_BLOCK
         self.ideal = all(channel.ideal() for channel in self._channels)
 
+    def checked(self, changes):
+        """Return the settings {name: value} of sensor parameters would give; raise if bad."""
+        return checked_settings(self.settings, changes)
+
     def change(self, changes):
         """Apply {name: value} of sensor parameters, checked; raises ParameterError."""
-        self.configure(checked_settings(self.settings, changes))
+        if changes:
+            self.configure(checked_settings(self.settings, changes))
 
     def read(self, time_ns, pressures):
         """Return the readings [Pa absolute] of pressures [Pa absolute]; None: dropped out."""
@@ -320,3 +325,26 @@ class SensorStage:
     def dropped_topics(self):
         """Topics that publish nothing (dropout)."""
         return [t for t, c in zip(PRESSURE_NAMES, self._channels) if c.dropout]
+
+
+def read_waveforms(waveforms, settings, tick_interval, ambient_pressure):
+    """
+    Return (tick indices, readings) of an offline run as valve_node would publish them.
+
+    waveforms: simulation.Waveforms (its events change sensor settings at their ticks);
+    settings: sensor settings at the start; every sample tick_interval [s] apart is a
+    tick. readings: array (ticks, 4) [Pa absolute], nan where nothing is published.
+    """
+    interval = waveforms.time[1] - waveforms.time[0]
+    every = max(1, round(tick_interval / interval))
+    indices = np.arange(0, len(waveforms.time), every)
+    stage = SensorStage(settings)
+    changes = {round(t / interval): c for t, c in waveforms.events}
+    readings = np.empty((len(indices), len(PRESSURE_NAMES)))
+    for row, index in enumerate(indices):
+        if index in changes:
+            stage.change({n: v for n, v in changes[index].items() if n in SENSOR_NAMES})
+        time_ns = round(waveforms.time[index] * 1e9)
+        values = stage.read(time_ns, waveforms.states[index, P_S:P_C + 1] + ambient_pressure)
+        readings[row] = [math.nan if v is None else v for v in values]
+    return indices, readings

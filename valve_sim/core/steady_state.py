@@ -223,7 +223,7 @@ def steady_state(params, inlet_flow, faults=HEALTHY):
             f'no consistent steady state at inlet flow {inlet_flow:g} m^3/s '
             f'(smallest relative residual {error:.2e}); check the parameters'
         )
-    if state[P_S] > params['supply_pressure_limit']:
+    if 0.0 < params['supply_pressure_limit'] < state[P_S]:
         raise SteadyStateError(
             f'the valve passes {inlet_flow:g} m^3/s only at p_s = {state[P_S]:.6g} Pa, above '
             f"supply_pressure_limit = {params['supply_pressure_limit']:g} Pa"

@@ -25,6 +25,7 @@ std_msgs/msg/Float64 [m^3/s].
 """
 
 import importlib
+import math
 
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
@@ -81,25 +82,40 @@ class TickMessages:
         self._applied.float64s(0)  # effort
         self._messages += [('joint_states', self._joints), ('applied_inlet_flow', self._applied)]
 
-    def fill(self, time_ns, state, applied_flow, ambient_pressure):
-        """Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
-        for (_, message), offset, pressure in zip(
-            self._messages, self._pressure_offsets, state[P_S:P_C + 1]
+    def fill(self, time_ns, state, applied_flow, ambient_pressure, readings=None):
+        """
+        Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa].
+
+        readings: the published pressures [Pa absolute] (a sensor stage's), None for a
+        topic that publishes nothing; default: the state's pressures + ambient_pressure.
+        """
+        if readings is None:
+            readings = [pressure + ambient_pressure for pressure in state[P_S:P_C + 1]]
+        for (_, message), offset, reading in zip(
+            self._messages, self._pressure_offsets, readings
         ):
-            message.set_float64s(offset, pressure + ambient_pressure)
+            if reading is not None:
+                message.set_float64s(offset, reading)
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
         self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
         self._applied.set_float64s(self._applied_velocity, applied_flow)
         sec, nanosec = divmod(time_ns, NS_PER_S)
         tick = []
-        for topic, message in self._messages:
+        for index, (topic, message) in enumerate(self._messages):
+            if index < len(readings) and readings[index] is None:
+                continue
             message.set_stamp(sec, nanosec)
             tick.append((topic, message.bytes()))
         return tick
 
 
 def write_simulation_bag(
-    path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0
+    path,
+    waveforms,
+    ambient_pressure=STANDARD_ATMOSPHERE,
+    publish_interval=1e-3,
+    start_time_ns=0,
+    readings=None,
 ):
     """
     Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
@@ -108,7 +124,9 @@ def write_simulation_bag(
     whole multiple of the waveforms' sample interval) becomes one tick, stamped
     start_time_ns [ns] + its model time. inlet_flow carries the command: the first
     flow at the start and each change at the last tick before it was applied.
-    log_time = publish_time = the stamp (an offline run has no transport).
+    log_time = publish_time = the stamp (an offline run has no transport). readings:
+    the pressure topics' values per tick [Pa absolute] (sensors.read_waveforms; nan:
+    nothing published); default: the model's pressures + ambient_pressure.
     Returns the number of ticks written; raises ParameterError for a bad interval.
     """
     record_interval = waveforms.time[1] - waveforms.time[0]
@@ -125,7 +143,7 @@ def write_simulation_bag(
             bag.add_topic('/' + topic, type_name)
         indices = range(0, len(waveforms.time), every)
         commanded = None
-        for previous, index in zip([None, *indices], indices):
+        for row, (previous, index) in enumerate(zip([None, *indices], indices)):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
             flow = float(waveforms.inlet_flow[index])
             if flow != commanded:
@@ -136,7 +154,14 @@ def write_simulation_bag(
                 )
                 bag.write_message('/inlet_flow', Float64(data=flow), command_ns, command_ns)
                 commanded = flow
-            for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
+            published = (
+                None
+                if readings is None
+                else [None if math.isnan(v) else float(v) for v in readings[row]]
+            )
+            for topic, data in tick.fill(
+                time_ns, waveforms.states[index], flow, ambient_pressure, published
+            ):
                 bag.write(bag.channels['/' + topic], data, time_ns, time_ns)
         return len(indices)
     finally:

@@ -52,6 +52,7 @@ class Counters:
     rejected_inputs: int = 0
     rejected_parameter_changes: int = 0
     integration_failures: int = 0
+    overpressure_alarms: int = 0
 
 
 @dataclass(frozen=True)
@@ -83,17 +84,18 @@ class NodeStatus:
         self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
-    def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings):
+    def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings, conditions=()):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
 
         stamp: header stamp (builtin_interfaces Time); name: the node's full name;
         model_time_ns: model time [ns] or None before the first tick; inputs:
-        InputReport; settings: {name: value} shown as they are (units in the names).
+        InputReport; settings: {name: value} shown as they are (units in the names);
+        conditions: [(level, text)] more to report (faults, overpressure).
         """
         counters, previous = self.counters, self._reported
         status = DiagnosticStatus(name=f'{name}: valve model', hardware_id=name)
-        status.level, status.message = self._summary(counters, previous, inputs)
+        status.level, status.message = self._summary(counters, previous, inputs, conditions)
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
             **self._compute_times(),
@@ -113,13 +115,15 @@ class NodeStatus:
         array.header.stamp = stamp
         return array
 
-    def _summary(self, counters, previous, inputs):
+    def _summary(self, counters, previous, inputs, conditions=()):
         """
         Return (level, message) of the status.
 
-        ERROR on a divergence in the window, WARN on stale input or skipped time.
+        ERROR on a divergence in the window, WARN on stale input or skipped time;
+        conditions [(level, text)] come first.
         """
-        problems, level = [], DiagnosticStatus.OK
+        problems = [text for _, text in conditions]
+        level = max([c[0] for c in conditions], default=DiagnosticStatus.OK)
         failures = counters.integration_failures - previous.integration_failures
         if failures:
             level = DiagnosticStatus.ERROR
