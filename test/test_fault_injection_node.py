@@ -18,14 +18,14 @@ valve_node's faults and sensors over real DDS, on simulated time (/clock in lock
 One node starts with a fault schedule; the tests run in file order on it: the
 schedule (compared with the offline run), its diagnostics, the overpressure alarm,
 sensor noise and bias, dropout, and the parameters' descriptors and checks. An
-analyser records /parameter_events meanwhile, so the bag tells when faults began.
+analyser records meanwhile (fault_status among the rest), so the bag tells when faults
+began.
 """
 
 import math
 import signal
 import subprocess
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
@@ -108,20 +108,14 @@ def faulty(context, tmp_path_factory):
     probe.node.create_subscription(DiagnosticArray, '/diagnostics', recorded.append, 10)
     try:
         probe.wait_until_connected(use_sim_time=True)
-        # The analyser records the valve's parameter events before the schedule starts.
-        probe.wait_for(lambda: probe.node.count_subscribers('/parameter_events') > 0,
-                       'the analyser subscribing /parameter_events')
 
-        def parameter_events_recorded():
-            return any(kv.key == 'messages /parameter_events' and int(kv.value) > 0
+        # The analyser records the valve's (latched) fault status before the schedule starts.
+        def fault_status_recorded():
+            return any(kv.key == f'messages {NAMESPACE}/fault_status' and int(kv.value) > 0
                        for message in list(recorded) for status in message.status
                        for kv in status.values)
 
-        deadline = time.monotonic() + TIMEOUT
-        while not parameter_events_recorded():
-            assert time.monotonic() < deadline, 'the analyser records no /parameter_events'
-            assert probe.set_parameters(**{'sensor.noise_seed': 0})[0].successful
-            probe._wait(parameter_events_recorded, 2.0)
+        probe.wait_for(fault_status_recorded, 'the analyser recording fault_status')
         probe.start_ns = probe.start_clock(100 * 1_000_000_000, PERIOD_NS)
         probe.schedule = load_schedule(schedule)
         probe.recorder = recorder
@@ -251,13 +245,15 @@ def test_fault_parameters_are_described_and_checked(faulty):
 def test_the_bag_tells_when_each_fault_began(faulty):
     log = faulty.recorder.stop()
     bag = next(faulty.recorder.folder.glob('*.mcap'))
-    changes = {}
+    began = {}  # setting: model time [ns] from the start at which it first left its default
     with open(bag, 'rb') as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, _, _, event in reader.iter_decoded_messages(topics=['/parameter_events']):
-            if event.node == f'{NAMESPACE}/relief_valve':
-                stamp = event.stamp.sec * 1_000_000_000 + event.stamp.nanosec
-                for parameter in event.changed_parameters:
-                    changes.setdefault(parameter.name, stamp - faulty.start_ns)
-    assert changes['fault.damping_orifice_blockage'] == 21 * PERIOD_NS, log
-    assert changes['fault.main_valve_stuck'] == 120 * PERIOD_NS
+        for *_, array in reader.iter_decoded_messages(topics=[f'{NAMESPACE}/fault_status']):
+            stamp = array.header.stamp.sec * 1_000_000_000 + array.header.stamp.nanosec
+            for kv in array.status[0].values:
+                if kv.value not in ('0.0', 'false', '-1.0', '0'):
+                    began.setdefault(kv.key, stamp - faulty.start_ns)
+    assert began['fault.damping_orifice_blockage'] == 21 * PERIOD_NS, log
+    assert began['fault.seat_leakage_diameter'] == 21 * PERIOD_NS
+    assert began['sensor.supply_pressure.bias'] == 80 * PERIOD_NS
+    assert began['fault.main_valve_stuck'] == 120 * PERIOD_NS

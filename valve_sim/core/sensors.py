@@ -30,14 +30,15 @@ the absolute pressure u [Pa] of each published sample:
   dropout     bool nothing published (sensor fault)
 
 The defaults are an ideal transducer: the output is the model's pressure, never below
-0 Pa absolute (the model has no cavitation; below vacuum it publishes 0 Pa).
+0 Pa absolute (the model has no cavitation; below vacuum it publishes 0 Pa). The
+numbers run in one compiled kernel (sense) for the four topics.
 """
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
 from valve_sim.core.faults import SwitchSpec
+from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 from valve_sim.core.parameters import ParameterError, ParameterSpec
 
@@ -200,70 +201,49 @@ def checked_settings(settings, changes):
     return new
 
 
-@dataclass
-class _Channel:
-    """One transducer's settings and memory."""
+# Columns of the settings array, one row per topic (the order of DEFAULTS).
+BANDWIDTH, BIAS, NOISE_STD, RESOLUTION, RANGE_MIN, RANGE_MAX, STUCK_AT, STUCK, DROPOUT = range(9)
+# Columns of the memory array: lag state [Pa], last reading [Pa], time [ns], noise drawn.
+FILTERED, OUTPUT, TIME, NOISE_USED = range(4)
 
-    bandwidth: float = 0.0
-    bias: float = 0.0
-    noise_std: float = 0.0
-    resolution: float = 0.0
-    range_min: float = 0.0
-    range_max: float = 0.0
-    stuck_at: float = -1.0
-    stuck: bool = False
-    dropout: bool = False
-    filtered: float = math.nan  # lag state [Pa]; nan until the first sample
-    output: float = math.nan  # last reading [Pa]
-    time_ns: int = 0  # time of the last sample [ns]
-    noise: np.ndarray = None
-    noise_index: int = NOISE_BLOCK
-    generator: object = None
 
-    def ideal(self):
-        return not (
-            self.bandwidth
-            or self.bias
-            or self.noise_std
-            or self.resolution
-            or self.range_min
-            or self.range_max
-            or self.stuck
-            or self.dropout
-        )
+@jit
+def sense(pressures, time_ns, settings, memory, noise, out):
+    """
+    Write the readings [Pa absolute] of pressures [Pa absolute] at time_ns [ns] into out.
 
-    def normal(self):
-        if self.noise_index == NOISE_BLOCK:
-            self.noise = self.generator.standard_normal(NOISE_BLOCK)
-            self.noise_index = 0
-        self.noise_index += 1
-        return self.noise[self.noise_index - 1]
-
-    def read(self, time_ns, pressure):
-        """Return the reading of pressure [Pa absolute] at time_ns [ns]."""
-        if self.bandwidth and self.filtered == self.filtered:
-            dt = (time_ns - self.time_ns) * 1e-9
-            self.filtered += (1.0 - math.exp(-2.0 * math.pi * self.bandwidth * dt)) * (
-                pressure - self.filtered
+    settings: rows of the SETTING columns; memory: rows of the MEMORY columns (nan lag
+    state and reading before the first sample); noise: rows of standard normal draws,
+    used in order. A dropped-out topic reads nan (nothing published).
+    """
+    for i in range(pressures.shape[0]):
+        row, state = settings[i], memory[i]
+        filtered = state[FILTERED]
+        if row[BANDWIDTH] > 0.0 and filtered == filtered:
+            dt = max(time_ns - state[TIME], 0.0) * 1e-9
+            filtered += (1.0 - math.exp(-2.0 * math.pi * row[BANDWIDTH] * dt)) * (
+                pressures[i] - filtered
             )
         else:
-            self.filtered = pressure
-        self.time_ns = time_ns
-        value = self.filtered + self.bias
-        if self.noise_std:
-            value += self.noise_std * self.normal()
-        if self.resolution:
-            value = round(value / self.resolution) * self.resolution
-        value = max(value, self.range_min)
-        if self.range_max:
-            value = min(value, self.range_max)
-        if self.stuck:
-            if self.stuck_at >= 0.0:
-                value = self.stuck_at
-            elif self.output == self.output:  # not nan: there was a reading before
-                value = self.output
-        self.output = value
-        return value
+            filtered = pressures[i]
+        state[FILTERED] = filtered
+        state[TIME] = time_ns
+        value = filtered + row[BIAS]
+        if row[NOISE_STD] > 0.0:
+            value += row[NOISE_STD] * noise[i, int(state[NOISE_USED])]
+            state[NOISE_USED] += 1.0
+        if row[RESOLUTION] > 0.0:
+            value = np.round(value / row[RESOLUTION]) * row[RESOLUTION]
+        value = max(value, row[RANGE_MIN])
+        if row[RANGE_MAX] > 0.0:
+            value = min(value, row[RANGE_MAX])
+        if row[STUCK] > 0.0:
+            if row[STUCK_AT] >= 0.0:
+                value = row[STUCK_AT]
+            elif state[OUTPUT] == state[OUTPUT]:  # not nan: there was a reading before
+                value = state[OUTPUT]
+        state[OUTPUT] = value
+        out[i] = math.nan if row[DROPOUT] > 0.0 else value
 
 
 class SensorStage:
@@ -271,28 +251,45 @@ class SensorStage:
     The four pressure transducers between the model and the wire.
 
     read(time_ns, pressures) turns the absolute pressures [Pa] of one published
-    sample into what is published: a list with None for a topic that drops out.
+    sample into what is published: a list of floats, nan for a topic that drops out.
     """
 
     def __init__(self, settings=None):
-        self.settings = checked_settings(default_settings(), settings or {})
-        self._channels = [_Channel() for _ in PRESSURE_NAMES]
+        count = len(PRESSURE_NAMES)
+        self._settings = np.zeros((count, len(DEFAULTS)))
+        self._memory = np.full((count, 4), math.nan)
+        self._memory[:, NOISE_USED] = NOISE_BLOCK
+        self._noise = np.zeros((count, NOISE_BLOCK))
+        self._out = np.empty(count)
+        self._fresh = 0  # reads left before a noise row may run out
+        self._generators = None
         self._seed = None
-        self.configure(self.settings)
+        self.configure(checked_settings(default_settings(), settings or {}))
 
     def configure(self, settings):
         """Use new settings (as checked_settings returns them); the transducers' memory stays."""
         self.settings = settings
-        for topic, channel in zip(PRESSURE_NAMES, self._channels):
-            for key in DEFAULTS:
-                setattr(channel, key, settings[f'{PREFIX}{topic}.{key}'])
+        for row, topic in enumerate(PRESSURE_NAMES):
+            for column, key in enumerate(DEFAULTS):
+                self._settings[row, column] = float(settings[f'{PREFIX}{topic}.{key}'])
         seed = settings[NOISE_SEED.name]
         if seed != self._seed:
             self._seed = seed
-            for index, channel in enumerate(self._channels):
-                channel.generator = np.random.default_rng([seed, index])
-                channel.noise_index = NOISE_BLOCK
-        self.ideal = all(channel.ideal() for channel in self._channels)
+            self._generators = [
+                np.random.default_rng([seed, row]) for row in range(len(PRESSURE_NAMES))
+            ]
+            self._memory[:, NOISE_USED] = NOISE_BLOCK
+            self._fresh = 0
+        defaults = np.array([float(v) for v in DEFAULTS.values()])
+        self.ideal = bool(np.all(self._settings == defaults))
+
+    def _draw(self):
+        """Refill the noise rows that are used up; return the reads before one can run out."""
+        for row, generator in enumerate(self._generators):
+            if self._memory[row, NOISE_USED] >= NOISE_BLOCK:
+                self._noise[row] = generator.standard_normal(NOISE_BLOCK)
+                self._memory[row, NOISE_USED] = 0.0
+        return int(NOISE_BLOCK - self._memory[:, NOISE_USED].max())
 
     def checked(self, changes):
         """Return the settings {name: value} of sensor parameters would give; raise if bad."""
@@ -304,14 +301,21 @@ class SensorStage:
             self.configure(checked_settings(self.settings, changes))
 
     def read(self, time_ns, pressures):
-        """Return the readings [Pa absolute] of pressures [Pa absolute]; None: dropped out."""
+        """Return the readings [Pa absolute] of pressures [Pa absolute]; nan: dropped out."""
         if self.ideal:
             return [max(p, 0.0) for p in pressures]
-        readings = []
-        for channel, pressure in zip(self._channels, pressures):
-            value = channel.read(time_ns, pressure)
-            readings.append(None if channel.dropout else value)
-        return readings
+        if self._fresh == 0:
+            self._fresh = self._draw()
+        self._fresh -= 1
+        sense(
+            np.asarray(pressures, dtype=float),
+            float(time_ns),
+            self._settings,
+            self._memory,
+            self._noise,
+            self._out,
+        )
+        return self._out.tolist()
 
     def describe_faults(self):
         """Names of the sensor faults and non-ideal settings in effect, for diagnostics."""
@@ -324,7 +328,7 @@ class SensorStage:
 
     def dropped_topics(self):
         """Topics that publish nothing (dropout)."""
-        return [t for t, c in zip(PRESSURE_NAMES, self._channels) if c.dropout]
+        return [t for t, row in zip(PRESSURE_NAMES, self._settings) if row[DROPOUT]]
 
 
 def read_waveforms(waveforms, settings, tick_interval, ambient_pressure):
@@ -345,6 +349,7 @@ def read_waveforms(waveforms, settings, tick_interval, ambient_pressure):
         if index in changes:
             stage.change({n: v for n, v in changes[index].items() if n in SENSOR_NAMES})
         time_ns = round(waveforms.time[index] * 1e9)
-        values = stage.read(time_ns, waveforms.states[index, P_S:P_C + 1] + ambient_pressure)
-        readings[row] = [math.nan if v is None else v for v in values]
+        readings[row] = stage.read(
+            time_ns, waveforms.states[index, P_S:P_C + 1] + ambient_pressure
+        )
     return indices, readings

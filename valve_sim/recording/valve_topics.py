@@ -25,7 +25,6 @@ std_msgs/msg/Float64 [m^3/s].
 """
 
 import importlib
-import math
 
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
@@ -86,7 +85,7 @@ class TickMessages:
         """
         Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa].
 
-        readings: the published pressures [Pa absolute] (a sensor stage's), None for a
+        readings: the published pressures [Pa absolute] (a sensor stage's), nan for a
         topic that publishes nothing; default: the state's pressures + ambient_pressure.
         """
         if readings is None:
@@ -94,7 +93,7 @@ class TickMessages:
         for (_, message), offset, reading in zip(
             self._messages, self._pressure_offsets, readings
         ):
-            if reading is not None:
+            if reading == reading:  # not nan
                 message.set_float64s(offset, reading)
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
         self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
@@ -102,8 +101,8 @@ class TickMessages:
         sec, nanosec = divmod(time_ns, NS_PER_S)
         tick = []
         for index, (topic, message) in enumerate(self._messages):
-            if index < len(readings) and readings[index] is None:
-                continue
+            if index < len(readings) and readings[index] != readings[index]:
+                continue  # nan: this topic publishes nothing
             message.set_stamp(sec, nanosec)
             tick.append((topic, message.bytes()))
         return tick
@@ -154,11 +153,7 @@ def write_simulation_bag(
                 )
                 bag.write_message('/inlet_flow', Float64(data=flow), command_ns, command_ns)
                 commanded = flow
-            published = (
-                None
-                if readings is None
-                else [None if math.isnan(v) else float(v) for v in readings[row]]
-            )
+            published = None if readings is None else readings[row].tolist()
             for topic, data in tick.fill(
                 time_ns, waveforms.states[index], flow, ambient_pressure, published
             ):

@@ -96,7 +96,7 @@ DEFAULT_TOPICS = [
     'poppet_chamber_pressure',
     'joint_states',
     '/diagnostics',
-    '/parameter_events',  # when a fault or sensor setting changed (docs/faults.md)
+    'fault_status',  # valve_node's faults and sensor settings, each change (docs/faults.md)
 ]
 MEASURES_STATUS = 'valve_analyser: step measures'
 RECORDING_STATUS = 'valve_analyser: recording'

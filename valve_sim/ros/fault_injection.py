@@ -22,8 +22,9 @@ says what the diagnostics report. The physics are in valve_sim.core (faults,
 sensors); valve_node only calls this.
 """
 
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from valve_sim.core.fault_schedule import load_schedule, Schedule
 from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
 from valve_sim.core.model import P_C, P_S
@@ -41,6 +42,11 @@ from valve_sim.ros.ros_parameters import declare_double
 
 
 DOUBLE_SPECS = {**FAULT_DOUBLE_SPECS, **SENSOR_DOUBLE_SPECS}
+FAULT_STATUS_TOPIC = 'fault_status'
+# Latched: a late subscriber (the analyser, a bench's monitor) gets the settings in effect.
+FAULT_STATUS_QOS = QoSProfile(
+    depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
 OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
 
@@ -129,12 +135,34 @@ class FaultInjection:
         return self.schedule.due(time_ns - self.origin_ns) if self.schedule.pending() else {}
 
     def readings(self, time_ns, state, ambient_pressure):
-        """Return the published pressures [Pa absolute] of a state; None: nothing published."""
+        """Return the published pressures [Pa absolute] of a state; nan: nothing published."""
         return self.sensors.read(time_ns, [p + ambient_pressure for p in state[P_S:P_C + 1]])
 
     def at_supply_limit(self, state, limit):
         """Return whether p_s [Pa gauge] of state has reached the supply's limit [Pa]."""
         return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= state[P_S])
+
+    def status_message(self, faults, stamp, name):
+        """
+        Return the fault_status DiagnosticArray: every fault and sensor setting in effect.
+
+        stamp: builtin_interfaces Time from which they hold; name: the node's full name.
+        Level WARN while any is active; the message names the active ones.
+        """
+        active = [faults.describe()] * bool(faults.active()) + self.sensors.describe_faults()
+        settings = {**faults.as_parameters(), **self.sensors.settings}
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if active else DiagnosticStatus.OK,
+            name=f'{name}: faults',
+            hardware_id=name,
+            message=', '.join(active) or 'healthy valve, ideal sensors',
+            values=[
+                KeyValue(key=key, value=_text(value)) for key, value in settings.items()
+            ],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = stamp
+        return array
 
     def conditions(self, faults, supply_pressure, limit):
         """
@@ -163,3 +191,8 @@ class FaultInjection:
                 text += f'; dropout: nothing published on {", ".join(dropped)}'
             conditions.append((DiagnosticStatus.WARN, text))
         return conditions
+
+
+def _text(value):
+    """Format a setting as diagnostics text: true/false, or the number in full precision."""
+    return str(value).lower() if isinstance(value, bool) else repr(value)

@@ -29,6 +29,8 @@ Topic and service names are relative, so namespaces and remapping work:
                                                             applied over the tick ending at
                                                             the stamp
   pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
+  pub  fault_status             diagnostic_msgs/DiagnosticArray, latched: every fault and sensor
+                                setting, on start and on each change, stamped from when they hold
   srv  ~/reset                  std_srvs/Trigger            exact steady state of the current
                                                             inlet flow
 
@@ -49,6 +51,7 @@ import math
 import sys
 import time
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
@@ -88,6 +91,8 @@ from valve_sim.ros import spinning
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
+    FAULT_STATUS_QOS,
+    FAULT_STATUS_TOPIC,
     FaultInjection,
     INJECTION_NAMES,
     split_changes,
@@ -276,6 +281,8 @@ class ReliefValveNode(Node):
         self.injection.sensors.change(sensors)
         if FAULT_SCHEDULE in changes:
             self.injection.use_schedule(changes[FAULT_SCHEDULE])
+        if faults or sensors:
+            self._publish_fault_status()
         self.settings = settings
         if rate_changed:
             self.destroy_timer(self._tick_timer)
@@ -428,6 +435,21 @@ class ReliefValveNode(Node):
             for topic in TICK_TOPICS
         }
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._fault_status = self.create_publisher(
+            DiagnosticArray, FAULT_STATUS_TOPIC, FAULT_STATUS_QOS
+        )
+        self._publish_fault_status()
+
+    def _publish_fault_status(self):
+        """Publish the faults and sensor settings in effect, stamped from when they hold."""
+        time_ns = self.model.time_ns
+        stamp = (
+            self.get_clock().now().to_msg()
+            if time_ns is None
+            else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
+        )
+        name = self.get_fully_qualified_name()
+        self._fault_status.publish(self.injection.status_message(self.model.faults, stamp, name))
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
