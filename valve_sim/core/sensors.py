@@ -265,6 +265,10 @@ class SensorStage:
         self._generators = None
         self._seed = None
         self.configure(checked_settings(default_settings(), settings or {}))
+        # Compile (or load from numba's cache) the kernel now, not in the first tick that
+        # needs it: that would stall a real-time node.
+        sense(np.zeros(count), 0.0, np.zeros((count, len(DEFAULTS))), np.zeros((count, 4)),
+              self._noise, np.empty(count))
 
     def configure(self, settings):
         """Use new settings (as checked_settings returns them); the transducers' memory stays."""

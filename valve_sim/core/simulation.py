@@ -20,6 +20,16 @@ initial_flow, the inlet flow changed to final_flow at step_time (at once, or ove
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve. Faults (a FaultSet) hold from the start; a fault schedule
 (valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
+
+simulate() integrates the whole run. simulate_batch(), for studies, runs many
+parameter sets through one scenario on the lanes kernel and does not integrate
+the stretch before the step when the start is a stable steady state: there the
+flow is constant and the state is the exact steady state, a fixed point of RK4
+(every stage's derivative is zero), so the integration would only reproduce it
+up to rounding. Its samples before the step are then the steady state itself
+(docs/speed.md gives the measured difference). An unstable steady state (a
+linear mode with Re(lambda) >= 0, valve_sim.core.linear) is integrated as in
+simulate(): there rounding errors grow before the step as they would on a rig.
 """
 
 from dataclasses import dataclass, field
@@ -27,13 +37,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
-from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, STATE_NAMES, X_DOT
+from valve_sim.core.integrator import advance, advance_lanes
+from valve_sim.core.linear import jacobian
+from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
-from valve_sim.core.steady_state import steady_state
+from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
 LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
+LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
 
 
 @dataclass(frozen=True)
@@ -106,34 +118,73 @@ def _event_steps(schedule, steps, step_size, record_every, tick_interval):
     return sorted(grouped.items())
 
 
-def simulate(
+def main_stage_flow(params, states):
+    """Flow through the main stage q_m2 [m^3/s] (Eq. 11) for each row of states."""
+    c = coefficients(params)
+    return np.array([model_flows(state, c)[1] for state in np.asarray(states, dtype=float)])
+
+
+def step_flows(scenario, step_size):
+    """
+    Inlet flow [m^3/s] held during each RK4 step of a run.
+
+    Each step holds the flow at its midpoint: exact for a step on the grid,
+    second order for a ramp.
+    """
+    steps = int(round(scenario.end_time / step_size))
+    return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
+
+
+def _waveforms(initial, record, flows, record_every, step_size, initial_flow, events=()):
+    sample_steps = np.arange(1, len(record) + 1) * record_every
+    return Waveforms(
+        time=np.concatenate([[0.0], sample_steps * step_size]),
+        states=np.vstack([initial, record]),
+        inlet_flow=np.concatenate([[initial_flow], flows[sample_steps - 1]]),
+        events=list(events),
+    )
+
+
+def ramp_flows(max_flow, ramp_time, hold_time, step_size):
+    """
+    Inlet flow [m^3/s] per RK4 step of a static-characteristic test.
+
+    0 -> max_flow linearly over ramp_time [s], held for hold_time [s], back to 0
+    over ramp_time (midpoint flows, as step_flows).
+    """
+    ramp = int(round(ramp_time / step_size))
+    up = (np.arange(ramp) + 0.5) / ramp * max_flow
+    return np.concatenate([up, np.full(int(round(hold_time / step_size)), max_flow), up[::-1]])
+
+
+def run_flows(
     params,
-    scenario=Scenario(),
+    flows,
     step_size=1e-5,
     record_interval=1e-4,
+    initial_flow=0.0,
     faults=HEALTHY,
     schedule=(),
     tick_interval=1e-3,
 ):
     """
-    Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
+    Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
 
-    faults: FaultSet from the start (the start is its steady state); schedule: FaultEvents,
-    each applied at the first tick (every tick_interval [s], valve_node's publish period)
-    at or after its time. Waveforms.events lists what was applied when (sensor settings
-    included, for the sensor stage). Raises IntegrationError if the run diverges,
-    SteadyStateError if the start fails, ParameterError for a bad fault or tick interval.
+    The run starts at the exact steady state of initial_flow [m^3/s] (0: the empty,
+    closed valve) with faults (a FaultSet). schedule: FaultEvents, each applied at the
+    first tick (every tick_interval [s], valve_node's publish period) at or after its
+    time. Returns Waveforms sampled every record_interval [s]; their events list what
+    was applied when (sensor settings included, for the sensor stage). Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails,
+    ParameterError for a bad fault or tick interval.
     """
     record_every = max(1, int(round(record_interval / step_size)))
-    steps = int(round(scenario.end_time / step_size))
-    step_starts = np.arange(steps) * step_size
-    # Each step holds the flow at its midpoint: exact for a step on the grid,
-    # second order for a ramp.
-    flows = scenario.inlet_flow(step_starts + 0.5 * step_size)
-    state = steady_state(params, scenario.initial_flow, faults)
+    flows = np.ascontiguousarray(flows, dtype=float)
+    state = steady_state(params, initial_flow, faults)
     initial = state.copy()
     records, events, start = [], [], 0
-    for stop, changes in _event_steps(schedule, steps, step_size, record_every, tick_interval):
+    events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
+    for stop, changes in events_at:
         records.append(
             advance(
                 state,
@@ -162,10 +213,98 @@ def simulate(
         )
     )
     record = np.vstack(records)
-    sample_steps = np.arange(1, len(record) + 1) * record_every
-    return Waveforms(
-        time=np.concatenate([[0.0], sample_steps * step_size]),
-        states=np.vstack([initial, record]),
-        inlet_flow=np.concatenate([[scenario.initial_flow], flows[sample_steps - 1]]),
-        events=events,
+    return _waveforms(initial, record, flows, record_every, step_size, initial_flow, events)
+
+
+def simulate(
+    params,
+    scenario=Scenario(),
+    step_size=1e-5,
+    record_interval=1e-4,
+    faults=HEALTHY,
+    schedule=(),
+    tick_interval=1e-3,
+):
+    """
+    Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
+
+    faults, schedule, tick_interval: as run_flows. Raises IntegrationError if the run
+    diverges, SteadyStateError if the start fails.
+    """
+    flows = step_flows(scenario, step_size)
+    return run_flows(
+        params,
+        flows,
+        step_size,
+        record_interval,
+        scenario.initial_flow,
+        faults,
+        schedule,
+        tick_interval,
     )
+
+
+def steady_lead(flows, initial_flow, record_every):
+    """
+    Count the steps at the start of a run that hold initial_flow, in whole record intervals.
+
+    From the steady state of initial_flow, these need no integration if it is stable.
+    """
+    changed = np.flatnonzero(flows != initial_flow)
+    first = changed[0] if len(changed) else len(flows)
+    return first // record_every * record_every
+
+
+def is_stable(params, state, inlet_flow):
+    """Return whether every linear mode about a steady state decays (all Re(lambda) < 0)."""
+    return bool(np.max(np.linalg.eigvals(jacobian(params, state, inlet_flow)).real) < 0.0)
+
+
+def simulate_batch(
+    params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
+):
+    """
+    Run one scenario for many parameter sets; a list with, per set, Waveforms or the error.
+
+    The same Waveforms as simulate() gives (the same sample times), except that the
+    stretch before the step is not integrated but held at the exact steady state
+    when that is stable (see the module docstring). A set whose start fails gets its
+    SteadyStateError,
+    a run that diverges its IntegrationError, in place of Waveforms; the other
+    sets are not affected. lanes: how many runs the kernel advances together.
+    """
+    record_every = max(1, int(round(record_interval / step_size)))
+    flows = step_flows(scenario, step_size)
+    lead = steady_lead(flows, scenario.initial_flow, record_every)
+    results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
+    for index, params in enumerate(params_list):
+        try:
+            state = steady_state(params, scenario.initial_flow)
+        except SteadyStateError as error:
+            results[index] = error
+            continue
+        starts[index] = (state, coefficients(params))
+        groups[lead if is_stable(params, state, scenario.initial_flow) else 0].append(index)
+    for skipped, ready in groups.items():
+        for first in range(0, len(ready), max(1, lanes)):
+            group = ready[first:first + max(1, lanes)]
+            records, errors = advance_lanes(
+                np.array([starts[index][0] for index in group]),
+                flows[skipped:],
+                [starts[index][1] for index in group],
+                step_size,
+                record_every,
+                time=skipped * step_size,
+            )
+            for lane, index in enumerate(group):
+                initial = starts[index][0]
+                held = np.repeat(initial[np.newaxis], skipped // record_every, axis=0)
+                results[index] = errors[lane] or _waveforms(
+                    initial,
+                    np.concatenate([held, records[lane]]),
+                    flows,
+                    record_every,
+                    step_size,
+                    scenario.initial_flow,
+                )
+    return results
