@@ -183,16 +183,25 @@ def check_fault(name, value):
     spec = FAULT_DOUBLE_SPECS.get(name)
     if spec is None:
         raise ParameterError(f"unknown fault '{name}'; known: {', '.join(FAULT_NAMES)}")
+    return checked_number(spec, value, 'fault parameter')
+
+
+def checked_number(spec, value, kind):
+    """
+    Return value as a float if it is a finite number within spec's limits.
+
+    Raise ParameterError naming the parameter (kind, spec.name), its symbol and limits.
+    """
+    label = f"{kind} '{spec.name}' ({spec.symbol})"
+    unit = '' if spec.unit == '1' else f' {spec.unit}'
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(
-            f"fault parameter '{name}' ({spec.symbol}) must be a number in {spec.unit}, "
-            f'got {value!r}'
-        )
+        raise ParameterError(f'{label} must be a number{unit and " in" + unit}, got {value!r}')
     value = float(value)
-    if not math.isfinite(value) or not spec.minimum <= value <= spec.maximum:
-        unit = '' if spec.unit == '1' else f' {spec.unit}'
+    if not math.isfinite(value):
+        raise ParameterError(f'{label} must be finite, got {value}')
+    if not spec.minimum <= value <= spec.maximum:
         raise ParameterError(
-            f"fault parameter '{name}' ({spec.symbol}) = {value:g}{unit} is outside "
-            f'its limits [{spec.minimum:g}, {spec.maximum:g}]{unit}'
+            f'{label} = {value:g}{unit} is outside its limits '
+            f'[{spec.minimum:g}, {spec.maximum:g}]{unit}'
         )
     return value

@@ -37,7 +37,7 @@ numbers run in one compiled kernel (sense) for the four topics.
 import math
 
 import numpy as np
-from valve_sim.core.faults import SwitchSpec
+from valve_sim.core.faults import checked_number, SwitchSpec
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 from valve_sim.core.parameters import ParameterError, ParameterSpec
@@ -168,18 +168,7 @@ def check_sensor(name, value):
             f"{', '.join(PRESSURE_NAMES)} and setting in "
             f"{', '.join(DEFAULTS)}, and {NOISE_SEED.name}"
         )
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(
-            f"sensor parameter '{name}' ({spec.symbol}) must be a number in {spec.unit}, "
-            f'got {value!r}'
-        )
-    value = float(value)
-    if not math.isfinite(value) or not spec.minimum <= value <= spec.maximum:
-        raise ParameterError(
-            f"sensor parameter '{name}' ({spec.symbol}) = {value:g} {spec.unit} is outside "
-            f'its limits [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
-        )
-    return value
+    return checked_number(spec, value, 'sensor parameter')
 
 
 def checked_settings(settings, changes):
