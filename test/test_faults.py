@@ -164,7 +164,8 @@ def test_a_weakened_pilot_spring_lowers_the_cracking_pressure_in_proportion(para
         faults = FaultSet(pilot_spring_weakening=weakening)
         # In proportion to the spring's preload force; the poppet's lift and flow force at
         # cracking add a little (2 % at 40 %).
-        assert cracking_pressure(params, faults) / preset == pytest.approx(1 - weakening, rel=0.025)
+        ratio = cracking_pressure(params, faults) / preset
+        assert ratio == pytest.approx(1 - weakening, rel=0.025)
     weak = simulate(params, faults=FaultSet(pilot_spring_weakening=0.2))
     ratio = weak['supply_pressure'][-1] / healthy['supply_pressure'][-1]
     assert ratio == pytest.approx(0.8, rel=0.01)
