@@ -13,7 +13,9 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line: simulate, study, operating-point, characteristic, analyse, demo.
+The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
+
+Subcommands: simulate, study, operating-point, characteristic, analyse, calibrate, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -43,6 +45,10 @@ SUBCOMMANDS = {
     'analyse': (
         'valve_sim.commands.analyse',
         'step measures (or --characteristic) of a recorded rosbag2 MCAP file or bag folder',
+    ),
+    'calibrate': (
+        'valve_sim.commands.calibrate',
+        "fit parameters to the paper's measures or to a recorded bag",
     ),
     'demo': (
         'valve_sim.commands.demo',
