@@ -242,6 +242,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 states[:, j] = state
                 if not state_is_sane(state):
                     completed[j] = k
+                    failures[:, j] = state
         for j in range(lanes):
             derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
         for i in range(n):
@@ -259,10 +260,13 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 stage[i, j] = states[i, j] + step * k3[i, j]
         for j in range(lanes):
             derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
-        for i in range(n):  # all lanes in one sweep; a frozen lane's values no longer matter
+        # The update of every unsplit lane in one sweep (a split lane took its step above;
+        # a frozen lane's values no longer matter).
+        for i in range(n):
             for j in range(lanes):
                 rate = k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j]
-                states[i, j] += step / 6.0 * rate
+                updated = states[i, j] + step / 6.0 * rate
+                states[i, j] = states[i, j] if split[j] else updated
         for j in range(lanes):
             if completed[j] < steps or split[j]:
                 continue
