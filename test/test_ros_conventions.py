@@ -285,8 +285,9 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         return real_message_class(type_name)
 
     monkeypatch.setattr(analyser_node, 'message_class', message_class_without_string)
-    run = AnalyserRun(context, tmp_path, ['mystery'])
+    run = AnalyserRun(context, tmp_path, ['mystery', 'quiet'])
     try:
+        run.source.create_publisher(message_class('std_msgs/msg/Float64'), 'quiet', 10)
         run.wait_for(DiagnosticStatus.WARN[0], 'no messages yet on /analysed/mystery')
         string = message_class('std_msgs/msg/String')
         run.source.create_publisher(string, 'mystery', 10).publish(string(data='?'))
@@ -294,3 +295,10 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert (error.name, error.hardware_id) == (waiting.name, waiting.hardware_id)
     finally:
         run.close()
+    with Reader(run.analyser.bag.folder) as reader:  # subscribed, silent: listed, as in rosbag2
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    # quiet, and the analysed signals (always wanted) of the replay's silent publishers
+    assert counts == dict.fromkeys(
+        ['/analysed/quiet', '/analysed/applied_inlet_flow', '/analysed/joint_states',
+         '/analysed/supply_pressure'], 0
+    )
