@@ -18,7 +18,9 @@ Reproduce the paper's parameter study: Figures 6-13 and Table 3.
 m_m, m_p, V_p, V_c, d_c and k_p are varied one at a time by -20, -10, 0, +10 and
 +20 % of their reference values (30 cases; the five 0 % cases are one run), and
 the six together as in Table 2: 26 distinct runs of the paper's step test,
-spread over all cores. Writes into --out:
+run in batches by the study runner (a local Dask cluster, --scheduler for an existing
+one, a process pool without dask). Writes into --out:
+  results.jsonl     one row per run as it completes (--resume completes a broken study)
   sensitivity.csv   parameter, variation_percent, the six measures
   table3.csv        measure, table1, table2, relative_change_percent
   figure06_m_m.png ... figure12_k_p.png, figure08_pilot_poppet.png, figure13_P_o.png
@@ -26,26 +28,26 @@ As in the paper, the preset is not readjusted between cases (the measures are
 relative to each case's own initial pressure).
 """
 
-from concurrent.futures import as_completed, ProcessPoolExecutor
 import csv
-import os
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+import numpy as np
+from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import (
     REFERENCE_SCENARIO,
     STUDY_PARAMETERS,
     STUDY_VARIATIONS,
     TABLE2_CHANGES,
 )
+from valve_sim.analysis.study_runner import run_cases
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.commands.study_backend import add_runner_arguments, open_backend
 from valve_sim.core.parameters import scaled
-from valve_sim.core.simulation import simulate
 
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
-POPPET_SAMPLE_INTERVAL = 1e-4  # [s] for Figure 8's waveforms
+FIGURE8_PARAMETER = 'm_p'  # Figure 8: the poppet waveforms of the m_p variations
 
 
 def add_arguments(parser):
@@ -54,13 +56,7 @@ def add_arguments(parser):
         '--out', required=True, metavar='DIR', help='output folder (created if missing)'
     )
     parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
-    parser.add_argument(
-        '--jobs',
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar='N',
-        help='parallel processes (default: all cores)',
-    )
+    add_runner_arguments(parser)
 
 
 def study_cases():
@@ -76,37 +72,50 @@ def study_cases():
     return cases
 
 
-def run_case(params, changes, step_size):
-    """Measures (dict) of one case and its poppet waveform (time, y) for Figure 8."""
-    waveforms = simulate(
-        scaled(params, changes), REFERENCE_SCENARIO, step_size, POPPET_SAMPLE_INTERVAL
-    )
-    measures = step_measures(
-        waveforms.time,
-        waveforms['supply_pressure'],
-        waveforms['main_valve_displacement'],
-        REFERENCE_SCENARIO.step_time,
-    )
-    return measures.as_dict(), (waveforms.time, waveforms['poppet_displacement'])
-
-
-def run_all(params, step_size, jobs, progress=print):
-    """Run every case in parallel; returns {label: (measures, poppet_waveform)}."""
-    cases = study_cases()
-    results = {}
-    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {
-            pool.submit(run_case, params, changes, step_size): label for label, changes in cases
+def runner_cases(params, step_size):
+    """Return the study's cases as the runner takes them, indexed in study_cases() order."""
+    return [
+        {
+            'index': index,
+            'params': scaled(params, changes),
+            'preset_pressure': None,
+            'scenario': REFERENCE_SCENARIO,
+            'step_size': step_size,
+            'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
         }
-        for done, future in enumerate(as_completed(futures), 1):
-            label = futures[future]
-            results[label] = future.result()
-            measures = results[label][0]
-            summary = ', '.join(
-                f'{name}={measures[name]:.4g}' if measures[name] is not None else f'{name}=-'
-                for name in MEASURE_NAMES
-            )
-            progress(f'[{done:2d}/{len(cases)}] {label:<14} {summary}')
+        for index, (_, changes) in enumerate(study_cases())
+    ]
+
+
+def run_all(params, step_size, backend, results_path, resume=False, progress_stream=sys.stderr):
+    """
+    Run every case on the backend; returns {label: (measures, poppet_waveform)}.
+
+    measures: the six (None where undefined) with 'reasons' (and 'error' for a run
+    that failed); poppet_waveform: (time, y) for Figure 8's cases, else None.
+    """
+    labels = [label for label, _ in study_cases()]
+    rows, _ = run_cases(
+        runner_cases(params, step_size),
+        results_path,
+        backend,
+        resume,
+        label='study',
+        progress_stream=progress_stream,
+    )
+    results = {}
+    for index, label in enumerate(labels):
+        row = rows[index]
+        measures = dict(row['measures'], reasons=dict(row['reasons']))
+        if row['error']:
+            measures['reasons'] = dict.fromkeys(MEASURE_NAMES, row['error'])
+        waveforms = row.get('waveforms')
+        poppet = (
+            (np.asarray(waveforms['time']), np.asarray(waveforms['poppet_displacement']))
+            if waveforms
+            else None
+        )
+        results[label] = (measures, poppet)
     return results
 
 
@@ -156,8 +165,9 @@ def write_figures(out, results):
     plot_poppet_waveforms(
         out / 'figure08_pilot_poppet.png',
         {
-            percent: results[f'm_p {percent:+d} %' if percent else 'reference'][1]
+            percent: waveform
             for percent in STUDY_VARIATIONS
+            if (waveform := results[f'm_p {percent:+d} %' if percent else 'reference'][1])
         },
         REFERENCE_SCENARIO.step_time,
     )
@@ -177,16 +187,15 @@ def write_figures(out, results):
 
 def run(args):
     params, settings = load_from_arguments(args)
-    step_size = settings['step_size']
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    print(f'parameter study: {len(study_cases())} runs on {args.jobs} processes', file=sys.stderr)
-    results = run_all(
-        params,
-        step_size,
-        args.jobs,
-        progress=lambda line: print(line, file=sys.stderr, flush=True),
-    )
+    backend = open_backend(args, 'study', pool_fallback=True)
+    try:
+        results = run_all(
+            params, settings['step_size'], backend, out / 'results.jsonl', args.resume
+        )
+    finally:
+        backend.close()
     write_sensitivity(out / 'sensitivity.csv', results)
     write_table3(out / 'table3.csv', results)
     write_figures(out, results)

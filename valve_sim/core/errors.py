@@ -28,4 +28,10 @@ class InputFileError(ValueError):
     """A file given by the user cannot be read or has the wrong content."""
 
 
-USER_ERRORS = (ParameterError, IntegrationError, SteadyStateError, InputFileError, OSError)
+class StudyError(RuntimeError):
+    """A study cannot run or complete (its results file, its cluster)."""
+
+
+# What one valve of a study can fail with (recorded as that case's error).
+MODEL_ERRORS = (ParameterError, IntegrationError, SteadyStateError)
+USER_ERRORS = (*MODEL_ERRORS, InputFileError, StudyError, OSError)
