@@ -116,13 +116,14 @@ def read_results(path, study):
     """
     Rows on file for the study with this fingerprint: {index: row}.
 
-    A missing file gives {}; a file of another study raises StudyError. A torn
-    last line (the process died while writing it) is ignored; it is recomputed.
+    A missing file gives {}; a file of another study raises StudyError. Every row
+    ends with a newline: a torn last line (the process died while writing it) is
+    not a row, and drop_torn_tail() removes it before new rows are appended.
     """
     path = Path(path)
     if not path.exists():
         return {}
-    lines = path.read_text().splitlines()
+    lines = path.read_text().split('\n')[:-1]
     try:
         header = json.loads(lines[0]) if lines else {}
     except json.JSONDecodeError:
@@ -137,11 +138,16 @@ def read_results(path, study):
         try:
             row = json.loads(line)
         except json.JSONDecodeError:
-            if number == len(lines):
-                continue
             raise StudyError(f'{path}, line {number}: not a JSON row') from None
         rows.setdefault(row['index'], row)
     return rows
+
+
+def drop_torn_tail(path):
+    """Cut a file after its last newline (a row that was being written when it died)."""
+    with open(path, 'r+b') as stream:
+        data = stream.read()
+        stream.truncate(data.rfind(b'\n') + 1)
 
 
 def batches_of(cases, batch_size):
@@ -209,6 +215,7 @@ def run_cases(
     (the rest came from the file with resume=True). Without resume an existing file
     is replaced. An interruption (Ctrl-C, a failed batch) leaves every finished row
     on file and raises; resume=True then evaluates only the missing indices.
+    Progress goes to progress_stream (None: silent).
     """
     indices = [case['index'] for case in cases]
     if len(set(indices)) != len(indices):
@@ -223,7 +230,9 @@ def run_cases(
             progress_stream,
             f'{label}: resuming: {len(rows)} of {len(cases)} runs on file in {results_path}',
         )
-    if not resume or not results_path.exists():
+    if resume and results_path.exists():
+        drop_torn_tail(results_path)
+    else:
         results_path.parent.mkdir(parents=True, exist_ok=True)
         results_path.write_text(json.dumps({'study': study, 'cases': len(cases)}) + '\n')
     progress = Progress(label, len(cases), len(rows), progress_stream)
