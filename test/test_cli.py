@@ -110,7 +110,7 @@ def test_bad_input_is_one_clear_line(args, message):
 
 def test_study_writes_the_papers_tables_and_figures(tmp_path):
     result = valve_sim('study', '--out', str(tmp_path))
-    assert '[26/26]' in result.stderr  # progress lines
+    assert '26/26 runs' in result.stderr  # progress lines
     with open(tmp_path / 'sensitivity.csv') as stream:
         rows = list(csv.DictReader(stream))
     assert list(rows[0]) == ['parameter', 'variation_percent', *MEASURE_NAMES]

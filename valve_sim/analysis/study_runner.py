@@ -17,7 +17,8 @@ The study runner: many step tests in batches, on Dask or a local process pool.
 
 A case is a dict:
   index            int, unique within its study (the bookkeeping key)
-  params           complete model parameter dict (SI), as sampled
+  params           complete model parameter dict (SI), as sampled (validated here:
+                   a sample outside a parameter's limits is that case's error)
   preset_pressure  [Pa] the valve is set to crack at this pressure before its test
                    (the pilot spring preload y_0 re-solved, as a technician turns the
                    screw); None keeps params' preload (frozen preload)
@@ -46,6 +47,7 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
+from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate
 from valve_sim.core.steady_state import preload_for_cracking_pressure
 
@@ -57,9 +59,9 @@ MAX_BATCH = 64
 
 def evaluate_case(case):
     """Set the valve to its preset, run the step test and measure it; return its row."""
-    params = dict(case['params'])
     row = {'index': case['index']}
     try:
+        params = validate(case['params'])
         if case.get('preset_pressure') is not None:
             params['pilot_spring_preload'] = preload_for_cracking_pressure(
                 params, case['preset_pressure']
@@ -83,7 +85,10 @@ def evaluate_case(case):
             'error': f'{type(error).__name__}: {error}',
         }
     row.update(
-        measures={name: measures[name] for name in MEASURE_NAMES},
+        measures={
+            name: None if measures[name] is None else float(measures[name])
+            for name in MEASURE_NAMES
+        },
         reasons=measures['reasons'],
         error=None,
     )

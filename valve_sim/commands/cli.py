@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line: simulate, study, operating-point, analyse, demo.
+The `valve-sim` command line: offline runs, studies, bag analysis and the demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -32,6 +32,14 @@ SUBCOMMANDS = {
         'run the valve model offline for one inlet-flow step',
     ),
     'study': ('valve_sim.commands.study', "the paper's parameter study (Figures 6-13, Table 3)"),
+    'tolerance': (
+        'valve_sim.commands.tolerance',
+        'Monte Carlo of manufacturing tolerances: yield against limits, percentiles',
+    ),
+    'sensitivity': (
+        'valve_sim.commands.sensitivity',
+        'global sensitivity: Sobol first-order and total indices (SALib)',
+    ),
     'operating-point': (
         'valve_sim.commands.operating_point',
         'exact steady state, flows, forces and linear modes at a flow',

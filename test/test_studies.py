@@ -13,15 +13,18 @@
 # limitations under the License.
 
 """
-The study runner on a real Dask cluster: same results, worker death, resume.
+The study runner on a real Dask cluster, and the tolerance and sensitivity studies.
 
 The cluster is a scheduler and two worker processes started here as `dask
 scheduler` / `dask worker` subprocesses, as a user starts them on other machines.
 """
 
 import argparse
+import csv
 import json
+import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -29,6 +32,7 @@ import time
 
 import pytest
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.study_runner import (
     DaskBackend,
     evaluate_batch,
@@ -36,10 +40,11 @@ from valve_sim.analysis.study_runner import (
     run_cases,
     SerialBackend,
 )
+from valve_sim.analysis.tolerances import Distribution, parse_limits, parse_variations
 from valve_sim.commands.study import run_all
 from valve_sim.commands.study_backend import open_backend
 from valve_sim.core.errors import StudyError
-from valve_sim.core.parameters import scaled
+from valve_sim.core.parameters import ParameterError, scaled
 
 
 DASK = [sys.executable, '-m', 'dask']
@@ -279,3 +284,141 @@ def test_without_dask_the_study_runs_on_a_process_pool_and_the_others_say_what_t
     assert 'local process pool' in capsys.readouterr().err
     with pytest.raises(StudyError, match=r"pip install 'dask\[distributed\]'"):
         open_backend(args, 'tolerance')
+
+
+def valve_sim(*args):
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_tolerance_yield_and_percentiles_on_a_known_answer(cluster, reference, tmp_path):
+    # P_1 falls monotonically with d_c. With d_c uniform on +-5 % and a 20-point Latin
+    # hypercube (one sample in each 5 % stratum of d_c), a limit at P_1 of the d_c
+    # quantile q = 0.25 is met by exactly the 15 valves above that quantile, and the
+    # sample median lies between P_1 at the quantiles 0.45 and 0.55.
+    def p1_at(quantile):
+        case = valve_cases(reference, 1)[0]
+        case['params'] = scaled(reference, {'d_c': -5.0 + 10.0 * quantile})
+        return evaluate_batch([case])[0]['measures']['P_1_percent']
+
+    limit = p1_at(0.25)
+    out = tmp_path / 'tolerance'
+    result = valve_sim(
+        'tolerance', '--vary', 'd_c=±5%', '--samples', '20', '--seed', '7',
+        '--limits', f'P_1_percent<={limit!r}', '--frozen-preload', '--out', str(out),
+        '--scheduler', cluster[0],
+    )
+    with open(out / 'samples.csv') as stream:
+        samples = list(csv.DictReader(stream))
+    assert len(samples) == 20
+    ordered = sorted(samples, key=lambda row: float(row['damping_orifice_diameter']))
+    p1 = [float(row['P_1_percent']) for row in ordered]
+    assert all(a > b for a, b in zip(p1, p1[1:])), 'the known answer needs P_1 monotonic'
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['protocol'].startswith('frozen preload')
+    assert summary['distributions'][0]['distribution'] == 'uniform'
+    assert summary['yield']['passed'] == 15 and summary['yield']['fraction'] == 0.75
+    low, high = summary['yield']['ci95']
+    assert low < 0.75 < high
+    assert p1_at(0.55) <= summary['percentiles']['P_1_percent']['p50'] <= p1_at(0.45)
+    assert 'yield 15/20 = 75.0 %' in result.stdout
+    assert (out / 'measures_cdf.png').exists()
+    assert (out / 'measures_vs_damping_orifice_diameter.png').exists()
+
+
+def test_sensitivity_writes_indices_and_charts(cluster, tmp_path):
+    out = tmp_path / 'sensitivity'
+    result = valve_sim(
+        'sensitivity', '--vary', 'd_c=±5%,k_p=±5%', '--samples', '4', '--out', str(out),
+        '--scheduler', cluster[0],
+    )
+    assert '16 runs' in result.stderr and 'preset' in result.stderr
+    with open(out / 'indices.csv') as stream:
+        rows = list(csv.DictReader(stream))
+    assert [(row['measure'], row['symbol']) for row in rows[:2]] == [
+        ('P_o_percent', 'd_c'), ('P_o_percent', 'k_p')
+    ]
+    assert len(rows) == 12
+    assert len(list(out.glob('sobol_*.png'))) == 6
+
+
+def ishigami_batch(cases):
+    """Evaluate the Ishigami function (a = 7, b = 0.1) as a batch of runner rows."""
+    return [
+        {
+            'index': case['index'],
+            'measures': {
+                'y': math.sin(case['x'][0]) + 7.0 * math.sin(case['x'][1]) ** 2
+                + 0.1 * case['x'][2] ** 4 * math.sin(case['x'][0])
+            },
+        }
+        for case in cases
+    ]
+
+
+def test_sobol_indices_of_the_ishigami_function_through_the_runner(tmp_path):
+    a, b, pi = 7.0, 0.1, math.pi
+    v1 = (1.0 + b * pi**4 / 5.0) ** 2 / 2.0
+    v2 = a**2 / 8.0
+    v13 = b**2 * pi**8 * (1.0 / 18.0 - 1.0 / 50.0)
+    total = v1 + v2 + v13
+    expected = {
+        'S1': [v1 / total, v2 / total, 0.0],
+        'ST': [(v1 + v13) / total, v2 / total, v13 / total],
+    }
+    distributions = [Distribution(f'x{i}', 'uniform', -pi, pi, '') for i in (1, 2, 3)]
+    values = sobol_design(distributions, 1024, seed=1)
+    cases = [{'index': i, 'x': [float(v) for v in row]} for i, row in enumerate(values)]
+    rows, _ = run_cases(cases, tmp_path / 'ishigami.jsonl', SerialBackend(), batch_size=512,
+                        evaluate=ishigami_batch, progress_stream=None)
+    outputs = [rows[i]['measures']['y'] for i in range(len(values))]
+    indices = sobol_indices(distributions, outputs, seed=1)
+    for key in ('S1', 'ST'):
+        for i in range(3):
+            error = abs(indices[key][i] - expected[key][i])
+            assert error <= max(0.03, 1.5 * indices[key + '_conf'][i]), (key, i, error)
+            assert indices[key + '_conf'][i] < 0.1
+
+
+@pytest.mark.parametrize(
+    'text, kind, a, b',
+    [
+        ('d_c=±2%', 'uniform', 0.98e-3, 1.02e-3),
+        ('damping_orifice_diameter=+-2%', 'uniform', 0.98e-3, 1.02e-3),
+        ('delta_s=3e-6:7e-6', 'uniform', 3e-6, 7e-6),
+        ('d_c=1.1e-3~N(1%)', 'normal', 1.1e-3, 1.1e-5),
+        ('d_c=~N(2e-6)', 'normal', 1e-3, 2e-6),
+    ],
+)
+def test_variation_forms(reference, text, kind, a, b):
+    (distribution,) = parse_variations([text], reference)
+    assert distribution.kind == kind
+    assert distribution.a == pytest.approx(a) and distribution.b == pytest.approx(b)
+
+
+@pytest.mark.parametrize(
+    'text, message',
+    [
+        ('x_y=±2%', "unknown parameter 'x_y'"),
+        ('d_c=2%', "'d_c=2%': SPEC must be"),
+        ('d_c=5e-3:1e-3', 'LO < HI'),
+        ('d_c=~N(0%)', 'sigma must be > 0'),
+        ('d_c=±1%,d_c=±2%', 'varied twice: damping_orifice_diameter'),
+    ],
+)
+def test_bad_variations_name_the_culprit(reference, text, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        parse_variations([text], reference)
+
+
+def test_limits():
+    (limit,) = parse_limits('P_1_percent<=4')
+    assert limit.holds({'P_1_percent': 4.0}) and not limit.holds({'P_1_percent': None})
+    with pytest.raises(ParameterError, match="limit 'P_9<=4'"):
+        parse_limits('P_9<=4')
