@@ -260,9 +260,10 @@ def test_the_papers_study_on_a_cluster_equals_the_pool_and_resumes(
     finally:
         backend.close()
     assert len(on_cluster) == 26
-    for label, (measures, poppet) in on_cluster.items():
-        assert measures == pool[label][0]
-        assert (poppet is None) == (pool[label][1] is None)
+    for label, result in on_cluster.items():
+        assert result['measures'] == pool[label]['measures']
+        assert result['case'] == pool[label]['case']
+        assert (result['poppet'] is None) == (pool[label]['poppet'] is None)
     resumed = subprocess.run(
         [sys.executable, '-m', 'valve_sim.commands.cli', 'study', '--out', str(tmp_path / 'out'),
          '--scheduler', cluster[0], '--resume'],
@@ -321,7 +322,7 @@ def test_tolerance_yield_and_percentiles_on_a_known_answer(cluster, reference, t
     p1 = [float(row['P_1_percent']) for row in ordered]
     assert all(a > b for a, b in zip(p1, p1[1:])), 'the known answer needs P_1 monotonic'
     summary = json.loads((out / 'summary.json').read_text())
-    assert summary['protocol'].startswith('frozen preload')
+    assert summary['protocol'] == 'frozen-preload'
     assert summary['distributions'][0]['distribution'] == 'uniform'
     assert summary['yield']['passed'] == 15 and summary['yield']['fraction'] == 0.75
     low, high = summary['yield']['ci95']
@@ -338,7 +339,7 @@ def test_sensitivity_writes_indices_and_charts(cluster, tmp_path):
         'sensitivity', '--vary', 'd_c=±5%,k_p=±5%', '--samples', '4', '--out', str(out),
         '--scheduler', cluster[0],
     )
-    assert '16 runs' in result.stderr and 'preset' in result.stderr
+    assert '16 runs' in result.stderr and 'protocol held-preset' in result.stderr
     with open(out / 'indices.csv') as stream:
         rows = list(csv.DictReader(stream))
     assert [(row['measure'], row['symbol']) for row in rows[:2]] == [

@@ -26,8 +26,9 @@ A case is a dict:
   step_size        [s] RK4 step
   record           state names whose waveforms the row keeps (usually empty)
 evaluate_batch(cases) -> rows is the one work unit: a row holds index, the preload
-used, the six measures, their reasons, and error (a message when the valve could
-not be set or the run failed; then the measures are None).
+used, the cracking pressure, the initial p_s and x, the six measures, their reasons,
+and error (a message when the valve could not be set or the run failed; then the
+measures are None).
 
 run_cases() submits batches to a backend (DaskBackend, PoolBackend, SerialBackend)
 and appends every finished row to a JSON-lines results file as it arrives (first
@@ -49,7 +50,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate
-from valve_sim.core.steady_state import preload_for_cracking_pressure
+from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
 
 
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
@@ -63,12 +64,13 @@ def evaluate_case(case):
     try:
         params = validate(case['params'])
         if case.get('preset_pressure') is not None:
-            params['pilot_spring_preload'] = preload_for_cracking_pressure(
-                params, case['preset_pressure']
-            )
+            params = with_preset_pressure(params, case['preset_pressure'])
         row['pilot_spring_preload'] = params['pilot_spring_preload']
+        row['cracking_pressure'] = cracking_pressure(params)
         scenario = case['scenario']
         waveforms = simulate(params, scenario, case['step_size'], RECORD_INTERVAL)
+        row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
+        row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
         direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
         measures = step_measures(
             waveforms.time,
@@ -82,7 +84,7 @@ def evaluate_case(case):
             **row,
             'measures': dict.fromkeys(MEASURE_NAMES),
             'reasons': {},
-            'error': f'{type(error).__name__}: {error}',
+            'error': str(error),
         }
     row.update(
         measures={

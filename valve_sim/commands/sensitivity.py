@@ -18,7 +18,8 @@ Global sensitivity of the six measures: Sobol first-order and total indices (SAL
 By default the paper's six parameters (m_m, m_p, V_p, V_c, d_c, k_p) vary together,
 each uniform on +-20 % (the paper's one-at-a-time range); --vary takes the forms of
 `tolerance`. --samples N base samples give N (D + 2) runs of the paper's step
-test, each valve set to the preset first (or --frozen-preload). Writes into --out:
+test, each valve set to the preset first (protocol held-preset, or
+--frozen-preload). Writes into --out:
   results.jsonl        one row per run as it completes (--resume)
   indices.csv          measure, parameter, S1, S1_conf, ST, ST_conf, interaction
                        (ST - S1); conf: half-width of the 95 % bootstrap interval
@@ -36,13 +37,13 @@ from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import parse_variations
-from valve_sim.commands.study_backend import add_runner_arguments, open_backend, PIP_INSTALL
-from valve_sim.commands.tolerance import (
-    add_preset_arguments,
-    add_study_arguments,
-    preset_protocol,
-    sample_cases,
+from valve_sim.commands.study_backend import (
+    add_protocol_arguments,
+    add_runner_arguments,
+    open_backend,
+    PIP_INSTALL,
 )
+from valve_sim.commands.tolerance import add_study_arguments, preset_protocol, sample_cases
 from valve_sim.core.errors import StudyError
 from valve_sim.core.parameters import SPECS
 
@@ -60,7 +61,7 @@ def add_arguments(parser):
         metavar='NAME=SPEC,...',
         help=f'parameters and distributions as for tolerance (default: {PAPER_RANGES})',
     )
-    add_preset_arguments(parser)
+    add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
 
@@ -136,8 +137,8 @@ def run(args):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(
-        f'sensitivity: {len(values)} runs ({args.samples} x ({len(names)} + 2)); '
-        + protocol['protocol'],
+        f'sensitivity: {len(values)} runs ({args.samples} x ({len(names)} + 2)); protocol '
+        f"{protocol['protocol']}: {protocol['protocol_meaning']}",
         file=sys.stderr,
     )
     backend = open_backend(args, 'sensitivity')

@@ -28,8 +28,9 @@ import math
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
 from valve_sim.core.model import STATE_NAMES
-from valve_sim.core.parameters import load_parameters, ParameterError
+from valve_sim.core.parameters import check_value, load_parameters, ParameterError
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.steady_state import with_preset_pressure
 
 
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
@@ -67,8 +68,24 @@ def assignment(text):
         raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
 
 
+def pressure_value(text):
+    """Parse a pressure from '7e6', '7e6Pa', '7MPa' or '70bar' -> Pa (argparse type)."""
+    number, factor = text.strip(), 1.0
+    for suffix, scale in (('MPa', 1e6), ('kPa', 1e3), ('bar', 1e5), ('Pa', 1.0)):
+        if number.endswith(suffix):
+            number, factor = number[: -len(suffix)], scale
+            break
+    try:
+        value = float(number) * factor
+    except ValueError:
+        raise ArgumentTypeError(f'not a pressure: {text!r} (use e.g. 7MPa or 7e6)') from None
+    if not math.isfinite(value) or value <= 0.0:
+        raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
+    return value
+
+
 def add_parameter_arguments(parser):
-    """--params and --set, shared by simulate and study."""
+    """--params, --set and --preset-pressure, shared by every command that runs the model."""
     parser.add_argument(
         '--params',
         metavar='FILE.yaml',
@@ -82,15 +99,27 @@ def add_parameter_arguments(parser):
         default=[],
         help='override one parameter (ROS name or paper symbol, SI units); repeatable',
     )
+    parser.add_argument(
+        '--preset-pressure',
+        type=pressure_value,
+        metavar='P',
+        help='main-valve cracking pressure (gauge, e.g. 7MPa): sets pilot_spring_preload like '
+        'the adjusting screw, after --params and --set (also preset_pressure in a file or --set)',
+    )
 
 
 def load_from_arguments(args):
     """
-    Return (params, settings) from --params, --set and --step-size.
+    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
 
-    --step-size overrides settings["step_size"].
+    --step-size overrides settings["step_size"]. A preset pressure (--preset-pressure,
+    else preset_pressure of --set or the file) sets the pilot spring preload last.
     """
     params, settings = load_parameters(args.params, dict(args.set))
+    preset = settings.pop('preset_pressure', None)
+    preset = getattr(args, 'preset_pressure', None) or preset
+    if preset is not None:
+        params = with_preset_pressure(params, check_value('preset_pressure', preset))
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size
     if not 1e-7 <= settings['step_size'] <= 1e-4:

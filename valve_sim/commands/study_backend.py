@@ -18,6 +18,13 @@ Options and backend shared by the study commands (study, tolerance, sensitivity)
 --scheduler tcp://HOST:PORT uses an existing Dask cluster; without it a local
 cluster of --workers processes runs on this machine. Results stream to
 DIR/results.jsonl; --resume completes an interrupted study.
+
+PROTOCOL (--protocol): how each case's valve is set before its test.
+  held-preset     (default, the paper's) the pilot spring preload is re-solved in
+                  every case so that the main valve cracks at the same preset
+                  pressure, as a technician turns the adjusting screw back to 7 MPa;
+  frozen-preload  every case keeps the preload of the parameter file, so a stiffer or
+                  softer spring moves the preset with it.
 """
 
 import os
@@ -28,6 +35,38 @@ from valve_sim.core.errors import StudyError
 
 
 PIP_INSTALL = "pip install 'dask[distributed]' SALib"
+PROTOCOLS = {
+    'held-preset': 'pilot spring preload re-solved per case: the main valve cracks at the '
+    'preset pressure in every case (the paper: preset pressure 7 MPa)',
+    'frozen-preload': 'pilot spring preload of the parameter file in every case: '
+    'the preset moves with the varied parameters',
+}
+DEFAULT_PROTOCOL = 'held-preset'
+
+
+def add_protocol_arguments(parser):
+    """--protocol and its short form --frozen-preload."""
+    parser.add_argument(
+        '--protocol',
+        choices=PROTOCOLS,
+        default=DEFAULT_PROTOCOL,
+        help='held-preset: preload re-solved per case, the preset held (default, the paper); '
+        'frozen-preload: the preload of the parameter file in every case',
+    )
+    parser.add_argument(
+        '--frozen-preload',
+        dest='protocol',
+        action='store_const',
+        const='frozen-preload',
+        help='same as --protocol frozen-preload',
+    )
+
+
+def protocol_preset(protocol, preset_pressure):
+    """Return the preset a case of this protocol is set to: preset_pressure, or None (frozen)."""
+    if protocol not in PROTOCOLS:
+        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
+    return preset_pressure if protocol == 'held-preset' else None
 
 
 def add_runner_arguments(parser):

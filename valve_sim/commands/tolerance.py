@@ -17,9 +17,10 @@ Monte Carlo of manufacturing tolerances: how many valves of a batch meet a spec.
 
 Each sampled valve (--vary, see valve_sim.analysis.tolerances for the forms) is
 set to the preset pressure before its test, as a technician sets every valve on
-the bench (the pilot spring preload re-solved so that it cracks at the preset),
-or keeps the nominal preload with --frozen-preload; then the paper's step test
-(5 -> 20 L/min) is run and measured. Writes into --out:
+the bench (protocol held-preset: the pilot spring preload re-solved so that it
+cracks at the preset, the cracking pressure of the nominal valve or
+--preset-pressure), or keeps the nominal preload (--frozen-preload); then the
+paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
   results.jsonl   one row per run as it completes (--resume)
   samples.csv     index, the varied parameters, the preload used, the six
                   measures, pass, reasons, error (one row per sample)
@@ -45,7 +46,13 @@ from valve_sim.analysis.tolerances import (
     summarise,
 )
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
-from valve_sim.commands.study_backend import add_runner_arguments, open_backend
+from valve_sim.commands.study_backend import (
+    add_protocol_arguments,
+    add_runner_arguments,
+    open_backend,
+    protocol_preset,
+    PROTOCOLS,
+)
 from valve_sim.core.parameters import SPECS
 from valve_sim.core.steady_state import cracking_pressure
 
@@ -61,22 +68,6 @@ def add_study_arguments(parser, samples_help):
         '--seed', type=int, default=0, metavar='S', help='seed of the sampler (default 0)'
     )
     parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
-
-
-def add_preset_arguments(parser):
-    """--preset-pressure and --frozen-preload (tolerance and sensitivity)."""
-    parser.add_argument(
-        '--preset-pressure',
-        type=float,
-        metavar='PA',
-        help='cracking pressure every valve is set to before its test [Pa, gauge] '
-        '(default: that of the nominal valve)',
-    )
-    parser.add_argument(
-        '--frozen-preload',
-        action='store_true',
-        help='keep the nominal pilot spring preload instead of setting each valve to the preset',
-    )
 
 
 def add_arguments(parser):
@@ -102,25 +93,24 @@ def add_arguments(parser):
         help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power of two), '
         'random: pseudo-random (all seeded)',
     )
-    add_preset_arguments(parser)
+    add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
 
 def preset_protocol(args, params):
-    """(preset_pressure or None, JSON-ready statement of how each valve was set)."""
-    if args.frozen_preload:
-        return None, {
-            'protocol': 'frozen preload: every valve keeps the nominal pilot spring preload',
-            'pilot_spring_preload': params['pilot_spring_preload'],
-        }
-    preset = args.preset_pressure
-    if preset is None:
-        preset = cracking_pressure(params)
-    return preset, {
-        'protocol': "preset: each valve's pilot spring preload re-solved so that it cracks at "
-        'preset_pressure, as a technician sets every valve on the bench',
+    """
+    Return (preset for the cases or None, JSON-ready statement of how each valve was set).
+
+    The preset is the cracking pressure of params (after --preset-pressure).
+    """
+    preset = cracking_pressure(params)
+    statement = {
+        'protocol': args.protocol,
+        'protocol_meaning': PROTOCOLS[args.protocol],
         'preset_pressure': preset,
+        'nominal_pilot_spring_preload': params['pilot_spring_preload'],
     }
+    return protocol_preset(args.protocol, preset), statement
 
 
 def sample_cases(params, names, values, preset, step_size):
@@ -213,7 +203,7 @@ def run(args):
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
     from valve_sim.analysis.study_plots import plot_measure_cdfs, plot_measures_against
 
-    plot_measure_cdfs(out / 'measures_cdf.png', rows, limits, protocol['protocol'])
+    plot_measure_cdfs(out / 'measures_cdf.png', rows, limits, f"protocol {protocol['protocol']}")
     for index, name in enumerate(names):
         plot_measures_against(
             out / f'measures_vs_{name}.png',
@@ -223,7 +213,11 @@ def run(args):
             rows,
             limits,
         )
-    print(protocol['protocol'], file=sys.stderr)
+    print(
+        f"tolerance: protocol {protocol['protocol']}: {protocol['protocol_meaning']}; preset "
+        f"{protocol['preset_pressure'] / 1e6:.4f} MPa",
+        file=sys.stderr,
+    )
     print_summary(summary)
     print(f'wrote {out}/samples.csv, {out}/summary.json and figures')
     return 0

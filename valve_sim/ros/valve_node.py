@@ -60,18 +60,14 @@ from valve_sim.core.parameters import (
     NODE_NAME,
     ParameterError,
     PARAMETERS,
+    PRESET_PRESSURE,
     SETTING_SPECS,
     SETTINGS,
     SPECS,
     validate,
 )
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, TRIAL_STEPS
-from valve_sim.core.retuning import (
-    check_preset,
-    dependent_change,
-    merged_parameters,
-    PRESET_PRESSURE,
-)
+from valve_sim.core.retuning import check_preset, dependent_change, merged_parameters
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
