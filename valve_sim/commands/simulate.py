@@ -26,7 +26,7 @@ import json
 import math
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
+from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
 from valve_sim.core.model import STATE_NAMES
 from valve_sim.core.parameters import check_value, load_parameters, ParameterError
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
@@ -201,15 +201,28 @@ def write_csv(path, waveforms):
             writer.writerow([f'{t:.7f}', f'{q:.9e}'] + [f'{v:.9e}' for v in state])
 
 
-def print_table(measures):
-    """Human-readable comparison with the paper's Figure 5."""
-    print(f'{"measure":<14}{"valve_sim":>12}{"paper":>10}')
+def print_table(measures, paper=False):
+    """
+    Print the six measures as a table; paper: beside Figure 5's values.
+
+    Only a run of the paper's own scenario should get the paper's column.
+    """
+    print(f'{"measure":<14}{"valve_sim":>12}' + (f'{"paper":>10}' if paper else ''))
     for name in MEASURE_NAMES:
         value = measures.values[name]
         shown = f'{value:12.4g}' if value is not None else f'{"-":>12}'
-        print(f'{name:<14}{shown}{FIGURE5_MEASURES[name]:>10.4g}')
+        print(f'{name:<14}{shown}' + (f'{FIGURE5_MEASURES[name]:>10.4g}' if paper else ''))
     for name, reason in measures.reasons.items():
         print(f'  {name}: {reason}')
+
+
+def is_papers_run(params, scenario):
+    """Whether a run is the paper's Figure 5 case: its step, on the reference parameters."""
+    return (
+        is_reference_step(scenario.initial_flow, scenario.final_flow)
+        and scenario.ramp_time == 0.0
+        and params == load_parameters()[0]
+    )
 
 
 def run(args):
@@ -255,5 +268,5 @@ def run(args):
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:
-        print_table(measures)
+        print_table(measures, paper=is_papers_run(params, scenario))
     return 0

@@ -31,6 +31,7 @@ import sys
 import yaml
 
 
+PACKAGE = 'valve_sim'
 NODE_NAME = 'relief_valve'
 
 
@@ -495,10 +496,26 @@ def validate(params):
 
 
 def config_path(filename):
-    """Path of a file shipped in config/ (installed share/valve_sim/config or the source tree)."""
-    candidates = [
-        Path(sys.prefix) / 'share' / 'valve_sim' / 'config' / filename,
-        Path(__file__).resolve().parents[2] / 'config' / filename,
+    """
+    Return the path of a file shipped in config/, or raise ParameterError naming where it looked.
+
+    Looked for, in this order: the package's share directory as ament_index knows it
+    (a colcon install, once its setup file is sourced: AMENT_PREFIX_PATH); the
+    share directory of the prefix this module is installed in (a colcon or pip
+    install used without sourcing); the source tree (a clone, or an editable install).
+    """
+    candidates = []
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / 'config' / filename)
+    except (ImportError, LookupError, OSError, ValueError):
+        pass  # no ament_index, no AMENT_PREFIX_PATH, or valve_sim not in it: the fallbacks
+    here = Path(__file__).resolve()
+    candidates += [
+        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / 'config' / filename,
+        Path(sys.prefix) / 'share' / PACKAGE / 'config' / filename,
+        here.parents[2] / 'config' / filename,  # source tree
     ]
     for candidate in candidates:
         if candidate.is_file():
