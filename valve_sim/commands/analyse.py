@@ -20,6 +20,11 @@ bag with other names or types works), joins them on the supply-pressure times,
 and runs valve_sim.analysis.step_analysis.StepAnalysis over them. A file whose end is
 missing (a recording killed before it closed) gives what its complete chunks
 hold, with a warning; a damaged or foreign file is an error.
+
+With --characteristic the bag is a slow flow ramp up and down instead (as
+valve-sim characteristic makes one): only supply pressure and inlet flow are
+needed, and valve_sim.analysis.characteristic finds cracking and reseat from the
+pressure-flow curve (a bag holds no main-stage flow; docs/characteristic.md).
 """
 
 from dataclasses import dataclass
@@ -38,6 +43,7 @@ from valve_sim.analysis.signals import (
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis
+from valve_sim.commands.simulate import flow_value
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
@@ -256,6 +262,19 @@ def add_arguments(parser):
         'instead of detecting steps; the inlet flow is then not needed',
     )
     parser.add_argument(
+        '--characteristic',
+        action='store_true',
+        help='the bag is a slow flow ramp up and down: report the static characteristic '
+        '(cracking, rated-flow and reseat pressures, override, hysteresis) instead of steps',
+    )
+    parser.add_argument(
+        '--rated-flow',
+        type=flow_value,
+        metavar='Q',
+        help='with --characteristic: rated flow of the valve (default: the largest inlet flow '
+        'in the bag)',
+    )
+    parser.add_argument(
         '--step-direction',
         choices=('up', 'down'),
         default='up',
@@ -276,7 +295,46 @@ def signal_map_from(args):
     )
 
 
+def run_characteristic(args):
+    """--characteristic: the static characteristic of a recorded ramp."""
+    from valve_sim.analysis.characteristic import characteristic
+
+    recording = read_recording(
+        args.bag, signal_map_from(args), ('supply_pressure', 'inlet_flow')
+    )
+    if recording.problem:
+        print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)
+    rated = args.rated_flow or float(np.max(recording.inlet_flow))
+    if not rated > 0.0:
+        raise InputFileError(f'{args.bag}: the inlet flow is never above 0 (no ramp)')
+    try:
+        marks = characteristic(recording.supply_pressure, recording.inlet_flow, rated)
+    except ValueError as error:
+        raise InputFileError(f'{args.bag}: {error}') from error
+    if args.plot:
+        from valve_sim.analysis.plotting import plot_characteristic
+
+        plot_characteristic(
+            args.plot,
+            recording.inlet_flow,
+            recording.supply_pressure,
+            marks,
+            title=f'Static characteristic of {args.bag}',
+        )
+        print(f'wrote {args.plot}', file=sys.stderr)
+    if args.json:
+        print(json.dumps({'bag': str(args.bag), 'characteristic': marks.as_dict()}, indent=2))
+    else:
+        from valve_sim.commands.characteristic import print_marks
+
+        print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}')
+        print_marks(marks, {})
+    return 0
+
+
 def run(args):
+    if args.characteristic:
+        return run_characteristic(args)
     required = REQUIRED if args.step_time is None else ('supply_pressure', 'main_valve')
     recording = read_recording(args.bag, signal_map_from(args), required)
     if recording.problem:

@@ -44,7 +44,14 @@ SUBCOMMANDS = {
         'valve_sim.commands.operating_point',
         'exact steady state, flows, forces and linear modes at a flow',
     ),
-    'analyse': ('valve_sim.commands.analyse', 'step measures of a recorded rosbag2 MCAP file'),
+    'characteristic': (
+        'valve_sim.commands.characteristic',
+        'static pressure-flow characteristic from a slow flow ramp up and down',
+    ),
+    'analyse': (
+        'valve_sim.commands.analyse',
+        'step measures (or --characteristic) of a recorded rosbag2 MCAP file',
+    ),
     'demo': (
         'valve_sim.commands.demo',
         "valve_node + analyser_node over DDS: the paper's step, recorded and measured",

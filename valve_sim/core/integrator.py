@@ -20,11 +20,27 @@ do we, in one kernel shared by the offline tools and the real-time node. After
 each step the valves are kept at their seats and end stops (inelastic contact),
 and the state is checked: a non-finite or absurd state stops the integration
 and raises IntegrationError instead of returning numbers.
+
+rk4_lanes advances several independent valves (lanes: parameter sets and
+states) through the same inlet-flow schedule at once, stage by stage across
+the lanes, calling the same model.derivatives per lane in the same order of
+operations: its results are bit-identical to rk4_steps, but the processor
+overlaps the lanes' independent arithmetic, which makes a study's runs faster.
 """
 
 import numpy as np
 from valve_sim.core.jit import jit
-from valve_sim.core.model import derivatives, P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
+from valve_sim.core.model import (
+    Coefficients,
+    derivatives,
+    P_C,
+    P_S,
+    STATE_NAMES,
+    X,
+    X_DOT,
+    Y,
+    Y_DOT,
+)
 
 
 # A pressure beyond these limits [Pa, gauge] means the integration broke down:
@@ -133,11 +149,121 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
     start = state.copy()
     done = rk4_steps(state, inlet_flows, coefficients, float(step), max(record_every, 1), record)
     if done < len(inlet_flows):
-        failed = describe_state(state)
+        error = _divergence(state, done, step, time)
         state[:] = start
-        raise IntegrationError(
-            f'integration diverged at t = {time + (done + 1) * step:.6f} s '
-            f'(step {done + 1} of this call, '
-            f'step size {step:g} s): {failed}. Reduce the step size or check the parameters.'
-        )
+        raise error
     return record
+
+
+def _lane_coefficients_function():
+    """
+    Compile lane_coefficients(table, lane) -> Coefficients of column lane of table.
+
+    Generated from Coefficients' fields so that it follows any field added to the
+    model; a namedtuple cannot be built from an array column any other way in numba.
+    """
+    arguments = ', '.join(f'table[{i}, lane]' for i in range(len(Coefficients._fields)))
+    namespace = {'Coefficients': Coefficients}
+    exec(f'def lane_coefficients(table, lane):\n    return Coefficients({arguments})\n', namespace)
+    return jit(namespace['lane_coefficients'], cache=False)
+
+
+lane_coefficients = _lane_coefficients_function()
+
+
+@jit
+def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed):
+    """
+    Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
+
+    The same arithmetic as rk4_steps, lane by lane. table [fields x lanes]: each
+    lane's Coefficients as a column. Every record_every steps the states go into
+    records[lane, row]. completed[lane] is set to the number of steps the lane
+    completed: fewer than len(inlet_flows) means its state became insane; that
+    lane is then frozen (its state holds the insane values) while the others go on.
+    """
+    n, lanes = states.shape
+    k1 = np.empty((n, lanes))
+    k2 = np.empty((n, lanes))
+    k3 = np.empty((n, lanes))
+    k4 = np.empty((n, lanes))
+    stage = np.empty((n, lanes))
+    steps = inlet_flows.shape[0]
+    for j in range(lanes):
+        completed[j] = steps
+    row = 0
+    until_record = record_every
+    for k in range(steps):
+        q = inlet_flows[k]
+        for j in range(lanes):
+            derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
+        for i in range(n):
+            for j in range(lanes):
+                stage[i, j] = states[i, j] + 0.5 * step * k1[i, j]
+        for j in range(lanes):
+            derivatives(stage[:, j], q, lane_coefficients(table, j), k2[:, j])
+        for i in range(n):
+            for j in range(lanes):
+                stage[i, j] = states[i, j] + 0.5 * step * k2[i, j]
+        for j in range(lanes):
+            derivatives(stage[:, j], q, lane_coefficients(table, j), k3[:, j])
+        for i in range(n):
+            for j in range(lanes):
+                stage[i, j] = states[i, j] + step * k3[i, j]
+        for j in range(lanes):
+            derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
+        for j in range(lanes):
+            if completed[j] < steps:
+                continue
+            state = states[:, j]
+            for i in range(n):
+                state[i] += step / 6.0 * (k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j])
+            enforce_stops(state, lane_coefficients(table, j))
+            if not state_is_sane(state):
+                completed[j] = k
+        until_record -= 1
+        if until_record == 0:
+            until_record = record_every
+            if row < records.shape[1]:
+                for j in range(lanes):
+                    records[j, row, :] = states[:, j]
+                row += 1
+
+
+def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, time=0.0):
+    """
+    Advance several valves (rows of states, modified in place) through the same inlet_flows.
+
+    states: float64 array [lanes x 8]; coefficient_sets: one Coefficients per lane;
+    the other arguments as for advance(). Returns (records [lanes x rows x 8],
+    errors): errors[lane] is None or the IntegrationError of a lane that diverged,
+    whose state is then left as it was before the call. The lanes do not affect
+    each other, and each gives exactly what advance() gives it alone.
+    """
+    inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
+    lanes = len(states)
+    rows = len(inlet_flows) // record_every if record_every else 0
+    records = np.empty((lanes, rows, 8))
+    start = np.array(states, dtype=float)
+    columns = np.ascontiguousarray(start.T)
+    table = np.array([tuple(c) for c in coefficient_sets], dtype=float).T.copy()
+    completed = np.empty(lanes, dtype=np.int64)
+    rk4_lanes(columns, inlet_flows, table, float(step), max(record_every, 1), records, completed)
+    errors = []
+    for lane, done in enumerate(completed):
+        if done < len(inlet_flows):
+            errors.append(_divergence(columns[:, lane], done, step, time))
+            states[lane] = start[lane]
+        else:
+            errors.append(None)
+            states[lane] = columns[:, lane]
+    return records, errors
+
+
+def _divergence(state, done, step, time):
+    return IntegrationError(
+        f'integration diverged at t = {time + (done + 1) * step:.6f} s '
+        f'(step {done + 1} of this call, '
+        f'step size {step:g} s): {describe_state(state)}. '
+        'Reduce the step size or check the parameters.'
+    )
