@@ -111,7 +111,7 @@ def test_a_missing_flow_topic_is_named(tmp_path, capsys, reference):
     """Name the missing inlet-flow topic: analyse --characteristic needs it."""
     waveforms = run_flows(reference, ramp_flows(RATED, 1.0, 0.1, 1e-5), 1e-5, 1e-3)
     bag = tmp_path / 'rig.mcap'
-    write_simulation_bag(bag, waveforms, 101325.0, publish_interval=1e-3)
+    write_simulation_bag(bag, waveforms, 101325.0, publish_interval=1e-3, start_time_ns=0)
     code = valve_sim(
         ['analyse', '--characteristic', str(bag), '--topic-inlet-flow', '/no_such_topic']
     )

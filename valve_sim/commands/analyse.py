@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Step measures of each inlet-flow step in a rosbag2 MCAP file, as the analyser computes them live.
+Step measures of each inlet-flow step in a rosbag2 MCAP file or bag folder, as measured live.
 
 Reads the signals of valve_sim.analysis.signals (topics mappable by option, so a real rig's
 bag with other names or types works), joins them on the supply-pressure times,
@@ -47,6 +47,7 @@ from valve_sim.commands.simulate import flow_value
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
+from valve_sim.recording.rosbag2_metadata import bag_files
 
 
 PLOT_LEAD = (
@@ -68,35 +69,33 @@ class Recording:
 
 def read_recording(path, signal_map=None, required=REQUIRED):
     """
-    Read a bag file as a Recording.
+    Read a bag (an MCAP file or a rosbag2 bag folder) as a Recording.
 
     Raises InputFileError if a required signal is missing or unreadable.
     """
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
-    reader, decoders, joiner, rows = (
-        BagReader(path),
-        DecoderFactory(),
-        Joiner(required, ['pilot_poppet']),
-        [],
-    )
-    extractors = {}
+    decoders, joiner, rows = DecoderFactory(), Joiner(required, ['pilot_poppet']), []
     wanted = {signal_map.topics[role] for role in required + ('pilot_poppet',)}
-    for channel, schema, message in reader.messages(wanted):
-        if channel.id not in extractors:
-            extractors[channel.id] = _extractor(path, channel, schema, signal_map, decoders)
-        extractor, decode = extractors[channel.id]
-        try:
-            decoded = decode(message.data)
-        except Exception as error:  # the decoder raises anything from struct.error to IndexError
-            raise InputFileError(
-                f'{path}: a message on {channel.topic} does not decode: {error}'
-            ) from error
-        for role, time_ns, value in extractor.samples(decoded, message.log_time):
-            rows.extend(joiner.add(role, time_ns, value))
+    found, problems = set(), []
+    for file in bag_files(path):  # a file, or the files of a bag folder in order
+        reader, extractors = BagReader(file), {}
+        for channel, schema, message in reader.messages(wanted):
+            if channel.id not in extractors:
+                extractors[channel.id] = _extractor(file, channel, schema, signal_map, decoders)
+            extractor, decode = extractors[channel.id]
+            try:
+                decoded = decode(message.data)
+            except Exception as error:  # the decoder raises anything, struct.error to IndexError
+                raise InputFileError(
+                    f'{file}: a message on {channel.topic} does not decode: {error}'
+                ) from error
+            for role, time_ns, value in extractor.samples(decoded, message.log_time):
+                rows.extend(joiner.add(role, time_ns, value))
+        found.update(channel.topic for channel in reader.channels.values())
+        problems += [reader.problem] if reader.problem else []
     rows.extend(joiner.finish())
-    found = {channel.topic for channel in reader.channels.values()}
     for role in required:
         if signal_map.topics[role] not in found:
             raise InputFileError(
@@ -113,7 +112,9 @@ def read_recording(path, signal_map=None, required=REQUIRED):
         for role in ('supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow')
     }
     return Recording(
-        np.array([seconds(time_ns) for time_ns, _ in rows]), problem=reader.problem, **column
+        np.array([seconds(time_ns) for time_ns, _ in rows]),
+        problem='; '.join(problems) or None,
+        **column,
     )
 
 
@@ -214,7 +215,9 @@ def print_steps(records, recording):
 
 def add_arguments(parser):
     parser.add_argument(
-        'bag', metavar='BAG.mcap', help="rosbag2 MCAP file (valve_node's topics, or mapped ones)"
+        'bag',
+        metavar='BAG',
+        help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
     )
     parser.add_argument('--json', action='store_true', help='print the step records as JSON')
     parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')

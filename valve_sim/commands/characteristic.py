@@ -37,7 +37,14 @@ from valve_sim.analysis.characteristic import (
     CRACKING_FRACTION,
     split_ramps,
 )
-from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
+from valve_sim.commands.simulate import (
+    add_bag_arguments,
+    add_parameter_arguments,
+    check_bag_arguments,
+    flow_value,
+    load_from_arguments,
+    write_bag,
+)
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.simulation import LITRE_PER_MINUTE, main_stage_flow, ramp_flows, run_flows
 from valve_sim.core.steady_state import (
@@ -98,6 +105,7 @@ def add_arguments(parser):
         help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
         '(for valve-sim analyse --characteristic)',
     )
+    add_bag_arguments(parser)
 
 
 def _check(args, step_size):
@@ -180,6 +188,7 @@ def print_marks(marks, steady):
 
 
 def run(args):
+    check_bag_arguments(args)
     params, settings = load_from_arguments(args)
     step_size = settings['step_size']
     rated = _check(args, step_size)
@@ -201,10 +210,7 @@ def run(args):
         write_outputs(Path(args.out), params, waveforms, main, marks['main_stage_flow'], steady,
                       report, args.max_flow)
     if args.mcap:
-        from valve_sim.recording.valve_topics import write_simulation_bag
-
-        write_simulation_bag(args.mcap, waveforms, settings['ambient_pressure'],
-                             publish_interval=args.record_interval)
+        write_bag(args, waveforms, settings['ambient_pressure'], args.record_interval)
     if args.json:
         print(json.dumps(report, indent=2))
     else:

@@ -50,7 +50,7 @@ SUBCOMMANDS = {
     ),
     'analyse': (
         'valve_sim.commands.analyse',
-        'step measures (or --characteristic) of a recorded rosbag2 MCAP file',
+        'step measures (or --characteristic) of a recorded rosbag2 MCAP file or bag folder',
     ),
     'demo': (
         'valve_sim.commands.demo',
