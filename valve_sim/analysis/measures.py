@@ -91,18 +91,25 @@ def _lobes(e, band):
 
     Only a rise counts: samples that start above +band (a response that begins
     above its settled value) open no lobe until e has been below +band once.
+    A hysteresis switch, computed on whole arrays: after the first sample at or
+    below +band, a sample above +band switches it on (a lobe starts) and one
+    below -band switches it off (the lobe ends there); other samples leave it.
     """
-    lobes, start, above, armed = [], None, False, False
-    for i, value in enumerate(e):
-        if not armed:
-            armed = value <= band
-        elif not above and value > band:
-            above, start = True, i
-        elif above and value < -band:
-            lobes.append((start, i))
-            above = False
-    if above:
-        lobes.append((start, len(e)))
+    e = np.asarray(e)
+    armed = np.flatnonzero(e <= band)
+    if len(armed) == 0:
+        return []
+    events = np.zeros(len(e), dtype=np.int8)
+    events[e > band] = 1
+    events[e < -band] = -1
+    events[: armed[0] + 1] = 0
+    where = np.flatnonzero(events)
+    kinds = events[where]
+    switched = kinds != np.concatenate([[-1], kinds[:-1]])
+    starts, stops = where[switched & (kinds == 1)], where[switched & (kinds == -1)]
+    lobes = [(int(start), int(stop)) for start, stop in zip(starts, stops)]
+    if len(starts) > len(stops):
+        lobes.append((int(starts[-1]), len(e)))
     return lobes
 
 

@@ -331,7 +331,7 @@ def run_characteristic(args):
         from valve_sim.commands.characteristic import print_marks
 
         print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}')
-        print_marks(marks, {})
+        print_marks(marks)
     return 0
 
 

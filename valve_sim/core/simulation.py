@@ -97,11 +97,16 @@ def step_flows(scenario, step_size):
     return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
 
 
-def _waveforms(initial, record, flows, record_every, step_size, initial_flow):
-    sample_steps = np.arange(1, len(record) + 1) * record_every
+def _waveforms(initial, record, flows, record_every, step_size, initial_flow, held=0):
+    """Waveforms of a run: the initial state, held rows of it, then the recorded rows."""
+    rows = held + len(record)
+    states = np.empty((rows + 1, len(initial)))
+    states[: held + 1] = initial
+    states[held + 1:] = record
+    sample_steps = np.arange(1, rows + 1) * record_every
     return Waveforms(
         time=np.concatenate([[0.0], sample_steps * step_size]),
-        states=np.vstack([initial, record]),
+        states=states,
         inlet_flow=np.concatenate([[initial_flow], flows[sample_steps - 1]]),
     )
 
@@ -197,14 +202,13 @@ def simulate_batch(
                 time=skipped * step_size,
             )
             for lane, index in enumerate(group):
-                initial = starts[index][0]
-                held = np.repeat(initial[np.newaxis], skipped // record_every, axis=0)
                 results[index] = errors[lane] or _waveforms(
-                    initial,
-                    np.concatenate([held, records[lane]]),
+                    starts[index][0],
+                    records[lane],
                     flows,
                     record_every,
                     step_size,
                     scenario.initial_flow,
+                    held=skipped // record_every,
                 )
     return results
