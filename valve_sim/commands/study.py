@@ -21,7 +21,8 @@ the six together as in Table 2: 26 distinct runs of the paper's step test, run
 in batches by the study runner (a local Dask cluster, --scheduler for an existing
 one, a local process pool when dask is not installed).
 
-PROTOCOL (--protocol): how the preset is treated between cases.
+PROTOCOL (--protocol; valve_sim.analysis.study_cases.PROTOCOLS): how the preset is
+treated between cases.
   held-preset     (default, the paper's) the pilot spring preload is re-solved in
                   every case so that the main valve cracks at the same preset
                   pressure, as a technician turns the adjusting screw back to 7 MPa;
@@ -45,21 +46,15 @@ import sys
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.paper import (
-    REFERENCE_SCENARIO,
-    STUDY_PARAMETERS,
-    STUDY_VARIATIONS,
-    TABLE2_CHANGES,
-)
+from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
+from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
 from valve_sim.analysis.study_runner import evaluate_case, run_cases, SerialBackend
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
-    DEFAULT_PROTOCOL,
     open_backend,
     protocol_preset,
-    PROTOCOLS,
 )
 from valve_sim.core.parameters import scaled
 from valve_sim.core.steady_state import cracking_pressure
@@ -85,19 +80,6 @@ def add_arguments(parser):
     add_protocol_arguments(parser)
     parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
     add_runner_arguments(parser)
-
-
-def study_cases():
-    """[(label, {symbol: percent})]: the baseline, the one-at-a-time variations, Table 2."""
-    cases = [('reference', {})]
-    for symbol in STUDY_PARAMETERS:
-        cases += [
-            (f'{symbol} {percent:+d} %', {symbol: percent})
-            for percent in STUDY_VARIATIONS
-            if percent
-        ]
-    cases.append(('table2', dict(TABLE2_CHANGES)))
-    return cases
 
 
 def runner_case(index, params, changes, step_size, protocol, preset_pressure):

@@ -19,29 +19,19 @@ Options and backend shared by the study commands (study, tolerance, sensitivity)
 cluster of --workers processes runs on this machine. Results stream to
 DIR/results.jsonl; --resume completes an interrupted study.
 
-PROTOCOL (--protocol): how each case's valve is set before its test.
-  held-preset     (default, the paper's) the pilot spring preload is re-solved in
-                  every case so that the main valve cracks at the same preset
-                  pressure, as a technician turns the adjusting screw back to 7 MPa;
-  frozen-preload  every case keeps the preload of the parameter file, so a stiffer or
-                  softer spring moves the preset with it.
+--protocol (analysis.study_cases.PROTOCOLS): held-preset sets every case's valve
+to the preset before its test, frozen-preload keeps the preload of the parameter file.
 """
 
 import os
 import sys
 
+from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
 from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
 from valve_sim.core.errors import StudyError
 
 
 PIP_INSTALL = "pip install 'dask[distributed]' SALib"
-PROTOCOLS = {
-    'held-preset': 'pilot spring preload re-solved per case: the main valve cracks at the '
-    'preset pressure in every case (the paper: preset pressure 7 MPa)',
-    'frozen-preload': 'pilot spring preload of the parameter file in every case: '
-    'the preset moves with the varied parameters',
-}
-DEFAULT_PROTOCOL = 'held-preset'
 
 
 def add_protocol_arguments(parser):

@@ -36,6 +36,7 @@ import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.study_cases import PROTOCOLS
 from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import (
     draw,
@@ -51,7 +52,6 @@ from valve_sim.commands.study_backend import (
     add_runner_arguments,
     open_backend,
     protocol_preset,
-    PROTOCOLS,
 )
 from valve_sim.core.parameters import SPECS
 from valve_sim.core.steady_state import cracking_pressure

@@ -21,6 +21,10 @@ each step the valves are kept at their seats and end stops (inelastic contact),
 and the state is checked: a non-finite or absurd state stops the integration
 and raises IntegrationError instead of returning numbers.
 
+A step whose stiffest chamber would put RK4 beyond its stability
+(model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
+the paper's operating points that never happens.
+
 rk4_lanes advances several independent valves (lanes: parameter sets and
 states) through the same inlet-flow schedule at once, stage by stage across
 the lanes, calling the same model.derivatives per lane in the same order of
@@ -33,6 +37,7 @@ from valve_sim.core.jit import jit
 from valve_sim.core.model import (
     Coefficients,
     derivatives,
+    fastest_chamber_rate,
     P_C,
     P_S,
     STATE_NAMES,
@@ -47,6 +52,12 @@ from valve_sim.core.model import (
 # water cannot hold 10 bar below vacuum, and nothing in the valve reaches 1 GPa.
 PRESSURE_FLOOR = -1e6
 PRESSURE_CEILING = 1e9
+# Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
+# eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
+STEP_RATE_LIMIT = 2.0
+# At most this many sub-steps per step: enough for a chamber made stiff by the operating
+# point at the paper's 10 us, not a licence for steps far beyond what the model allows.
+MAX_SPLITS = 8
 
 
 class IntegrationError(RuntimeError):
@@ -86,14 +97,39 @@ def state_is_sane(state):
 
 
 @jit
+def splits_needed(state, c, step):
+    """Return the number of equal sub-steps that keep RK4 stable on the stiffest chamber."""
+    return min(int(step * fastest_chamber_rate(state, c) / STEP_RATE_LIMIT) + 1, MAX_SPLITS)
+
+
+@jit
+def rk4_step(state, q, c, h, k1, k2, k3, k4, stage):
+    """One classical RK4 step of size h [s] at inlet flow q, then the seats and stops."""
+    n = state.shape[0]
+    derivatives(state, q, c, k1)
+    for i in range(n):
+        stage[i] = state[i] + 0.5 * h * k1[i]
+    derivatives(stage, q, c, k2)
+    for i in range(n):
+        stage[i] = state[i] + 0.5 * h * k2[i]
+    derivatives(stage, q, c, k3)
+    for i in range(n):
+        stage[i] = state[i] + h * k3[i]
+    derivatives(stage, q, c, k4)
+    for i in range(n):
+        state[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    enforce_stops(state, c)
+
+
+@jit
 def rk4_steps(state, inlet_flows, c, step, record_every, record):
     """
     Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
-    inlet_flows[k] [m^3/s] is held during step k. Every record_every steps the
-    state is copied into the next row of record. Returns the number of steps
-    completed: fewer than len(inlet_flows) means the state became insane
-    (and state holds the insane values).
+    inlet_flows[k] [m^3/s] is held during step k; a step is split where
+    splits_needed() asks for it. Every record_every steps the state is copied into
+    the next row of record. Returns the number of steps completed: fewer than
+    len(inlet_flows) means the state became insane (and state holds the insane values).
     """
     n = state.shape[0]
     k1 = np.empty(n)
@@ -105,19 +141,10 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
     until_record = record_every
     for k in range(inlet_flows.shape[0]):
         q = inlet_flows[k]
-        derivatives(state, q, c, k1)
-        for i in range(n):
-            stage[i] = state[i] + 0.5 * step * k1[i]
-        derivatives(stage, q, c, k2)
-        for i in range(n):
-            stage[i] = state[i] + 0.5 * step * k2[i]
-        derivatives(stage, q, c, k3)
-        for i in range(n):
-            stage[i] = state[i] + step * k3[i]
-        derivatives(stage, q, c, k4)
-        for i in range(n):
-            state[i] += step / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-        enforce_stops(state, c)
+        splits = splits_needed(state, c, step)
+        h = step / splits
+        for _ in range(splits):
+            rk4_step(state, q, c, h, k1, k2, k3, k4, stage)
         if not state_is_sane(state):
             return k
         until_record -= 1
@@ -176,7 +203,8 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     """
     Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
 
-    The same arithmetic as rk4_steps, lane by lane. table [fields x lanes]: each
+    The same arithmetic as rk4_steps, lane by lane: a lane whose step must be split
+    (splits_needed) takes it alone with rk4_step. table [fields x lanes]: each
     lane's Coefficients as a column. Every record_every steps the states go into
     records[lane, row]. completed[lane] is set to the number of steps the lane
     completed: fewer than len(inlet_flows) means its state became insane; that
@@ -188,6 +216,8 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     k3 = np.empty((n, lanes))
     k4 = np.empty((n, lanes))
     stage = np.empty((n, lanes))
+    single = np.empty((5, n))
+    split = np.zeros(lanes, dtype=np.bool_)
     steps = inlet_flows.shape[0]
     for j in range(lanes):
         completed[j] = steps
@@ -195,6 +225,23 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     until_record = record_every
     for k in range(steps):
         q = inlet_flows[k]
+        for j in range(lanes):
+            split[j] = False
+            if completed[j] < steps:
+                continue
+            c = lane_coefficients(table, j)
+            splits = splits_needed(states[:, j], c, step)
+            if splits > 1:
+                split[j] = True
+                state = states[:, j].copy()
+                for _ in range(splits):
+                    rk4_step(
+                        state, q, c, step / splits, single[0], single[1], single[2],
+                        single[3], single[4]
+                    )
+                states[:, j] = state
+                if not state_is_sane(state):
+                    completed[j] = k
         for j in range(lanes):
             derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
         for i in range(n):
@@ -213,7 +260,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
         for j in range(lanes):
             derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
         for j in range(lanes):
-            if completed[j] < steps:
+            if completed[j] < steps or split[j]:
                 continue
             state = states[:, j]
             for i in range(n):

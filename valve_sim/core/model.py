@@ -35,6 +35,7 @@ Departures from the printed equations, each explained in docs/model.md:
 - Eq. (12) is normalised by the upstream pressure max(p_s, p_p), which equals the
   printed p_s in forward flow and stays bounded in reverse flow or at zero pressure.
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
+fastest_chamber_rate() tells the integrator when a fixed step must be split.
 """
 
 from collections import namedtuple
@@ -170,6 +171,49 @@ def orifice_root(dp, transition):
         return -math.sqrt(-dp)
     r = dp / transition
     return math.sqrt(transition) * r * (1.25 - 0.25 * r * r)
+
+
+@jit
+def orifice_root_slope(dp, transition):
+    """Return the slope of orifice_root at dp [1/sqrt(Pa)]: a unit orifice's conductance."""
+    magnitude = abs(dp)
+    if magnitude >= transition:
+        return 0.5 / math.sqrt(magnitude)
+    r = dp / transition
+    return (1.25 - 0.75 * r * r) / math.sqrt(transition)
+
+
+@jit
+def fastest_chamber_rate(state, c):
+    """
+    Return the largest chamber rate beta/V * sum |dq/dp| [1/s] (diagonal of the Jacobian).
+
+    A chamber between two wide orifices with small drops (the one between the
+    main throttles at a low preset and a large flow) is a stiff first-order mode;
+    fixed-step RK4 needs step * rate below 2.79 on it (integrator.rk4_steps).
+    """
+    p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
+    x = min(max(state[X], 0.0), c.main_valve_stroke)
+    y = min(max(state[Y], 0.0), c.poppet_stroke)
+    tr = c.transition_pressure
+    throttle_1 = c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root_slope(
+        p_s - p_m, tr
+    )
+    throttle_2 = c.second_throttle_gain * x * orifice_root_slope(p_m, tr)
+    orifice = c.damping_orifice_gain * orifice_root_slope(p_p - p_c, tr)
+    poppet = c.poppet_gain * y * orifice_root_slope(p_c, tr)
+    upstream = max(p_s, p_p, tr)
+    z = abs(p_s - p_p) / upstream
+    bearing = c.bearing_gain * (
+        c.bearing_k1 + z * (2.0 * c.bearing_k2 + 3.0 * z * c.bearing_k3)
+    ) / math.sqrt(upstream)
+    leak = c.rod_leakage_conductance
+    return max(
+        c.supply_compliance_inv * (throttle_1 + abs(bearing) + leak),
+        c.intermediate_compliance_inv * (throttle_1 + throttle_2),
+        c.pilot_compliance_inv * (abs(bearing) + orifice),
+        c.poppet_chamber_compliance_inv * (orifice + leak + poppet),
+    )
 
 
 @jit
