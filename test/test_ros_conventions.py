@@ -209,8 +209,9 @@ class AnalyserRun:
                 Parameter('topics', value=topics),
             ],
         )
-        self.statuses, self.condition = [], threading.Condition()
+        self.statuses, self.condition, self.measures = [], threading.Condition(), []
         self.analyser.status_publisher.publish = self._capture
+        self.analyser.measures_publisher.publish = self.measures.append
         self.source = rclpy.create_node('replay', namespace='/analysed', context=context)
         self.replay = Replay(self.source)
         self.executor = rclpy.executors.SingleThreadedExecutor(context=context)
@@ -260,6 +261,9 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert (recording.name, recording.hardware_id) == (waiting.name, waiting.hardware_id)
     finally:
         run.close()
+    (measured,) = [status for array in run.measures for status in array.status]
+    assert measured.name == 'renamed_analyser: step measures'  # measured on closing
+    assert measured.hardware_id == 'rig_7/recorder'
     folder = run.analyser.bag.folder  # a rosbag2 bag folder, read by rosbags
     assert folder.parent == tmp_path and (folder / 'metadata.yaml').is_file()
     with Reader(folder) as reader:
