@@ -206,7 +206,7 @@ lane_coefficients = _lane_coefficients_function()
 
 
 @jit
-def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed):
+def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed, failures):
     """
     Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
 
@@ -215,7 +215,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     lane's Coefficients as a column. Every record_every steps the states go into
     records[lane, row]. completed[lane] is set to the number of steps the lane
     completed: fewer than len(inlet_flows) means its state became insane; that
-    lane is then frozen (its state holds the insane values) while the others go on.
+    state goes into failures[:, lane], and the lane's later values mean nothing.
     """
     n, lanes = states.shape
     k1 = np.empty((n, lanes))
@@ -251,6 +251,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 states[:, j] = state
                 if not state_is_sane(state):
                     completed[j] = k
+                    failures[:, j] = state
         for j in range(lanes):
             derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
         for i in range(n):
@@ -268,15 +269,21 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 stage[i, j] = states[i, j] + step * k3[i, j]
         for j in range(lanes):
             derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
+        # The update of every unsplit lane in one sweep (a split lane took its step above;
+        # a frozen lane's values no longer matter).
+        for i in range(n):
+            for j in range(lanes):
+                rate = k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j]
+                updated = states[i, j] + step / 6.0 * rate
+                states[i, j] = states[i, j] if split[j] else updated
         for j in range(lanes):
             if completed[j] < steps or split[j]:
                 continue
             state = states[:, j]
-            for i in range(n):
-                state[i] += step / 6.0 * (k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j])
             enforce_stops(state, lane_coefficients(table, j))
             if not state_is_sane(state):
                 completed[j] = k
+                failures[:, j] = state
         until_record -= 1
         if until_record == 0:
             until_record = record_every
@@ -304,11 +311,21 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     columns = np.ascontiguousarray(start.T)
     table = np.array([tuple(c) for c in coefficient_sets], dtype=float).T.copy()
     completed = np.empty(lanes, dtype=np.int64)
-    rk4_lanes(columns, inlet_flows, table, float(step), max(record_every, 1), records, completed)
+    failures = np.empty_like(columns)
+    rk4_lanes(
+        columns,
+        inlet_flows,
+        table,
+        float(step),
+        max(record_every, 1),
+        records,
+        completed,
+        failures,
+    )
     errors = []
     for lane, done in enumerate(completed):
         if done < len(inlet_flows):
-            errors.append(_divergence(columns[:, lane], done, step, time))
+            errors.append(_divergence(failures[:, lane], done, step, time))
             states[lane] = start[lane]
         else:
             errors.append(None)
