@@ -25,8 +25,10 @@ limit is skipped: the model time jumps and the state is held over that stretch.
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients
+from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 
 
@@ -56,20 +58,21 @@ class RealTimeModel:
     The valve state, its parameters and its model time [ns].
 
     params: validated parameter dict; step_size [s]; inlet_flow [m^3/s]: the
-    flow whose exact steady state is the initial state. The model time is None
-    until start() anchors it to the clock.
+    flow whose exact steady state is the initial state; faults: the FaultSet in
+    effect. The model time is None until start() anchors it to the clock.
     """
 
-    def __init__(self, params, step_size, inlet_flow):
-        self.state = steady_state(params, inlet_flow)
+    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY):
+        self.state = steady_state(params, inlet_flow, faults)
         self.time_ns = None
-        self._use(params, step_size)
-        self._previous = None  # (params, step_size) before the last retune, for roll_back()
+        self._use(params, step_size, faults)
+        self._previous = None  # (params, step_size, faults) before the last retune
 
-    def _use(self, params, step_size):
+    def _use(self, params, step_size, faults):
         self.params = params
         self.step_size = step_size
-        self._coefficients = coefficients(params)
+        self.faults = faults
+        self._coefficients = coefficients(params, faults)
         self._step_ns = step_ns(step_size)
 
     def start(self, now_ns):
@@ -100,23 +103,31 @@ class RealTimeModel:
         """Move the model time to the last step boundary before now_ns [ns], holding the state."""
         self.time_ns += (now_ns - self.time_ns) // self._step_ns * self._step_ns
 
-    def trial(self, params, step_size, inlet_flow):
+    def trial(self, params, step_size, inlet_flow, faults=None):
         """
-        Integrate TRIAL_STEPS steps from a copy of the state with new parameters.
+        Integrate TRIAL_STEPS steps from a copy of the state with new parameters (and faults).
 
         Raises IntegrationError if they diverge; the model itself is not touched.
         """
+        state = self.state.copy()
+        faults = self.faults if faults is None else apply_faults(state, self.faults, faults)
         advance(
-            self.state.copy(),
+            state,
             np.full(TRIAL_STEPS, float(inlet_flow)),
-            coefficients(params),
+            coefficients(params, faults),
             step_ns(step_size) / NS_PER_S,
         )
 
-    def retune(self, params, step_size):
-        """Use new parameters (validated dict) and step size [s] from the next step on."""
-        self._previous = (self.params, self.step_size)
-        self._use(params, step_size)
+    def retune(self, params, step_size, faults=None):
+        """
+        Use new parameters (validated dict) and step size [s] from the next step on.
+
+        faults: {name: value} of fault parameters changed too (None: none); a main
+        valve that becomes stuck stops where it is.
+        """
+        self._previous = (self.params, self.step_size, self.faults)
+        faults = self.faults if faults is None else apply_faults(self.state, self.faults, faults)
+        self._use(params, step_size, faults)
 
     def roll_back(self):
         """
@@ -132,8 +143,8 @@ class RealTimeModel:
 
     def reset(self, inlet_flow):
         """
-        Re-initialise at the exact steady state for inlet_flow [m^3/s].
+        Re-initialise at the exact steady state for inlet_flow [m^3/s] with the faults in effect.
 
         Raises SteadyStateError.
         """
-        self.state = steady_state(self.params, inlet_flow)
+        self.state = steady_state(self.params, inlet_flow, self.faults)

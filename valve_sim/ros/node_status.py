@@ -52,6 +52,7 @@ class Counters:
     rejected_inputs: int = 0
     rejected_parameter_changes: int = 0
     integration_failures: int = 0
+    overpressure_alarms: int = 0
 
 
 @dataclass(frozen=True)
@@ -83,18 +84,29 @@ class NodeStatus:
         self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
-    def report(self, stamp, name, hardware_id, steady_now_ns, model_time_ns, inputs, settings):
+    def report(
+        self,
+        stamp,
+        name,
+        hardware_id,
+        steady_now_ns,
+        model_time_ns,
+        inputs,
+        settings,
+        conditions=(),
+    ):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
 
         stamp: header stamp (builtin_interfaces Time); name, hardware_id: the
         status's (valve_sim.ros.diagnostics); model_time_ns: model time [ns] or None
         before the first tick; inputs: InputReport; settings: {name: value} shown as
-        they are (units in the names).
+        they are (units in the names); conditions: [(level, text)] more to report
+        (faults, overpressure).
         """
         counters, previous = self.counters, self._reported
         status = DiagnosticStatus(name=name, hardware_id=hardware_id)
-        status.level, status.message = self._summary(counters, previous, inputs)
+        status.level, status.message = self._summary(counters, previous, inputs, conditions)
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
             **self._compute_times(),
@@ -114,15 +126,17 @@ class NodeStatus:
         array.header.stamp = stamp
         return array
 
-    def _summary(self, counters, previous, inputs):
+    def _summary(self, counters, previous, inputs, conditions=()):
         """
         Return (level, message) of the status.
 
         ERROR: the model diverged in the window (state held, last change undone);
         WARN: the input is stale, or lag beyond the catch-up limit was skipped;
         OK otherwise (late ticks are named in the message but stay OK).
+        conditions [(level, text)] (faults, overpressure) come first, at their level.
         """
-        problems, level = [], DiagnosticStatus.OK
+        problems = [text for _, text in conditions]
+        level = max([c[0] for c in conditions], default=DiagnosticStatus.OK)
         failures = counters.integration_failures - previous.integration_failures
         if failures:
             level = DiagnosticStatus.ERROR
