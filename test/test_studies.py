@@ -429,11 +429,3 @@ def test_limits():
     with pytest.raises(ParameterError, match="limit 'P_9<=4'"):
         parse_limits('P_9<=4')
 
-
-def test_a_valve_whose_root_solve_stalls_on_the_root_is_still_set_to_the_preset(reference):
-    # k_p +6.3 %, d_c +1.6 %: hybr sits on the cracking point (residual ~1e-16) but
-    # reports no progress; 55 of 2048 valves of a +-10 % Sobol design failed this way.
-    from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
-
-    valve = scaled(reference, {'k_p': 6.3, 'd_c': 1.6})
-    assert cracking_pressure(with_preset_pressure(valve, 7e6)) == pytest.approx(7e6, rel=1e-6)

@@ -261,9 +261,11 @@ def cracking_pressure(params, faults=HEALTHY):
         residual, guess[[P_S, P_P, P_C, Y]] / scale, method='hybr', options={'xtol': 1e-13}
     )
     state = compose(solution.x)
-    # The residual decides, not solution.success: hybr reports "not making good progress"
-    # when it sits on the root closer than it can improve (seen at residuals ~1e-16).
-    if np.max(np.abs(residual(solution.x))) > TOLERANCE or not 0.0 < state[Y] < c.poppet_stroke:
+    if (
+        not solution.success
+        or np.max(np.abs(residual(solution.x))) > TOLERANCE
+        or not 0.0 < state[Y] < c.poppet_stroke
+    ):
         raise SteadyStateError(
             'no cracking point found: the pilot stage cannot hold the main valve at its seat '
             'with these parameters'
