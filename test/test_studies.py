@@ -428,4 +428,3 @@ def test_limits():
     assert limit.holds({'P_1_percent': 4.0}) and not limit.holds({'P_1_percent': None})
     with pytest.raises(ParameterError, match="limit 'P_9<=4'"):
         parse_limits('P_9<=4')
-
