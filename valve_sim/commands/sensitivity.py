@@ -37,19 +37,17 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import parse_variations
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
-    open_backend,
     PIP_INSTALL,
 )
 from valve_sim.commands.tolerance import (
     add_study_arguments,
     preset_protocol,
-    sample_cases,
+    run_samples,
     write_samples,
 )
 from valve_sim.core.errors import StudyError
@@ -149,19 +147,7 @@ def run(args):
         f"{protocol['protocol']}: {protocol['protocol_meaning']}",
         file=sys.stderr,
     )
-    backend = open_backend(args, 'sensitivity')
-    try:
-        results, _ = run_cases(
-            sample_cases(params, names, values, preset, settings['step_size']),
-            out / 'results.jsonl',
-            backend,
-            args.resume,
-            args.batch_size,
-            label='sensitivity',
-        )
-    finally:
-        backend.close()
-    rows = [results[index] for index in range(len(values))]
+    rows = run_samples(args, 'sensitivity', params, names, values, preset, settings, out)
     indices = measure_indices(distributions, rows, args.seed)
     write_indices(out / 'indices.csv', distributions, indices)
     write_samples(out / 'samples.csv', names, values, rows, [])

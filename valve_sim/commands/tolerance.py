@@ -169,6 +169,28 @@ def print_summary(summary):
         print(f'{name:<14}{cells}{note}')
 
 
+def run_samples(args, label, params, names, values, preset, settings, out):
+    """
+    Run the sampled valves on the study runner; return their rows in sample order.
+
+    Rows stream to out/results.jsonl (--resume continues it); the backend follows
+    --scheduler/--workers as open_backend sets it up for command label.
+    """
+    backend = open_backend(args, label)
+    try:
+        results, _ = run_cases(
+            sample_cases(params, names, values, preset, settings['step_size']),
+            out / 'results.jsonl',
+            backend,
+            args.resume,
+            args.batch_size,
+            label=label,
+        )
+    finally:
+        backend.close()
+    return [results[index] for index in range(len(values))]
+
+
 def run(args):
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary, params)
@@ -177,19 +199,7 @@ def run(args):
     names = [d.name for d in distributions]
     values = draw(distributions, args.samples, args.seed, args.sampler)
     out = make_folder(Path(args.out))
-    backend = open_backend(args, 'tolerance')
-    try:
-        results, _ = run_cases(
-            sample_cases(params, names, values, preset, settings['step_size']),
-            out / 'results.jsonl',
-            backend,
-            args.resume,
-            args.batch_size,
-            label='tolerance',
-        )
-    finally:
-        backend.close()
-    rows = [results[index] for index in range(len(values))]
+    rows = run_samples(args, 'tolerance', params, names, values, preset, settings, out)
     summary = {
         'samples': len(values),
         'seed': args.seed,
