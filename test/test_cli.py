@@ -99,7 +99,7 @@ def test_simulate_from_a_closed_valve_with_a_ramp():
         (('--initial-flow=-5L/min',), 'flow must be finite and >= 0'),
         (('--final-flow', 'lots'), 'not a flow'),
         (('--step-size', '1e-3'), 'step size'),
-        (('--set', 'step_size=1e-4'), 'diverged'),
+        (('--set', 'c_p=1e4'), 'diverged'),  # c_p / m_p = 1.25e6 /s at 10 us steps
     ],
 )
 def test_bad_input_is_one_clear_line(args, message):

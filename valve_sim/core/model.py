@@ -91,6 +91,7 @@ Coefficients = namedtuple(
         'pilot_spring_preload',
         'poppet_stroke',
         'transition_pressure',  # dp_tr                   [Pa]
+        'burst_pressure',  # p_burst, a physical limit  [Pa]
     ),
 )
 
@@ -152,6 +153,7 @@ def coefficients(p):
         pilot_spring_preload=p['pilot_spring_preload'],
         poppet_stroke=p['poppet_stroke'],
         transition_pressure=p['orifice_transition_pressure'],
+        burst_pressure=p['burst_pressure'],
     )
 
 
@@ -197,6 +199,54 @@ def flows(state, c):
     q_s = c.rod_leakage_conductance * (p_s - p_c)  # (14)
     q_p = c.poppet_gain * y * orifice_root(p_c, tr)  # (15)
     return q_m1, q_m2, q_n, q_c, q_s, q_p
+
+
+@jit
+def orifice_slope(dp, transition):
+    """Slope of orifice_root [1/sqrt(Pa)]: largest, 1.25 / sqrt(transition), at dp = 0."""
+    if abs(dp) >= transition:
+        return 0.5 / math.sqrt(abs(dp))
+    r = dp / transition
+    return (1.25 - 0.75 * r * r) / math.sqrt(transition)
+
+
+@jit
+def pressure_stiffness(state, c):
+    """
+    Upper bound [1/s] of the fastest decay rate of the four chamber pressures.
+
+    The pressures relax through the orifices of Eqs. (10)-(15): d p / dt = -C G p
+    near the state, C = beta / V of each chamber, G the orifices' conductances
+    dq / d(dp) [m^3/(s Pa)]. C G is similar to C^1/2 G C^1/2, whose Gershgorin
+    rows bound its eigenvalues. Largest with all pressure drops in the laminar
+    region (a closed, empty valve), where the fixed step may be unstable.
+    """
+    p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
+    x = min(max(state[X], 0.0), c.main_valve_stroke)
+    y = min(max(state[Y], 0.0), c.poppet_stroke)
+    tr = c.transition_pressure
+    upstream = max(p_s, p_p, tr)
+    z = min(abs(p_s - p_p) / upstream, 1.0)
+    g_sm = c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_slope(p_s - p_m, tr)
+    g_m0 = c.second_throttle_gain * x * orifice_slope(p_m, tr)
+    g_sp = (
+        c.bearing_gain
+        * abs(c.bearing_k1 + z * (2.0 * c.bearing_k2 + 3.0 * z * c.bearing_k3))
+        / math.sqrt(upstream)
+    )
+    g_pc = c.damping_orifice_gain * orifice_slope(p_p - p_c, tr)
+    g_sc = c.rod_leakage_conductance
+    g_c0 = c.poppet_gain * y * orifice_slope(p_c, tr)
+    c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
+    c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
+    r_sm, r_sp, r_sc = math.sqrt(c_s * c_m), math.sqrt(c_s * c_p), math.sqrt(c_s * c_c)
+    r_pc = math.sqrt(c_p * c_c)
+    return max(
+        c_s * (g_sm + g_sp + g_sc) + r_sm * g_sm + r_sp * g_sp + r_sc * g_sc,
+        c_m * (g_sm + g_m0) + r_sm * g_sm,
+        c_p * (g_sp + g_pc) + r_sp * g_sp + r_pc * g_pc,
+        c_c * (g_pc + g_sc + g_c0) + r_pc * g_pc + r_sc * g_sc,
+    )
 
 
 @jit
