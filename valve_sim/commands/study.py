@@ -32,6 +32,7 @@ import os
 from pathlib import Path
 import sys
 
+import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import (
     REFERENCE_SCENARIO,
@@ -40,8 +41,10 @@ from valve_sim.analysis.paper import (
     TABLE2_CHANGES,
 )
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.core.integrator import OverpressureError
 from valve_sim.core.parameters import scaled
 from valve_sim.core.simulation import simulate
+from valve_sim.core.steady_state import SteadyStateError
 
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
@@ -77,10 +80,22 @@ def study_cases():
 
 
 def run_case(params, changes, step_size):
-    """Measures (dict) of one case and its poppet waveform (time, y) for Figure 8."""
-    waveforms = simulate(
-        scaled(params, changes), REFERENCE_SCENARIO, step_size, POPPET_SAMPLE_INTERVAL
-    )
+    """
+    Measures (dict) of one case and its poppet waveform (time, y) for Figure 8.
+
+    A case whose valve leaves the physical limits (valve_sim.core.limits: d_c -20 %
+    cannot open its main valve and would sit at 40 MPa, beyond burst_pressure) has
+    every measure undefined, the refusal as the reason, and no waveform.
+    """
+    try:
+        waveforms = simulate(
+            scaled(params, changes), REFERENCE_SCENARIO, step_size, POPPET_SAMPLE_INTERVAL
+        )
+    except (SteadyStateError, OverpressureError) as error:
+        reason = f'beyond the physical limits: {error}'
+        measures = dict.fromkeys(MEASURE_NAMES)
+        measures.update(reasons=dict.fromkeys(MEASURE_NAMES, reason), details={})
+        return measures, (np.empty(0), np.empty(0))
     measures = step_measures(
         waveforms.time,
         waveforms['supply_pressure'],
