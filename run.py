@@ -17,7 +17,7 @@
 The README's two commands, for a machine with nothing but Python 3 and git.
 
     python3 run.py demo [options]   the main job: valve_node + analyser_node, the paper's step
-    python3 run.py test [pytest options]   the test suite
+    python3 run.py test [pytest options] [test paths]   the test suite (the paths only, if given)
 
 Each creates .venv beside this file on first use and installs valve_sim into it
 (editable, with its PyPI dependencies and the ROS 2 Jazzy wheels); it reinstalls
@@ -55,6 +55,11 @@ def ensure_environment():
     STAMP.write_text(wanted)
 
 
+def is_test_path(argument):
+    """Whether a pytest argument names tests (test/x.py, test/x.py::name) rather than an option."""
+    return not argument.startswith('-') and Path(argument.split('::')[0]).exists()
+
+
 def main(argv):
     if not argv or argv[0] not in ('demo', 'test'):
         print(__doc__.strip(), file=sys.stderr)
@@ -64,7 +69,8 @@ def main(argv):
     if argv[0] == 'demo':
         command = [str(BIN / 'valve-sim'), 'demo', *argv[1:]]
     else:
-        command = [str(BIN / 'python'), '-m', 'pytest', str(ROOT / 'test'), *argv[1:]]
+        paths = [str(ROOT / 'test')] if not any(map(is_test_path, argv[1:])) else []
+        command = [str(BIN / 'python'), '-m', 'pytest', *paths, *argv[1:]]
     return subprocess.call(command, cwd=os.getcwd(), env=env)
 
 

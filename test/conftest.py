@@ -22,6 +22,7 @@ Child processes inherit both.
 """
 
 import os
+from pathlib import Path
 
 from valve_sim.ros.isolation import claim_domain
 
@@ -50,3 +51,11 @@ def reference():
     from valve_sim.core.parameters import load_parameters
 
     return load_parameters()[0]
+
+
+@pytest.fixture(scope='session')
+def lint_paths():
+    """Every source path the ament lint tests check: package, tests, benchmarks, launch."""
+    root = Path(__file__).resolve().parents[1]
+    names = ['valve_sim', 'test', 'bench', 'launch', 'setup.py', 'run.py']
+    return [str(root / name) for name in names if (root / name).exists()]

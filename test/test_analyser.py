@@ -212,3 +212,45 @@ def test_unwritable_output_dir_is_an_error_at_start(tmp_path):
         log = analyser.communicate(timeout=TIMEOUT)[0]
     assert analyser.returncode == 1
     assert 'output_dir' in log and 'cannot be created' in log and 'Traceback' not in log
+
+
+def test_a_best_effort_publisher_is_recorded_and_its_qos_reported(node, tmp_path):
+    """As rosbag2 does: a SensorDataQoS (best-effort) topic is subscribed best effort."""
+    from rclpy.qos import qos_profile_sensor_data
+    from std_msgs.msg import Float64
+    from valve_sim.ros.analyser_node import RECORDING_STATUS
+
+    statuses = []
+    subscription = node.create_subscription(
+        DiagnosticArray,
+        '/diagnostics',
+        lambda array: statuses.extend(s for s in array.status if s.name == RECORDING_STATUS),
+        10,
+    )
+    publisher = node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
+    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+
+    def recorded():
+        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
+        return values.get('qos /inlet_flow') == 'best_effort/volatile' and int(
+            values.get('messages /inlet_flow', 0)
+        ) > 0
+
+    try:
+        with running_analyser(tmp_path) as analyser:
+            deadline = time.monotonic() + TIMEOUT
+            while not recorded():
+                assert time.monotonic() < deadline, f'not recorded best effort: {statuses[-1:]}'
+                publisher.publish(Float64(data=1e-4))
+                executor.spin_once(timeout_sec=0.05)
+            analyser.send_signal(signal.SIGINT)
+            log = analyser.communicate(timeout=TIMEOUT)[0]
+    finally:
+        executor.remove_node(node)
+        node.destroy_publisher(publisher)
+        node.destroy_subscription(subscription)
+    assert analyser.returncode == 0, log
+    assert 'recording /inlet_flow (std_msgs/msg/Float64) with QoS best_effort/volatile' in log
+    bag = next(tmp_path.glob('*.mcap'))
+    assert sum(1 for _ in BagReader(bag).messages({'/inlet_flow'})) > 0

@@ -19,19 +19,9 @@ import json
 import subprocess
 import sys
 
+from figure5 import outside_tolerance
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
-
-
-# Issue 2: the paper's Figure 5 values and the tolerances the reference geometry must meet.
-PAPER = {
-    'T_1_ms': (6.7, 0.10, 'rel'),
-    'T_d_ms': (25.1, 0.10, 'rel'),
-    'P_1_percent': (3.18, 0.15, 'rel'),
-    'r_d': (0.851, 0.03, 'abs'),
-    'T_s_ms': (540.0, 0.20, 'rel'),
-    'P_o_percent': (0.144, 0.30, 'rel'),
-}
 
 
 def valve_sim(*args, check=True):
@@ -49,11 +39,7 @@ def valve_sim(*args, check=True):
 def test_reference_run_reproduces_figure5_within_tolerance():
     measures = json.loads(valve_sim('simulate', '--json').stdout)
     assert measures['reasons'] == {}
-    for name, (paper, tolerance, kind) in PAPER.items():
-        allowed = tolerance * paper if kind == 'rel' else tolerance
-        assert abs(measures[name] - paper) <= allowed, (
-            f'{name} = {measures[name]:.4g}, paper {paper}'
-        )
+    assert outside_tolerance(measures) == {}
 
 
 def test_simulate_writes_csv_and_plot(tmp_path):
@@ -108,22 +94,69 @@ def test_bad_input_is_one_clear_line(args, message):
     assert message in result.stderr and 'Traceback' not in result.stderr
 
 
-def test_study_writes_the_papers_tables_and_figures(tmp_path):
+def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_path):
     result = valve_sim('study', '--out', str(tmp_path))
-    assert '[26/26]' in result.stderr  # progress lines
+    assert '[26/26]' in result.stderr and 'protocol held-preset' in result.stderr
     with open(tmp_path / 'sensitivity.csv') as stream:
         rows = list(csv.DictReader(stream))
-    assert list(rows[0]) == ['parameter', 'variation_percent', *MEASURE_NAMES]
+    assert list(rows[0])[:3] == ['parameter', 'variation_percent', 'protocol']
+    assert set(MEASURE_NAMES) <= set(rows[0])
     assert len(rows) == 30
     assert {row['parameter'] for row in rows} == {'m_m', 'm_p', 'V_p', 'V_c', 'd_c', 'k_p'}
     references = [row for row in rows if row['variation_percent'] == '0']
     assert all(row['T_1_ms'] == references[0]['T_1_ms'] for row in references)
+    preset = float(rows[0]['preset_pressure_Pa'])
+    assert preset == pytest.approx(7e6, rel=1e-3)  # the paper's preset, config/reference.yaml
+    for row in rows:
+        assert row['protocol'] == 'held-preset'
+        for name in MEASURE_NAMES:  # a value, or the reason why there is none
+            assert row[name] != '' or name in row['reasons'], (row['parameter'], name)
+        if row['initial_supply_pressure_Pa']:  # the preset is held: p_s before the step
+            assert float(row['cracking_pressure_Pa']) == pytest.approx(preset, rel=1e-6)
+            assert float(row['initial_supply_pressure_Pa']) > preset
+    k_p_rows = [row for row in rows if row['parameter'] == 'k_p']
+    initial = [float(row['initial_supply_pressure_Pa']) for row in k_p_rows]
+    assert max(initial) - min(initial) < 1e-3 * preset  # frozen, k_p +-20 % moves it ~ +-20 %
+    k_p_preloads = [float(row['pilot_spring_preload_m']) for row in k_p_rows]
+    assert k_p_preloads == sorted(k_p_preloads, reverse=True)  # stiffer spring, less preload
     with open(tmp_path / 'table3.csv') as stream:
         table3 = list(csv.DictReader(stream))
     assert [row['measure'] for row in table3] == list(MEASURE_NAMES)
-    assert list(table3[0]) == ['measure', 'table1', 'table2', 'relative_change_percent']
+    assert list(table3[0]) == [
+        'measure',
+        'table1',
+        'table2',
+        'relative_change_percent',
+        'protocol',
+    ]
     for number in (6, 7, 8, 9, 10, 11, 12, 13):
         assert len(list(tmp_path.glob(f'figure{number:02d}_*.png'))) == 1
+
+
+def test_frozen_preload_protocol_lets_the_preset_move_with_the_spring(reference):
+    from valve_sim.commands.study import run_case
+
+    held = run_case(reference, {'k_p': 20}, 1e-5, 'held-preset', 7e6)['case']
+    frozen = run_case(reference, {'k_p': 20}, 1e-5, 'frozen-preload')['case']
+    assert frozen['protocol'] == 'frozen-preload' and held['protocol'] == 'held-preset'
+    assert frozen['pilot_spring_preload_m'] == reference['pilot_spring_preload']
+    assert held['initial_supply_pressure_Pa'] == pytest.approx(7e6, rel=1e-3)
+    assert frozen['initial_supply_pressure_Pa'] > 1.15 * held['initial_supply_pressure_Pa']
+
+
+def test_preset_pressure_on_the_command_line_and_in_parameter_files(tmp_path):
+    out = valve_sim('operating-point', '--flow', '5L/min', '--preset-pressure', '8MPa').stdout
+    assert 'cracking pressure: 8.0000 MPa' in out
+    path = tmp_path / 'rig.yaml'
+    path.write_text('relief_valve:\n  ros__parameters:\n    preset_pressure: 6.5e6\n')
+    out = valve_sim('operating-point', '--flow', '5L/min', '--params', str(path)).stdout
+    assert 'cracking pressure: 6.5000 MPa' in out
+    out = valve_sim('operating-point', '--flow', '5L/min', '--set', 'preset_pressure=9e6').stdout
+    assert 'cracking pressure: 9.0000 MPa' in out
+    bad = valve_sim('simulate', '--preset-pressure', '0.5GPa', check=False)
+    assert bad.returncode != 0 and 'not a pressure' in bad.stderr
+    bad = valve_sim('simulate', '--preset-pressure', '900MPa', check=False)
+    assert bad.returncode != 0 and 'preset_pressure' in bad.stderr
 
 
 def test_operating_point_reports_balances_and_modes():

@@ -26,7 +26,6 @@ import re
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ['valve_sim', 'test', 'bench', 'launch', 'setup.py', 'run.py']
 COPYRIGHT = re.compile(r'^# Copyright (\d{4})(-\d{4})? \S.*$', re.MULTILINE)
 APACHE_NOTICE = [
     'Licensed under the Apache License, Version 2.0 (the "License");',
@@ -35,9 +34,8 @@ APACHE_NOTICE = [
 ]
 
 
-def python_files():
-    for name in SOURCES:
-        path = ROOT / name
+def python_files(paths):
+    for path in map(Path, paths):
         yield from ([path] if path.is_file() else sorted(path.rglob('*.py')))
 
 
@@ -55,20 +53,30 @@ def first_comment_block(path):
 
 @pytest.mark.copyright
 @pytest.mark.linter
-def test_copyright():
+def test_copyright(lint_paths):
     try:
         from ament_copyright.main import main
     except ImportError:
         main = None
     if main is not None:
-        assert main(argv=[str(ROOT / name) for name in SOURCES if (ROOT / name).exists()]) == 0
+        assert main(argv=lint_paths) == 0
         return
-    missing = []
-    for path in python_files():
-        header = first_comment_block(path)
-        if not COPYRIGHT.search(header) or not all(text in header for text in APACHE_NOTICE):
-            missing.append(str(path.relative_to(ROOT)))
+    files = list(python_files(lint_paths))
+    assert len(files) > 10, f'expected the package sources, found {files}'
+    missing = [str(path.relative_to(ROOT)) for path in files if not has_notice(path)]
     assert missing == [], f'files without the copyright and Apache-2.0 notice: {missing}'
+
+
+def has_notice(path):
+    header = first_comment_block(path)
+    return bool(COPYRIGHT.search(header)) and all(text in header for text in APACHE_NOTICE)
+
+
+def test_a_file_without_the_notice_is_found(tmp_path):
+    bare = tmp_path / 'bare.py'
+    bare.write_text('#!/usr/bin/env python3\n# Copyright 2026 someone\n\nprint(1)\n')
+    assert not has_notice(bare)
+    assert has_notice(Path(__file__))
 
 
 def test_the_licence_file_matches_package_xml():

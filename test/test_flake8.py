@@ -13,18 +13,12 @@
 # limitations under the License.
 
 """ament_flake8 with ROS's configuration over the package, tests, benchmarks and launch files."""
-from pathlib import Path
-
 from ament_flake8.main import main_with_errors
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ['valve_sim', 'test', 'bench', 'launch', 'setup.py', 'run.py']
 
 
 @pytest.mark.flake8
 @pytest.mark.linter
-def test_flake8():
-    paths = [str(ROOT / name) for name in SOURCES if (ROOT / name).exists()]
-    rc, errors = main_with_errors(argv=paths)
+def test_flake8(lint_paths):
+    rc, errors = main_with_errors(argv=lint_paths)
     assert rc == 0, f'Found {len(errors)} code style errors / warnings:\n' + '\n'.join(errors)

@@ -131,3 +131,16 @@ def test_broken_parameter_files_give_clear_errors(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(ParameterError, match=message):
         load_parameters(path)
+
+
+def test_preset_pressure_in_a_parameter_file_sets_the_preload(tmp_path):
+    from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
+
+    path = tmp_path / 'rig.yaml'
+    path.write_text('relief_valve:\n  ros__parameters:\n    preset_pressure: 8.0e6\n')
+    params, settings = load_parameters(path)
+    assert settings['preset_pressure'] == 8e6
+    assert cracking_pressure(with_preset_pressure(params, 8e6)) == pytest.approx(8e6, rel=1e-9)
+    path.write_text('relief_valve:\n  ros__parameters:\n    preset_pressure: -1.0\n')
+    with pytest.raises(ParameterError, match="'preset_pressure'.*outside its limits"):
+        load_parameters(path)

@@ -12,19 +12,12 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ament_pep257 (docstring style, ROS's selection of checks) over package, tests and benchmarks."""
-from pathlib import Path
-
+"""ament_pep257 (ROS's selection of docstring checks) over the package, tests and benchmarks."""
 from ament_pep257.main import main
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ['valve_sim', 'test', 'bench', 'launch', 'setup.py', 'run.py']
 
 
 @pytest.mark.linter
 @pytest.mark.pep257
-def test_pep257():
-    paths = [str(ROOT / name) for name in SOURCES if (ROOT / name).exists()]
-    rc = main(argv=paths)
-    assert rc == 0, 'Found code style errors / warnings'
+def test_pep257(lint_paths):
+    assert main(argv=lint_paths) == 0, 'Found code style errors / warnings'

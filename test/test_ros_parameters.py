@@ -126,7 +126,7 @@ def test_the_node_documentation_lists_every_parameter_with_symbol_and_unit():
     from pathlib import Path
 
     from valve_sim.core.parameters import PARAMETERS, SETTINGS
-    from valve_sim.core.retuning import PRESET_PRESSURE
+    from valve_sim.core.parameters import PRESET_PRESSURE
 
     text = (Path(__file__).resolve().parent.parent / 'docs' / 'valve_node.md').read_text()
     for spec in PARAMETERS + SETTINGS + (PRESET_PRESSURE,):

@@ -18,8 +18,9 @@ valve_node over real DDS, the node in its own process (issue 3, "done means").
 The step-response test runs the node on simulated time (use_sim_time, /clock
 published here in lockstep), so the comparison with the offline simulation
 does not depend on how busy the machine is. The other tests share one node on
-the wall clock; a fixture puts it back to 5 L/min, the reference parameters
-and the steady state after each test. No test asserts wall-clock timing.
+the wall clock; a fixture restores it to 5 L/min, the reference parameters and
+the steady state before each test, and waits for samples stamped after that
+restore. No test asserts wall-clock timing.
 """
 
 import math
@@ -28,6 +29,7 @@ import time
 
 import numpy as np
 import pytest
+from std_msgs.msg import Float64
 from valve_harness import PRESSURE_TOPICS, Probe, start_node, stop_node
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
 from valve_sim.core.model import P_S, X
@@ -78,19 +80,20 @@ def valve_process(context, tmp_path_factory):
 
 @pytest.fixture
 def valve(valve_process, reference, reference_settings):
-    """Yield the probe, with the node at the reference parameters, 5 L/min and steady state."""
+    """
+    Yield the probe, the node restored to a known state first.
+
+    The known state: the reference parameters and settings, 5 L/min applied, the
+    exact steady state, and the probe's samples from after that reset (asserted
+    by Probe.restore). So no test sees what an earlier one left behind.
+    """
     process, probe = valve_process
+    assert process.poll() is None, 'valve_node died'
+    defaults = {**reference, **{name: reference_settings[name] for name in RETUNABLE_SETTINGS}}
+    probe.restore(defaults, INITIAL_FLOW)
     yield probe
     assert process.poll() is None, 'valve_node died'
     assert probe.non_finite == 0, 'a NaN or inf was published'
-    defaults = {**reference, **{name: reference_settings[name] for name in RETUNABLE_SETTINGS}}
-    current = probe.get_parameters(*defaults)
-    changed = {name: value for name, value in defaults.items() if current[name] != value}
-    if changed:
-        assert probe.set_parameters_atomically(**changed).successful
-    probe.send_flow(INITIAL_FLOW)
-    probe.wait_for(lambda: probe.applied[-1][1] == INITIAL_FLOW, 'inlet flow back at 5 L/min')
-    probe.reset()
 
 
 def supply_gauge(probe):
@@ -334,6 +337,23 @@ def test_reset_returns_to_the_steady_state_of_the_current_flow(valve, reference)
     valve.wait_for(lambda: valve.joints[-1][0] > reset_ns, 'joint_states after the reset')
     x_after = next(row[1] for row in valve.joints if row[0] > reset_ns)
     assert x_after == pytest.approx(expected[X], rel=1e-4)
+
+
+def test_a_best_effort_inlet_flow_publisher_is_heard(valve):
+    """A bench publishing with SensorDataQoS (best effort) drives the valve too."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    publisher = valve.node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
+    try:
+        valve.wait_for(
+            lambda: publisher.get_subscription_count() > 0, 'valve_node matching a best-effort one'
+        )
+        deadline = time.monotonic() + 60.0
+        while not valve._wait(lambda: valve.applied[-1][1] == FINAL_FLOW, 0.05):
+            assert time.monotonic() < deadline, 'the best-effort flow was never applied'
+            publisher.publish(Float64(data=FINAL_FLOW))  # periodically, as a bench does
+    finally:
+        valve.node.destroy_publisher(publisher)
 
 
 def test_flood_of_bad_inlet_flows_is_rejected_and_never_reaches_an_output(valve_process, valve):

@@ -186,12 +186,19 @@ class Probe:
         with self.condition:
             return len(self.pressures['supply_pressure'])
 
+    def _rows(self, topic):
+        """Return the list of received rows of a tick topic."""
+        others = {'joint_states': self.joints, 'applied_inlet_flow': self.applied}
+        return others[topic] if topic in others else self.pressures[topic]
+
     def wait_for_new_samples(self, n=1, topic='supply_pressure'):
         """Wait until n more samples of topic arrived; returns the last one."""
+        rows = self._rows(topic)
         with self.condition:
-            start = len(self.pressures[topic])
-        self.wait_for(lambda: len(self.pressures[topic]) >= start + n, f'{n} new {topic} messages')
-        return self.latest(topic)
+            start = len(rows)
+        self.wait_for(lambda: len(rows) >= start + n, f'{n} new {topic} messages')
+        with self.condition:
+            return rows[-1]
 
     def wait_for_diagnostics(self, condition=lambda values: True, what='diagnostics'):
         """Wait for a diagnostics status from now on satisfying condition; returns its values."""
@@ -289,16 +296,60 @@ class Probe:
             for name, value in zip(names, values)
         }
 
-    def reset(self):
-        """Call ~/reset; returns the model time [ns] of the reset state (from the response)."""
+    def call_reset(self):
+        """
+        Call ~/reset.
+
+        Returns (model time [ns], inlet flow [m^3/s]) of the reset state, as its
+        response states them, or raises AssertionError with the refusal.
+        """
         response = self._result(self.reset_client.call_async(Trigger.Request()))
         assert response.success, response.message
         seconds = re.search(r'model time (\d+)\.(\d{9}) s', response.message)
-        return int(seconds[1]) * 1_000_000_000 + int(seconds[2])
+        flow = re.search(r'steady state of (\S+) m\^3/s', response.message)
+        return int(seconds[1]) * 1_000_000_000 + int(seconds[2]), float(flow[1])
+
+    def reset(self):
+        """Call ~/reset; returns the model time [ns] of the reset state (from the response)."""
+        return self.call_reset()[0]
+
+    def restore(self, parameters, flow):
+        """
+        Bring the valve to a known state and assert it got there.
+
+        The known state: parameters ({name: value}) in use, the inlet flow [m^3/s]
+        applied, and the exact steady state of that flow. The reset is repeated until
+        its response shows it happened at flow (the flow message may still be on
+        its way), and the call returns only once a sample of every tick topic
+        stamped after the reset has arrived: from then on the probe's latest
+        samples are the restored valve's, however far its queues lagged. Returns
+        the reset's model time [ns].
+        """
+        current = self.get_parameters(*parameters)
+        changed = {name: value for name, value in parameters.items() if current[name] != value}
+        if changed:
+            result = self.set_parameters_atomically(**changed)
+            assert result.successful, f'restoring {changed}: {result.reason}'
+        assert self.get_parameters(*parameters) == parameters, 'parameters not restored'
+        deadline = time.monotonic() + TIMEOUT
+        while True:
+            self.send_flow(flow)
+            reset_ns, reset_flow = self.call_reset()
+            if math.isclose(reset_flow, flow, rel_tol=1e-5, abs_tol=1e-12):
+                break
+            assert time.monotonic() < deadline, f'the valve never took inlet_flow {flow:g}'
+            self.wait_for_new_samples(topic='applied_inlet_flow')
+        for topic in PRESSURE_TOPICS:
+            self.first_after(reset_ns, topic)
+        self.first_after(reset_ns, 'joint_states')
+        applied = self.first_after(reset_ns, 'applied_inlet_flow')
+        assert applied[1] == flow, f'applied_inlet_flow after the reset: {applied[1]:g} m^3/s'
+
+        return reset_ns
 
     def first_after(self, time_ns, topic='supply_pressure'):
         """Return the first sample of topic stamped after time_ns [ns] (waits for it)."""
-        rows = self.pressures[topic]
+        rows = self._rows(topic)
         self.wait_for(lambda: rows and rows[-1][0] > time_ns, f'{topic} after {time_ns} ns')
         with self.condition:
             return next(row for row in rows if row[0] > time_ns)

@@ -13,15 +13,18 @@
 # limitations under the License.
 
 """
-Reference data from the paper (../shared/paper/relief_valve_paper.txt), for comparison only.
+Reference data from the paper (its Figure 5, Table 2 and Table 3), for comparison only.
 
-Nothing in the model reads these; they are printed beside our results.
+Nothing in the model reads these; they are printed beside our results, and only
+beside a run of the paper's own scenario (is_reference_step).
 """
+
+import math
 
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario
 
 
-# Figure 5 / Table 3, Table 1 conditions, under the names of metrics.md.
+# Figure 5 / Table 3, Table 1 conditions, under the names of docs/measures.md.
 FIGURE5_MEASURES = {
     'P_o_percent': 0.144,
     'P_1_percent': 3.18,
@@ -45,3 +48,18 @@ STUDY_VARIATIONS = (-20, -10, 0, 10, 20)
 
 # Table 2: the six parameters varied together [%].
 TABLE2_CHANGES = {'m_m': -20, 'm_p': -20, 'V_p': 20, 'V_c': -20, 'd_c': 10, 'k_p': -20}
+
+
+def is_reference_step(initial_flow, final_flow):
+    """
+    Whether an inlet-flow step [m^3/s] is the paper's 5 -> 20 L/min.
+
+    Figure 5's values only describe that step; beside any other they compare nothing.
+    """
+    return all(
+        math.isclose(flow, reference, rel_tol=1e-3)
+        for flow, reference in (
+            (initial_flow, REFERENCE_SCENARIO.initial_flow),
+            (final_flow, REFERENCE_SCENARIO.final_flow),
+        )
+    )

@@ -56,24 +56,30 @@ def plot_step_response(
     title='Step response (paper Figure 5)',
 ):
     """
-    Figure 5: p_s/p_0, x/x_0 and y/y_0 against time after the step; writes a PNG to path.
+    Figure 5: p_s, x and y against time, each divided by its value at the step; writes a PNG.
 
     time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
-    StepMeasures.as_dict() to print beside the curves (optional).
+    StepMeasures.as_dict() to print beside the curves (optional). A signal that is
+    zero (or undefined) at the step, as from a closed valve, cannot be divided by
+    it: its panel shows it in MPa or mm instead, and says why.
     """
     time = np.asarray(time, dtype=float)
     before = int(np.searchsorted(time, t_step, side='right')) - 1
     before = max(before, 0)
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8), constrained_layout=True)
     curves = (
-        (supply_pressure, 'P = p_s / p_s(t_step) [-]', 'tab:blue'),
-        (main_valve_displacement, 'X = x / x(t_step) [-]', 'tab:red'),
-        (poppet_displacement, 'Y = y / y(t_step) [-]', 'tab:green'),
+        (supply_pressure, 'P = p_s / p_s(t_step) [-]', 'p_s [MPa]', 1e-6, 'tab:blue'),
+        (main_valve_displacement, 'X = x / x(t_step) [-]', 'x [mm]', 1e3, 'tab:red'),
+        (poppet_displacement, 'Y = y / y(t_step) [-]', 'y [mm]', 1e3, 'tab:green'),
     )
-    for axis, (signal, label, colour) in zip(axes, curves):
+    for axis, (signal, ratio_label, unit_label, scale, colour) in zip(axes, curves):
         signal = np.asarray(signal, dtype=float)
-        reference = signal[before] if signal[before] != 0.0 else 1.0
-        axis.plot(time, signal / reference, color=colour, linewidth=0.9)
+        at_step = signal[before] if signal.size else 0.0
+        if at_step != 0.0 and np.isfinite(at_step):
+            values, label = signal / at_step, ratio_label
+        else:
+            values, label = signal * scale, f'{unit_label}\n({at_step:g} at the step)'
+        axis.plot(time, values, color=colour, linewidth=0.9)
         axis.axvline(t_step, color='0.6', linestyle=':', linewidth=0.8)
         axis.set_ylabel(label)
         axis.grid(True, alpha=0.3)

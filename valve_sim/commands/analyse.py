@@ -147,7 +147,8 @@ def plot_steps(path, recording, records):
     Draw Figure 5 of each step.
 
     The figure goes to path itself for one step, and to path with _step<k> before
-    the suffix for several.
+    the suffix for several. Titles give the step's time from the first sample
+    (a bag's own time axis is often the epoch).
     """
     from pathlib import Path
 
@@ -166,24 +167,40 @@ def plot_steps(path, recording, records):
             recording.pilot_poppet[shown],
             PLOT_LEAD,
             record,
-            title=f'Recorded step {k} at t = {t_step:.4f} s, shown at 0.25 s (paper Figure 5)',
+            title=(
+                f'Recorded step {k}, {t_step - recording.time[0]:.4f} s after the first '
+                f'sample, shown at {PLOT_LEAD:g} s'
+            ),
         )
         written.append(target)
     return written
 
 
-def print_steps(records, start_time):
-    """Each step's measures as a table beside the paper's values (valve_sim.commands.simulate)."""
+def flows_around(recording, record):
+    """(flow before, flow at the end of the window) [m^3/s] of a step; NaN where unknown."""
+    before = np.searchsorted(recording.time, record['t_step'], side='right') - 1
+    after = np.searchsorted(recording.time, record['t_step'] + WINDOW, side='right') - 1
+    return recording.inlet_flow[max(before, 0)], recording.inlet_flow[max(after, 0)]
+
+
+def print_steps(records, recording):
+    """
+    Print each step's measures as a table (valve_sim.commands.simulate.print_table).
+
+    The paper's values are shown beside the paper's own 5 -> 20 L/min step only.
+    """
+    from valve_sim.analysis.paper import is_reference_step
     from valve_sim.commands.simulate import print_table
 
     for k, record in enumerate(records, start=1):
         direction = 'up' if record['direction'] > 0 else 'down'
         print(
             f'step {k}: {direction} at t = {record["t_step"]:.6f} s '
-            f'({record["t_step"] - start_time:.4f} s after the first sample)'
+            f'({record["t_step"] - recording.time[0]:.4f} s after the first sample)'
         )
         print_table(
-            StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons'])
+            StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons']),
+            paper=is_reference_step(*flows_around(recording, record)),
         )
         if 'note' in record['details']:
             print(f'  note: {record["details"]["note"]}')
@@ -276,7 +293,7 @@ def run(args):
     if args.json:
         print(json.dumps({'bag': str(args.bag), 'steps': records}, indent=2))
     elif records:
-        print_steps(records, recording.time[0])
+        print_steps(records, recording)
     else:
         print(
             f'no inlet-flow step in {args.bag} ({len(recording.time)} samples, '

@@ -15,19 +15,20 @@
 """
 The paper's step over real DDS: valve_node and analyser_node, 5 -> 20 L/min, recorded and measured.
 
-Starts both nodes as processes (in ROS_DOMAIN_ID if set, otherwise in a random domain with
-discovery kept on this machine), commands 5 L/min until the analyser records every
-topic, holds it HOLD_TIME, steps to 20 L/min, waits for the analyser's live
-measures of the step, and stops both nodes with SIGINT. Then it prints the six
-measures beside the paper's, checks them against an offline analysis of the bag,
-and draws Figure 5. The folder gets the bag, its measures JSON, figure5.png and
-the two nodes' logs.
+Starts both nodes as processes (in ROS_DOMAIN_ID if set, otherwise in a domain no other
+run on this machine holds, discovery kept on this machine), commands 5 L/min until the
+analyser records every topic, holds it until valve_node's model time has advanced
+HOLD_TIME in step with the wall clock (it compiles its kernels before it ticks, which
+takes tens of seconds on a fresh clone), steps to 20 L/min, waits for the analyser's live
+measures of the step, and stops both nodes with SIGINT. Then it prints the six measures
+beside the paper's, checks them against an offline analysis of the bag, and draws
+Figure 5. The folder gets the bag, its measures JSON, figure5.png and the two nodes' logs.
+Exits 1 with one line saying what is missing if any measure, the bag or the figure is.
 """
 
 import json
-import os
+import math
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
@@ -35,14 +36,18 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.errors import IncompleteRunError
 
 
 INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow  # [m^3/s] 5 L/min
 FINAL_FLOW = REFERENCE_SCENARIO.final_flow  # [m^3/s] 20 L/min
 HOLD_TIME = 1.0  # [s] at the initial flow, once everything is recorded
+# Share of the wall-clock time the valve's model time must advance over the hold: a node
+# still compiling, or skipping lag, advances far less; a loaded but working one about 1.
+REAL_TIME_SHARE = 0.8
 AFTER_MEASURES = 0.2  # [s] still recorded after the measures arrived
 COMMAND_PERIOD = 0.02  # [s] inlet_flow is published at 50 Hz (valve_node's input timeout is 1 s)
-READY_TIMEOUT = 90.0  # [s] for start-up and discovery
+READY_TIMEOUT = 180.0  # [s] for start-up (a cold kernel compile on a loaded machine) and discovery
 MEASURES_TIMEOUT = 60.0  # [s] from the step to the analyser's measures
 STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
 NODES = ('valve_node', 'analyser_node')
@@ -50,18 +55,6 @@ NODES = ('valve_node', 'analyser_node')
 
 def progress(text):
     print(f'demo: {text}', flush=True)
-
-
-def choose_domain():
-    """
-    Use ROS_DOMAIN_ID if set; otherwise pick a random domain.
-
-    A random domain keeps discovery on this machine. Returns the domain id.
-    """
-    if 'ROS_DOMAIN_ID' not in os.environ:
-        os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    return os.environ['ROS_DOMAIN_ID']
 
 
 def start_nodes(folder):
@@ -101,11 +94,12 @@ def stop_nodes(processes, folder):
 
 
 class Driver:
-    """The demo's own node: commands the inlet flow and listens to the analyser."""
+    """The demo's own node: commands the inlet flow, follows the valve and the analyser."""
 
     def __init__(self, processes, folder):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
+        from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64
         from valve_sim.ros.analyser_node import MEASURES_QOS, RECORDING_STATUS
 
@@ -113,6 +107,7 @@ class Driver:
         self.node = Node('valve_demo')
         self.bag = None  # the analyser's file, once it records every topic
         self.measures = []  # step_measures messages
+        self.model_time_ns = None  # stamp of the valve's latest state
         publisher = self.node.create_publisher(Float64, 'inlet_flow', 10)
         self.node.create_timer(COMMAND_PERIOD, lambda: publisher.publish(Float64(data=self.flow)))
 
@@ -124,7 +119,11 @@ class Driver:
                 ):
                     self.bag = Path(values['file'])
 
+        def on_state(message):
+            self.model_time_ns = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+
         self.node.create_subscription(DiagnosticArray, '/diagnostics', on_status, 10)
+        self.node.create_subscription(JointState, 'applied_inlet_flow', on_state, 100)
         self.node.create_subscription(
             DiagnosticArray, 'step_measures', self.measures.append, MEASURES_QOS
         )
@@ -147,22 +146,22 @@ class Driver:
 
     def run_step(self):
         """
-        Wait for the recording, hold, step, and wait for the step's measures.
+        Wait for the recording and a valve in real time, hold, step, wait for the measures.
 
         Returns the bag path.
         """
         progress(
-            'waiting for the nodes to start and discover each other '
+            'waiting for the nodes to start and discover each other; valve_node compiles '
+            'its model kernels first (tens of seconds on the first run, then cached) '
             f'(commanding {self.flow * 6e4:g} L/min)'
         )
         self.spin_until(
-            lambda: self.bag is not None, READY_TIMEOUT, 'recording of every topic by the analyser'
+            lambda: self.bag is not None and self.model_time_ns is not None,
+            READY_TIMEOUT,
+            'recording of every topic by the analyser',
         )
-        progress(
-            f'analyser records every topic to {self.bag}; '
-            f'holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s'
-        )
-        self._spin_for(HOLD_TIME)
+        progress(f'analyser records every topic to {self.bag}')
+        self._hold_in_real_time()
         self.flow = FINAL_FLOW
         progress(
             f'inlet flow stepped to {self.flow * 6e4:g} L/min; '
@@ -171,6 +170,29 @@ class Driver:
         self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, 'step measures from the analyser')
         self._spin_for(AFTER_MEASURES)
         return self.bag
+
+    def _hold_in_real_time(self):
+        """
+        Hold the initial flow until the valve's model time keeps pace with the wall clock.
+
+        Raises TimeoutError if it never does within READY_TIMEOUT.
+        """
+        deadline = time.monotonic() + READY_TIMEOUT
+        while True:
+            progress(f'holding {self.flow * 6e4:g} L/min for {HOLD_TIME:g} s')
+            wall, model = time.monotonic(), self.model_time_ns
+            self._spin_for(HOLD_TIME)
+            share = (self.model_time_ns - model) / 1e9 / (time.monotonic() - wall)
+            if share >= REAL_TIME_SHARE:
+                progress(f'valve_node advances in real time ({share:.2f} s of model time per s)')
+                return
+            if time.monotonic() > deadline:
+                raise TimeoutError(
+                    f'valve_node advanced only {share:.2f} s of model time per second of wall '
+                    f'time after {READY_TIMEOUT:g} s (needs {REAL_TIME_SHARE:g}; the machine is '
+                    f'too busy for real time?) (log: {self.folder / "valve_node.log"})'
+                )
+            progress(f'valve_node advanced {share:.2f} s of model time per s: not yet real time')
 
     def _spin_for(self, duration):
         end = time.monotonic() + duration
@@ -181,16 +203,22 @@ def report(folder, bag):
     """
     Print the live measures beside the paper's and the offline check; draw Figure 5.
 
-    Returns the JSON path.
+    Returns the JSON path. Raises IncompleteRunError, naming what is missing, if a
+    measure is undefined, the offline analysis disagrees, or the figure was not written.
     """
     from valve_sim.commands.analyse import analyse, plot_steps, print_steps, read_recording
 
     measures_path = bag.with_suffix('.measures.json')
     live = json.loads(measures_path.read_text())['steps']
     recording = read_recording(bag)
+    if len(live) != 1:
+        raise IncompleteRunError(
+            f'the analyser measured {len(live)} steps instead of the one commanded '
+            f'(bag {bag}, measures {measures_path})'
+        )
     offline = analyse(recording)
     print()
-    print_steps(live, recording.time[0])
+    print_steps(live, recording)
     same = [[record[name] for name in MEASURE_NAMES] for record in offline] == [
         [record[name] for name in MEASURE_NAMES] for record in live
     ]
@@ -198,10 +226,24 @@ def report(folder, bag):
         '\noffline analysis of the bag: '
         f'{"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
     )
-    figure = plot_steps(folder / 'figure5.png', recording, live[:1])[0] if live else None
+    figure = plot_steps(folder / 'figure5.png', recording, live)[0]
     for path in (bag, measures_path, figure):
-        if path:
-            progress(f'wrote {path}')
+        progress(f'wrote {path}')
+    undefined = {
+        name: live[0]['reasons'].get(name, 'no value')
+        for name in MEASURE_NAMES
+        if live[0][name] is None or not math.isfinite(live[0][name])
+    }
+    if undefined:
+        raise IncompleteRunError(
+            'measure(s) undefined: '
+            + '; '.join(f'{name}: {reason}' for name, reason in undefined.items())
+            + f' (logs in {folder})'
+        )
+    if not same:
+        raise IncompleteRunError(f'the offline analysis of {bag} gives different measures')
+    if not figure.is_file() or figure.stat().st_size == 0:
+        raise IncompleteRunError(f'{figure} was not written')
     return measures_path
 
 
@@ -217,11 +259,17 @@ def add_arguments(parser):
 def run(args):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
+    from valve_sim.ros.isolation import claim_domain
 
     folder = Path(args.out) if args.out else Path.cwd() / time.strftime('demo_%Y%m%d-%H%M%S')
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise IncompleteRunError(
+            f'output folder {folder} cannot be created: {error.strerror}'
+        ) from error
     folder = folder.resolve()
-    progress(f'output folder {folder}; ROS_DOMAIN_ID={choose_domain()}')
+    progress(f'output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
     progress('starting valve_node and analyser_node')
     processes = start_nodes(folder)
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)

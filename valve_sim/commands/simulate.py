@@ -26,10 +26,11 @@ import json
 import math
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import FIGURE5_MEASURES, REFERENCE_SCENARIO
+from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
 from valve_sim.core.model import STATE_NAMES
-from valve_sim.core.parameters import load_parameters, ParameterError
+from valve_sim.core.parameters import check_value, load_parameters, ParameterError
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.steady_state import with_preset_pressure
 
 
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
@@ -67,8 +68,24 @@ def assignment(text):
         raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
 
 
+def pressure_value(text):
+    """Parse a pressure from '7e6', '7e6Pa', '7MPa' or '70bar' -> Pa (argparse type)."""
+    number, factor = text.strip(), 1.0
+    for suffix, scale in (('MPa', 1e6), ('kPa', 1e3), ('bar', 1e5), ('Pa', 1.0)):
+        if number.endswith(suffix):
+            number, factor = number[: -len(suffix)], scale
+            break
+    try:
+        value = float(number) * factor
+    except ValueError:
+        raise ArgumentTypeError(f'not a pressure: {text!r} (use e.g. 7MPa or 7e6)') from None
+    if not math.isfinite(value) or value <= 0.0:
+        raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
+    return value
+
+
 def add_parameter_arguments(parser):
-    """--params and --set, shared by simulate and study."""
+    """--params, --set and --preset-pressure, shared by every command that runs the model."""
     parser.add_argument(
         '--params',
         metavar='FILE.yaml',
@@ -82,15 +99,27 @@ def add_parameter_arguments(parser):
         default=[],
         help='override one parameter (ROS name or paper symbol, SI units); repeatable',
     )
+    parser.add_argument(
+        '--preset-pressure',
+        type=pressure_value,
+        metavar='P',
+        help='main-valve cracking pressure (gauge, e.g. 7MPa): sets pilot_spring_preload like '
+        'the adjusting screw, after --params and --set (also preset_pressure in a file or --set)',
+    )
 
 
 def load_from_arguments(args):
     """
-    Return (params, settings) from --params, --set and --step-size.
+    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
 
-    --step-size overrides settings["step_size"].
+    --step-size overrides settings["step_size"]. A preset pressure (--preset-pressure,
+    else preset_pressure of --set or the file) sets the pilot spring preload last.
     """
     params, settings = load_parameters(args.params, dict(args.set))
+    preset = settings.pop('preset_pressure', None)
+    preset = getattr(args, 'preset_pressure', None) or preset
+    if preset is not None:
+        params = with_preset_pressure(params, check_value('preset_pressure', preset))
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size
     if not 1e-7 <= settings['step_size'] <= 1e-4:
@@ -172,15 +201,28 @@ def write_csv(path, waveforms):
             writer.writerow([f'{t:.7f}', f'{q:.9e}'] + [f'{v:.9e}' for v in state])
 
 
-def print_table(measures):
-    """Human-readable comparison with the paper's Figure 5."""
-    print(f'{"measure":<14}{"valve_sim":>12}{"paper":>10}')
+def print_table(measures, paper=False):
+    """
+    Print the six measures as a table; paper: beside Figure 5's values.
+
+    Only a run of the paper's own scenario should get the paper's column.
+    """
+    print(f'{"measure":<14}{"valve_sim":>12}' + (f'{"paper":>10}' if paper else ''))
     for name in MEASURE_NAMES:
         value = measures.values[name]
         shown = f'{value:12.4g}' if value is not None else f'{"-":>12}'
-        print(f'{name:<14}{shown}{FIGURE5_MEASURES[name]:>10.4g}')
+        print(f'{name:<14}{shown}' + (f'{FIGURE5_MEASURES[name]:>10.4g}' if paper else ''))
     for name, reason in measures.reasons.items():
         print(f'  {name}: {reason}')
+
+
+def is_papers_run(params, scenario):
+    """Whether a run is the paper's Figure 5 case: its step, on the reference parameters."""
+    return (
+        is_reference_step(scenario.initial_flow, scenario.final_flow)
+        and scenario.ramp_time == 0.0
+        and params == load_parameters()[0]
+    )
 
 
 def run(args):
@@ -226,5 +268,5 @@ def run(args):
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:
-        print_table(measures)
+        print_table(measures, paper=is_papers_run(params, scenario))
     return 0

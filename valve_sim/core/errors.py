@@ -28,4 +28,15 @@ class InputFileError(ValueError):
     """A file given by the user cannot be read or has the wrong content."""
 
 
-USER_ERRORS = (ParameterError, IntegrationError, SteadyStateError, InputFileError, OSError)
+class IncompleteRunError(RuntimeError):
+    """A run ended without all it was to produce; the message says what is missing and why."""
+
+
+USER_ERRORS = (
+    ParameterError,
+    IntegrationError,
+    SteadyStateError,
+    InputFileError,
+    IncompleteRunError,
+    OSError,
+)

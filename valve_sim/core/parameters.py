@@ -31,6 +31,7 @@ import sys
 import yaml
 
 
+PACKAGE = 'valve_sim'
 NODE_NAME = 'relief_valve'
 
 
@@ -419,6 +420,19 @@ SETTINGS = (
     ),
 )
 
+# The adjusting screw, in the parameter files and on every command line: when given, it sets
+# pilot_spring_preload (steady_state.with_preset_pressure), as valve_node's parameter does.
+PRESET_PRESSURE = ParameterSpec(
+    'preset_pressure',
+    'p_set',
+    'Pa',
+    0.0,
+    1e8,
+    'preset pressure: supply pressure (gauge) at which the main valve cracks open; '
+    'setting it sets pilot_spring_preload, like turning the adjusting screw',
+    'our definition, see docs/model.md (the paper presets 7 MPa)',
+)
+
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SETTING_SPECS = {spec.name: spec for spec in SETTINGS}
 SYMBOLS = {spec.symbol: spec.name for spec in PARAMETERS}
@@ -445,7 +459,10 @@ def resolve_name(name):
 
 def check_value(name, value):
     """Return value as a float if it is a finite number inside the parameter's limits."""
-    spec = SETTING_SPECS[name] if name in SETTING_SPECS else SPECS[resolve_name(name)]
+    if name == PRESET_PRESSURE.name:
+        spec = PRESET_PRESSURE
+    else:
+        spec = SETTING_SPECS[name] if name in SETTING_SPECS else SPECS[resolve_name(name)]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, "
@@ -499,10 +516,26 @@ def validate(params):
 
 
 def config_path(filename):
-    """Path of a file shipped in config/ (installed share/valve_sim/config or the source tree)."""
-    candidates = [
-        Path(sys.prefix) / 'share' / 'valve_sim' / 'config' / filename,
-        Path(__file__).resolve().parents[2] / 'config' / filename,
+    """
+    Return the path of a file shipped in config/, or raise ParameterError naming where it looked.
+
+    Looked for, in this order: the package's share directory as ament_index knows it
+    (a colcon install, once its setup file is sourced: AMENT_PREFIX_PATH); the
+    share directory of the prefix this module is installed in (a colcon or pip
+    install used without sourcing); the source tree (a clone, or an editable install).
+    """
+    candidates = []
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / 'config' / filename)
+    except (ImportError, LookupError, OSError, ValueError):
+        pass  # no ament_index, no AMENT_PREFIX_PATH, or valve_sim not in it: the fallbacks
+    here = Path(__file__).resolve()
+    candidates += [
+        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / 'config' / filename,
+        Path(sys.prefix) / 'share' / PACKAGE / 'config' / filename,
+        here.parents[2] / 'config' / filename,  # source tree
     ]
     for candidate in candidates:
         if candidate.is_file():
@@ -561,7 +594,9 @@ def load_parameters(path=None, overrides=None):
         raw.update(read_parameter_file(path))
     raw.update(overrides or {})
     settings = {
-        name: check_value(name, raw.pop(name)) for name in list(raw) if name in SETTING_SPECS
+        name: check_value(name, raw.pop(name))
+        for name in list(raw)
+        if name in SETTING_SPECS or name == PRESET_PRESSURE.name
     }
     params = {resolve_name(name): value for name, value in raw.items()}
     return validate(params), settings

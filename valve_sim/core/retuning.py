@@ -27,20 +27,10 @@ check_limits() that the running valve stays within its physical limits.
 import math
 
 from valve_sim.core.limits import inlet_flow_problem, state_problem
-from valve_sim.core.parameters import ParameterError, ParameterSpec, SPECS, validate
+from valve_sim.core.parameters import ParameterError, SPECS, validate
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
 
-PRESET_PRESSURE = ParameterSpec(
-    'preset_pressure',
-    'p_set',
-    'Pa',
-    0.0,
-    1e8,
-    'preset pressure: supply pressure (gauge) at which the main valve cracks open; '
-    'setting it sets pilot_spring_preload, like turning the adjusting screw',
-    'our definition, see docs/valve_node.md',
-)
 PRESET_TOLERANCE = 1e-6  # relative agreement of preset_pressure and the cracking pressure
 
 

@@ -303,3 +303,13 @@ def preload_for_cracking_pressure(params, pressure):
             slope = (y1 - y0) / (e1 - e0)
         y0, e0 = y1, e1
     raise SteadyStateError(f'could not find a preload for a cracking pressure of {pressure:g} Pa')
+
+
+def with_preset_pressure(params, pressure):
+    """
+    Copy of params whose pilot spring preload y_0 makes the main valve crack at pressure [Pa].
+
+    The preset as one concept: parameter files, --preset-pressure, valve_node's
+    preset_pressure and the study's held preset all mean this cracking pressure.
+    """
+    return {**params, 'pilot_spring_preload': preload_for_cracking_pressure(params, pressure)}

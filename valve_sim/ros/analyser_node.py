@@ -29,14 +29,21 @@ It records as rosbag2 does.
   pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "valve_analyser:
        recording": the file, the messages recorded per topic and, for a topic with
        one publisher, the messages lost on the way (gaps in its publication
-       sequence numbers); WARN while a topic has no message yet or once any was lost.
+       sequence numbers), the QoS of each subscription ("qos /topic":
+       reliable/volatile ...); WARN while a topic has no message yet or once any was lost.
 
 One recording per run: output_dir/valve_<date>-<time>.mcap, and beside it
 <same name>.measures.json ({"bag", "steps"}, step_analysis.MeasuresFile), to
 which each step is appended.
 
-How nothing is lost. Subscriptions are reliable with a deep queue (queue_depth
-per topic, 1 s at 1 kHz by default), filled by the middleware's own threads. The
+QoS, as rosbag2 chooses it: a topic is subscribed once it has a publisher; reliable if
+every publisher is reliable, else best effort (so a SensorDataQoS publisher is heard);
+transient local if every publisher is, else volatile. The log and the recording status
+name the QoS of each topic; the bag keeps the publishers' offers.
+
+How nothing is lost. Subscriptions have a deep queue (queue_depth per topic, 1 s at
+1 kHz by default), filled by the middleware's own threads; a reliable publisher's
+messages are not dropped on the way. The
 executor never runs them (their callback group is closed to it): a timer every
 drain_period takes all waiting messages of every topic in one go, writes them and
 feeds the analysis; taking them directly costs a fraction of a callback per
@@ -46,9 +53,11 @@ end the spin; the node then takes what is still queued, measures (and
 publishes) the open steps on what it has, and closes the file.
 """
 
+import argparse
 from dataclasses import dataclass
 from pathlib import Path
 import sys
+import textwrap
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -60,6 +69,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from rclpy.utilities import remove_ros_args
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.signals import Extractor, Joiner, REQUIRED, ROLE, SignalMap
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
@@ -175,6 +185,39 @@ class RecordedTopic:
     )
     last_sequence: int = None
     lost: int = 0
+    qos: str = ''  # reliability and durability of the subscription
+
+
+def subscription_qos(offers, depth):
+    """
+    Return the QoSProfile to record a topic with, as rosbag2 chooses it.
+
+    offers: the QoSProfiles of its publishers. Reliable only if every publisher is
+    (a reliable subscription never hears a best-effort publisher), else best effort;
+    transient local only if every publisher is (so their stored samples come too),
+    else volatile. Keep last depth messages.
+    """
+    def every(policy_of, value):
+        return all(policy_of(offer) == value for offer in offers)
+
+    return QoSProfile(
+        depth=depth,
+        reliability=(
+            ReliabilityPolicy.RELIABLE
+            if every(lambda offer: offer.reliability, ReliabilityPolicy.RELIABLE)
+            else ReliabilityPolicy.BEST_EFFORT
+        ),
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL
+            if every(lambda offer: offer.durability, DurabilityPolicy.TRANSIENT_LOCAL)
+            else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+def qos_name(qos):
+    """Return 'reliable/volatile' style name of a QoSProfile's reliability and durability."""
+    return f'{qos.reliability.name.lower()}/{qos.durability.name.lower()}'
 
 
 def qos_offer(qos):
@@ -269,9 +312,7 @@ class ValveAnalyser(Node):
         self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
         self.recorded = {}
-        self.queue = QoSProfile(
-            depth=settings['queue_depth'], reliability=ReliabilityPolicy.RELIABLE
-        )
+        self.queue_depth = settings['queue_depth']
         self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
             DiagnosticArray, 'step_measures', MEASURES_QOS
@@ -348,12 +389,15 @@ class ValveAnalyser(Node):
 
     def _discover(self):
         """
-        Subscribe to each wanted topic once the graph knows its type.
+        Subscribe to each wanted topic once it has a publisher, with a QoS its publishers match.
 
         Also note who publishes what.
         """
         types = dict(self.get_topic_names_and_types())
         for topic in [t for t in self.wanted if t not in self.recorded and t in types]:
+            offers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+            if not offers:
+                continue  # only subscribers so far: the publishers' QoS decides ours
             type_name = types[topic][0]
             try:
                 message_type = message_class(type_name)
@@ -363,17 +407,24 @@ class ValveAnalyser(Node):
                 )
                 self.wanted.pop(topic)
                 continue
+            qos = subscription_qos(offers, self.queue_depth)
             self.recorded[topic] = RecordedTopic(
                 self.create_subscription(
                     message_type,
                     topic,
                     lambda _: None,
-                    self.queue,
+                    qos,
                     callback_group=self.recorder_group,
                     raw=True,
                 ),
                 type_name,
                 self._extractor(topic, type_name),
+                qos=qos_name(qos),
+            )
+            self.get_logger().info(
+                f'recording {topic} ({type_name}) with QoS {qos_name(qos)}, depth '
+                f'{qos.depth}, for {len(offers)} publisher(s) offering '
+                f'{", ".join(sorted({qos_name(offer) for offer in offers}))}'
             )
         for topic, recorded in self.recorded.items():
             recorded.single_publisher = self.count_publishers(topic) == 1
@@ -469,6 +520,7 @@ class ValveAnalyser(Node):
             'messages': str(self.bag.message_count),
             'steps measured': str(self.measures.count),
             **{f'messages {topic}': str(count) for topic, count in counts.items()},
+            **{f'qos {topic}': recorded.qos for topic, recorded in self.recorded.items()},
             **{f'lost {topic}': str(count) for topic, count in lost.items()},
         }
         message = (
@@ -510,6 +562,42 @@ def record(stop):
         node.destroy_node()
 
 
+def parameter_names():
+    """Return the names of the node's ROS parameters, in the order they are declared."""
+    return (
+        ['topics', 'output_dir', 'queue_depth', 'ambient_pressure']
+        + [spec.name for spec in DOUBLE_PARAMETERS]
+        + [
+            f'{name}_{kind}'
+            for name in REQUIRED
+            for kind in ('topic', 'joint')
+            if kind == 'topic' or ROLE[name].joint
+        ]
+    )
+
+
+def parse_arguments(args):
+    """
+    Parse analyser_node's own command line (ROS arguments removed).
+
+    It has no options of its own: --help prints the usage, the parameters and exits 0
+    before anything is recorded; anything else is a usage error (exit 2).
+    """
+    parser = argparse.ArgumentParser(
+        prog='analyser_node',
+        description=__doc__.strip().splitlines()[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=textwrap.fill(
+            'ROS parameters (read-only, set at start: --ros-args -p NAME:=VALUE or '
+            '--params-file FILE): ' + ', '.join(parameter_names()) + '. '
+            '`ros2 param describe /valve_analyser NAME` explains each. Example: '
+            'analyser_node --ros-args -p output_dir:=/data/recordings',
+            width=88,
+        ),
+    )
+    return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
+
+
 def main(args=None):
     """
     Run analyser_node until SIGINT or SIGTERM; returns the exit code.
@@ -517,6 +605,7 @@ def main(args=None):
     The node closes its file with the middleware still up, so the last
     measures are still published.
     """
+    parse_arguments(args)
     stop = spinning.init(args)
     try:
         record(stop)

@@ -18,7 +18,9 @@ valve_node: the virtual relief valve as a real-time ROS 2 node.
 Topic and service names are relative, so namespaces and remapping work:
 
   sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s], 0 to
-                                                            max_inlet_flow
+                                                            max_inlet_flow; best effort:
+                                                            hears reliable and
+                                                            SensorDataQoS publishers
   pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
                                 sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
                                                             gauge pressure + ambient_pressure
@@ -49,6 +51,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
@@ -60,6 +63,7 @@ from valve_sim.core.parameters import (
     NODE_NAME,
     ParameterError,
     PARAMETERS,
+    PRESET_PRESSURE,
     SETTING_SPECS,
     SETTINGS,
     SPECS,
@@ -71,7 +75,6 @@ from valve_sim.core.retuning import (
     check_preset,
     dependent_change,
     merged_parameters,
-    PRESET_PRESSURE,
 )
 from valve_sim.core.steady_state import (
     cracking_pressure,
@@ -85,6 +88,7 @@ from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
 
 
+READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
 YOUNG_GENERATIONS = (
@@ -94,6 +98,9 @@ STATE_QUEUE_DEPTH = (
     1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 )
 INPUT_QUEUE_DEPTH = 1000  # inlet_flow messages held for the callback: a 1 s burst at 1 kHz
+# Best effort, as REP 2003 asks of sensor-data subscribers: it matches reliable and best-effort
+# (SensorDataQoS) publishers alike; a reliable subscription never hears the latter.
+INLET_FLOW_QOS = QoSProfile(depth=INPUT_QUEUE_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
 WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {
@@ -109,9 +116,14 @@ class ReliefValveNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         params, self.settings = self._declare_parameters()
+        started = time.perf_counter()
         self.model = RealTimeModel(
             params, self.settings['step_size'], self.settings['initial_inlet_flow']
         )
+        # Compile (or load from numba's cache) the integration kernel before the tick timer
+        # exists: compiled in the first tick, it would stall the clock for seconds.
+        self.model.trial(params, self.settings['step_size'], self.settings['initial_inlet_flow'])
+        self.kernels_seconds = time.perf_counter() - started
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
         self.input_stale = False
@@ -120,7 +132,7 @@ class ReliefValveNode(Node):
         self._restoring = False
         self._previous_slot_ns = None
         self._create_outputs()
-        self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, INPUT_QUEUE_DEPTH)
+        self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, INLET_FLOW_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self._housekeeping_due = False
         self._ticks_at_housekeeping = 0
@@ -135,6 +147,10 @@ class ReliefValveNode(Node):
             f'valve at the steady state of {self.inlet_flow:g} m^3/s: '
             f'p_s = {self.model.state[P_S]:.6g} Pa (gauge); '
             f'{self.settings["publish_rate"]:g} Hz, steps of {self.settings["step_size"]:g} s'
+        )
+        self.get_logger().info(
+            f'{READY_MESSAGE}: model kernels compiled or loaded in {self.kernels_seconds:.2f} s; '
+            'ticking from the first timer call'
         )
 
     @property

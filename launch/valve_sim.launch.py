@@ -1,0 +1,82 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Launch valve_node and analyser_node together (launch_ros).
+
+    ros2 launch valve_sim valve_sim.launch.py
+    ros2 launch valve_sim valve_sim.launch.py namespace:=rig1 use_sim_time:=true \
+        params_file:=/path/to/my_valve.yaml output_dir:=/data/recordings
+
+params_file is handed to valve_node as its --params-file, after the packaged
+config/reference.yaml (the node's defaults). Its section must name the node as it
+runs: `relief_valve:` without a namespace, `/rig1/relief_valve:` or `/**/relief_valve:`
+with one. output_dir is where analyser_node writes its MCAP recordings and measures.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+PACKAGE = 'valve_sim'
+
+
+def generate_launch_description():
+    """Declare the four arguments and the two nodes."""
+    reference = os.path.join(get_package_share_directory(PACKAGE), 'config', 'reference.yaml')
+    namespace = LaunchConfiguration('namespace')
+    use_sim_time = LaunchConfiguration('use_sim_time')
+    return LaunchDescription([
+        DeclareLaunchArgument(
+            'params_file',
+            default_value=reference,
+            description='ROS 2 parameter file for valve_node (default: the reference valve)',
+        ),
+        DeclareLaunchArgument(
+            'namespace', default_value='', description='namespace of both nodes and their topics'
+        ),
+        DeclareLaunchArgument(
+            'use_sim_time',
+            default_value='false',
+            description='follow /clock instead of the system clock (both nodes)',
+        ),
+        DeclareLaunchArgument(
+            'output_dir',
+            default_value='.',
+            description="folder of analyser_node's recordings (created if missing)",
+        ),
+        Node(
+            package=PACKAGE,
+            executable='valve_node',
+            name='relief_valve',
+            namespace=namespace,
+            parameters=[LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}],
+            output='screen',
+        ),
+        Node(
+            package=PACKAGE,
+            executable='analyser_node',
+            name='valve_analyser',
+            namespace=namespace,
+            parameters=[
+                {'output_dir': LaunchConfiguration('output_dir'), 'use_sim_time': use_sim_time}
+            ],
+            output='screen',
+        ),
+    ])

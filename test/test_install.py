@@ -1,0 +1,244 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The package as a ROS user installs it: a plain `colcon build`, then the install space alone.
+
+colcon builds a copy of the source tree in a temporary workspace (no
+--symlink-install); the installed valve_node is started from an empty folder,
+with the environment that sourcing install/setup.bash gives (AMENT_PREFIX_PATH,
+PYTHONPATH), and must publish. Its kernels compile cold there (numba caches
+beside the installed sources), as on a user's first start. The launch file,
+LICENSE and rosdep keys are checked against the same install.
+"""
+
+import ast
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+
+import pytest
+from valve_harness import Probe, stop_node
+from valve_sim.ros.analyser_node import parameter_names
+
+
+pytestmark = pytest.mark.timeout(600)
+
+REPO = Path(__file__).resolve().parent.parent
+START_TIMEOUT = 240.0  # [s] a cold kernel compile on a loaded 2-core machine
+NOT_SOURCES = ('.venv', '.git', '__pycache__', 'build', 'install', 'log', '*.egg-info', 'demo_*')
+# The rosdep keys of package.xml and the file of ros/rosdistro that defines each (checked at
+# rosdistro commit 8468e88, 2026-08-22). A new dependency needs its key checked and added here.
+ROSDEP_KEYS = {
+    **dict.fromkeys(
+        [
+            'rclpy',
+            'std_msgs',
+            'sensor_msgs',
+            'diagnostic_msgs',
+            'std_srvs',
+            'rcl_interfaces',
+            'builtin_interfaces',
+            'rosgraph_msgs',
+            'ament_index_python',
+            'launch',
+            'launch_ros',
+            'ament_flake8',
+            'ament_pep257',
+            'ament_copyright',
+        ],
+        'jazzy/distribution.yaml',
+    ),
+    **dict.fromkeys(
+        [
+            'python3-numpy',
+            'python3-scipy',
+            'python3-matplotlib',
+            'python3-yaml',
+            'python3-numba',
+            'mcap-ros2-support',
+            'python3-pytest',
+            'python3-pytest-timeout',
+            'python3-psutil',
+            'python3-rosbags-pip',
+        ],
+        'rosdep/python.yaml',
+    ),
+}
+
+
+@pytest.fixture(scope='module')
+def install(tmp_path_factory):
+    """Build a copy of the package with plain `colcon build`; returns install/valve_sim."""
+    workspace = tmp_path_factory.mktemp('colcon_ws')
+    shutil.copytree(
+        REPO, workspace / 'src' / 'valve_sim', ignore=shutil.ignore_patterns(*NOT_SOURCES)
+    )
+    colcon = Path(sys.executable).parent / 'colcon'
+    assert colcon.exists(), f'{colcon} missing: colcon-core is a test dependency (setup.py)'
+    result = subprocess.run(
+        [str(colcon), 'build'],
+        cwd=workspace,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=dict(os.environ, PATH=f'{colcon.parent}{os.pathsep}{os.environ["PATH"]}'),
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return workspace / 'install' / 'valve_sim'
+
+
+def sourced(prefix):
+    """Return the environment `source install/setup.bash` gives for this one package."""
+    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
+    return dict(
+        os.environ,
+        AMENT_PREFIX_PATH=str(prefix),
+        PYTHONPATH=str(site / 'site-packages'),
+        PYTHONUNBUFFERED='1',
+    )
+
+
+def test_the_install_space_has_its_code_config_and_launch_file(install):
+    code = (
+        'from valve_sim.core.parameters import config_path; '
+        "import valve_sim; print(valve_sim.__file__); print(config_path('reference.yaml'))"
+    )
+    module, config = subprocess.run(
+        [sys.executable, '-c', code],
+        env=sourced(install),
+        cwd=install.parent.parent,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    assert Path(module).is_relative_to(install), 'the installed code, not the source tree'
+    assert Path(config) == install / 'share' / 'valve_sim' / 'config' / 'reference.yaml'
+    share = install / 'share' / 'valve_sim'
+    for name in ('package.xml', 'LICENSE', 'config/table2.yaml', 'launch/valve_sim.launch.py'):
+        assert (share / name).is_file(), name
+
+
+def test_installed_valve_node_starts_from_another_folder_and_publishes(
+    install, context, tmp_path
+):
+    log_path = tmp_path / 'valve_node.log'
+    with open(log_path, 'w') as log:
+        process = subprocess.Popen(
+            [str(install / 'lib' / 'valve_sim' / 'valve_node'), '--ros-args', '-r',
+             '__ns:=/installed'],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=sourced(install),
+            cwd=tmp_path,
+        )
+    probe = Probe(context, '/installed')
+    try:
+        probe.wait_for(
+            lambda: probe.pressures['supply_pressure'] or process.poll() is not None,
+            'supply_pressure from the installed valve_node',
+            timeout=START_TIMEOUT,
+        )
+        assert process.poll() is None, log_path.read_text()
+        probe.wait_for_new_samples(100)
+        assert probe.non_finite == 0
+        assert 7e6 < probe.latest()[1] < 7.2e6  # [Pa abs] 5 L/min: 7 MPa gauge
+    finally:
+        probe.close()
+        exit_code = stop_node(process)
+    assert exit_code == 0, log_path.read_text()
+    assert 'ready: model kernels compiled or loaded' in log_path.read_text()
+
+
+def test_installed_analyser_help_exits_0_and_writes_nothing(install, tmp_path):
+    result = subprocess.run(
+        [str(install / 'lib' / 'valve_sim' / 'analyser_node'), '--help'],
+        env=sourced(install),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert 'usage: analyser_node' in result.stdout and 'output_dir' in result.stdout
+    assert list(tmp_path.iterdir()) == [], 'nothing recorded'
+
+
+def launch_calls(tree, name):
+    """Yield the keyword dicts of every call of name (e.g. Node) in a parsed file."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and name in (
+            getattr(node.func, 'id', None),
+            getattr(node.func, 'attr', None),
+        ):
+            yield {keyword.arg: keyword.value for keyword in node.keywords}, node.args
+
+
+def test_launch_file_compiles_and_names_only_what_is_installed(install):
+    """launch_ros cannot be installed here: the file compiles and all it names exists."""
+    path = install / 'share' / 'valve_sim' / 'launch' / 'valve_sim.launch.py'
+    source = path.read_text()
+    compile(source, str(path), 'exec')
+    tree = ast.parse(source)
+    constants = {
+        target.id: statement.value.value
+        for statement in tree.body
+        if isinstance(statement, ast.Assign) and isinstance(statement.value, ast.Constant)
+        for target in statement.targets
+    }
+    declared = {args[0].value for _, args in launch_calls(tree, 'DeclareLaunchArgument')}
+    assert declared == {'params_file', 'namespace', 'use_sim_time', 'output_dir'}
+    used = {args[0].value for _, args in launch_calls(tree, 'LaunchConfiguration')}
+    assert used <= declared
+    joined = [
+        [arg.value for arg in args if isinstance(arg, ast.Constant)]
+        for _, args in launch_calls(tree, 'join')
+    ]
+    assert joined == [['config', 'reference.yaml']]
+    assert (install / 'share' / 'valve_sim' / 'config' / 'reference.yaml').is_file()
+    node_parameters = {
+        'valve_node': {'use_sim_time'},
+        'analyser_node': set(parameter_names()) | {'use_sim_time'},
+    }
+    nodes = list(launch_calls(tree, 'Node'))
+    assert len(nodes) == 2
+    for keywords, _ in nodes:
+        assert constants[keywords['package'].id] == 'valve_sim'
+        executable = keywords['executable'].value
+        assert os.access(install / 'lib' / 'valve_sim' / executable, os.X_OK), executable
+        names = {
+            key.value
+            for element in keywords['parameters'].elts
+            if isinstance(element, ast.Dict)
+            for key in element.keys
+        }
+        assert names <= node_parameters[executable], (executable, names)
+
+
+def test_license_and_rosdep_keys():
+    license_text = (REPO / 'LICENSE').read_text()
+    assert 'Apache License' in license_text and 'Version 2.0, January 2004' in license_text
+    package = ElementTree.parse(REPO / 'package.xml').getroot()
+    assert package.findtext('license') == 'Apache-2.0'
+    keys = [
+        element.text
+        for element in package
+        if element.tag.endswith('depend') and element.tag != 'buildtool_depend'
+    ]
+    assert keys and sorted(set(keys)) == sorted(keys), 'no key twice'
+    unchecked = [key for key in keys if key not in ROSDEP_KEYS]
+    assert unchecked == [], f'rosdep keys not checked against rosdistro: {unchecked}'
