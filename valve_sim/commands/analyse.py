@@ -92,6 +92,11 @@ def read_recording(path, signal_map=None, required=REQUIRED):
     rows.extend(joiner.finish())
     found = {channel.topic for channel in reader.channels.values()}
     for role in required:
+        if signal_map.topics[role] not in found and reader.problem:
+            raise InputFileError(
+                f'{reader.problem}. Nothing of {signal_map.topics[role]} ({role}) could be read '
+                'before the end: no chunk of the file is complete'
+            )
         if signal_map.topics[role] not in found:
             raise InputFileError(
                 f'{path} has no topic {signal_map.topics[role]} ({role}); its topics: '

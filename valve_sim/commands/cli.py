@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line: simulate, study, operating-point, analyse, demo.
+The `valve-sim` command line: simulate, study, operating-point, analyse, repair, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -37,6 +37,10 @@ SUBCOMMANDS = {
         'exact steady state, flows, forces and linear modes at a flow',
     ),
     'analyse': ('valve_sim.commands.analyse', 'step measures of a recorded rosbag2 MCAP file'),
+    'repair': (
+        'valve_sim.commands.repair',
+        'rewrite a truncated or crash-ended MCAP file complete (as `mcap recover`)',
+    ),
     'demo': (
         'valve_sim.commands.demo',
         "valve_node + analyser_node over DDS: the paper's step, recorded and measured",
