@@ -218,13 +218,14 @@ def test_a_best_effort_publisher_is_recorded_and_its_qos_reported(node, tmp_path
     """As rosbag2 does: a SensorDataQoS (best-effort) topic is subscribed best effort."""
     from rclpy.qos import qos_profile_sensor_data
     from std_msgs.msg import Float64
-    from valve_sim.ros.analyser_node import RECORDING_STATUS
+    from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
 
+    recording_status = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its default name
     statuses = []
     subscription = node.create_subscription(
         DiagnosticArray,
         '/diagnostics',
-        lambda array: statuses.extend(s for s in array.status if s.name == RECORDING_STATUS),
+        lambda array: statuses.extend(s for s in array.status if s.name == recording_status),
         10,
     )
     publisher = node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)

@@ -137,7 +137,7 @@ def test_simulation_bag_has_valve_node_layout(simulation_bag, waveforms):
     message, supply = decoded['/supply_pressure']
     assert supply.fluid_pressure == pytest.approx(waveforms['supply_pressure'][0] + 101325.0)
     assert (supply.header.stamp.sec, supply.header.stamp.nanosec) == (START_NS // 10**9, 0)
-    assert message.log_time == message.publish_time == START_NS
+    assert message.publish_time == START_NS < message.log_time  # sent, then received
     assert list(decoded['/joint_states'][1].name) == ['main_valve', 'pilot_poppet']
 
 
@@ -314,10 +314,11 @@ def test_foreign_files_are_clear_errors(tmp_path, capsys):
         channel = writer.register_channel('/foo', 'json', 0)
         writer.add_message(channel, log_time=1, data=b'{}', publish_time=1)
         writer.finish()
+    (tmp_path / 'no_bag').mkdir()
     cases = {
         text: 'is not an MCAP file',
         empty: 'is not an MCAP file (it is empty)',
-        tmp_path: 'is a directory',
+        tmp_path / 'no_bag': 'is a folder with neither metadata.yaml nor .mcap files',
         tmp_path / 'missing.mcap': 'cannot read',
         json_mcap: 'has no topic /supply_pressure',
     }

@@ -167,9 +167,10 @@ def test_operating_point_reports_balances_and_modes():
 
 def test_offline_bag_analyses_to_the_offline_measures(tmp_path):
     bag = tmp_path / 'run.mcap'
-    direct = json.loads(valve_sim('simulate', '--json', '--mcap', str(bag)).stdout)
+    start = ('--start-time', '2026-11-29T12:00:00Z')  # 1795953600 s since the epoch
+    direct = json.loads(valve_sim('simulate', '--json', '--mcap', str(bag), *start).stdout)
     (step,) = json.loads(valve_sim('analyse', str(bag), '--json').stdout)['steps']
-    assert step['t_step'] == pytest.approx(0.25)
+    assert step['t_step'] == pytest.approx(1795953600.25, abs=1e-6)
     assert step['T_1_ms'] == pytest.approx(
         direct['T_1_ms'], abs=0.2
     )  # 1 kHz bag vs 10 kHz samples

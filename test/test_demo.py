@@ -21,6 +21,7 @@ The paper's step recorded and measured.
 import json
 import os
 from pathlib import Path
+import re
 import shutil
 import signal
 import subprocess
@@ -38,14 +39,14 @@ from valve_sim.recording.bag import BagReader
 BAGS = Path(__file__).resolve().parent.parent / 'bags'
 
 
-def run_demo(folder, timeout=300):
+def run_demo(folder, *options, timeout=300):
     """
-    `valve-sim demo --out folder` in its own process group: (exit code, stdout, stderr).
+    `valve-sim demo --out folder *options` in its own process group: (code, stdout, stderr).
 
     On a time-out the whole group goes, so no node outlives the test.
     """
     demo = subprocess.Popen(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'demo', '--out', str(folder)],
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'demo', '--out', str(folder), *options],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -61,8 +62,9 @@ def run_demo(folder, timeout=300):
 
 
 def test_demo_records_and_measures_the_papers_step(tmp_path):
-    code, out, err = run_demo(tmp_path)
+    code, out, err = run_demo(tmp_path, '--foxglove', '0')  # live view on a free port
     assert code == 0, out + err
+    assert re.search(r'Foxglove live view: ws://localhost:[1-9]\d*; layout \S+valve_layout', out)
     assert (
         'both nodes stopped cleanly' in out
         and 'offline analysis of the bag: the same measures' in out

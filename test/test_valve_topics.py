@@ -22,6 +22,7 @@ from valve_sim.core.model import STATE_NAMES
 from valve_sim.recording.bag import message_definition
 from valve_sim.recording.valve_topics import (
     message_class,
+    PRESSURE_FRAMES,
     PRESSURE_TOPICS,
     TICK_TOPICS,
     TickMessages,
@@ -56,7 +57,9 @@ def test_tick_bytes_decode_to_the_state_and_match_an_independent_encoder(seed):
             serialize_dynamic(type_name, message_definition(type_name))[type_name](message) == data
         ), topic
         assert message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec == time_ns
-        assert message.header.frame_id == topic
+        assert message.header.frame_id == (
+            f'relief_valve/{PRESSURE_FRAMES[topic]}' if topic in PRESSURE_TOPICS else ''
+        )
     for index, topic in enumerate(PRESSURE_TOPICS):
         pressure = messages[topic][1]
         assert pressure.fluid_pressure == state[index] + AMBIENT and pressure.variance == 0.0
@@ -80,3 +83,17 @@ def test_refilling_changes_only_stamp_and_values():
     decoded = deserialize_message(second[0], message_class(TOPIC_TYPES[TICK_TOPICS[0]]))
     assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (2, 1)
     assert decoded.fluid_pressure == 1.0 + AMBIENT
+
+
+def test_frame_prefix_places_each_pressure_in_its_own_frame():
+    frames = [
+        deserialize_message(data, message_class(TOPIC_TYPES[topic])).header.frame_id
+        for topic, data in TickMessages('rig_a/valve_1/').fill(0, np.zeros(8), 0.0, AMBIENT)
+        if topic in PRESSURE_TOPICS
+    ]
+    assert frames == [
+        'rig_a/valve_1/supply_port',
+        'rig_a/valve_1/intermediate_chamber',
+        'rig_a/valve_1/pilot_chamber',
+        'rig_a/valve_1/poppet_chamber',
+    ]

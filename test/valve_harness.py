@@ -99,9 +99,9 @@ class Probe:
     The probe lives in the valve's namespace, so relative topic names match.
     """
 
-    def __init__(self, context, namespace='/'):
+    def __init__(self, context, namespace='/', node_name=NODE_NAME):
         self.node = rclpy.create_node('valve_probe', namespace=namespace, context=context)
-        self.valve_name = f'{namespace.rstrip("/")}/{NODE_NAME}'
+        self.valve_name = f'{namespace.rstrip("/")}/{node_name}'
         self.condition = threading.Condition()
         self.pressures = {topic: [] for topic in PRESSURE_TOPICS}  # [(stamp_ns, p [Pa abs])]
         self.joints = []  # [(stamp_ns, x, y, x_dot, y_dot)]
@@ -154,7 +154,7 @@ class Probe:
         for status in message.status:
             if status.hardware_id == self.valve_name:
                 values = {kv.key: kv.value for kv in status.values}
-                values.update(level=status.level[0], message=status.message)
+                values.update(level=status.level[0], message=status.message, name=status.name)
                 with self.condition:
                     self.diagnostics.append(values)
                     self.condition.notify_all()

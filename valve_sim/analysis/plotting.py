@@ -170,3 +170,81 @@ def plot_pressure_increment(path, series):
     axis.legend()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def plot_characteristic(
+    path, inlet_flow, supply_pressure, marks, steady_curve=None, steady_marks=None, title=None
+):
+    """
+    Draw the static characteristic, p_s [MPa] against q_in [L/min], into a PNG at path.
+
+    Top: the whole ramp (filling the supply volume included); bottom: zoomed on
+    the pressures around cracking and rated flow. marks: a
+    valve_sim.analysis.characteristic.Characteristic; steady_curve: (inlet flows
+    [m^3/s], p_s [Pa]) of the exact steady state, drawn dashed; steady_marks: its
+    cracking pressure (dict), listed beside the ramp's.
+    """
+    from valve_sim.analysis.characteristic import split_ramps
+
+    q = np.asarray(inlet_flow, dtype=float) * 6e4
+    p = np.asarray(supply_pressure, dtype=float) * 1e-6
+    rising, falling = split_ramps(inlet_flow)
+    figure, axes = plt.subplots(
+        2, 1, figsize=(8, 8), constrained_layout=True, gridspec_kw={'height_ratios': [1, 2]}
+    )
+    for axis in axes:
+        axis.plot(q[rising], p[rising], color='tab:blue', linewidth=1.0, label='rising ramp')
+        axis.plot(q[falling], p[falling], color='tab:orange', linewidth=1.0, label='falling ramp')
+        if steady_curve is not None:
+            flows, pressure = steady_curve
+            axis.plot(
+                np.asarray(flows) * 6e4,
+                np.asarray(pressure) * 1e-6,
+                'k--',
+                linewidth=0.9,
+                label='exact steady state',
+            )
+        axis.set_ylabel('supply pressure p_s [MPa, gauge]')
+        axis.grid(True, alpha=0.3)
+    points = (
+        ('cracking', marks.cracking_flow, marks.cracking_pressure, 'tab:red', 'o'),
+        ('rated flow', marks.rated_flow, marks.rated_pressure, 'tab:green', 's'),
+        ('reseat', marks.reseat_flow, marks.reseat_pressure, 'tab:purple', 'v'),
+    )
+    marked = []
+    for label, flow, pressure, colour, marker in points:
+        if flow is not None and pressure is not None:
+            axes[1].plot(flow * 6e4, pressure * 1e-6, marker, color=colour, label=label)
+            marked.append(pressure * 1e-6)
+    lines = [f'cracking basis: {marks.basis}']
+    for label, value in (
+        ('cracking', marks.cracking_pressure),
+        ('at rated flow', marks.rated_pressure),
+        ('override', marks.override),
+        ('reseat', marks.reseat_pressure),
+        ('hysteresis', marks.hysteresis),
+    ):
+        lines.append(f'{label}: ' + (f'{value * 1e-6:.4f} MPa' if value is not None else 'none'))
+    if steady_marks and steady_marks.get('cracking_pressure') is not None:
+        lines.append(f'steady-state cracking: {steady_marks["cracking_pressure"] * 1e-6:.4f} MPa')
+    axes[1].text(
+        0.98,
+        0.04,
+        '\n'.join(lines),
+        transform=axes[1].transAxes,
+        ha='right',
+        va='bottom',
+        fontsize=8,
+        family='monospace',
+        bbox={'facecolor': 'white', 'alpha': 0.85, 'edgecolor': '0.8'},
+    )
+    if marked:
+        low, high = min(marked), max(marked + [float(np.max(p))])
+        margin = max(high - low, 1e-4)
+        axes[1].set_ylim(low - 1.5 * margin, high + 0.5 * margin)
+    axes[1].set_xlabel('inlet flow q_in [L/min]')
+    axes[0].set_title(title or 'Static pressure-flow characteristic (slow ramp up and down)')
+    axes[0].legend(loc='lower right', fontsize=8)
+    axes[1].legend(loc='upper left', fontsize=8)
+    figure.savefig(path, dpi=120)
+    plt.close(figure)

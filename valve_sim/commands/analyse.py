@@ -13,13 +13,18 @@
 # limitations under the License.
 
 """
-Step measures of each inlet-flow step in a rosbag2 MCAP file, as the analyser computes them live.
+Step measures of each inlet-flow step in a rosbag2 MCAP file or bag folder, as measured live.
 
 Reads the signals of valve_sim.analysis.signals (topics mappable by option, so a real rig's
 bag with other names or types works), joins them on the supply-pressure times,
 and runs valve_sim.analysis.step_analysis.StepAnalysis over them. A file whose end is
 missing (a recording killed before it closed) gives what its complete chunks
 hold, with a warning; a damaged or foreign file is an error.
+
+With --characteristic the bag is a slow flow ramp up and down instead (as
+valve-sim characteristic makes one): only supply pressure and inlet flow are
+needed, and valve_sim.analysis.characteristic finds cracking and reseat from the
+pressure-flow curve (a bag holds no main-stage flow; docs/characteristic.md).
 """
 
 from dataclasses import dataclass
@@ -38,9 +43,11 @@ from valve_sim.analysis.signals import (
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis
+from valve_sim.commands.simulate import flow_value
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
+from valve_sim.recording.rosbag2_metadata import bag_files
 
 
 PLOT_LEAD = (
@@ -62,35 +69,33 @@ class Recording:
 
 def read_recording(path, signal_map=None, required=REQUIRED):
     """
-    Read a bag file as a Recording.
+    Read a bag (an MCAP file or a rosbag2 bag folder) as a Recording.
 
     Raises InputFileError if a required signal is missing or unreadable.
     """
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
-    reader, decoders, joiner, rows = (
-        BagReader(path),
-        DecoderFactory(),
-        Joiner(required, ['pilot_poppet']),
-        [],
-    )
-    extractors = {}
+    decoders, joiner, rows = DecoderFactory(), Joiner(required, ['pilot_poppet']), []
     wanted = {signal_map.topics[role] for role in required + ('pilot_poppet',)}
-    for channel, schema, message in reader.messages(wanted):
-        if channel.id not in extractors:
-            extractors[channel.id] = _extractor(path, channel, schema, signal_map, decoders)
-        extractor, decode = extractors[channel.id]
-        try:
-            decoded = decode(message.data)
-        except Exception as error:  # the decoder raises anything from struct.error to IndexError
-            raise InputFileError(
-                f'{path}: a message on {channel.topic} does not decode: {error}'
-            ) from error
-        for role, time_ns, value in extractor.samples(decoded, message.log_time):
-            rows.extend(joiner.add(role, time_ns, value))
+    found, problems = set(), []
+    for file in bag_files(path):  # a file, or the files of a bag folder in order
+        reader, extractors = BagReader(file), {}
+        for channel, schema, message in reader.messages(wanted):
+            if channel.id not in extractors:
+                extractors[channel.id] = _extractor(file, channel, schema, signal_map, decoders)
+            extractor, decode = extractors[channel.id]
+            try:
+                decoded = decode(message.data)
+            except Exception as error:  # the decoder raises anything, struct.error to IndexError
+                raise InputFileError(
+                    f'{file}: a message on {channel.topic} does not decode: {error}'
+                ) from error
+            for role, time_ns, value in extractor.samples(decoded, message.log_time):
+                rows.extend(joiner.add(role, time_ns, value))
+        found.update(channel.topic for channel in reader.channels.values())
+        problems += [reader.problem] if reader.problem else []
     rows.extend(joiner.finish())
-    found = {channel.topic for channel in reader.channels.values()}
     for role in required:
         if signal_map.topics[role] not in found and reader.problem:
             raise InputFileError(
@@ -112,7 +117,9 @@ def read_recording(path, signal_map=None, required=REQUIRED):
         for role in ('supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow')
     }
     return Recording(
-        np.array([seconds(time_ns) for time_ns, _ in rows]), problem=reader.problem, **column
+        np.array([seconds(time_ns) for time_ns, _ in rows]),
+        problem='; '.join(problems) or None,
+        **column,
     )
 
 
@@ -213,7 +220,9 @@ def print_steps(records, recording):
 
 def add_arguments(parser):
     parser.add_argument(
-        'bag', metavar='BAG.mcap', help="rosbag2 MCAP file (valve_node's topics, or mapped ones)"
+        'bag',
+        metavar='BAG',
+        help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
     )
     parser.add_argument('--json', action='store_true', help='print the step records as JSON')
     parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
@@ -261,6 +270,19 @@ def add_arguments(parser):
         'instead of detecting steps; the inlet flow is then not needed',
     )
     parser.add_argument(
+        '--characteristic',
+        action='store_true',
+        help='the bag is a slow flow ramp up and down: report the static characteristic '
+        '(cracking, rated-flow and reseat pressures, override, hysteresis) instead of steps',
+    )
+    parser.add_argument(
+        '--rated-flow',
+        type=flow_value,
+        metavar='Q',
+        help='with --characteristic: rated flow of the valve (default: the largest inlet flow '
+        'in the bag)',
+    )
+    parser.add_argument(
         '--step-direction',
         choices=('up', 'down'),
         default='up',
@@ -281,7 +303,46 @@ def signal_map_from(args):
     )
 
 
+def run_characteristic(args):
+    """--characteristic: the static characteristic of a recorded ramp."""
+    from valve_sim.analysis.characteristic import characteristic
+
+    recording = read_recording(
+        args.bag, signal_map_from(args), ('supply_pressure', 'inlet_flow')
+    )
+    if recording.problem:
+        print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)
+    rated = args.rated_flow or float(np.max(recording.inlet_flow))
+    if not rated > 0.0:
+        raise InputFileError(f'{args.bag}: the inlet flow is never above 0 (no ramp)')
+    try:
+        marks = characteristic(recording.supply_pressure, recording.inlet_flow, rated)
+    except ValueError as error:
+        raise InputFileError(f'{args.bag}: {error}') from error
+    if args.plot:
+        from valve_sim.analysis.plotting import plot_characteristic
+
+        plot_characteristic(
+            args.plot,
+            recording.inlet_flow,
+            recording.supply_pressure,
+            marks,
+            title=f'Static characteristic of {args.bag}',
+        )
+        print(f'wrote {args.plot}', file=sys.stderr)
+    if args.json:
+        print(json.dumps({'bag': str(args.bag), 'characteristic': marks.as_dict()}, indent=2))
+    else:
+        from valve_sim.commands.characteristic import print_marks
+
+        print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}')
+        print_marks(marks, {})
+    return 0
+
+
 def run(args):
+    if args.characteristic:
+        return run_characteristic(args)
     required = REQUIRED if args.step_time is None else ('supply_pressure', 'main_valve')
     recording = read_recording(args.bag, signal_map_from(args), required)
     if recording.problem:

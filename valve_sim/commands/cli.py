@@ -13,7 +13,9 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line: simulate, study, operating-point, analyse, repair, demo.
+The `valve-sim` command line.
+
+Subcommands: simulate, study, operating-point, characteristic, analyse, repair, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -36,7 +38,14 @@ SUBCOMMANDS = {
         'valve_sim.commands.operating_point',
         'exact steady state, flows, forces and linear modes at a flow',
     ),
-    'analyse': ('valve_sim.commands.analyse', 'step measures of a recorded rosbag2 MCAP file'),
+    'characteristic': (
+        'valve_sim.commands.characteristic',
+        'static pressure-flow characteristic from a slow flow ramp up and down',
+    ),
+    'analyse': (
+        'valve_sim.commands.analyse',
+        'step measures (or --characteristic) of a recorded rosbag2 MCAP file or bag folder',
+    ),
     'repair': (
         'valve_sim.commands.repair',
         'rewrite a truncated or crash-ended MCAP file complete (as `mcap recover`)',

@@ -29,6 +29,7 @@ Exits 1 with one line saying what is missing if any measure, the bag or the figu
 import json
 import math
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -57,9 +58,16 @@ def progress(text):
     print(f'demo: {text}', flush=True)
 
 
-def start_nodes(folder):
-    """{name: Popen} of valve_node and analyser_node (recording into folder), logs in folder."""
-    arguments = {'valve_node': [], 'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}']}
+def start_nodes(folder, foxglove_port=None):
+    """
+    Start valve_node and analyser_node (recording into folder), logs in folder.
+
+    foxglove_port: valve_node serves its live view there. Returns {name: Popen}.
+    """
+    arguments = {
+        'valve_node': [] if foxglove_port is None else ['--foxglove', str(foxglove_port)],
+        'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}'],
+    }
     processes = {}
     for name in NODES:
         with open(folder / f'{name}.log', 'wb') as log:
@@ -96,14 +104,15 @@ def stop_nodes(processes, folder):
 class Driver:
     """The demo's own node: commands the inlet flow, follows the valve and the analyser."""
 
-    def __init__(self, processes, folder):
+    def __init__(self, processes, folder, live_view=False):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64
-        from valve_sim.ros.analyser_node import MEASURES_QOS, RECORDING_STATUS
+        from valve_sim.ros.analyser_node import MEASURES_QOS, NODE_NAME, RECORDING_TASK
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
+        self.live_view = live_view  # valve_node serves one: say where, once it runs
         self.node = Node('valve_demo')
         self.bag = None  # the analyser's file, once it records every topic
         self.measures = []  # step_measures messages
@@ -112,7 +121,8 @@ class Driver:
         self.node.create_timer(COMMAND_PERIOD, lambda: publisher.publish(Float64(data=self.flow)))
 
         def on_status(array):
-            for status in (s for s in array.status if s.name == RECORDING_STATUS):
+            recording = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its name
+            for status in (s for s in array.status if s.name == recording):
                 values = {pair.key: pair.value for pair in status.values}
                 if all(
                     int(count) > 0 for key, count in values.items() if key.startswith('messages /')
@@ -161,6 +171,8 @@ class Driver:
             'recording of every topic by the analyser',
         )
         progress(f'analyser records every topic to {self.bag}')
+        if self.live_view:
+            self._announce_live_view()
         self._hold_in_real_time()
         self.flow = FINAL_FLOW
         progress(
@@ -170,6 +182,15 @@ class Driver:
         self.spin_until(lambda: self.measures, MEASURES_TIMEOUT, 'step measures from the analyser')
         self._spin_for(AFTER_MEASURES)
         return self.bag
+
+    def _announce_live_view(self):
+        """Print the address valve_node logged for its Foxglove server, and the layout."""
+        from valve_sim.ros.live_view import layout_path
+
+        log = self.folder / 'valve_node.log'
+        found = re.search(r'Foxglove live view on ws://[\w.]+:(\d+)', log.read_text())
+        address = f'ws://localhost:{found[1]}' if found else f'nowhere (see {log})'
+        progress(f'Foxglove live view: {address}; layout {layout_path()}')
 
     def _hold_in_real_time(self):
         """
@@ -248,11 +269,19 @@ def report(folder, bag):
 
 
 def add_arguments(parser):
+    from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT
+
     parser.add_argument(
         '--out',
         metavar='DIR',
         help='folder for the bag, measures JSON, figure and logs (default: a new '
         'demo_<date>-<time> folder in the current directory)',
+    )
+    add_port_option(
+        parser,
+        'valve_node serves a live view over the Foxglove WebSocket protocol on this port '
+        f'of this machine (default {DEFAULT_PORT}; 0: any free port): open it in the Foxglove '
+        'app with the layout share/valve_sim/foxglove/valve_layout.json',
     )
 
 
@@ -271,10 +300,10 @@ def run(args):
     folder = folder.resolve()
     progress(f'output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
     progress('starting valve_node and analyser_node')
-    processes = start_nodes(folder)
+    processes = start_nodes(folder, args.foxglove)
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
-        bag = Driver(processes, folder).run_step()
+        bag = Driver(processes, folder, args.foxglove is not None).run_step()
     finally:
         rclpy.try_shutdown()
         progress('stopping both nodes (SIGINT)')

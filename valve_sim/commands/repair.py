@@ -20,31 +20,47 @@ rosbags, rosbag2 and the mcap library's indexed reader refuse it. The repaired
 copy holds every schema, channel, message, metadata and attachment record still
 in the file (those of a chunk cut short too, when it is uncompressed), with
 chunk and message indexes, statistics and summary, so any MCAP reader opens it.
-The source is only read.
+The source is only read. A rosbag2 bag folder is repaired file by file into a
+new folder.
 """
 
 from pathlib import Path
 
 from valve_sim.recording.recovery import repair
+from valve_sim.recording.rosbag2_metadata import bag_files, METADATA_FILE
 
 
 def add_arguments(parser):
-    parser.add_argument('bag', metavar='BAG.mcap', help='the damaged MCAP file (only read)')
+    parser.add_argument(
+        'bag', metavar='BAG', help='the damaged MCAP file, or a rosbag2 bag folder (only read)'
+    )
     parser.add_argument(
         '-o',
         '--output',
-        metavar='OUT.mcap',
-        help='the complete copy (default: BAG with .repaired.mcap instead of .mcap)',
+        metavar='OUT',
+        help='the complete copy (default: BAG.repaired.mcap beside a file, '
+        'BAG_repaired/ beside a folder)',
     )
 
 
 def default_output(bag):
-    """BAG.mcap -> BAG.repaired.mcap, beside it."""
+    """Return BAG.repaired.mcap for a file, BAG_repaired for a folder."""
     bag = Path(bag)
+    if bag.is_dir():
+        return bag.with_name(f'{bag.name}_repaired')
     return bag.with_name(f'{bag.stem}.repaired.mcap')
 
 
 def run(args):
-    report = repair(args.bag, args.output or default_output(args.bag))
-    print(report.summary())
+    output = Path(args.output) if args.output else default_output(args.bag)
+    if not Path(args.bag).is_dir():
+        print(repair(args.bag, output).summary())
+        return 0
+    output.mkdir(parents=True, exist_ok=True)
+    for file in bag_files(args.bag):
+        print(repair(file, output / file.name).summary())
+    print(
+        f'{output} has no {METADATA_FILE}: open its files directly, or let rosbag2 write one '
+        f'(ros2 bag reindex {output} mcap)'
+    )
     return 0

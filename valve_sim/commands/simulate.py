@@ -22,8 +22,10 @@ Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 
 from argparse import ArgumentTypeError
 import csv
+from datetime import datetime, timezone
 import json
 import math
+import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
@@ -55,6 +57,18 @@ def flow_value(text):
     if not math.isfinite(value) or value < 0.0:
         raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
     return value
+
+
+def start_time(text):
+    """ISO 8601 time (UTC unless it says otherwise) -> ns since the epoch (argparse type)."""
+    try:
+        moment = datetime.fromisoformat(text.strip().replace('Z', '+00:00'))
+    except ValueError:
+        raise ArgumentTypeError(f'not an ISO 8601 time: {text!r} (e.g. 2026-11-29T12:00:00Z)')
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=timezone.utc)
+    delta = moment - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
 
 
 def assignment(text):
@@ -179,6 +193,46 @@ def add_arguments(parser):
         help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
         "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
     )
+    add_bag_arguments(parser)
+
+
+def add_bag_arguments(parser):
+    """--bag-folder and --start-time, for the commands that write --mcap."""
+    parser.add_argument(
+        '--bag-folder',
+        action='store_true',
+        help='with --mcap: write a rosbag2 bag folder there instead (metadata.yaml + '
+        '<folder name>_0.mcap; the folder must not exist yet)',
+    )
+    parser.add_argument(
+        '--start-time',
+        type=start_time,
+        metavar='UTC',
+        help='with --mcap: wall-clock time of model time 0, ISO 8601 (e.g. '
+        '2026-11-29T12:00:00Z; default: now, to the millisecond)',
+    )
+
+
+def write_bag(args, waveforms, ambient_pressure, publish_interval):
+    """Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag)."""
+    from valve_sim.recording.valve_topics import write_simulation_bag
+
+    start_ns = args.start_time
+    if start_ns is None:
+        start_ns = time.time_ns() // 1_000_000 * 1_000_000
+    write_simulation_bag(
+        args.mcap,
+        waveforms,
+        ambient_pressure,
+        publish_interval=publish_interval,
+        start_time_ns=start_ns,
+        folder=args.bag_folder,
+    )
+
+
+def check_bag_arguments(args):
+    if (args.bag_folder or args.start_time is not None) and not args.mcap:
+        raise ParameterError('--bag-folder and --start-time need --mcap')
 
 
 def _scenario(args):
@@ -226,6 +280,7 @@ def is_papers_run(params, scenario):
 
 
 def run(args):
+    check_bag_arguments(args)
     params, settings = load_from_arguments(args)
     step_size = settings['step_size']
     scenario = _scenario(args)
@@ -255,16 +310,12 @@ def run(args):
             measures.as_dict(),
         )
     if args.mcap:
-        from valve_sim.recording.valve_topics import write_simulation_bag
-
         # valve_node's 1 kHz ticks where the samples allow it, else every sample.
         ratio = 1e-3 / args.record_interval
         interval = (
             1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
         )
-        write_simulation_bag(
-            args.mcap, waveforms, settings['ambient_pressure'], publish_interval=interval
-        )
+        write_bag(args, waveforms, settings['ambient_pressure'], interval)
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:

@@ -25,13 +25,14 @@ except ImportError:  # pragma: no cover - exercised only on machines without num
     njit = None
 
 
-def jit(function):
+def jit(function, cache=True):
     """
     numba.njit if available, else the function itself.
 
     error_model="numpy": a division by zero gives inf (caught by the state check)
     instead of a Python exception, which keeps branches out of the inner loop.
+    cache=False for a function without a source file (generated with exec).
     """
     if njit is None:
         return function
-    return njit(cache=True, nogil=True, error_model='numpy', inline='always')(function)
+    return njit(cache=cache, nogil=True, error_model='numpy', inline='always')(function)

@@ -19,17 +19,29 @@ A Scenario is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve.
+
+simulate() integrates the whole run. simulate_batch(), for studies, runs many
+parameter sets through one scenario on the lanes kernel and does not integrate
+the stretch before the step when the start is a stable steady state: there the
+flow is constant and the state is the exact steady state, a fixed point of RK4
+(every stage's derivative is zero), so the integration would only reproduce it
+up to rounding. Its samples before the step are then the steady state itself
+(docs/speed.md gives the measured difference). An unstable steady state (a
+linear mode with Re(lambda) >= 0, valve_sim.core.linear) is integrated as in
+simulate(): there rounding errors grow before the step as they would on a rig.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, STATE_NAMES
-from valve_sim.core.steady_state import steady_state
+from valve_sim.core.integrator import advance, advance_lanes
+from valve_sim.core.linear import jacobian
+from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES
+from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
 LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
+LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
 
 
 @dataclass(frozen=True)
@@ -68,24 +80,131 @@ class Waveforms:
         return self.states[:, STATE_NAMES.index(name)]
 
 
+def main_stage_flow(params, states):
+    """Flow through the main stage q_m2 [m^3/s] (Eq. 11) for each row of states."""
+    c = coefficients(params)
+    return np.array([model_flows(state, c)[1] for state in np.asarray(states, dtype=float)])
+
+
+def step_flows(scenario, step_size):
+    """
+    Inlet flow [m^3/s] held during each RK4 step of a run.
+
+    Each step holds the flow at its midpoint: exact for a step on the grid,
+    second order for a ramp.
+    """
+    steps = int(round(scenario.end_time / step_size))
+    return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
+
+
+def _waveforms(initial, record, flows, record_every, step_size, initial_flow):
+    sample_steps = np.arange(1, len(record) + 1) * record_every
+    return Waveforms(
+        time=np.concatenate([[0.0], sample_steps * step_size]),
+        states=np.vstack([initial, record]),
+        inlet_flow=np.concatenate([[initial_flow], flows[sample_steps - 1]]),
+    )
+
+
+def ramp_flows(max_flow, ramp_time, hold_time, step_size):
+    """
+    Inlet flow [m^3/s] per RK4 step of a static-characteristic test.
+
+    0 -> max_flow linearly over ramp_time [s], held for hold_time [s], back to 0
+    over ramp_time (midpoint flows, as step_flows).
+    """
+    ramp = int(round(ramp_time / step_size))
+    up = (np.arange(ramp) + 0.5) / ramp * max_flow
+    return np.concatenate([up, np.full(int(round(hold_time / step_size)), max_flow), up[::-1]])
+
+
+def run_flows(params, flows, step_size=1e-5, record_interval=1e-4, initial_flow=0.0):
+    """
+    Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
+
+    The run starts at the exact steady state of initial_flow [m^3/s] (0: the empty,
+    closed valve). Returns Waveforms sampled every record_interval [s]. Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails.
+    """
+    record_every = max(1, int(round(record_interval / step_size)))
+    flows = np.ascontiguousarray(flows, dtype=float)
+    state = steady_state(params, initial_flow)
+    initial = state.copy()
+    record = advance(state, flows, coefficients(params), step_size, record_every)
+    return _waveforms(initial, record, flows, record_every, step_size, initial_flow)
+
+
 def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
     Raises IntegrationError if the run diverges, SteadyStateError if the start fails.
     """
+    flows = step_flows(scenario, step_size)
+    return run_flows(params, flows, step_size, record_interval, scenario.initial_flow)
+
+
+def steady_lead(flows, initial_flow, record_every):
+    """
+    Count the steps at the start of a run that hold initial_flow, in whole record intervals.
+
+    From the steady state of initial_flow, these need no integration if it is stable.
+    """
+    changed = np.flatnonzero(flows != initial_flow)
+    first = changed[0] if len(changed) else len(flows)
+    return first // record_every * record_every
+
+
+def is_stable(params, state, inlet_flow):
+    """Return whether every linear mode about a steady state decays (all Re(lambda) < 0)."""
+    return bool(np.max(np.linalg.eigvals(jacobian(params, state, inlet_flow)).real) < 0.0)
+
+
+def simulate_batch(
+    params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
+):
+    """
+    Run one scenario for many parameter sets; a list with, per set, Waveforms or the error.
+
+    The same Waveforms as simulate() gives (the same sample times), except that the
+    stretch before the step is not integrated but held at the exact steady state
+    when that is stable (see the module docstring). A set whose start fails gets its
+    SteadyStateError,
+    a run that diverges its IntegrationError, in place of Waveforms; the other
+    sets are not affected. lanes: how many runs the kernel advances together.
+    """
     record_every = max(1, int(round(record_interval / step_size)))
-    steps = int(round(scenario.end_time / step_size))
-    step_starts = np.arange(steps) * step_size
-    # Each step holds the flow at its midpoint: exact for a step on the grid,
-    # second order for a ramp.
-    flows = scenario.inlet_flow(step_starts + 0.5 * step_size)
-    state = steady_state(params, scenario.initial_flow)
-    initial = state.copy()
-    record = advance(state, flows, coefficients(params), step_size, record_every)
-    sample_steps = np.arange(1, len(record) + 1) * record_every
-    return Waveforms(
-        time=np.concatenate([[0.0], sample_steps * step_size]),
-        states=np.vstack([initial, record]),
-        inlet_flow=np.concatenate([[scenario.initial_flow], flows[sample_steps - 1]]),
-    )
+    flows = step_flows(scenario, step_size)
+    lead = steady_lead(flows, scenario.initial_flow, record_every)
+    results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
+    for index, params in enumerate(params_list):
+        try:
+            state = steady_state(params, scenario.initial_flow)
+        except SteadyStateError as error:
+            results[index] = error
+            continue
+        starts[index] = (state, coefficients(params))
+        groups[lead if is_stable(params, state, scenario.initial_flow) else 0].append(index)
+    for skipped, ready in groups.items():
+        for first in range(0, len(ready), max(1, lanes)):
+            group = ready[first:first + max(1, lanes)]
+            records, errors = advance_lanes(
+                np.array([starts[index][0] for index in group]),
+                flows[skipped:],
+                [starts[index][1] for index in group],
+                step_size,
+                record_every,
+                time=skipped * step_size,
+            )
+            for lane, index in enumerate(group):
+                initial = starts[index][0]
+                held = np.repeat(initial[np.newaxis], skipped // record_every, axis=0)
+                results[index] = errors[lane] or _waveforms(
+                    initial,
+                    np.concatenate([held, records[lane]]),
+                    flows,
+                    record_every,
+                    step_size,
+                    scenario.initial_flow,
+                )
+    return results

@@ -27,7 +27,7 @@ position is fixed there and its force balance is replaced by the contact conditi
 """
 
 import numpy as np
-from scipy.optimize import root
+from scipy.optimize import brentq, root
 from valve_sim.core.integrator import advance, IntegrationError
 from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.model import (
@@ -313,3 +313,39 @@ def with_preset_pressure(params, pressure):
     preset_pressure and the study's held preset all mean this cracking pressure.
     """
     return {**params, 'pilot_spring_preload': preload_for_cracking_pressure(params, pressure)}
+
+
+def steady_curve(params, inlet_flows):
+    """
+    Exact static characteristic: (p_s [Pa], main-stage flow q_m2 [m^3/s]) at each inlet flow.
+
+    NaN where no steady state is found.
+    """
+    c = coefficients(params)
+    pressure, main = np.full(len(inlet_flows), np.nan), np.full(len(inlet_flows), np.nan)
+    for k, inlet_flow in enumerate(inlet_flows):
+        try:
+            state = steady_state(params, inlet_flow)
+        except SteadyStateError:
+            continue
+        pressure[k], main[k] = state[P_S], flows(state, c)[1]
+    return pressure, main
+
+
+def flow_for_main_stage_flow(params, main_flow, max_flow):
+    """
+    Inlet flow [m^3/s] at which the steady main-stage flow q_m2 equals main_flow [m^3/s].
+
+    Searched between 0 and max_flow [m^3/s] (Brent's method on the exact steady
+    state); raises SteadyStateError if the main stage does not pass main_flow there.
+    """
+    c = coefficients(params)
+
+    def excess(inlet_flow):
+        return flows(steady_state(params, inlet_flow), c)[1] - main_flow
+
+    if excess(max_flow) < 0.0:
+        raise SteadyStateError(
+            f'the main stage passes less than {main_flow:g} m^3/s up to {max_flow:g} m^3/s'
+        )
+    return brentq(excess, main_flow, max_flow, xtol=1e-15, rtol=1e-13)

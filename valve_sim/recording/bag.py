@@ -21,9 +21,12 @@ header profile "ros2"; one schema per type, named "pkg/msg/Type", encoding
 message encoding "cdr" and the metadata "offered_qos_profiles" (qos_profiles_yaml())
 and "topic_type_hash"; messages as serialized CDR with log_time = receive time and
 publish_time = send time [ns]; chunked, uncompressed (rosbag2's default), with
-message indexes, chunk indexes and a Statistics record. Every flush() completes the
-open chunk and hands it to the operating system, so after a hard kill every
-flushed chunk can still be read.
+message indexes, chunk indexes and a Statistics record; the Metadata record 'rosbag2'
+(rosbag2_metadata: the bag's metadata, version 9) when the file opens and again,
+complete, when it closes. Every flush() completes the open chunk and hands it to the
+operating system, so after a hard kill every flushed chunk can still be read.
+BagWriter(folder=True) writes a rosbag2 bag folder: NAME/NAME_0.mcap and, on
+close, NAME/metadata.yaml.
 
 Reading (BagReader) goes through the file record by record, so a file whose end
 is missing (a recording killed before it was closed) still yields every message of
@@ -43,6 +46,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
+from valve_sim.recording import rosbag2_metadata
 from valve_sim.recording.recovery import diagnose
 import yaml
 
@@ -173,24 +177,7 @@ def qos_profiles_yaml(offers):
     offers: dicts like DEFAULT_OFFER (policies as rmw's lower-case names, durations
     in ns). Returns YAML::Dump's text: a block list, no trailing newline ('[]' if empty).
     """
-
-    def duration(ns):
-        return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
-
-    profiles = [
-        {
-            'history': offer['history'],
-            'depth': offer['depth'],
-            'reliability': offer['reliability'],
-            'durability': offer['durability'],
-            'deadline': duration(offer['deadline_ns']),
-            'lifespan': duration(offer['lifespan_ns']),
-            'liveliness': offer['liveliness'],
-            'liveliness_lease_duration': duration(offer['liveliness_lease_duration_ns']),
-            'avoid_ros_namespace_conventions': offer['avoid_ros_namespace_conventions'],
-        }
-        for offer in offers
-    ]
+    profiles = rosbag2_metadata.qos_profiles(offers)
     if not profiles:
         return '[]'
     return yaml.safe_dump(profiles, sort_keys=False, default_flow_style=False).rstrip('\n')
@@ -198,15 +185,24 @@ def qos_profiles_yaml(offers):
 
 class BagWriter:
     """
-    Writes one rosbag2-style MCAP file.
+    Writes one rosbag2-style MCAP file, or a rosbag2 bag folder holding one.
 
-    add_topic() once per topic, then write() serialized messages.
+    add_topic() once per topic, then write() serialized messages. path is the file,
+    or with folder=True the bag folder (it must not exist yet, as for rosbag2);
+    self.path is then the MCAP file in it. custom_data: {str: str} for the metadata.
     """
 
-    def __init__(self, path, chunk_size=CHUNK_SIZE):
-        self.path = Path(path)
+    def __init__(self, path, chunk_size=CHUNK_SIZE, folder=False, custom_data=None):
+        self.folder = Path(path) if folder else None
+        self.path = self.folder / f'{self.folder.name}_0.mcap' if folder else Path(path)
         try:
+            if folder:
+                self.folder.mkdir(parents=True, exist_ok=False)
             self._file = open(self.path, 'wb')
+        except FileExistsError as error:
+            raise InputFileError(
+                f'bag folder {self.folder} already exists; rosbag2 does not overwrite a bag'
+            ) from error
         except OSError as error:
             raise InputFileError(f'cannot write {self.path}: {error.strerror}') from error
         self._mcap = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.NONE)
@@ -214,9 +210,13 @@ class BagWriter:
         self._schemas = {}
         self._encoders = {}  # type name -> CDR encoder (write_message)
         self._channel_types = {}  # channel id -> type name
+        self._topics = {}  # channel id -> [topic, type, offers, type hash, message count]
+        self._custom_data = custom_data
+        self._log_times = [rosbag2_metadata.NOT_STARTED_NS, 0]  # first, last [ns]
         self.channels = {}  # topic -> channel id
         self.message_count = 0
         self.bytes_written = 0  # [bytes] message payloads
+        self._write_metadata()  # as rosbag2 does on opening: distro, file, no messages yet
 
     def add_topic(self, topic, type_name, offers=(DEFAULT_OFFER,)):
         """
@@ -232,17 +232,39 @@ class BagWriter:
             'offered_qos_profiles': qos_profiles_yaml(offers),
             'topic_type_hash': type_hash(type_name),
         }
-        self.channels[topic] = self._mcap.register_channel(
-            topic, 'cdr', self._schemas[type_name], metadata
-        )
-        self._channel_types[self.channels[topic]] = type_name
-        return self.channels[topic]
+        channel_id = self._mcap.register_channel(topic, 'cdr', self._schemas[type_name], metadata)
+        self.channels[topic] = channel_id
+        self._channel_types[channel_id] = type_name
+        self._topics[channel_id] = [topic, type_name, list(offers), type_hash(type_name), 0]
+        return channel_id
 
     def write(self, channel_id, data, log_time, publish_time):
         """Add one serialized (CDR) message; times in ns (receive time, send time)."""
         self._mcap.add_message(channel_id, log_time=log_time, data=data, publish_time=publish_time)
+        self._topics[channel_id][4] += 1
+        times = self._log_times
+        if log_time < times[0]:
+            times[0] = log_time
+        if log_time > times[1]:
+            times[1] = log_time
         self.message_count += 1
         self.bytes_written += len(data)
+
+    def metadata(self):
+        """Return the rosbag2 BagMetadata (a dict) of what was written so far."""
+        return rosbag2_metadata.bag_metadata(
+            self.path.name,
+            [tuple(topic) for topic in self._topics.values()],
+            *self._log_times,
+            custom_data=self._custom_data,
+        )
+
+    def _write_metadata(self):
+        """Add the Metadata record 'rosbag2' as rosbag2's mcap_storage update_metadata does."""
+        self._mcap.add_metadata(
+            rosbag2_metadata.RECORD_NAME,
+            {rosbag2_metadata.RECORD_KEY: rosbag2_metadata.dump(self.metadata())},
+        )
 
     def write_message(self, topic, message, log_time, publish_time):
         """
@@ -276,13 +298,17 @@ class BagWriter:
 
     def close(self):
         """
-        Write the summary and the footer; close the file.
+        Write the final rosbag2 metadata, the summary and the footer; close the file.
 
-        The summary holds the schemas, channels, statistics and indexes.
+        The summary holds the schemas, channels, statistics and indexes. A bag
+        folder gets its metadata.yaml.
         """
         if not self._file.closed:
+            self._write_metadata()
             self._mcap.finish()
             self._file.close()
+            if self.folder:
+                rosbag2_metadata.write_metadata_file(self.folder, self.metadata())
 
 
 class BagReader:
@@ -299,7 +325,9 @@ class BagReader:
         self.channels = {}  # id -> Channel
         self.schemas = {}  # id -> Schema
         if self.path.is_dir():
-            raise InputFileError(f'{self.path} is a directory; give the .mcap file in it')
+            raise InputFileError(
+                f'{self.path} is a directory; rosbag2_metadata.bag_files() gives its .mcap files'
+            )
         try:
             with open(self.path, 'rb') as file:
                 magic = file.read(len(MCAP_MAGIC))

@@ -22,13 +22,19 @@ in absolute Pa (model gauge pressure + ambient_pressure), joint_states
 (inlet_flow: velocity = the inlet flow [m^3/s] applied over the interval ending at
 the stamp), all stamped with the model time. The inlet_flow command is
 std_msgs/msg/Float64 [m^3/s].
+
+Frames: each pressure is measured at a place of the valve, its header.frame_id
+frame_prefix + PRESSURE_FRAMES[topic] (valve_node's frame_prefix parameter, by
+default its node name and '/'), so a user can place each sensor in TF. The joint
+states carry no frame (frame_id ''), as joint_state_publisher's do.
 """
 
 import importlib
 
+import numpy as np
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
-from valve_sim.core.parameters import ParameterError, STANDARD_ATMOSPHERE
+from valve_sim.core.parameters import NODE_NAME, ParameterError, STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.cdr import CdrMessage
 
@@ -42,7 +48,22 @@ TOPIC_TYPES = {
     'applied_inlet_flow': 'sensor_msgs/msg/JointState',
     'inlet_flow': 'std_msgs/msg/Float64',
 }
+PRESSURE_FRAMES = dict(  # where each pressure is measured
+    zip(
+        PRESSURE_TOPICS,
+        ('supply_port', 'intermediate_chamber', 'pilot_chamber', 'poppet_chamber'),
+    )
+)
+DEFAULT_FRAME_PREFIX = NODE_NAME + '/'
 NS_PER_S = 1_000_000_000
+# Receive time - send time of an offline bag's messages: one hop of the bench's bare echo
+# round trip on this machine (p50 0.66 ms, p99 1.56 ms, docs/valve_node.md) is 0.33 ms
+# (p50); modelled as a fixed part plus an exponential jitter, capped so that each
+# topic's messages still arrive in order (ticks are 1 ms apart). Seeded: same bag each run.
+TRANSPORT_DELAY_NS = 250_000  # [ns] fixed part
+TRANSPORT_JITTER_NS = 100_000  # [ns] mean of the exponential part
+TRANSPORT_JITTER_CAP_NS = 500_000  # [ns]
+TRANSPORT_SEED = 14
 
 
 def message_class(type_name):
@@ -58,23 +79,23 @@ class TickMessages:
     fill() writes the state (8 model states, SI, gauge pressures) at time_ns [ns]
     into them and returns [(topic, CDR bytes)]. valve_node publishes these; the
     offline bag writer and the replay publisher write them: one layout for all.
-    Each message's header.frame_id is its topic name.
+    A pressure's header.frame_id is frame_prefix + its PRESSURE_FRAMES name.
     """
 
-    def __init__(self):
+    def __init__(self, frame_prefix=DEFAULT_FRAME_PREFIX):
         self._messages = []
         self._pressure_offsets = []
         for name in PRESSURE_TOPICS:  # sensor_msgs/FluidPressure
-            message = CdrMessage(frame_id=name)
+            message = CdrMessage(frame_id=frame_prefix + PRESSURE_FRAMES[name])
             self._pressure_offsets.append(message.float64())  # fluid_pressure
             message.float64()  # variance: 0, unknown
             self._messages.append((name, message))
-        self._joints = CdrMessage(frame_id='joint_states')  # sensor_msgs/JointState
+        self._joints = CdrMessage(frame_id='')  # sensor_msgs/JointState
         self._joints.strings(JOINT_NAMES)
         self._joint_positions = self._joints.float64s(len(JOINT_NAMES))
         self._joint_velocities = self._joints.float64s(len(JOINT_NAMES))
         self._joints.float64s(0)  # effort
-        self._applied = CdrMessage(frame_id='applied_inlet_flow')
+        self._applied = CdrMessage(frame_id='')
         self._applied.strings(['inlet_flow'])
         self._applied.float64s(0)  # position
         self._applied_velocity = self._applied.float64s(1)
@@ -98,18 +119,33 @@ class TickMessages:
         return tick
 
 
+def transport_delays(count, seed=TRANSPORT_SEED):
+    """Return count receive - send delays [ns] of the offline bag's transport model (seeded)."""
+    jitter = np.random.default_rng(seed).exponential(TRANSPORT_JITTER_NS, count)
+    return TRANSPORT_DELAY_NS + np.minimum(jitter, TRANSPORT_JITTER_CAP_NS).astype(np.int64)
+
+
 def write_simulation_bag(
-    path, waveforms, ambient_pressure=STANDARD_ATMOSPHERE, publish_interval=1e-3, start_time_ns=0
+    path,
+    waveforms,
+    ambient_pressure=STANDARD_ATMOSPHERE,
+    publish_interval=1e-3,
+    *,
+    start_time_ns,
+    folder=False,
+    frame_prefix=DEFAULT_FRAME_PREFIX,
 ):
     """
     Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
 
     waveforms: simulation.Waveforms; every sample publish_interval [s] apart (a
     whole multiple of the waveforms' sample interval) becomes one tick, stamped
-    start_time_ns [ns] + its model time. inlet_flow carries the command: the first
-    flow at the start and each change at the last tick before it was applied.
-    log_time = publish_time = the stamp (an offline run has no transport).
-    Returns the number of ticks written; raises ParameterError for a bad interval.
+    start_time_ns [ns since the epoch] + its model time, sent (publish_time) at its
+    stamp. inlet_flow carries the command: the first flow at the start and each
+    change at the last tick before it was applied. Each message is received
+    (log_time) after a transport delay (transport_delays()). folder: write a
+    rosbag2 bag folder at path instead of a file. Returns the number of ticks
+    written; raises ParameterError for a bad interval.
     """
     record_interval = waveforms.time[1] - waveforms.time[0]
     every = round(publish_interval / record_interval)
@@ -118,12 +154,15 @@ def write_simulation_bag(
             f'publish interval {publish_interval:g} s is not a whole multiple of the '
             f"waveforms' sample interval {record_interval:g} s"
         )
-    bag = BagWriter(path)
-    tick = TickMessages()
+    bag = BagWriter(
+        path, folder=folder, custom_data={'source': 'valve-sim simulate (offline model run)'}
+    )
+    tick = TickMessages(frame_prefix)
+    indices = range(0, len(waveforms.time), every)
+    delays = iter(transport_delays(len(indices) * (len(TICK_TOPICS) + 1)).tolist())
     try:
         for topic, type_name in TOPIC_TYPES.items():
             bag.add_topic('/' + topic, type_name)
-        indices = range(0, len(waveforms.time), every)
         commanded = None
         for previous, index in zip([None, *indices], indices):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
@@ -134,10 +173,12 @@ def write_simulation_bag(
                     if previous is None
                     else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
                 )
-                bag.write_message('/inlet_flow', Float64(data=flow), command_ns, command_ns)
+                bag.write_message(
+                    '/inlet_flow', Float64(data=flow), command_ns + next(delays), command_ns
+                )
                 commanded = flow
             for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
-                bag.write(bag.channels['/' + topic], data, time_ns, time_ns)
+                bag.write(bag.channels['/' + topic], data, time_ns + next(delays), time_ns)
         return len(indices)
     finally:
         bag.close()

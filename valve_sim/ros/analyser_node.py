@@ -21,20 +21,25 @@ It records as rosbag2 does.
        namespace), serialized, of whatever type the graph reports for it
   pub  step_measures   diagnostic_msgs/msg/DiagnosticArray, reliable, transient local:
        one message per measured step, header.stamp = t_step, one DiagnosticStatus
-       (name "valve_analyser: step measures", hardware_id = the bag file name,
+       (name "<node name>: step measures", hardware_id = the parameter hardware_id,
        level OK, or WARN when a measure is undefined) with one KeyValue per measure
        (P_o_percent ... T_s_ms: the number, or "none"), "<measure>_reason" for
        each undefined one, and t_step_s, direction (+1 / -1), flow_before_m3_s,
-       window_s and note (a truncated window).
-  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "valve_analyser:
+       window_s, note (a truncated window) and bag (the file it was recorded in).
+  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "<node name>:
        recording": the file, the messages recorded per topic and, for a topic with
        one publisher, the messages lost on the way (gaps in its publication
        sequence numbers), the QoS of each subscription ("qos /topic":
-       reliable/volatile ...); WARN while a topic has no message yet or once any was lost.
+       reliable/volatile ...); ERROR once a wanted topic cannot be recorded (its type
+       is unknown here), else WARN while a topic has no message yet or once any was
+       lost, else OK. Names and hardware_id as diagnostic_updater has them
+       (valve_sim.ros.diagnostics).
 
 One recording per run: output_dir/valve_<date>-<time>.mcap, and beside it
 <same name>.measures.json ({"bag", "steps"}, step_analysis.MeasuresFile), to
-which each step is appended.
+which each step is appended. With bag_folder:=true a rosbag2 bag folder instead:
+output_dir/valve_<date>-<time>/ holding valve_<date>-<time>_0.mcap, its
+.measures.json and, once closed, metadata.yaml.
 
 QoS, as rosbag2 chooses it: a topic is subscribed once it has a publisher; reliable if
 every publisher is reliable, else best effort (so a SensorDataQoS publisher is heard);
@@ -82,7 +87,7 @@ from valve_sim.core.parameters import (
 )
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.valve_topics import message_class
-from valve_sim.ros import spinning
+from valve_sim.ros import diagnostics, spinning
 from valve_sim.ros.ros_parameters import declare_double
 
 
@@ -97,8 +102,8 @@ DEFAULT_TOPICS = [
     'joint_states',
     '/diagnostics',
 ]
-MEASURES_STATUS = 'valve_analyser: step measures'
-RECORDING_STATUS = 'valve_analyser: recording'
+MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
+RECORDING_TASK = 'recording'
 MEASURES_QOS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
@@ -239,11 +244,12 @@ def qos_offer(qos):
     }
 
 
-def measures_message(record, hardware_id):
+def measures_message(record, name, hardware_id, bag):
     """
     Build the step_measures DiagnosticArray of a step record.
 
-    The record is one of valve_sim.analysis.step_analysis.
+    The record is one of valve_sim.analysis.step_analysis; name and hardware_id
+    the status's; bag the name of the file it was recorded in.
     """
 
     def number(value):
@@ -259,12 +265,13 @@ def measures_message(record, hardware_id):
     values.update({f'{name}_reason': reason for name, reason in record['reasons'].items()})
     if 'note' in record['details']:
         values['note'] = record['details']['note']
+    values['bag'] = bag
     summary = ', '.join(
         f'{name} = {record[name]:.4g}' for name in MEASURE_NAMES if record[name] is not None
     )
     status = DiagnosticStatus(
         level=DiagnosticStatus.WARN if record['reasons'] else DiagnosticStatus.OK,
-        name=MEASURES_STATUS,
+        name=name,
         hardware_id=hardware_id,
         message=f'step {"up" if record["direction"] > 0 else "down"}: {summary}',
         values=[KeyValue(key=key, value=value) for key, value in values.items()],
@@ -303,7 +310,12 @@ class ValveAnalyser(Node):
             [self.resolve_topic_name(t) for t in settings['topics']]
             + list(self.signal_map.topics.values())
         )
-        self.bag = BagWriter(self._new_bag_path(Path(settings['output_dir'])))
+        self.hardware_id = diagnostics.declare_hardware_id(self)
+        self.bag = BagWriter(
+            self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
+            folder=settings['bag_folder'],
+            custom_data={'recorded_by': 'valve_sim analyser_node ' + self.hardware_id},
+        )
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
         )
@@ -312,6 +324,7 @@ class ValveAnalyser(Node):
         self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
         self.recorded = {}
+        self.unrecordable = {}  # topic -> why it cannot be recorded
         self.queue_depth = settings['queue_depth']
         self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
@@ -342,6 +355,11 @@ class ValveAnalyser(Node):
             'output_dir': declare(
                 'output_dir', '.', 'folder of the recordings (created if missing)'
             ),
+            'bag_folder': declare(
+                'bag_folder',
+                False,
+                'record a rosbag2 bag folder (metadata.yaml + .mcap) instead of a single .mcap',
+            ),
             'queue_depth': declare(
                 'queue_depth',
                 1000,
@@ -368,9 +386,9 @@ class ValveAnalyser(Node):
         return settings
 
     @staticmethod
-    def _new_bag_path(folder):
+    def _new_bag_path(folder, bag_folder):
         """
-        Return a new file name in folder (created).
+        Return a new file name (or bag folder name) in folder (created).
 
         Raises InputFileError if it cannot be written.
         """
@@ -380,11 +398,11 @@ class ValveAnalyser(Node):
             raise InputFileError(
                 f'output_dir {folder} cannot be created: {error.strerror}'
             ) from error
-        stem = time.strftime('valve_%Y%m%d-%H%M%S')
-        path, k = folder / f'{stem}.mcap', 1
+        stem, suffix = time.strftime('valve_%Y%m%d-%H%M%S'), '' if bag_folder else '.mcap'
+        path, k = folder / f'{stem}{suffix}', 1
         while path.exists():
             k += 1
-            path = folder / f'{stem}_{k}.mcap'
+            path = folder / f'{stem}_{k}{suffix}'
         return path
 
     def _discover(self):
@@ -402,6 +420,7 @@ class ValveAnalyser(Node):
             try:
                 message_type = message_class(type_name)
             except (ImportError, AttributeError, ValueError) as error:
+                self.unrecordable[topic] = f'no message type {type_name} here'
                 self.get_logger().error(
                     f'cannot record {topic}: no message type {type_name} ({error})'
                 )
@@ -502,7 +521,12 @@ class ValveAnalyser(Node):
                 self.measures.append(record)
             except OSError as error:  # name the file: a full disk's error does not
                 raise OSError(error.errno, error.strerror, str(self.measures.path)) from error
-            message = measures_message(record, self.bag.path.name)
+            message = measures_message(
+                record,
+                diagnostics.status_name(self, MEASURES_TASK),
+                self.hardware_id,
+                self.bag.path.name,
+            )
             self.get_logger().info(message.status[0].message)
             self.measures_publisher.publish(message)
 
@@ -510,7 +534,8 @@ class ValveAnalyser(Node):
         """
         Publish the recording status on /diagnostics.
 
-        WARN while a topic has no message or when some were lost.
+        ERROR once a topic cannot be recorded; else WARN while a topic has no
+        message or when some were lost; else OK.
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
@@ -526,17 +551,27 @@ class ValveAnalyser(Node):
             **{f'qos {topic}': recorded.qos for topic, recorded in self.recorded.items()},
             **{f'lost {topic}': str(count) for topic, count in lost.items()},
         }
+        values.update({f'cannot record {t}': why for t, why in self.unrecordable.items()})
         message = (
-            f'no messages yet on {", ".join(waiting)}'
+            f'cannot record {", ".join(self.unrecordable)}'
+            if self.unrecordable
+            else f'no messages yet on {", ".join(waiting)}'
             if waiting
             else f'{sum(lost.values())} message(s) lost before reaching the analyser'
             if lost
             else f'recording to {self.bag.path.name}'
         )
+        level = (
+            DiagnosticStatus.ERROR
+            if self.unrecordable
+            else DiagnosticStatus.WARN
+            if waiting or lost
+            else DiagnosticStatus.OK
+        )
         status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if waiting or lost else DiagnosticStatus.OK,
-            name=RECORDING_STATUS,
-            hardware_id=self.bag.path.name,
+            level=level,
+            name=diagnostics.status_name(self, RECORDING_TASK),
+            hardware_id=self.hardware_id,
             message=message,
             values=[KeyValue(key=key, value=value) for key, value in values.items()],
         )

@@ -88,16 +88,17 @@ class NodeStatus:
         self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
-    def report(self, stamp, name, steady_now_ns, model_time_ns, inputs, settings):
+    def report(self, stamp, name, hardware_id, steady_now_ns, model_time_ns, inputs, settings):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
 
-        stamp: header stamp (builtin_interfaces Time); name: the node's full name;
-        model_time_ns: model time [ns] or None before the first tick; inputs:
-        InputReport; settings: {name: value} shown as they are (units in the names).
+        stamp: header stamp (builtin_interfaces Time); name, hardware_id: the
+        status's (valve_sim.ros.diagnostics); model_time_ns: model time [ns] or None
+        before the first tick; inputs: InputReport; settings: {name: value} shown as
+        they are (units in the names).
         """
         counters, previous = self.counters, self._reported
-        status = DiagnosticStatus(name=f'{name}: valve model', hardware_id=name)
+        status = DiagnosticStatus(name=name, hardware_id=hardware_id)
         status.level, status.message = self._summary(counters, previous, inputs)
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
@@ -123,8 +124,9 @@ class NodeStatus:
         """
         Return (level, message) of the status.
 
-        ERROR while the model is halted and on an overpressure or a divergence in the
-        window, WARN on stale input or skipped time.
+        ERROR: an overpressure or a divergence in the window, or the model halted
+        (state held); WARN: the input is stale, or lag beyond the catch-up limit was
+        skipped; OK otherwise (late ticks are named in the message but stay OK).
         """
         problems, level = [], DiagnosticStatus.OK
         overpressures = counters.overpressures - previous.overpressures

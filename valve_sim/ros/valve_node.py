@@ -33,7 +33,14 @@ Topic and service names are relative, so namespaces and remapping work:
   srv  ~/reset                  std_srvs/Trigger            exact steady state of the current
                                                             inlet flow
 
-All messages of one tick carry the model time of the state as header.stamp.
+With --foxglove [PORT] the node also serves its tick topics and /diagnostics over the
+Foxglove WebSocket protocol (valve_sim.ros.live_view), for a live view without ROS.
+
+All messages of one tick carry the model time of the state as header.stamp; a
+pressure's header.frame_id is frame_prefix (a parameter, default '<node name>/')
++ supply_port, intermediate_chamber, pilot_chamber or poppet_chamber. The
+/diagnostics status is '<node name>: valve model' with hardware_id the parameter
+hardware_id (default: the fully qualified node name), valve_sim.ros.diagnostics.
 The model itself (valve_sim.core.realtime_model) has no ROS in it; this module only
 adapts it: parameters, topics, the tick timer and the reset service.
 See docs/valve_node.md for the behaviour in detail.
@@ -45,16 +52,18 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
+from valve_sim.core.errors import InputFileError
 from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
@@ -82,12 +91,13 @@ from valve_sim.core.steady_state import (
     SteadyStateError,
 )
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
-from valve_sim.ros import spinning
+from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.inlet_input import InletFlowInput
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
 
 
+STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
@@ -116,6 +126,9 @@ class ReliefValveNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         params, self.settings = self._declare_parameters()
+        self.hardware_id = diagnostics.declare_hardware_id(self)
+        self._status_name = diagnostics.status_name(self, STATUS_TASK)
+        self.frame_prefix = self._declare_frame_prefix()
         started = time.perf_counter()
         self.model = RealTimeModel(
             params, self.settings['step_size'], self.settings['initial_inlet_flow']
@@ -134,6 +147,7 @@ class ReliefValveNode(Node):
         self._create_outputs()
         self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, INLET_FLOW_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self.live_view = None  # a LiveView once serve_live_view() started one
         self._housekeeping_due = False
         self._ticks_at_housekeeping = 0
         self.create_timer(
@@ -175,6 +189,18 @@ class ReliefValveNode(Node):
         params = validate({name: values[name] for name in SPECS})
         settings = {name: values[name] for name in SETTING_SPECS}
         return self._declare_preset_pressure(params), settings
+
+    def _declare_frame_prefix(self):
+        """Declare frame_prefix (read-only): the pressures' frames are it + their place."""
+        descriptor = ParameterDescriptor(
+            name='frame_prefix',
+            description=(
+                "prefix of the pressure messages' header.frame_id (+ supply_port, "
+                'intermediate_chamber, pilot_chamber, poppet_chamber); default: node name + /'
+            ),
+            read_only=True,
+        )
+        return self.declare_parameter('frame_prefix', self.get_name() + '/', descriptor).value
 
     def _declare_preset_pressure(self, params):
         """
@@ -423,7 +449,7 @@ class ReliefValveNode(Node):
 
     def _create_outputs(self):
         """Create the publishers of the tick topics and the messages they reuse every tick."""
-        self._tick_messages = TickMessages()
+        self._tick_messages = TickMessages(self.frame_prefix)
         self._tick_publishers = {
             topic: self.create_publisher(
                 message_class(TOPIC_TYPES[topic]), topic, STATE_QUEUE_DEPTH
@@ -434,13 +460,32 @@ class ReliefValveNode(Node):
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
-        for topic, data in self._tick_messages.fill(
+        tick = self._tick_messages.fill(
             self.model.time_ns,
             self.model.state,
             self.applied_flow,
             self.settings['ambient_pressure'],
-        ):
+        )
+        for topic, data in tick:
             self._tick_publishers[topic].publish(data)
+        view = self.live_view
+        if view is not None and view.watched:  # one check per tick when nobody watches
+            for topic, data in tick:
+                view.log(self._tick_publishers[topic].topic_name, data, self.model.time_ns)
+
+    def serve_live_view(self, port, host):
+        """Serve the tick topics and /diagnostics over Foxglove's WebSocket protocol."""
+        topics = {
+            publisher.topic_name: TOPIC_TYPES[topic]
+            for topic, publisher in self._tick_publishers.items()
+        }
+        topics[self._diagnostics.topic_name] = 'diagnostic_msgs/msg/DiagnosticArray'
+        self.live_view = live_view.LiveView(
+            topics, port, host, name=self.get_fully_qualified_name()
+        )
+        self.get_logger().info(
+            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
+        )
 
     def _on_inlet_flow(self, message):
         """Count the message as accepted or rejected; keep it if it is a valid inlet flow."""
@@ -520,16 +565,20 @@ class ReliefValveNode(Node):
             'step_size_s': self.model.step_size,
             'input_timeout_s': self.settings['input_timeout'],
         }
-        self._diagnostics.publish(
-            self.status.report(
-                now.to_msg(),
-                self.get_fully_qualified_name(),
-                time.monotonic_ns(),
-                self.model.time_ns,
-                inputs,
-                settings,
-            )
+        report = self.status.report(
+            now.to_msg(),
+            self._status_name,
+            self.hardware_id,
+            time.monotonic_ns(),
+            self.model.time_ns,
+            inputs,
+            settings,
         )
+        self._diagnostics.publish(report)
+        if self.live_view is not None and self.live_view.watched:
+            self.live_view.log(
+                self._diagnostics.topic_name, serialize_message(report), now.nanoseconds
+            )
 
     def _input_report(self, now_ns):
         """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
@@ -557,6 +606,20 @@ def parse_arguments(args):
             "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
         ),
     )
+    live_view.add_port_option(
+        parser,
+        'serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
+        f'(default port {live_view.DEFAULT_PORT}; 0: any free port). On a ROS install, run '
+        'foxglove_bridge instead',
+    )
+    parser.add_argument(
+        '--foxglove-host',
+        default=live_view.DEFAULT_HOST,
+        metavar='HOST',
+        help='address the Foxglove server listens on '
+        f'(default {live_view.DEFAULT_HOST}, this machine; '
+        '0.0.0.0 for the network)',
+    )
     return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
 
 
@@ -571,11 +634,18 @@ def main(args=None):
         rclpy.try_shutdown()
         return 1
     try:
+        if options.foxglove is not None:
+            node.serve_live_view(options.foxglove, options.foxglove_host)
         node.get_logger().info(f'executor: {options.executor}')
         gc.freeze()  # start-up objects stay out of the garbage collector's scans
         gc.disable()  # the node collects in its housekeeping, between ticks
         spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
+    except InputFileError as error:  # the live view's port or foxglove-sdk
+        node.get_logger().fatal(f'cannot start: {error}')
+        return 1
     finally:
+        if node.live_view is not None:
+            node.live_view.close()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -1,0 +1,111 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The study fast path: the lanes kernel and simulate_batch against the single-run kernel."""
+
+import numpy as np
+import pytest
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.integrator import advance, advance_lanes, IntegrationError
+from valve_sim.core.model import coefficients, P_C, P_S
+from valve_sim.core.parameters import scaled
+from valve_sim.core.simulation import (
+    LITRE_PER_MINUTE,
+    Scenario,
+    simulate,
+    simulate_batch,
+)
+from valve_sim.core.steady_state import steady_state, SteadyStateError
+
+
+def test_lanes_give_exactly_the_single_run_kernel(reference):
+    """Each lane is bit-identical to advance() alone; a diverging lane leaves the others."""
+    variants = [reference, scaled(reference, {'d_c': 10}), scaled(reference, {'k_p': -20})]
+    flows = np.concatenate([np.full(300, 5.0), np.full(4700, 20.0)]) * LITRE_PER_MINUTE
+    starts = [steady_state(p, 5 * LITRE_PER_MINUTE) for p in variants]
+    alone = []
+    for params, start in zip(variants, starts):
+        state = start.copy()
+        alone.append((advance(state, flows, coefficients(params), 1e-5, record_every=7), state))
+    # The third lane at a 100 us step diverges (as test_model's divergence test shows);
+    # run all lanes at 1e-5 but give the last one a coefficient set that blows up: V_s tiny.
+    broken = coefficients(reference)._replace(supply_compliance_inv=1e20)
+    states = np.array(starts + [starts[0]])
+    records, errors = advance_lanes(
+        states, flows, [coefficients(p) for p in variants] + [broken], 1e-5, record_every=7
+    )
+    for lane, (record, final) in enumerate(alone):
+        assert errors[lane] is None
+        assert np.array_equal(records[lane], record)
+        assert np.array_equal(states[lane], final)
+    assert isinstance(errors[3], IntegrationError) and 'diverged' in str(errors[3])
+    assert np.array_equal(states[3], starts[0])  # a diverged lane is left as it was
+
+
+def _measures(waveforms, scenario):
+    return step_measures(
+        waveforms.time,
+        waveforms['supply_pressure'],
+        waveforms['main_valve_displacement'],
+        scenario.step_time,
+    ).values
+
+
+def test_batch_skips_the_steady_lead_without_changing_the_measures(reference):
+    """
+    simulate_batch against simulate() on the paper's step.
+
+    Stable starts (lead held, not integrated): the same samples, states within
+    rounding, measures equal to 1e-9. An unstable start (d_c +40 %) is integrated
+    as simulate() does it: bit-identical.
+    """
+    scenario = Scenario(end_time=0.45)  # the paper's step, shorter (the window is truncated)
+    variants = [reference, scaled(reference, {'m_m': 20}), scaled(reference, {'d_c': 40})]
+    batch = simulate_batch(variants, scenario, lanes=2)
+    for params, fast in zip(variants, batch):
+        full = simulate(params, scenario)
+        assert np.array_equal(fast.time, full.time)
+        assert np.array_equal(fast.inlet_flow, full.inlet_flow)
+        pressure = np.abs(fast.states[:, P_S:P_C + 1] - full.states[:, P_S:P_C + 1])
+        assert np.max(pressure) < 1e-12 * np.max(full.states[:, P_S])
+        a, b = _measures(full, scenario), _measures(fast, scenario)
+        for name in MEASURE_NAMES:
+            assert (a[name] is None) == (b[name] is None), name
+            if a[name] is not None:
+                assert b[name] == pytest.approx(a[name], rel=1e-9, abs=1e-12), name
+    assert np.array_equal(batch[2].states, simulate(variants[2], scenario).states)
+
+
+def test_batch_reports_each_failure_in_its_place(reference):
+    """A run that diverges gets its IntegrationError (time on the run's axis); the rest run on."""
+    scenario = Scenario(end_time=0.3)
+    stiff = dict(reference, pilot_volume=reference['pilot_volume'] * 0.01)
+    results = simulate_batch([reference, stiff, reference], scenario)
+    assert isinstance(results[1], IntegrationError)
+    assert 'diverged at t = 0.25' in str(results[1])  # just after the step, not at 0
+    alone = simulate_batch([reference], scenario)[0]
+    for result in (results[0], results[2]):
+        assert np.array_equal(result.states, alone.states)
+    (nan_start,) = simulate_batch([reference], Scenario(initial_flow=float('nan')))
+    assert isinstance(nan_start, SteadyStateError)
+
+
+def test_paper_scenario_measures_through_the_batch(reference):
+    """The reference valve's measures through simulate_batch equal simulate()'s (1e-9)."""
+    fast = simulate_batch([reference], REFERENCE_SCENARIO)[0]
+    full = simulate(reference, REFERENCE_SCENARIO)
+    a, b = _measures(full, REFERENCE_SCENARIO), _measures(fast, REFERENCE_SCENARIO)
+    for name in MEASURE_NAMES:
+        assert b[name] == pytest.approx(a[name], rel=1e-9), name

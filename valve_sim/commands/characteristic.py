@@ -1,0 +1,256 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Static pressure-flow characteristic: a slow flow ramp up and down, as on a test rig.
+
+The valve starts empty and closed; the inlet flow rises linearly from 0 to
+--max-flow over --ramp-time, is held for --hold-time and falls back to 0 over
+--ramp-time. The ramp is analysed by valve_sim.analysis.characteristic (cracking,
+rated-flow and reseat pressures, override, hysteresis; docs/characteristic.md)
+and compared with the exact steady-state curve. Writes into --out:
+  characteristic.csv   time, inlet flow, supply pressure, main-stage flow, ramp
+  steady_state.csv     the exact steady-state curve p_s(q_in) and its main-stage flow
+  characteristic.json  the marks of the ramp and of the steady state
+  characteristic.png   p_s against q_in with the marks and the steady-state curve
+"""
+
+import csv
+import json
+from pathlib import Path
+import sys
+
+import numpy as np
+from valve_sim.analysis.characteristic import (
+    characteristic,
+    CRACKING_FRACTION,
+    split_ramps,
+)
+from valve_sim.commands.simulate import (
+    add_bag_arguments,
+    add_parameter_arguments,
+    check_bag_arguments,
+    flow_value,
+    load_from_arguments,
+    write_bag,
+)
+from valve_sim.core.parameters import ParameterError
+from valve_sim.core.simulation import LITRE_PER_MINUTE, main_stage_flow, ramp_flows, run_flows
+from valve_sim.core.steady_state import (
+    cracking_pressure,
+    flow_for_main_stage_flow,
+    steady_curve,
+    steady_state,
+    SteadyStateError,
+)
+
+
+STEADY_POINTS = 80  # points of the steady-state curve
+
+
+def add_arguments(parser):
+    add_parameter_arguments(parser)
+    parser.add_argument(
+        '--max-flow',
+        type=flow_value,
+        default=20.0 * LITRE_PER_MINUTE,
+        metavar='Q',
+        help="top of the ramp (default 20L/min, the paper's largest flow)",
+    )
+    parser.add_argument(
+        '--rated-flow',
+        type=flow_value,
+        metavar='Q',
+        help='rated flow of the valve: the override is taken at it and cracking at 1 %% '
+        'of it (default: --max-flow)',
+    )
+    parser.add_argument(
+        '--ramp-time',
+        type=float,
+        default=10.0,
+        metavar='S',
+        help='duration of each ramp, up and down [s] (default 10; slower is closer to static)',
+    )
+    parser.add_argument(
+        '--hold-time',
+        type=float,
+        default=0.5,
+        metavar='S',
+        help='time held at --max-flow between the ramps [s] (default 0.5)',
+    )
+    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    parser.add_argument(
+        '--record-interval',
+        type=float,
+        default=1e-3,
+        metavar='S',
+        help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)",
+    )
+    parser.add_argument('--out', metavar='DIR', help='write CSV, JSON and the figure here')
+    parser.add_argument('--json', action='store_true', help='print the marks as JSON')
+    parser.add_argument(
+        '--mcap',
+        metavar='FILE.mcap',
+        help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
+        '(for valve-sim analyse --characteristic)',
+    )
+    add_bag_arguments(parser)
+
+
+def _check(args, step_size):
+    if not 0.0 < args.max_flow:
+        raise ParameterError('--max-flow must be > 0')
+    if not 0.01 <= args.ramp_time <= 600.0 or not 0.0 <= args.hold_time <= 600.0:
+        raise ParameterError('need 0.01 <= --ramp-time <= 600 s and 0 <= --hold-time <= 600 s')
+    if not step_size <= args.record_interval <= 1.0:
+        raise ParameterError(f'--record-interval must be in [{step_size:g}, 1] s')
+    rated = args.rated_flow or args.max_flow
+    if not 0.0 < rated <= args.max_flow:
+        raise ParameterError('--rated-flow must be > 0 and <= --max-flow')
+    return rated
+
+
+def steady_marks(params, rated_flow, max_flow):
+    """Return the steady state's cracking (lift-off, 1 % main-stage flow) and rated pressures."""
+    marks = {'lift_off_pressure': None, 'cracking_pressure': None, 'cracking_flow': None}
+    try:
+        marks['lift_off_pressure'] = cracking_pressure(params)
+    except SteadyStateError as error:
+        marks['lift_off_note'] = str(error)
+    try:
+        flow = flow_for_main_stage_flow(params, CRACKING_FRACTION * rated_flow, max_flow)
+        marks['cracking_flow'] = flow
+        marks['cracking_pressure'] = float(steady_state(params, flow)[0])
+    except SteadyStateError as error:
+        marks['cracking_note'] = str(error)
+    marks['rated_pressure'] = float(steady_state(params, rated_flow)[0])
+    if marks['cracking_pressure'] is not None:
+        marks['override'] = marks['rated_pressure'] - marks['cracking_pressure']
+    return marks
+
+
+def ramp_test(params, max_flow, rated_flow, ramp_time, hold_time, step_size, record_interval):
+    """Run the ramp; returns (Waveforms, main-stage flow per sample, {basis: Characteristic})."""
+    waveforms = run_flows(
+        params, ramp_flows(max_flow, ramp_time, hold_time, step_size), step_size, record_interval
+    )
+    main = main_stage_flow(params, waveforms.states)
+    p_s, q_in = waveforms['supply_pressure'], waveforms.inlet_flow
+    return waveforms, main, {
+        'main_stage_flow': characteristic(p_s, q_in, rated_flow, main),
+        'pressure_flow_curve': characteristic(p_s, q_in, rated_flow),
+    }
+
+
+def _write_csv(path, header, rows):
+    with open(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def _ramp_labels(inlet_flow):
+    rising, falling = split_ramps(inlet_flow)
+    labels = np.full(len(inlet_flow), 'top', dtype=object)
+    labels[rising[:-1]], labels[falling[1:]] = 'rising', 'falling'
+    return labels
+
+
+def print_marks(marks, steady):
+    """Print the ramp's marks beside the steady state's, in MPa and L/min."""
+    print(f'{"mark":<22}{"ramp":>12}{"steady state":>14}')
+    rows = (
+        ('cracking [MPa]', 'cracking_pressure', 1e-6),
+        ('cracking flow [L/min]', 'cracking_flow', 1 / LITRE_PER_MINUTE),
+        ('rated-flow p [MPa]', 'rated_pressure', 1e-6),
+        ('override [MPa]', 'override', 1e-6),
+        ('reseat [MPa]', 'reseat_pressure', 1e-6),
+        ('hysteresis [MPa]', 'hysteresis', 1e-6),
+    )
+    for label, key, scale in rows:
+        value, exact = getattr(marks, key), steady.get(key)
+        shown = f'{value * scale:12.5f}' if value is not None else f'{"-":>12}'
+        exact_shown = f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
+        print(f'{label:<22}{shown}{exact_shown}')
+    for name, reason in marks.reasons.items():
+        print(f'  {name}: {reason}')
+
+
+def run(args):
+    check_bag_arguments(args)
+    params, settings = load_from_arguments(args)
+    step_size = settings['step_size']
+    rated = _check(args, step_size)
+    waveforms, main, marks = ramp_test(
+        params, args.max_flow, rated, args.ramp_time, args.hold_time, step_size,
+        args.record_interval,
+    )
+    steady = steady_marks(params, rated, args.max_flow)
+    report = {
+        'max_flow': args.max_flow,
+        'rated_flow': rated,
+        'ramp_time': args.ramp_time,
+        'hold_time': args.hold_time,
+        'step_size': step_size,
+        'ramp': {basis: found.as_dict() for basis, found in marks.items()},
+        'steady_state': steady,
+    }
+    if args.out:
+        write_outputs(Path(args.out), params, waveforms, main, marks['main_stage_flow'], steady,
+                      report, args.max_flow)
+    if args.mcap:
+        write_bag(args, waveforms, settings['ambient_pressure'], args.record_interval)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print_marks(marks['main_stage_flow'], steady)
+        curve = marks['pressure_flow_curve']
+        alone = [
+            f'{name} {value * 1e-6:.5f} MPa'
+            for name, value in (
+                ('cracking', curve.cracking_pressure),
+                ('reseat', curve.reseat_pressure),
+            )
+            if value is not None
+        ]
+        if alone:
+            print('from the pressure-flow curve alone (as from a rig bag): ' + ', '.join(alone))
+    return 0
+
+
+def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow):
+    """CSV files, JSON and the figure into out."""
+    from valve_sim.analysis.plotting import plot_characteristic
+
+    out.mkdir(parents=True, exist_ok=True)
+    q_in, p_s = waveforms.inlet_flow, waveforms['supply_pressure']
+    _write_csv(
+        out / 'characteristic.csv',
+        ['time_s', 'inlet_flow_m3_s', 'supply_pressure_Pa', 'main_stage_flow_m3_s', 'ramp'],
+        (
+            [f'{t:.6f}', f'{q:.9e}', f'{p:.9e}', f'{m:.9e}', label]
+            for t, q, p, m, label in zip(waveforms.time, q_in, p_s, main, _ramp_labels(q_in))
+        ),
+    )
+    flows = np.linspace(0.0, max_flow, STEADY_POINTS + 1)[1:]
+    pressure, main_steady = steady_curve(params, flows)
+    _write_csv(
+        out / 'steady_state.csv',
+        ['inlet_flow_m3_s', 'supply_pressure_Pa', 'main_stage_flow_m3_s'],
+        ([f'{q:.9e}', f'{p:.9e}', f'{m:.9e}'] for q, p, m in zip(flows, pressure, main_steady)),
+    )
+    (out / 'characteristic.json').write_text(json.dumps(report, indent=2) + '\n')
+    plot_characteristic(out / 'characteristic.png', q_in, p_s, marks, (flows, pressure), steady)
+    print(f'wrote {out}/characteristic.csv, steady_state.csv, characteristic.json and '
+          'characteristic.png', file=sys.stderr)
