@@ -16,11 +16,17 @@
 
 import numpy as np
 import pytest
-from valve_sim.core.integrator import advance, IntegrationError, OverpressureError, substeps
+from valve_sim.core.integrator import (
+    advance,
+    advance_lanes,
+    IntegrationError,
+    OverpressureError,
+    substeps,
+)
 from valve_sim.core.model import coefficients, P_S, Y
 from valve_sim.core.parameters import load_parameters, ParameterError
 from valve_sim.core.retuning import check_limits
-from valve_sim.core.simulation import LITRE_PER_MINUTE
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
@@ -97,3 +103,21 @@ def test_a_change_that_would_leave_the_limits_is_refused(reference):
         check_limits({**reference, 'burst_pressure': 5e6}, state, FLOW)
     with pytest.raises(ParameterError, match='would crack at .* burst_pressure'):
         check_limits({**reference, 'burst_pressure': 5e6}, np.zeros(8), 0.0)
+
+
+def test_an_offline_schedule_beyond_max_inlet_flow_is_refused(reference):
+    with pytest.raises(ParameterError, match='inlet flow schedule: .* exceeds max_inlet_flow'):
+        simulate(reference, Scenario(final_flow=200 * LITRE_PER_MINUTE))
+
+
+def test_lanes_take_the_same_substeps_as_one_valve_alone(reference):
+    """advance_lanes stays bit-identical to advance where a lane needs substeps."""
+    flows = np.full(3000, 1e-9)
+    flows[1500:] = FLOW
+    starts = np.array([np.zeros(8), steady_state(reference, FLOW)])
+    c = coefficients(reference)
+    records, errors = advance_lanes(starts.copy(), flows, [c, c], 1e-5, record_every=100)
+    assert errors == [None, None]
+    for lane, start in enumerate(starts):
+        alone = advance(start.copy(), flows, c, 1e-5, record_every=100)
+        assert np.array_equal(records[lane], alone)

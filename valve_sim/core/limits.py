@@ -35,6 +35,7 @@ go through it.
 
 import math
 
+import numpy as np
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 
@@ -75,6 +76,19 @@ def inlet_flow_problem(flow, max_inlet_flow):
             f'inlet flow {flow:g} m^3/s exceeds max_inlet_flow (q_in,max) = '
             f'{max_inlet_flow:g} m^3/s'
         )
+    return None
+
+
+def schedule_problem(flows, max_inlet_flow):
+    """Return why an inlet-flow schedule (array [m^3/s]) has an invalid flow, or None."""
+    if len(flows) == 0:
+        return None
+    for flow in (float(np.min(flows)), float(np.max(flows))):
+        problem = inlet_flow_problem(flow, max_inlet_flow)
+        if problem:
+            return problem
+    if not np.all(np.isfinite(flows)):
+        return 'inlet flow must be finite'
     return None
 
 

@@ -35,8 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from valve_sim.core.integrator import advance, advance_lanes
+from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
 from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES
+from valve_sim.core.parameters import ParameterError
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
@@ -106,6 +108,13 @@ def _waveforms(initial, record, flows, record_every, step_size, initial_flow):
     )
 
 
+def check_schedule(params, flows):
+    """Raise ParameterError if a flow of the schedule [m^3/s] is not a valid inlet flow."""
+    problem = schedule_problem(flows, params['max_inlet_flow'])
+    if problem:
+        raise ParameterError(f'inlet flow schedule: {problem}')
+
+
 def ramp_flows(max_flow, ramp_time, hold_time, step_size):
     """
     Inlet flow [m^3/s] per RK4 step of a static-characteristic test.
@@ -129,6 +138,7 @@ def run_flows(params, flows, step_size=1e-5, record_interval=1e-4, initial_flow=
     record_every = max(1, int(round(record_interval / step_size)))
     flows = np.ascontiguousarray(flows, dtype=float)
     state = steady_state(params, initial_flow)
+    check_schedule(params, flows)
     initial = state.copy()
     record = advance(state, flows, coefficients(params), step_size, record_every)
     return _waveforms(initial, record, flows, record_every, step_size, initial_flow)
@@ -180,7 +190,8 @@ def simulate_batch(
     for index, params in enumerate(params_list):
         try:
             state = steady_state(params, scenario.initial_flow)
-        except SteadyStateError as error:
+            check_schedule(params, flows)
+        except (ParameterError, SteadyStateError) as error:
             results[index] = error
             continue
         starts[index] = (state, coefficients(params))

@@ -18,9 +18,10 @@ valve_node: the virtual relief valve as a real-time ROS 2 node.
 Topic and service names are relative, so namespaces and remapping work:
 
   sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s], 0 to
-                                                            max_inlet_flow; best effort:
-                                                            hears reliable and
-                                                            SensorDataQoS publishers
+                                                            max_inlet_flow; best effort
+                                                            (hears reliable and
+                                                            SensorDataQoS publishers) or
+                                                            reliable: inlet_flow_reliability
   pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
                                 sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
                                                             gauge pressure + ambient_pressure
@@ -108,9 +109,14 @@ STATE_QUEUE_DEPTH = (
     1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 )
 INPUT_QUEUE_DEPTH = 1000  # inlet_flow messages held for the callback: a 1 s burst at 1 kHz
-# Best effort, as REP 2003 asks of sensor-data subscribers: it matches reliable and best-effort
-# (SensorDataQoS) publishers alike; a reliable subscription never hears the latter.
-INLET_FLOW_QOS = QoSProfile(depth=INPUT_QUEUE_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
+# inlet_flow_reliability: best effort by default, as REP 2003 asks of sensor-data subscribers:
+# it matches reliable and best-effort (SensorDataQoS) publishers alike (a reliable subscription
+# never hears the latter), but the middleware may drop messages in a flood before the callback
+# counts them; reliable delivers every message of a reliable publisher.
+INLET_FLOW_RELIABILITY = {
+    'best_effort': ReliabilityPolicy.BEST_EFFORT,
+    'reliable': ReliabilityPolicy.RELIABLE,
+}
 WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {
@@ -145,7 +151,9 @@ class ReliefValveNode(Node):
         self._restoring = False
         self._previous_slot_ns = None
         self._create_outputs()
-        self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, INLET_FLOW_QOS)
+        self.create_subscription(
+            Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
+        )
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.live_view = None  # a LiveView once serve_live_view() started one
         self._housekeeping_due = False
@@ -189,6 +197,25 @@ class ReliefValveNode(Node):
         params = validate({name: values[name] for name in SPECS})
         settings = {name: values[name] for name in SETTING_SPECS}
         return self._declare_preset_pressure(params), settings
+
+    def _declare_inlet_flow_qos(self):
+        """Declare inlet_flow_reliability (read-only); return the subscription's QoS."""
+        descriptor = ParameterDescriptor(
+            name='inlet_flow_reliability',
+            description=(
+                "inlet_flow subscription: 'best_effort' (default; hears every publisher, "
+                "may lose messages in a flood) or 'reliable' (reliable publishers only; "
+                'every message delivered and counted)'
+            ),
+            read_only=True,
+        )
+        choice = self.declare_parameter('inlet_flow_reliability', 'best_effort', descriptor).value
+        if choice not in INLET_FLOW_RELIABILITY:
+            raise ParameterError(
+                f"inlet_flow_reliability must be one of {', '.join(INLET_FLOW_RELIABILITY)}, "
+                f'got {choice!r}'
+            )
+        return QoSProfile(depth=INPUT_QUEUE_DEPTH, reliability=INLET_FLOW_RELIABILITY[choice])
 
     def _declare_frame_prefix(self):
         """Declare frame_prefix (read-only): the pressures' frames are it + their place."""
@@ -335,6 +362,7 @@ class ReliefValveNode(Node):
         """Advance the model to the clock and publish its state."""
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
+        self.input.stamp(now_ns)
         if self.model.time_ns is None or now_ns < self.model.time_ns:
             self._start(now_ns)
         else:
@@ -487,10 +515,6 @@ class ReliefValveNode(Node):
             f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
         )
 
-    def _on_inlet_flow(self, message):
-        """Count the message as accepted or rejected; keep it if it is a valid inlet flow."""
-        self.input.offer(message.data, self.get_clock().now().nanoseconds)
-
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
         try:
@@ -582,6 +606,7 @@ class ReliefValveNode(Node):
 
     def _input_report(self, now_ns):
         """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
+        self.input.stamp(now_ns)
         received_ns = self.input.received_ns
         age = 0.0 if received_ns is None else max(now_ns - received_ns, 0) / NS_PER_S
         timeout = self.settings['input_timeout']
