@@ -74,6 +74,10 @@ def test_bad_input_is_named():
     short = characteristic(p, q, 2 * RATED, main)  # rated flow never reached
     assert short.rated_pressure is None and 'never reaches' in short.reasons['rated_pressure']
     assert short.override is None
+    closed = characteristic(p, q, RATED, np.zeros_like(q))  # the main stage never opens
+    assert closed.cracking_pressure is None and closed.reseat_pressure is None
+    assert closed.hysteresis is None
+    assert {'cracking_pressure', 'reseat_pressure'} <= set(closed.reasons)
 
 
 def test_ramp_cracking_equals_the_steady_state_solver(reference):

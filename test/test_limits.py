@@ -21,7 +21,7 @@ from valve_sim.core.integrator import (
     advance_lanes,
     IntegrationError,
     OverpressureError,
-    substeps,
+    splits_needed,
 )
 from valve_sim.core.model import coefficients, P_S, Y
 from valve_sim.core.parameters import load_parameters, ParameterError
@@ -75,10 +75,10 @@ def test_steady_state_at_a_tiny_flow_holds_the_pilot_at_its_opening(reference, f
     assert state[P_S] == pytest.approx(resolvable[P_S], rel=1e-8), 'it is a steady state'
 
 
-def test_the_closed_valve_is_substepped_the_running_valve_is_not(reference):
+def test_the_closed_valve_steps_are_split_the_running_valves_are_not(reference):
     c = coefficients(reference)
-    assert substeps(np.zeros(8), c, 1e-5) > 1
-    assert substeps(steady_state(reference, FLOW), c, 1e-5) == 1
+    assert splits_needed(np.zeros(8), c, 1e-5) > 1
+    assert splits_needed(steady_state(reference, FLOW), c, 1e-5) == 1
 
 
 def test_overpressure_is_reported_apart_from_divergence(reference):
@@ -110,8 +110,8 @@ def test_an_offline_schedule_beyond_max_inlet_flow_is_refused(reference):
         simulate(reference, Scenario(final_flow=200 * LITRE_PER_MINUTE))
 
 
-def test_lanes_take_the_same_substeps_as_one_valve_alone(reference):
-    """advance_lanes stays bit-identical to advance where a lane needs substeps."""
+def test_lanes_split_the_same_steps_as_one_valve_alone(reference):
+    """advance_lanes stays bit-identical to advance where a lane's steps are split."""
     flows = np.full(3000, 1e-9)
     flows[1500:] = FLOW
     starts = np.array([np.zeros(8), steady_state(reference, FLOW)])

@@ -18,7 +18,13 @@ import math
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures, StepDetector
+from valve_sim.analysis.measures import (
+    _lobes,
+    detect_steps,
+    MEASURE_NAMES,
+    step_measures,
+    StepDetector,
+)
 
 
 P0, DELTA = 7.0e6, 1.0e4  # pressure before the step, settled increment [Pa]
@@ -159,3 +165,31 @@ def test_step_detector_merges_a_ramp_and_ignores_noise():
     detector = StepDetector(threshold=1e-6, merge_time=0.05)
     steps = [s for s in map(detector.update, t, q) if s]
     assert len(steps) == 1 and 0.299 <= steps[0][0] <= 0.305
+
+
+def _lobes_one_sample_at_a_time(e, band):
+    """Find the lobes with the loop the switch describes (the reference for _lobes)."""
+    lobes, start, above, armed = [], None, False, False
+    for i, value in enumerate(e):
+        if not armed:
+            armed = value <= band
+        elif not above and value > band:
+            above, start = True, i
+        elif above and value < -band:
+            lobes.append((start, i))
+            above = False
+    if above:
+        lobes.append((start, len(e)))
+    return lobes
+
+
+def test_lobes_on_arrays_equal_the_sample_loop():
+    """Random walks and small integers (values exactly at +-band) give the same lobes."""
+    rng = np.random.default_rng(7)
+    for trial in range(4000):
+        n = int(rng.integers(0, 60))
+        if trial % 2:
+            e, band = rng.integers(-3, 4, size=n).astype(float), float(rng.integers(0, 3))
+        else:
+            e, band = rng.normal(size=n).cumsum(), abs(rng.normal())
+        assert _lobes(e, band) == _lobes_one_sample_at_a_time(e, band), (e, band)

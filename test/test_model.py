@@ -16,9 +16,10 @@
 
 import numpy as np
 import pytest
-from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.integrator import advance, IntegrationError, STEP_RATE_LIMIT
 from valve_sim.core.model import (
     coefficients,
+    fastest_chamber_rate,
     flows,
     net_forces,
     P_C,
@@ -36,6 +37,7 @@ from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
     steady_state,
+    with_preset_pressure,
 )
 
 
@@ -252,10 +254,23 @@ def test_cracking_pressure_and_preset(params):
 
 
 def test_divergence_is_reported_not_returned(params):
-    # A 10 us poppet oscillation (m_p = 10 mg) at 100 us steps: no substep resolves it.
-    c = coefficients({**params, 'pilot_poppet_mass': 1e-5})
+    # A poppet chamber of 1 mm^3 is far too stiff even for split steps (MAX_SPLITS).
+    c = coefficients({**params, 'poppet_chamber_volume': 1e-9})
     state = steady_state(params, 5 * LITRE_PER_MINUTE)
     before = state.copy()
     with pytest.raises(IntegrationError, match='diverged'):
-        advance(state, np.full(2000, 20 * LITRE_PER_MINUTE), c, 1e-4)
+        advance(state, np.full(2000, 20 * LITRE_PER_MINUTE), c, 1e-5)
     assert np.array_equal(state, before)
+
+
+def test_stiff_chamber_steps_are_split_and_agree_with_small_steps(params):
+    # 3 MPa preset, 25 L/min: the chamber between the main throttles is too stiff for
+    # one RK4 step of 10 us (it diverged before steps were split); 2.5 us needs no split.
+    low = with_preset_pressure(params, 3e6)
+    scenario = Scenario(5 * LITRE_PER_MINUTE, 25 * LITRE_PER_MINUTE, 0.05, 0.3)
+    split = simulate(low, scenario, 1e-5, 1e-3)
+    small = simulate(low, scenario, 2.5e-6, 1e-3)
+    scale = np.max(np.abs(small.states), axis=0) + 1e-12
+    assert np.max(np.abs(split.states - small.states) / scale) < 1e-4
+    c = coefficients(low)
+    assert max(1e-5 * fastest_chamber_rate(state, c) for state in split.states) > STEP_RATE_LIMIT

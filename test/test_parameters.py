@@ -18,7 +18,7 @@ import math
 
 import pytest
 from valve_sim.analysis.paper import TABLE2_CHANGES
-from valve_sim.core.bearing import reference_bearing_fit
+from valve_sim.core.bearing import REFERENCE_BEARING, reference_bearing_fit
 from valve_sim.core.parameters import (
     config_path,
     load_parameters,
@@ -62,7 +62,7 @@ def test_bearing_coefficients_are_the_fit_of_the_documented_bearing(reference):
         reference['bearing_coefficient_2'],
         reference['bearing_coefficient_3'],
     ) == pytest.approx((k1, k2, k3), abs=1e-4)
-    assert reference['bearing_orifice_diameter'] == pytest.approx(0.78e-3)
+    assert reference['bearing_orifice_diameter'] == REFERENCE_BEARING['orifice_diameter']
     assert error < 0.02 and 0.5 < lam < 2.0
 
 
@@ -77,8 +77,8 @@ def test_bearing_coefficients_are_the_fit_of_the_documented_bearing(reference):
         ('pilot_spring_stiffness', math.inf, 'must be finite'),
         ('fluid_density', 'water', 'must be a number'),
         ('discharge_coefficient', True, 'must be a number'),
-        ('first_throttle_inner_diameter', 0.011, 'must exceed'),  # D_1 <= d_1
-        ('second_throttle_inner_diameter', 0.0099501, 'must exceed'),  # D_2 <= d_2
+        ('first_throttle_inner_diameter', 0.0209, 'must exceed'),  # D_1 <= d_1
+        ('second_throttle_inner_diameter', 0.02071, 'must exceed'),  # D_2 <= d_2
         ('bearing_coefficient_1', -5.0, 'does not\nrise|does not rise'),
     ],
 )

@@ -81,16 +81,17 @@ def split_ramps(inlet_flow):
 
 
 def _crossing(values, level, upward):
-    """Fractional index where values first go above (upward) or below level; None if never."""
+    """
+    Fractional index where values first cross level upward (or downward); None if never.
+
+    A crossing needs a sample on the other side first: from <= level to > level
+    (upward), or from >= level to < level (downward).
+    """
     beyond = values > level if upward else values < level
     hits = np.flatnonzero(beyond[1:] & ~beyond[:-1]) + 1
-    if beyond[0]:
-        hits = np.concatenate([[0], hits])
     if len(hits) == 0:
         return None
     i = hits[0]
-    if i == 0:
-        return 0.0
     a, b = values[i - 1], values[i]
     return i - 1 + (level - a) / (b - a) if b != a else float(i)
 
@@ -150,7 +151,10 @@ def characteristic(supply_pressure, inlet_flow, rated_flow, main_flow=None):
         result.cracking_pressure = _at(p[rising], crack)
         result.cracking_flow = _at(q[rising], crack)
     if reseat is None:
-        reasons.setdefault('reseat_pressure', 'the main stage does not close on the falling ramp')
+        reasons.setdefault(
+            'reseat_pressure',
+            'the main stage does not close on the falling ramp (or was not open at its top)',
+        )
     else:
         result.reseat_pressure = _at(p[falling], reseat)
         result.reseat_flow = _at(q[falling], reseat)

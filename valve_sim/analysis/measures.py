@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The paper's six step-response measures, as ../shared/spec/metrics.md defines them.
+The paper's six step-response measures, as docs/analyser.md defines them.
 
 This is the only implementation: the command line, the live analyser and bag
 analysis all call step_measures() and StepDetector.
@@ -21,6 +21,13 @@ analysis all call step_measures() and StepDetector.
 Inputs are sampled waveforms: time t [s], supply pressure p_s [Pa, gauge],
 main-valve displacement x [m], and t_step [s], the time at which the inlet-flow
 step took effect in the model (the last sample computed with the old flow).
+
+Settling time T_s: the paper's, from x (the time after which x stays within
+x_inf +- 5 % of the step width), wherever x is recorded. A rig rarely records x;
+without it (x None or NaN in the window) T_s comes from the supply pressure: the
+time after which |p_s - p_inf| stays below 5 % of the first overshoot p_1 - p_inf.
+(5 % of the pressure step P_o would be a band of a few kPa, smaller than the
+ripple of any real pressure signal.) details['T_s_from'] says which one was used.
 
 How overshoot peaks are found (so that pilot-stage ripple is never taken for a
 peak): the deviation e = direction * (p_s - p_inf) is split into lobes with a
@@ -91,29 +98,42 @@ def _lobes(e, band):
 
     Only a rise counts: samples that start above +band (a response that begins
     above its settled value) open no lobe until e has been below +band once.
+    A hysteresis switch, computed on whole arrays: after the first sample at or
+    below +band, a sample above +band switches it on (a lobe starts) and one
+    below -band switches it off (the lobe ends there); other samples leave it.
     """
-    lobes, start, above, armed = [], None, False, False
-    for i, value in enumerate(e):
-        if not armed:
-            armed = value <= band
-        elif not above and value > band:
-            above, start = True, i
-        elif above and value < -band:
-            lobes.append((start, i))
-            above = False
-    if above:
-        lobes.append((start, len(e)))
+    e = np.asarray(e)
+    armed = np.flatnonzero(e <= band)
+    if len(armed) == 0:
+        return []
+    events = np.zeros(len(e), dtype=np.int8)
+    events[e > band] = 1
+    events[e < -band] = -1
+    events[: armed[0] + 1] = 0
+    where = np.flatnonzero(events)
+    kinds = events[where]
+    switched = kinds != np.concatenate([[-1], kinds[:-1]])
+    starts, stops = where[switched & (kinds == 1)], where[switched & (kinds == -1)]
+    lobes = [(int(start), int(stop)) for start, stop in zip(starts, stops)]
+    if len(starts) > len(stops):
+        lobes.append((int(starts[-1]), len(e)))
     return lobes
 
 
-def _settling_time(t, x, x_0, x_inf, t_step):
+def _settling_time(t, x, x_0, x_inf, t_step, width=None, signal='the main valve'):
     """
-    Return the time [s] after t_step from which x stays within x_inf +- 5 % of |x_inf - x_0|.
+    Return the time [s] after t_step from which x stays within x_inf +- 5 % of width.
 
-    Returns (time, None), or (None, a reason) when there is no such time.
+    width defaults to the step width |x_inf - x_0|. Returns (time, None), or
+    (None, a reason) when there is no such time.
     """
-    width = abs(x_inf - x_0)
+    width = abs(x_inf - x_0) if width is None else width
     if width == 0.0:
+        if x_0 == 0.0:
+            return None, (
+                'no relief through the main stage: the main valve stayed on its seat '
+                '(the pilot alone passes this flow)'
+            )
         return None, 'the main valve did not move (zero step width)'
     outside = np.flatnonzero(np.abs(x - x_inf) > SETTLING_BAND * width)
     if len(outside) == 0:
@@ -122,13 +142,34 @@ def _settling_time(t, x, x_0, x_inf, t_step):
     if last >= len(x) - 1 or t[last] >= t[-1] - SETTLED_SPAN:
         return (
             None,
-            'the main valve does not settle inside the window '
+            f'{signal} does not settle inside the window '
             '(still outside the band in its last 50 ms)',
         )
     # Interpolate the final entry into the band between samples last and last + 1.
     bound = x_inf + math.copysign(SETTLING_BAND * width, x[last] - x_inf)
     fraction = (x[last] - bound) / (x[last] - x[last + 1])
-    return t[last] + fraction * (t[last + 1] - t[last]) - t_step, None
+    entry = t[last] + fraction * (t[last + 1] - t[last])
+    # A later swing whose samples stay inside but whose peak leaves the band between
+    # samples (seen at 1 kHz, not at 10 kHz) is an exit too: refine each later local
+    # extreme by the parabola through it and its neighbours, as the overshoot peaks.
+    deviation = np.abs(x - x_inf)
+    band = SETTLING_BAND * width
+    for j in range(last + 2, len(x) - 1):
+        if deviation[j] >= deviation[j - 1] and deviation[j] >= deviation[j + 1]:
+            exit_time = _parabola_exit(t[j - 1:j + 2], deviation[j - 1:j + 2], band)
+            if exit_time is not None:
+                entry = exit_time
+    return entry - t_step, None
+
+
+def _parabola_exit(t, deviation, band):
+    """Return where the parabola through 3 samples falls back below band after its peak."""
+    tc = t - t[1]
+    a, b, c = np.polyfit(tc, deviation, 2)
+    if a >= 0.0 or c - b * b / (4.0 * a) <= band:
+        return None
+    root = (-b - math.sqrt(b * b - 4.0 * a * (c - band))) / (2.0 * a)  # the later root
+    return t[1] + min(root, tc[-1])
 
 
 def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
@@ -136,13 +177,16 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     Compute the six measures of the step at t_step [s] (metrics.md), as StepMeasures.
 
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
-    arrays. direction: +1 for a rising inlet flow (overshoot peaks are maxima),
-    -1 for a falling one (they are minima; P_1 is then negative). window [s]:
+    arrays; x may be None or NaN where not recorded (T_s then from p_s). direction:
+    +1 for a rising inlet flow (overshoot peaks are maxima), -1 for a falling one
+    (they are minima; P_1 is then negative). window [s]:
     normally WINDOW; a shorter one (a truncated recording) is reported in details.
     """
     t = np.asarray(t, dtype=float)
     p = np.asarray(supply_pressure, dtype=float)
-    x = np.asarray(main_valve_displacement, dtype=float)
+    x = np.full_like(t, np.nan) if main_valve_displacement is None else np.asarray(
+        main_valve_displacement, dtype=float
+    )
     values, reasons = dict.fromkeys(MEASURE_NAMES), {}
     if not (len(t) == len(p) == len(x)) or len(t) < 3:
         reasons.update(dict.fromkeys(MEASURE_NAMES, 'fewer than 3 samples'))
@@ -156,29 +200,31 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     inside = (t >= t_step) & (t <= end)
     tw, pw, xw = t[inside], p[inside], x[inside]
     settled = tw >= end - SETTLED_SPAN
-    p_0, x_0 = _interpolate(t, p, t_step), _interpolate(t, x, t_step)
-    p_inf, x_inf = float(np.mean(pw[settled])), float(np.mean(xw[settled]))
-    details = {
-        't_step': t_step,
-        'window_s': end - t_step,
-        'p_0': p_0,
-        'p_inf': p_inf,
-        'x_0': x_0,
-        'x_inf': x_inf,
-        'direction': direction,
-    }
+    x_recorded = bool(np.all(np.isfinite(xw))) and np.isfinite(_interpolate(t, x, t_step))
+    p_0 = _interpolate(t, p, t_step)
+    p_inf = float(np.mean(pw[settled]))
+    details = {'t_step': t_step, 'window_s': end - t_step, 'p_0': p_0, 'p_inf': p_inf}
+    if x_recorded:
+        x_0, x_inf = _interpolate(t, x, t_step), float(np.mean(xw[settled]))
+        details.update(x_0=x_0, x_inf=x_inf)
+    details.update(
+        direction=direction, T_s_from='main_valve' if x_recorded else 'supply_pressure'
+    )
     if end - t_step < window:
         details['note'] = f'window truncated to {end - t_step:.3f} s of the {window:.3f} s defined'
     if p_0 == 0.0:
-        reasons.update(dict.fromkeys(MEASURE_NAMES, 'supply pressure before the step is zero'))
+        reasons.update(
+            dict.fromkeys(
+                MEASURE_NAMES,
+                'no step response: the valve was empty and closed before the step '
+                '(supply pressure zero), so there is no relieving state to measure from',
+            )
+        )
         return StepMeasures(values, reasons, details)
 
     values['P_o_percent'] = (p_inf - p_0) / p_0 * 100.0
-    values['T_s_ms'], reason = _settling_time(tw, xw, x_0, x_inf, t_step)
-    if reason:
-        reasons['T_s_ms'] = reason
-    else:
-        values['T_s_ms'] *= 1e3
+    if x_recorded:
+        _set_settling_time(values, reasons, _settling_time(tw, xw, x_0, x_inf, t_step))
 
     e = direction * (pw - p_inf)
     largest = float(np.max(e))
@@ -197,8 +243,19 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
                 '(the pressure never swings above its settled value)',
             )
         )
+        if not x_recorded:
+            reasons['T_s_ms'] = (
+                'main valve not recorded, and the pressure-based settling time needs '
+                'a first overshoot for its band'
+            )
         return StepMeasures(values, reasons, details)
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
+    if not x_recorded:
+        _set_settling_time(
+            values,
+            reasons,
+            _settling_time(tw, pw, p_0, p_inf, t_step, e_1, 'the supply pressure'),
+        )
     values['P_1_percent'] = direction * e_1 / p_0 * 100.0
     values['T_1_ms'] = (t_1 - t_step) * 1e3
     details.update(t_1=t_1, p_1=p_inf + direction * e_1)
@@ -216,6 +273,15 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     values['T_d_ms'] = (t_2 - t_1) * 1e3
     details.update(t_2=t_2, p_2=p_inf + direction * e_2)
     return StepMeasures(values, reasons, details)
+
+
+def _set_settling_time(values, reasons, settling):
+    """Store T_s [ms] of a (time [s], reason) pair, or its reason."""
+    time, reason = settling
+    if reason:
+        reasons['T_s_ms'] = reason
+    else:
+        values['T_s_ms'] = time * 1e3
 
 
 class StepDetector:

@@ -172,6 +172,75 @@ def plot_pressure_increment(path, series):
     plt.close(figure)
 
 
+def plot_measures_fit(path, target, measures, waveforms):
+    """
+    Calibration to measures: the model's step response, and each measure against its target.
+
+    target: calibration.MeasuresTarget; measures: StepMeasures.as_dict() of the
+    calibrated model; waveforms: its simulation.Waveforms.
+    """
+    figure, (response, bars) = plt.subplots(
+        2, 1, figsize=(8, 8), constrained_layout=True, gridspec_kw={'height_ratios': [3, 2]}
+    )
+    t_step = target.scenario.step_time
+    pressure = waveforms['supply_pressure']
+    before = max(int(np.searchsorted(waveforms.time, t_step, side='right')) - 1, 0)
+    response.plot(waveforms.time, pressure / pressure[before], color='tab:blue', linewidth=0.9)
+    response.set_xlabel('time [s]')
+    response.set_ylabel('P = p_s / p_s(t_step) [-]')
+    response.set_title("Calibrated model: step response of the paper's test")
+    response.grid(True, alpha=0.3)
+    names = target.names
+    offsets = [
+        (measures[name] - target.values[name]) / target.tolerances[name]
+        if measures[name] is not None
+        else np.nan
+        for name in names
+    ]
+    bars.bar(range(len(names)), offsets, color='tab:blue')
+    bars.axhspan(-1.0, 1.0, color='tab:green', alpha=0.15, label='within tolerance')
+    bars.axhline(0.0, color='0.3', linewidth=0.8)
+    bars.set_xticks(range(len(names)))
+    bars.set_xticklabels(
+        [f'{name}\n{measures[name]:.4g} / {target.values[name]:.4g}'
+         if measures[name] is not None else f'{name}\nundefined' for name in names],
+        fontsize=8,
+    )
+    bars.set_ylabel('(model - target) / tolerance')
+    bars.legend(fontsize=8)
+    bars.grid(True, axis='y', alpha=0.3)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def plot_recording_fit(path, target, states):
+    """
+    Calibration to a recording: recorded and model supply pressure (and x), and the residual.
+
+    target: calibration.RecordingTarget; states: model states at its sample times.
+    """
+    rows = 3 if target.position is not None else 2
+    figure, axes = plt.subplots(rows, 1, sharex=True, figsize=(9, 2.8 * rows + 1),
+                                constrained_layout=True)
+    time = target.time
+    axes[0].plot(time, target.pressure / 1e6, color='0.5', linewidth=0.7, label='recorded')
+    axes[0].plot(time, states[:, 0] / 1e6, color='tab:blue', linewidth=0.9, label='model')
+    axes[0].set_ylabel('supply pressure p_s [MPa, gauge]')
+    axes[0].legend(fontsize=8)
+    axes[1].plot(time, (target.pressure - states[:, 0]) / 1e3, color='tab:red', linewidth=0.7)
+    axes[1].set_ylabel('recorded - model [kPa]')
+    if target.position is not None:
+        axes[2].plot(time, target.position * 1e6, color='0.5', linewidth=0.7, label='recorded')
+        axes[2].plot(time, states[:, 4] * 1e6, color='tab:blue', linewidth=0.9, label='model')
+        axes[2].set_ylabel('main valve x [um]')
+        axes[2].legend(fontsize=8)
+    for axis in axes:
+        axis.grid(True, alpha=0.3)
+    axes[-1].set_xlabel('time from the first sample [s]')
+    axes[0].set_title('Recording against the calibrated model')
+    figure.savefig(path, dpi=110)
+
+
 def plot_characteristic(
     path, inlet_flow, supply_pressure, marks, steady_curve=None, steady_marks=None, title=None
 ):

@@ -37,7 +37,6 @@ from valve_sim.analysis.signals import (
     CLOCKS,
     Extractor,
     Joiner,
-    REQUIRED,
     ROLES,
     seconds,
     SignalMap,
@@ -50,6 +49,9 @@ from valve_sim.recording.bag import BagReader
 from valve_sim.recording.rosbag2_metadata import bag_files
 
 
+# What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
+# (then T_s comes from the pressure, valve_sim.analysis.measures).
+BAG_REQUIRED = ('supply_pressure', 'inlet_flow')
 PLOT_LEAD = (
     0.25  # [s] shown before the step, which the plot puts at 0.25 s as in the paper's Figure 5
 )
@@ -61,23 +63,26 @@ class Recording:
 
     time: np.ndarray  # [s]
     supply_pressure: np.ndarray  # [Pa] gauge
-    main_valve: np.ndarray  # [m]
+    main_valve: np.ndarray  # [m], NaN where the bag has none
     pilot_poppet: np.ndarray  # [m], NaN where the bag has none
     inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
     problem: str = None
 
 
-def read_recording(path, signal_map=None, required=REQUIRED):
+def read_recording(path, signal_map=None, required=BAG_REQUIRED):
     """
     Read a bag (an MCAP file or a rosbag2 bag folder) as a Recording.
+
+    Roles not required are NaN where the bag lacks them.
 
     Raises InputFileError if a required signal is missing or unreadable.
     """
     from mcap_ros2.decoder import DecoderFactory
 
     signal_map = signal_map or SignalMap()
-    decoders, joiner, rows = DecoderFactory(), Joiner(required, ['pilot_poppet']), []
-    wanted = {signal_map.topics[role] for role in required + ('pilot_poppet',)}
+    optional = [role.name for role in ROLES if role.name not in required]
+    decoders, joiner, rows = DecoderFactory(), Joiner(required, optional), []
+    wanted = {signal_map.topics[role] for role in (*required, *optional)}
     found, problems = set(), []
     for file in bag_files(path):  # a file, or the files of a bag folder in order
         reader, extractors = BagReader(file), {}
@@ -214,18 +219,17 @@ def print_steps(records, recording):
             StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons']),
             paper=is_reference_step(*flows_around(recording, record)),
         )
+        if record['details'].get('T_s_from') == 'supply_pressure':
+            print(
+                '  T_s_ms: from the supply pressure (main valve not recorded): the time after '
+                'which |p_s - p_inf| stays below 5 % of p_1 - p_inf'
+            )
         if 'note' in record['details']:
             print(f'  note: {record["details"]["note"]}')
 
 
-def add_arguments(parser):
-    parser.add_argument(
-        'bag',
-        metavar='BAG',
-        help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
-    )
-    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
-    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+def add_signal_arguments(parser):
+    """--topic-*, --joint-*, --ambient-pressure and --clock: where a bag's signals are."""
     for role in ROLES:
         option = role.name.replace('_', '-')
         parser.add_argument(
@@ -255,6 +259,17 @@ def add_arguments(parser):
         default='header',
         help='time of a sample: its header stamp, or its receive time (needed for Float64 topics)',
     )
+
+
+def add_arguments(parser):
+    parser.add_argument(
+        'bag',
+        metavar='BAG',
+        help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
+    )
+    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
+    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+    add_signal_arguments(parser)
     parser.add_argument(
         '--step-threshold',
         type=float,
@@ -336,14 +351,14 @@ def run_characteristic(args):
         from valve_sim.commands.characteristic import print_marks
 
         print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}')
-        print_marks(marks, {})
+        print_marks(marks)
     return 0
 
 
 def run(args):
     if args.characteristic:
         return run_characteristic(args)
-    required = REQUIRED if args.step_time is None else ('supply_pressure', 'main_valve')
+    required = BAG_REQUIRED if args.step_time is None else ('supply_pressure',)
     recording = read_recording(args.bag, signal_map_from(args), required)
     if recording.problem:
         print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)

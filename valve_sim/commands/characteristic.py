@@ -167,9 +167,9 @@ def _ramp_labels(inlet_flow):
     return labels
 
 
-def print_marks(marks, steady):
-    """Print the ramp's marks beside the steady state's, in MPa and L/min."""
-    print(f'{"mark":<22}{"ramp":>12}{"steady state":>14}')
+def print_marks(marks, steady=None):
+    """Print the marks in MPa and L/min, beside the steady state's if given (a dict)."""
+    print(f'{"mark":<22}{"ramp":>12}' + (f'{"steady state":>14}' if steady is not None else ''))
     rows = (
         ('cracking [MPa]', 'cracking_pressure', 1e-6),
         ('cracking flow [L/min]', 'cracking_flow', 1 / LITRE_PER_MINUTE),
@@ -179,10 +179,12 @@ def print_marks(marks, steady):
         ('hysteresis [MPa]', 'hysteresis', 1e-6),
     )
     for label, key, scale in rows:
-        value, exact = getattr(marks, key), steady.get(key)
-        shown = f'{value * scale:12.5f}' if value is not None else f'{"-":>12}'
-        exact_shown = f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
-        print(f'{label:<22}{shown}{exact_shown}')
+        value = getattr(marks, key)
+        line = f'{label:<22}' + (f'{value * scale:12.5f}' if value is not None else f'{"-":>12}')
+        if steady is not None:
+            exact = steady.get(key)
+            line += f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
+        print(line)
     for name, reason in marks.reasons.items():
         print(f'  {name}: {reason}')
 

@@ -13,9 +13,10 @@
 # limitations under the License.
 
 """
-The `valve-sim` command line.
+The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
-Subcommands: simulate, study, operating-point, characteristic, analyse, repair, demo.
+Subcommands: simulate, study, operating-point, characteristic, analyse, calibrate, repair,
+demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -45,6 +46,10 @@ SUBCOMMANDS = {
     'analyse': (
         'valve_sim.commands.analyse',
         'step measures (or --characteristic) of a recorded rosbag2 MCAP file or bag folder',
+    ),
+    'calibrate': (
+        'valve_sim.commands.calibrate',
+        "fit parameters to the paper's measures or to a recorded bag",
     ),
     'repair': (
         'valve_sim.commands.repair',

@@ -16,7 +16,11 @@
 Report the exact steady state at an inlet flow: pressures, openings, flows, forces and modes.
 
 The numbers behind docs/model.md's force and flow balances and stability margins.
+--json prints the same as one JSON document under the stable key names of
+docs/model.md ("operating-point --json"), all SI.
 """
+
+import json
 
 from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
 from valve_sim.core.linear import oscillatory_modes
@@ -34,48 +38,114 @@ def add_arguments(parser):
         metavar='Q',
         help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)',
     )
+    parser.add_argument(
+        '--json', action='store_true', help='print the operating points as JSON (SI units)'
+    )
 
 
-def report(params, inlet_flow):
+def operating_point(params, inlet_flow):
+    """
+    Return the steady state at inlet_flow [m^3/s] as a JSON-ready dict (SI units).
+
+    Keys (stable, documented in docs/model.md): inlet_flow, pressures {supply,
+    intermediate, pilot, poppet_chamber} [Pa gauge], openings {main_valve,
+    first_throttle, poppet} [m], flows {main, pilot, bearings, damping_orifice,
+    rod_leakage} [m^3/s], main_valve_forces and poppet_forces [N], modes
+    [{frequency_hz, damping_ratio}] slowest first.
+    """
     c = coefficients(params)
     state = steady_state(params, inlet_flow)
-    p_s, p_m, p_p, p_c, x, _, y, _ = state
-    _, q_m2, _, q_c, q_s, q_p = (q / LITRE_PER_MINUTE for q in flows(state, c))
-    print(f'inlet flow {inlet_flow / LITRE_PER_MINUTE:.3f} L/min ({inlet_flow:.4e} m^3/s)')
+    p_s, p_m, p_p, p_c, x, _, y, _ = (float(v) for v in state)
+    _, q_m2, q_n, q_c, q_s, q_p = (float(q) for q in flows(state, c))
+    return {
+        'inlet_flow': inlet_flow,
+        'pressures': {
+            'supply': p_s,
+            'intermediate': p_m,
+            'pilot': p_p,
+            'poppet_chamber': p_c,
+        },
+        'openings': {
+            'main_valve': x,
+            'first_throttle': x + c.first_throttle_clearance,
+            'poppet': y,
+        },
+        'flows': {
+            'main': q_m2,
+            'pilot': q_p,
+            'bearings': q_n,
+            'damping_orifice': q_c,
+            'rod_leakage': q_s,
+        },
+        'main_valve_forces': {
+            'supply': c.supply_force_area * p_s,
+            'intermediate': c.intermediate_force_area * p_m,
+            'pilot': -c.back_area * p_p,
+            'spring': -c.main_spring_stiffness * (x + c.main_spring_preload),
+        },
+        'poppet_forces': {
+            'rod': c.rod_area * p_s,
+            'spring': -c.pilot_spring_stiffness * (y + c.pilot_spring_preload),
+            'flow': -c.flow_force_gain * y * p_c,
+        },
+        'modes': [
+            {'frequency_hz': float(f), 'damping_ratio': float(z)}
+            for f, z in oscillatory_modes(params, inlet_flow)
+        ],
+    }
+
+
+def report(point):
+    """Print one operating_point() for people: pressures in MPa, openings in um, flows in L/min."""
+    pressure, opening, flow = point['pressures'], point['openings'], point['flows']
+    main, poppet = point['main_valve_forces'], point['poppet_forces']
+    litres = {name: value / LITRE_PER_MINUTE for name, value in flow.items()}
     print(
-        f'  pressures [MPa]  p_s {p_s / 1e6:.4f}  p_m {p_m / 1e6:.4f}  '
-        f'p_p {p_p / 1e6:.4f}  p_c {p_c / 1e6:.4f}'
+        f'inlet flow {point["inlet_flow"] / LITRE_PER_MINUTE:.3f} L/min '
+        f'({point["inlet_flow"]:.4e} m^3/s)'
     )
     print(
-        f'  openings [um]    x {x * 1e6:.2f}  '
-        f'(first throttle x + h = {(x + c.first_throttle_clearance) * 1e6:.2f})'
-        f'  y {y * 1e6:.2f}'
+        f'  pressures [MPa]  p_s {pressure["supply"] / 1e6:.4f}  '
+        f'p_m {pressure["intermediate"] / 1e6:.4f}  p_p {pressure["pilot"] / 1e6:.4f}  '
+        f'p_c {pressure["poppet_chamber"] / 1e6:.4f}'
     )
     print(
-        f'  flows [L/min]    main q_m1 = q_m2 = {q_m2:.4f}  '
-        f'bearings q_n = orifice q_c = {q_c:.4f}  '
-        f'rod leak q_s {q_s:.4f}  poppet q_p {q_p:.4f}'
+        f'  openings [um]    x {opening["main_valve"] * 1e6:.2f}  '
+        f'(first throttle x + h = {opening["first_throttle"] * 1e6:.2f})'
+        f'  y {opening["poppet"] * 1e6:.2f}'
     )
     print(
-        f'  main valve [N]   alpha_s p_s {c.supply_force_area * p_s:.2f}  '
-        f'alpha_m p_m {c.intermediate_force_area * p_m:.2f}'
-        f'  -A_p p_p {-c.back_area * p_p:.2f}  '
-        f'-k_m (x + x_0) {-c.main_spring_stiffness * (x + c.main_spring_preload):.2f}'
+        f'  flows [L/min]    main q_m1 = q_m2 = {litres["main"]:.4f}  '
+        f'bearings q_n = orifice q_c = {litres["damping_orifice"]:.4f}  '
+        f'rod leak q_s {litres["rod_leakage"]:.4f}  pilot (poppet) q_p {litres["pilot"]:.4f}'
     )
     print(
-        f'  poppet [N]       A_s p_s {c.rod_area * p_s:.2f}  -k_p (y + y_0) '
-        f'{-c.pilot_spring_stiffness * (y + c.pilot_spring_preload):.2f}  '
-        f'-K_f y p_c {-c.flow_force_gain * y * p_c:.3f}'
+        f'  main valve [N]   alpha_s p_s {main["supply"]:.2f}  '
+        f'alpha_m p_m {main["intermediate"]:.2f}  -A_p p_p {main["pilot"]:.2f}  '
+        f'-k_m (x + x_0) {main["spring"]:.2f}'
+    )
+    print(
+        f'  poppet [N]       A_s p_s {poppet["rod"]:.2f}  -k_p (y + y_0) {poppet["spring"]:.2f}  '
+        f'-K_f y p_c {poppet["flow"]:.3f}'
     )
     modes = ', '.join(
-        f'{f:.1f} Hz (zeta {z:.4f})' for f, z in oscillatory_modes(params, inlet_flow)
+        f'{mode["frequency_hz"]:.1f} Hz (zeta {mode["damping_ratio"]:.4f})'
+        for mode in point['modes']
     )
     print(f'  linear modes     {modes}')
 
 
 def run(args):
     params, _ = load_from_arguments(args)
+    inlet_flows = args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE)
+    if args.json:
+        document = {
+            'cracking_pressure': cracking_pressure(params),
+            'operating_points': [operating_point(params, q) for q in inlet_flows],
+        }
+        print(json.dumps(document, indent=2))
+        return 0
     print(f'main valve cracking pressure: {cracking_pressure(params) / 1e6:.4f} MPa')
-    for inlet_flow in args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE):
-        report(params, inlet_flow)
+    for inlet_flow in inlet_flows:
+        report(operating_point(params, inlet_flow))
     return 0

@@ -193,6 +193,22 @@ def add_arguments(parser):
         help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
         "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
     )
+    parser.add_argument(
+        '--rig-topics',
+        metavar='PRESSURE,FLOW',
+        help='with --mcap: write what a test rig records instead, the supply pressure and the '
+        'inlet flow as std_msgs/msg/Float64 on these two topics (no main-valve position)',
+    )
+    parser.add_argument(
+        '--pressure-noise',
+        type=float,
+        default=0.0,
+        metavar='PA',
+        help='with --rig-topics: Gaussian noise on the recorded pressure, standard deviation [Pa]',
+    )
+    parser.add_argument(
+        '--seed', type=int, default=0, metavar='N', help='seed of the --pressure-noise generator'
+    )
     add_bag_arguments(parser)
 
 
@@ -214,12 +230,35 @@ def add_bag_arguments(parser):
 
 
 def write_bag(args, waveforms, ambient_pressure, publish_interval):
-    """Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag)."""
-    from valve_sim.recording.valve_topics import write_simulation_bag
+    """
+    Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag).
+
+    With --rig-topics (simulate only): what a rig records (valve_topics.write_rig_bag).
+    """
+    from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
     start_ns = args.start_time
     if start_ns is None:
         start_ns = time.time_ns() // 1_000_000 * 1_000_000
+    if getattr(args, 'rig_topics', None):
+        pressure_topic, flow_topic = rig_topics(args.rig_topics)
+        if not (math.isfinite(args.pressure_noise) and args.pressure_noise >= 0.0):
+            raise ParameterError(
+                f'--pressure-noise must be finite and >= 0 Pa, got {args.pressure_noise}'
+            )
+        write_rig_bag(
+            args.mcap,
+            waveforms,
+            pressure_topic,
+            flow_topic,
+            ambient_pressure,
+            args.pressure_noise,
+            args.seed,
+            publish_interval,
+            start_time_ns=start_ns,
+            folder=args.bag_folder,
+        )
+        return
     write_simulation_bag(
         args.mcap,
         waveforms,
@@ -228,6 +267,16 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval):
         start_time_ns=start_ns,
         folder=args.bag_folder,
     )
+
+
+def rig_topics(text):
+    """'PRESSURE,FLOW' of --rig-topics -> two absolute topic names; ParameterError if not."""
+    topics = [topic.strip() for topic in text.split(',')]
+    if len(topics) != 2 or not all(topics) or topics[0] == topics[1]:
+        raise ParameterError(
+            f'--rig-topics needs two different topics PRESSURE,FLOW, got {text!r}'
+        )
+    return ['/' + topic.lstrip('/') for topic in topics]
 
 
 def check_bag_arguments(args):

@@ -20,7 +20,8 @@ m_m, m_p, V_p, V_c, d_c and k_p are varied one at a time by -20, -10, 0, +10 and
 the six together as in Table 2: 26 distinct runs of the paper's step test,
 spread over all cores.
 
-PROTOCOL (--protocol): how the preset is treated between cases.
+PROTOCOL (--protocol; valve_sim.analysis.study_cases.PROTOCOLS): how the preset is
+treated between cases.
   held-preset     (default, the paper's) the pilot spring preload is re-solved in
                   every case so that the main valve cracks at the same preset
                   pressure, as a technician turns the adjusting screw back to 7 MPa;
@@ -44,30 +45,20 @@ from pathlib import Path
 import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import (
-    REFERENCE_SCENARIO,
-    STUDY_PARAMETERS,
-    STUDY_VARIATIONS,
-    TABLE2_CHANGES,
+from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
+from valve_sim.analysis.study_cases import (
+    case_parameters,
+    DEFAULT_PROTOCOL,
+    PROTOCOLS,
+    study_cases,
 )
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
 from valve_sim.core.integrator import IntegrationError
-from valve_sim.core.parameters import ParameterError, scaled
+from valve_sim.core.parameters import ParameterError
 from valve_sim.core.simulation import simulate
-from valve_sim.core.steady_state import (
-    cracking_pressure,
-    SteadyStateError,
-    with_preset_pressure,
-)
+from valve_sim.core.steady_state import cracking_pressure, SteadyStateError
 
 
-PROTOCOLS = {
-    'held-preset': 'pilot spring preload re-solved per case: the main valve cracks at the '
-    'preset pressure in every case (the paper: preset pressure 7 MPa)',
-    'frozen-preload': 'pilot spring preload of the parameter file in every case: '
-    'the preset moves with the varied parameters',
-}
-DEFAULT_PROTOCOL = 'held-preset'
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
 POPPET_SAMPLE_INTERVAL = 1e-4  # [s] for Figure 8's waveforms
 CASE_COLUMNS = (
@@ -107,35 +98,6 @@ def add_arguments(parser):
         metavar='N',
         help='parallel processes (default: all cores)',
     )
-
-
-def study_cases():
-    """[(label, {symbol: percent})]: the baseline, the one-at-a-time variations, Table 2."""
-    cases = [('reference', {})]
-    for symbol in STUDY_PARAMETERS:
-        cases += [
-            (f'{symbol} {percent:+d} %', {symbol: percent})
-            for percent in STUDY_VARIATIONS
-            if percent
-        ]
-    cases.append(('table2', dict(TABLE2_CHANGES)))
-    return cases
-
-
-def case_parameters(params, changes, protocol, preset_pressure):
-    """
-    Return the validated parameters of one case: params scaled by changes {symbol: percent}.
-
-    protocol 'held-preset' re-solves the pilot spring preload so that the main
-    valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
-    Raises ParameterError or SteadyStateError when the case has no such preload.
-    """
-    case = scaled(params, changes)
-    if protocol == 'held-preset':
-        case = with_preset_pressure(case, preset_pressure)
-    elif protocol != 'frozen-preload':
-        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
-    return case
 
 
 def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_pressure=None):

@@ -78,15 +78,15 @@ def fit_bearing_coefficients(
 
 
 # The bearing design behind K_1..K_3 in config/reference.yaml (docs/model.md):
-# four bearings, each a 0.78 mm orifice feeding a pocket whose land (9 mm wide,
-# 0.8 mm flow length, 15 um radial clearance) drains to the pilot chamber; fitted
+# four bearings, each a 0.38 mm orifice feeding a pocket whose land (9 mm wide,
+# 0.8 mm flow length, 9.5 um radial clearance) drains to the pilot chamber; fitted
 # at the 7 MPa preset. tests check that the parameter file holds this fit.
 REFERENCE_BEARING = {
     'count': 4,
-    'orifice_diameter': 0.78e-3,  # d_b [m]
+    'orifice_diameter': 0.38e-3,  # d_b [m]
     'land_width': 9e-3,  # w [m]
     'land_length': 0.8e-3,  # l [m]
-    'clearance': 15e-6,  # c [m]
+    'clearance': 9.5e-6,  # c [m]
     'design_pressure': 7e6,  # p_s [Pa]
 }
 

@@ -25,20 +25,16 @@ beyond burst_pressure counts as an overpressure only if the step that crossed it
 was accurate (one step and two half steps agree): a numerical instability
 that happens to cross the limit first is a divergence.
 
-Where the pressures can relax faster than the step can follow (a closed, nearly
-empty valve: every orifice laminar, model.pressure_stiffness), a step is split
-into equal substeps so that RK4 stays inside its stability region; everywhere
-else a step is one RK4 step, as in the paper.
+A step whose stiffest chamber would put RK4 beyond its stability
+(model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
+the paper's operating points that never happens.
 
 rk4_lanes advances several independent valves (lanes: parameter sets and
 states) through the same inlet-flow schedule at once, stage by stage across
 the lanes, calling the same model.derivatives per lane in the same order of
 operations: its results are bit-identical to rk4_steps, but the processor
 overlaps the lanes' independent arithmetic, which makes a study's runs faster.
-A lane that needs substeps at a step takes them on its own, as rk4_steps does.
 """
-
-import math
 
 import numpy as np
 from valve_sim.core.jit import jit
@@ -53,9 +49,9 @@ from valve_sim.core.limits import (
 from valve_sim.core.model import (
     Coefficients,
     derivatives,
+    fastest_chamber_rate,
     P_C,
     P_S,
-    pressure_stiffness,
     X,
     X_DOT,
     Y,
@@ -63,9 +59,12 @@ from valve_sim.core.model import (
 )
 
 
-# Largest |lambda| h of a substep: RK4 is stable on the negative real axis up to 2.785.
-STABLE_STEP_RATE = 2.5
-MAX_SUBSTEPS = 64  # bound on the cost of one step [substeps]
+# Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
+# eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
+STEP_RATE_LIMIT = 2.0
+# At most this many sub-steps per step: enough for a chamber made stiff by the operating
+# point at the paper's 10 us, not a licence for steps far beyond what the model allows.
+MAX_SPLITS = 8
 # An accurate step: its pressures agree with two half steps' within this share of p_burst.
 CROSSING_TOLERANCE = 1e-3
 
@@ -103,17 +102,14 @@ def enforce_stops(state, c):
 
 
 @jit
-def substeps(state, c, step):
-    """Return the number of RK4 substeps a step of step [s] needs from state to stay stable."""
-    rate = pressure_stiffness(state, c) * step
-    if rate <= STABLE_STEP_RATE:
-        return 1
-    return min(int(math.ceil(rate / STABLE_STEP_RATE)), MAX_SUBSTEPS)
+def splits_needed(state, c, step):
+    """Return the number of equal sub-steps that keep RK4 stable on the stiffest chamber."""
+    return min(int(step * fastest_chamber_rate(state, c) / STEP_RATE_LIMIT) + 1, MAX_SPLITS)
 
 
 @jit
 def rk4_step(state, q, c, h, k1, k2, k3, k4, stage):
-    """Advance state in place by one classical RK4 step of h [s] with q_in = q held."""
+    """One classical RK4 step of size h [s] at inlet flow q, then the seats and stops."""
     n = state.shape[0]
     derivatives(state, q, c, k1)
     for i in range(n):
@@ -135,10 +131,11 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
     """
     Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
-    inlet_flows[k] [m^3/s] is held during step k. Every record_every steps the
-    state is copied into the next row of record. Returns (steps completed,
-    limits verdict): fewer than len(inlet_flows) steps means the state left the
-    limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state holds those values).
+    inlet_flows[k] [m^3/s] is held during step k; a step is split where
+    splits_needed() asks for it. Every record_every steps the state is copied into
+    the next row of record. Returns (steps completed, limits verdict): fewer than
+    len(inlet_flows) steps means the state left the limits (verdict STATE_OVERPRESSURE
+    or STATE_DIVERGED; state holds those values).
     """
     n = state.shape[0]
     k1 = np.empty(n)
@@ -150,9 +147,10 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
     until_record = record_every
     for k in range(inlet_flows.shape[0]):
         q = inlet_flows[k]
-        parts = substeps(state, c, step)
-        for _ in range(parts):
-            rk4_step(state, q, c, step / parts, k1, k2, k3, k4, stage)
+        splits = splits_needed(state, c, step)
+        h = step / splits
+        for _ in range(splits):
+            rk4_step(state, q, c, h, k1, k2, k3, k4, stage)
         verdict = state_check(state, c.burst_pressure)
         if verdict != STATE_OK:
             return k, verdict
@@ -259,7 +257,8 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     """
     Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
 
-    The same arithmetic as rk4_steps, lane by lane. table [fields x lanes]: each
+    The same arithmetic as rk4_steps, lane by lane: a lane whose step must be split
+    (splits_needed) takes it alone with rk4_step. table [fields x lanes]: each
     lane's Coefficients as a column. Every record_every steps the states go into
     records[lane, row]. completed[lane] is set to the number of steps the lane
     completed: fewer than len(inlet_flows) means its state left the limits
@@ -267,28 +266,39 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     values) while the others go on.
     """
     n, lanes = states.shape
-    s1 = np.empty(n)
-    s2 = np.empty(n)
-    s3 = np.empty(n)
-    s4 = np.empty(n)
-    solo_stage = np.empty(n)
-    parts = np.ones(lanes, dtype=np.int64)
     k1 = np.empty((n, lanes))
     k2 = np.empty((n, lanes))
     k3 = np.empty((n, lanes))
     k4 = np.empty((n, lanes))
     stage = np.empty((n, lanes))
+    single = np.empty((5, n))
+    split = np.zeros(lanes, dtype=np.bool_)
     steps = inlet_flows.shape[0]
     for j in range(lanes):
         completed[j] = steps
+        verdicts[j] = STATE_OK
     row = 0
     until_record = record_every
-    for j in range(lanes):
-        verdicts[j] = STATE_OK
     for k in range(steps):
         q = inlet_flows[k]
         for j in range(lanes):
-            parts[j] = substeps(states[:, j], lane_coefficients(table, j), step)
+            split[j] = False
+            if completed[j] < steps:
+                continue
+            c = lane_coefficients(table, j)
+            splits = splits_needed(states[:, j], c, step)
+            if splits > 1:
+                split[j] = True
+                state = states[:, j].copy()
+                for _ in range(splits):
+                    rk4_step(
+                        state, q, c, step / splits, single[0], single[1], single[2],
+                        single[3], single[4]
+                    )
+                states[:, j] = state
+                verdicts[j] = state_check(state, c.burst_pressure)
+                if verdicts[j] != STATE_OK:
+                    completed[j] = k
         for j in range(lanes):
             derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
         for i in range(n):
@@ -307,17 +317,13 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
         for j in range(lanes):
             derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
         for j in range(lanes):
-            if completed[j] < steps:
+            if completed[j] < steps or split[j]:
                 continue
-            state, c = states[:, j], lane_coefficients(table, j)
-            if parts[j] == 1:
-                for i in range(n):
-                    increment = k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j]
-                    state[i] += step / 6.0 * increment
-                enforce_stops(state, c)
-            else:  # this lane's stages above are not used
-                for _ in range(parts[j]):
-                    rk4_step(state, q, c, step / parts[j], s1, s2, s3, s4, solo_stage)
+            state = states[:, j]
+            for i in range(n):
+                state[i] += step / 6.0 * (k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j])
+            c = lane_coefficients(table, j)
+            enforce_stops(state, c)
             verdicts[j] = state_check(state, c.burst_pressure)
             if verdicts[j] != STATE_OK:
                 completed[j] = k
@@ -363,10 +369,11 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     errors = []
     for lane, done in enumerate(completed):
         if done < len(inlet_flows):
+            reached = columns[:, lane].copy()
             errors.append(
                 _failure(
                     start[lane],
-                    columns[:, lane].copy(),
+                    reached,
                     inlet_flows,
                     done,
                     coefficient_sets[lane],

@@ -125,6 +125,18 @@ def transport_delays(count, seed=TRANSPORT_SEED):
     return TRANSPORT_DELAY_NS + np.minimum(jitter, TRANSPORT_JITTER_CAP_NS).astype(np.int64)
 
 
+def samples_per_publish(waveforms, publish_interval):
+    """Return the number of waveform samples in one publish_interval [s] (a whole number)."""
+    record_interval = waveforms.time[1] - waveforms.time[0]
+    every = round(publish_interval / record_interval)
+    if every < 1 or abs(every * record_interval - publish_interval) > 1e-9 * publish_interval:
+        raise ParameterError(
+            f'publish interval {publish_interval:g} s is not a whole multiple of the '
+            f"waveforms' sample interval {record_interval:g} s"
+        )
+    return every
+
+
 def write_simulation_bag(
     path,
     waveforms,
@@ -147,13 +159,7 @@ def write_simulation_bag(
     rosbag2 bag folder at path instead of a file. Returns the number of ticks
     written; raises ParameterError for a bad interval.
     """
-    record_interval = waveforms.time[1] - waveforms.time[0]
-    every = round(publish_interval / record_interval)
-    if every < 1 or abs(every * record_interval - publish_interval) > 1e-9 * publish_interval:
-        raise ParameterError(
-            f'publish interval {publish_interval:g} s is not a whole multiple of the '
-            f"waveforms' sample interval {record_interval:g} s"
-        )
+    every = samples_per_publish(waveforms, publish_interval)
     bag = BagWriter(
         path, folder=folder, custom_data={'source': 'valve-sim simulate (offline model run)'}
     )
@@ -179,6 +185,49 @@ def write_simulation_bag(
                 commanded = flow
             for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
                 bag.write(bag.channels['/' + topic], data, time_ns + next(delays), time_ns)
+        return len(indices)
+    finally:
+        bag.close()
+
+
+def write_rig_bag(
+    path,
+    waveforms,
+    pressure_topic,
+    flow_topic,
+    ambient_pressure=STANDARD_ATMOSPHERE,
+    pressure_noise=0.0,
+    seed=0,
+    publish_interval=1e-3,
+    *,
+    start_time_ns,
+    folder=False,
+):
+    """
+    Write an offline run as a test rig records it: two std_msgs/msg/Float64 topics.
+
+    pressure_topic: supply pressure [Pa absolute: gauge + ambient_pressure] with
+    Gaussian noise of standard deviation pressure_noise [Pa] (generator seeded with
+    seed); flow_topic: the inlet flow [m^3/s] over the interval ending at each
+    sample, as a flow meter reports it. No main-valve position, no headers: the
+    receive time (log_time) is the sample time, start_time_ns [ns since the epoch]
+    + the model time. folder: a rosbag2 bag folder at path. Returns the number of samples.
+    """
+    every = samples_per_publish(waveforms, publish_interval)
+    indices = np.arange(0, len(waveforms.time), every)
+    noise = np.random.default_rng(seed).normal(0.0, pressure_noise, len(indices))
+    pressure = waveforms.states[indices, P_S] + ambient_pressure + noise
+    bag = BagWriter(
+        path, folder=folder, custom_data={'source': 'valve-sim simulate --rig-topics (offline)'}
+    )
+    try:
+        for topic in (pressure_topic, flow_topic):
+            bag.add_topic(topic, 'std_msgs/msg/Float64')
+        for index, value in zip(indices, pressure):
+            time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
+            bag.write_message(pressure_topic, Float64(data=float(value)), time_ns, time_ns)
+            flow = float(waveforms.inlet_flow[index])
+            bag.write_message(flow_topic, Float64(data=flow), time_ns, time_ns)
         return len(indices)
     finally:
         bag.close()

@@ -1,0 +1,47 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The model across its envelope: presets 3-10 MPa, flows 0-25 L/min (coarse; bench/ has all)."""
+
+import pytest
+from valve_sim.analysis.envelope import envelope_run
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.simulation import LITRE_PER_MINUTE
+
+
+LPM = LITRE_PER_MINUTE
+COARSE = [  # (initial flow, final flow, ramp time): from closed, steps up and down, a ramp
+    (0.0, 25 * LPM, 0.0),
+    (0.0, 25 * LPM, 0.2),
+    (5 * LPM, 25 * LPM, 0.0),
+    (25 * LPM, 1 * LPM, 0.0),
+    (25 * LPM, 0.0, 0.0),
+]
+
+
+@pytest.mark.parametrize('preset', [3e6, 10e6])
+def test_no_divergence_or_stall_across_the_envelope(reference, preset):
+    for initial, final, ramp in COARSE:
+        run = envelope_run(reference, preset, initial, final, ramp)
+        assert run.good, (preset, initial / LPM, final / LPM, ramp, run.outcome, run.message)
+        for name in MEASURE_NAMES:  # a value, or the reason why there is none
+            assert run.measures[name] is not None or name in run.measures['reasons']
+        if initial == 0.0:
+            assert 'empty and closed' in run.measures['reasons']['P_o_percent']
+
+
+def test_a_flow_the_pilot_passes_alone_says_the_main_stage_stayed_shut(reference):
+    run = envelope_run(reference, 7e6, 0.2 * LPM, 0.5 * LPM)
+    assert run.outcome == 'pilot relieves'
+    assert 'stayed on its seat' in run.measures['reasons']['T_s_ms']

@@ -1,0 +1,61 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The cases of the paper's parameter study and the protocol that sets each case's preset.
+
+One definition for `valve-sim study`, calibration checks and tolerance studies.
+"""
+
+from valve_sim.analysis.paper import STUDY_PARAMETERS, STUDY_VARIATIONS, TABLE2_CHANGES
+from valve_sim.core.parameters import scaled
+from valve_sim.core.steady_state import with_preset_pressure
+
+
+PROTOCOLS = {
+    'held-preset': 'pilot spring preload re-solved per case: the main valve cracks at the '
+    'preset pressure in every case (the paper: preset pressure 7 MPa)',
+    'frozen-preload': 'pilot spring preload of the parameter file in every case: '
+    'the preset moves with the varied parameters',
+}
+DEFAULT_PROTOCOL = 'held-preset'
+
+
+def study_cases():
+    """[(label, {symbol: percent})]: the baseline, the one-at-a-time variations, Table 2."""
+    cases = [('reference', {})]
+    for symbol in STUDY_PARAMETERS:
+        cases += [
+            (f'{symbol} {percent:+d} %', {symbol: percent})
+            for percent in STUDY_VARIATIONS
+            if percent
+        ]
+    cases.append(('table2', dict(TABLE2_CHANGES)))
+    return cases
+
+
+def case_parameters(params, changes, protocol, preset_pressure):
+    """
+    Return the validated parameters of one case: params scaled by changes {symbol: percent}.
+
+    protocol 'held-preset' re-solves the pilot spring preload so that the main
+    valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
+    Raises ParameterError or SteadyStateError when the case has no such preload.
+    """
+    case = scaled(params, changes)
+    if protocol == 'held-preset':
+        case = with_preset_pressure(case, preset_pressure)
+    elif protocol != 'frozen-preload':
+        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
+    return case

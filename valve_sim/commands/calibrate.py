@@ -1,0 +1,422 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Fit model parameters to the paper's step measures or to a recorded bag (valve-sim calibrate).
+
+Target (one of): --target-measures FILE.json, the six measures with values and
+tolerances (config/calibration/figure5.json: the paper's Figure 5), or --bag
+BAG.mcap, a recording with the topic, type and ambient-pressure mapping of
+`valve-sim analyse`: the model is driven by the recorded inlet flow and fitted to
+the recorded supply pressure (and the main-valve position where recorded).
+--fit names the parameters (ROS names, paper symbols, or preset_pressure), with
+bounds from their specs or --bounds NAME=LO:HI. Writes into --out:
+  calibrated.yaml  ROS 2 parameter file (valve_node --params-file, valve-sim --params)
+  report.json, report.txt  fitted values, residuals, 95 % intervals, correlations,
+                   constraints, starts, wall time
+  fit.png          the recording or the targets against the calibrated model
+Ctrl-C stops the fit and writes the best result so far (exit code 130).
+"""
+
+import json
+import math
+from pathlib import Path
+import shlex
+import sys
+
+import numpy as np
+from valve_sim.analysis.calibration import (
+    calibrate,
+    CalibrationError,
+    CaseRelieves,
+    fit_parameters,
+    MeasuresTarget,
+    ModesDecay,
+    PilotFlowLimit,
+    RecordingTarget,
+    StudyRelieves,
+)
+from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
+from valve_sim.commands.simulate import (
+    add_parameter_arguments,
+    flow_value,
+    load_from_arguments,
+)
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import NODE_NAME
+from valve_sim.core.simulation import LITRE_PER_MINUTE
+from valve_sim.core.steady_state import cracking_pressure
+
+
+def bounds_value(text):
+    """'NAME=LO:HI' -> (NAME, (LO, HI)) for --bounds."""
+    from argparse import ArgumentTypeError
+
+    name, separator, span = text.partition('=')
+    low, colon, high = span.partition(':')
+    try:
+        if not separator or not colon:
+            raise ValueError
+        return name.strip(), (float(low), float(high))
+    except ValueError:
+        raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
+
+
+def case_value(text):
+    """'d_c=-20,k_p=10' -> {'d_c': -20.0, 'k_p': 10.0} for --relieves."""
+    from argparse import ArgumentTypeError
+
+    changes = {}
+    for part in text.split(','):
+        name, separator, percent = part.partition('=')
+        try:
+            if not separator:
+                raise ValueError
+            changes[name.strip()] = float(percent)
+        except ValueError:
+            raise ArgumentTypeError(
+                f'expected SYMBOL=PERCENT[,SYMBOL=PERCENT...], got {text!r}'
+            ) from None
+    return changes
+
+
+def add_arguments(parser):
+    add_parameter_arguments(parser)
+    target = parser.add_mutually_exclusive_group(required=True)
+    target.add_argument(
+        '--target-measures',
+        metavar='FILE.json',
+        help='the six measures to fit: {"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}',
+    )
+    target.add_argument(
+        '--bag', metavar='BAG.mcap', help='a recorded step to fit (topics mapped as in analyse)'
+    )
+    parser.add_argument(
+        '--fit',
+        required=True,
+        metavar='NAMES',
+        help='comma-separated parameters to fit (ROS names, paper symbols or preset_pressure)',
+    )
+    parser.add_argument(
+        '--bounds',
+        type=bounds_value,
+        action='append',
+        default=[],
+        metavar='NAME=LO:HI',
+        help='bounds of a fitted parameter [SI] (default: its spec limits); repeatable',
+    )
+    parser.add_argument('--out', required=True, metavar='DIR', help='output folder')
+    parser.add_argument(
+        '--max-pilot-flow',
+        type=flow_value,
+        metavar='Q',
+        help='constraint: pilot flow (bearings, damping orifice, rod clearance) at most Q '
+        '(e.g. 1.2L/min) at --pilot-flow-at',
+    )
+    parser.add_argument(
+        '--pilot-flow-at',
+        type=flow_value,
+        default=5 * LITRE_PER_MINUTE,
+        metavar='Q',
+        help='inlet flow of the pilot-flow constraint (default 5L/min)',
+    )
+    parser.add_argument(
+        '--table2-decays',
+        action='store_true',
+        help="constraint: every linear mode of the paper's Table 2 case (preset held) decays "
+        'by 95 %% within the 1 s window of the measures, at 5 and 20 L/min',
+    )
+    parser.add_argument(
+        '--relieves',
+        type=case_value,
+        action='append',
+        default=[],
+        metavar='SYMBOL=PERCENT[,...]',
+        help="constraint: this case of the paper's study (preset held; e.g. d_c=-20) ends its "
+        'step test relieving through the main stage; repeatable',
+    )
+    parser.add_argument(
+        '--study-relieves',
+        action='store_true',
+        help="check: every case of the paper's study (preset held) opens the main stage "
+        'and ends its step test relieving through it (26 runs per start)',
+    )
+    parser.add_argument(
+        '--starts', type=int, default=3, metavar='N', help='optimiser starts (default 3)'
+    )
+    parser.add_argument(
+        '--spread',
+        type=float,
+        default=0.1,
+        metavar='S',
+        help='log-normal spread of the starts after the first (default 0.1, about 10 %%)',
+    )
+    parser.add_argument('--seed', type=int, default=0, metavar='N', help='seed of the starts')
+    parser.add_argument(
+        '--tolerance',
+        type=float,
+        default=1e-10,
+        metavar='TOL',
+        help='ftol = xtol = gtol of least_squares (default 1e-10)',
+    )
+    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    parser.add_argument(
+        '--quiet', action='store_true', help='no progress lines on stderr'
+    )
+    add_signal_arguments(parser)
+
+
+def _target(args, step_size):
+    if args.target_measures:
+        try:
+            document = json.loads(Path(args.target_measures).read_text())
+        except OSError as error:
+            raise InputFileError(
+                f'cannot read {args.target_measures}: {error.strerror}'
+            ) from error
+        except json.JSONDecodeError as error:
+            raise InputFileError(f'{args.target_measures} is not valid JSON: {error}') from error
+        return MeasuresTarget.from_document(document, step_size)
+    recording = read_recording(args.bag, signal_map_from(args))
+    if recording.problem:
+        print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
+    main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
+    try:
+        return RecordingTarget(
+            recording.time - recording.time[0],
+            recording.supply_pressure,
+            recording.inlet_flow,
+            main_valve,
+            step_size,
+        )
+    except CalibrationError as error:
+        raise CalibrationError(f'{args.bag}: {error}') from None
+
+
+def run(args):
+    params, settings = load_from_arguments(args)
+    preset = args.preset_pressure or None
+    if args.starts < 1 or not (0.0 <= args.spread <= 2.0) or not args.tolerance > 0.0:
+        raise CalibrationError('need --starts >= 1, 0 <= --spread <= 2 and --tolerance > 0')
+    step_size = settings['step_size']
+    names = [name for name in args.fit.split(',') if name.strip()]
+    fitted = fit_parameters(names, dict(args.bounds), params)
+    target = _target(args, step_size)
+    constraints = []
+    if args.max_pilot_flow is not None:
+        constraints.append(PilotFlowLimit(args.max_pilot_flow, args.pilot_flow_at))
+    if args.table2_decays:
+        constraints.append(ModesDecay())
+    constraints += [CaseRelieves(changes) for changes in args.relieves]
+    checks = [StudyRelieves()] if args.study_relieves else []
+    progress = None if args.quiet else lambda line: print(line, file=sys.stderr, flush=True)
+    if progress:
+        progress(
+            f'calibrate: {", ".join(p.name for p in fitted)} to '
+            f'{args.target_measures or args.bag}; {args.starts} start(s)'
+            + (f'; preset held at {preset / 1e6:g} MPa' if preset else '')
+        )
+    result = calibrate(
+        params,
+        fitted,
+        target,
+        constraints,
+        checks,
+        preset_pressure=preset,
+        starts=args.starts,
+        spread=args.spread,
+        seed=args.seed,
+        tolerance=args.tolerance,
+        progress=progress,
+    )
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
+    write_parameter_file(out / 'calibrated.yaml', result, settings, command)
+    report = report_document(result, target, args, command)
+    (out / 'report.json').write_text(json.dumps(report, indent=2) + '\n')
+    text = report_text(report)
+    (out / 'report.txt').write_text(text)
+    plot_fit(out / 'fit.png', result, target)
+    print(text, end='')
+    print(f'wrote {out}/calibrated.yaml, report.json, report.txt and fit.png')
+    if result.interrupted:
+        print('valve-sim calibrate: interrupted: wrote the best result so far', file=sys.stderr)
+        return 130
+    if not result.satisfied:
+        print(
+            'valve-sim calibrate: no start met every constraint and check '
+            '(see report.txt); wrote the best one anyway',
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+def yaml_number(value):
+    """Shortest round-trip text of a float, with a '.' in the mantissa (ROS reads a double)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition('e')
+    if '.' not in mantissa:
+        mantissa += '.0'
+    return mantissa + (e + exponent if e else '')
+
+
+def write_parameter_file(path, result, settings, command):
+    """calibrated.yaml: every model parameter and setting; fitted ones marked."""
+    fitted = {p.name for p in result.fitted}
+    lines = [
+        f'# Written by: {command}',
+        f'# Fitted: {", ".join(sorted(fitted))}; '
+        f'main-valve cracking pressure (preset_pressure) '
+        f'{yaml_number(cracking_pressure(result.parameters))} Pa.',
+        f'{NODE_NAME}:',
+        '  ros__parameters:',
+    ]
+    for name, value in result.parameters.items():
+        mark = '   # fitted' if name in fitted else ''
+        lines.append(f'    {name}: {yaml_number(value)}{mark}')
+    for name, value in settings.items():
+        lines.append(f'    {name}: {yaml_number(value)}')
+    path.write_text('\n'.join(lines) + '\n')
+
+
+def report_document(result, target, args, command):
+    """Return the report as a JSON-ready dict."""
+    fitted = []
+    for k, p in enumerate(result.fitted):
+        entry = {
+            'name': p.name,
+            'symbol': p.symbol,
+            'unit': p.unit,
+            'start': result.start_values[k],
+            'value': result.values[k],
+            'bounds': [p.lower, p.upper],
+            'at_bound': bool(
+                math.isclose(result.values[k], p.lower, rel_tol=1e-6)
+                or math.isclose(result.values[k], p.upper, rel_tol=1e-6)
+            ),
+        }
+        if result.intervals:
+            entry['interval_95'] = list(result.intervals[k])
+        fitted.append(entry)
+    document = {
+        'command': command,
+        'target': args.target_measures or args.bag,
+        'kind': target.kind,
+        'fitted': fitted,
+        'correlations': None
+        if result.correlations is None
+        else np.round(result.correlations, 4).tolist(),
+        'cost': result.cost,
+        'constraints': result.constraints,
+        'starts': result.starts,
+        'evaluations': result.evaluations,
+        'wall_time_s': result.wall_time,
+        'interrupted': result.interrupted,
+        'preset_pressure_Pa': cracking_pressure(result.parameters),
+    }
+    if target.kind == 'measures':
+        measures, _ = target.model_output(result.parameters)
+        document['measures'] = [
+            {
+                'name': name,
+                'model': measures[name],
+                'target': target.values[name],
+                'tolerance': target.tolerances[name],
+                'residual': float(result.residuals[k]),
+            }
+            for k, name in enumerate(target.names)
+        ]
+    else:
+        count = len(target.time)
+        pressure = result.residuals[:count] * target.pressure_noise
+        document['recording'] = {
+            'samples': count,
+            'steps_at_s': [float(step[0]) for step in target.steps],
+            'pressure_noise_estimate_Pa': target.pressure_noise,
+            'pressure_residual_rms_Pa': float(np.sqrt(np.mean(pressure**2))),
+            'main_valve_recorded': target.position is not None,
+        }
+        if target.position is not None:
+            position = result.residuals[count:len(target.residual_names)] * target.position_noise
+            document['recording']['main_valve_residual_rms_m'] = float(
+                np.sqrt(np.mean(position**2))
+            )
+    return document
+
+
+def report_text(report):
+    """Return the report as text for people."""
+    lines = [f'calibration of {report["target"]} ({report["kind"]})']
+    if report['interrupted']:
+        lines.append('INTERRUPTED: the best evaluation so far, no intervals')
+    lines.append(f'{"parameter":<34}{"start":>13}{"fitted":>15}   95 % interval')
+    for entry in report['fitted']:
+        interval = entry.get('interval_95')
+        shown = f'[{interval[0]:.6g}, {interval[1]:.6g}]' if interval else '-'
+        bound = '  (at a bound)' if entry['at_bound'] else ''
+        lines.append(
+            f'{entry["name"] + " (" + entry["symbol"] + ")":<34}{entry["start"]:>13.6g}'
+            f'{entry["value"]:>15.8g}   {shown} {entry["unit"]}{bound}'
+        )
+    if report['correlations'] and len(report['fitted']) > 1:
+        lines.append('correlations: ' + '; '.join(
+            f'{a["symbol"]}-{b["symbol"]} {report["correlations"][i][j]:+.3f}'
+            for i, a in enumerate(report['fitted'])
+            for j, b in enumerate(report['fitted'])
+            if j > i
+        ))
+    if 'measures' in report:
+        lines.append(
+            f'{"measure":<14}{"model":>11}{"target":>11}{"tolerance":>11}{"residual":>10}'
+        )
+        for m in report['measures']:
+            model = f'{m["model"]:11.4g}' if m['model'] is not None else f'{"-":>11}'
+            lines.append(
+                f'{m["name"]:<14}{model}{m["target"]:>11.4g}{m["tolerance"]:>11.4g}'
+                f'{m["residual"]:>10.3f}'
+            )
+    else:
+        r = report['recording']
+        lines.append(
+            f'recording: {r["samples"]} samples, steps at {r["steps_at_s"]} s; p_s residual '
+            f'RMS {r["pressure_residual_rms_Pa"]:.4g} Pa (noise estimate '
+            f'{r["pressure_noise_estimate_Pa"]:.4g} Pa); main valve '
+            + ('recorded' if r['main_valve_recorded'] else 'not recorded')
+        )
+    for status in report['constraints']:
+        lines.append(
+            f'{"met" if status["satisfied"] else "NOT MET"}: {status["constraint"]}: '
+            f'{status["value"]}'
+        )
+    for k, start in enumerate(report['starts'], start=1):
+        lines.append(f'start {k}: cost {start["cost"]:.6g} ({start["message"]})')
+    lines.append(
+        f'preset (cracking) pressure {report["preset_pressure_Pa"] / 1e6:.6f} MPa; cost '
+        f'{report["cost"]:.6g}; {report["evaluations"]} evaluations; wall time '
+        f'{report["wall_time_s"]:.1f} s'
+    )
+    return '\n'.join(lines) + '\n'
+
+
+def plot_fit(path, result, target):
+    from valve_sim.analysis.plotting import plot_measures_fit, plot_recording_fit
+
+    if target.kind == 'measures':
+        measures, waveforms = target.model_output(result.parameters)
+        plot_measures_fit(path, target, measures, waveforms)
+    else:
+        states = target.model_output(result.parameters)
+        plot_recording_fit(path, target, states)
