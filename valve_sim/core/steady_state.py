@@ -50,6 +50,7 @@ PSEUDO_TRANSIENT_TIME = 0.3  # [s]
 PSEUDO_TRANSIENT_STEP = 5e-6  # [s]
 PSEUDO_TRANSIENT_DAMPING = (200.0, 50.0)  # [N s/m] added to main valve and poppet
 TOLERANCE = 1e-10  # relative residual of flows and forces
+TINY_FLOW_TOLERANCE = 1e-7  # the same relative to a tiny inlet flow: 1e-17 m^3/s at 1e-10
 # [m^3/s] below it double precision cannot resolve the flow balances (a poppet open by
 # 1e-15 m next to 6 MPa pressures): steady_state extrapolates from above it.
 TINY_FLOW = 1e-12
@@ -161,6 +162,19 @@ def _estimate(inlet_flow, c):
     return state
 
 
+def _pilot_opening_estimate(inlet_flow, c):
+    """
+    Estimate for a flow the pilot alone passes, barely open: the limit of a tiny flow.
+
+    All chambers at the pilot's opening pressure k_p y_0 / A_s, the main valve seated,
+    the poppet open just enough for the flow.
+    """
+    state = np.zeros(8)
+    state[[P_S, P_M, P_P, P_C]] = c.pilot_spring_stiffness * c.pilot_spring_preload / c.rod_area
+    state[Y] = inlet_flow / (c.poppet_gain * np.sqrt(state[P_C]))
+    return state
+
+
 def _pseudo_transient(params, inlet_flow, c):
     """State after integrating a fast-settling, damped copy of the model from the empty valve."""
     fast = c._replace(
@@ -178,14 +192,20 @@ def _pseudo_transient(params, inlet_flow, c):
 
 
 def _solve_from(guess, inlet_flow, c, tiny_flow=False):
-    """Newton from guess over the contact modes; (state, residual), state None if none fits."""
+    """
+    Newton from guess over the contact modes; (state, residual), state None if none fits.
+
+    tiny_flow: flows scaled by the inlet flow itself (see _newton), where rounding of
+    the 6 MPa pressures limits the relative residual to TINY_FLOW_TOLERANCE.
+    """
+    tolerance = TINY_FLOW_TOLERANCE if tiny_flow else TOLERANCE
     best = (None, np.inf)
     for fixed_x in _contacts(guess[X], c.main_valve_stroke):
         for fixed_y in _contacts(guess[Y], c.poppet_stroke):
             candidate, error = _newton(
                 guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow
             )
-            if error < TOLERANCE and _contact_is_consistent(candidate, c):
+            if error < tolerance and _contact_is_consistent(candidate, c):
                 return candidate, error
             best = (None, min(best[1], error))
     return best
@@ -219,7 +239,7 @@ def steady_state(params, inlet_flow):
     if state is None:
         state, error = _solve_from(_pseudo_transient(params, inlet_flow, c), inlet_flow, c)
     if state is None:
-        state, error = _solve_from(estimate, inlet_flow, c, tiny_flow=True)
+        state, error = _solve_from(_pilot_opening_estimate(inlet_flow, c), inlet_flow, c, True)
     if state is None:
         raise SteadyStateError(
             f'no consistent steady state at inlet flow {inlet_flow:g} m^3/s '
