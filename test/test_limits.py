@@ -19,6 +19,7 @@ import pytest
 from valve_sim.core.integrator import (
     advance,
     advance_lanes,
+    crossing_is_accurate,
     IntegrationError,
     OverpressureError,
     splits_needed,
@@ -88,9 +89,12 @@ def test_overpressure_is_reported_apart_from_divergence(reference):
     with pytest.raises(OverpressureError, match='burst_pressure'):
         advance(state, np.full(2000, 0.05), coefficients(generous), 1e-5)
     assert np.array_equal(state, before)
-    unstable = {**reference, 'pilot_poppet_mass': 1e-5}  # crosses 35 MPa first, then blows up
+    flood = np.full(10, 0.05)
+    assert crossing_is_accurate(state, flood, 0, coefficients(generous), 1e-5), 'physics'
+    light = {**generous, 'main_valve_mass': 1e-4}  # a 1e-4 kg main valve at 100 us steps
+    assert not crossing_is_accurate(state, flood, 0, coefficients(light), 1e-4), 'numerics'
     with pytest.raises(IntegrationError, match='diverged') as failure:
-        advance(state, np.full(2000, FLOW), coefficients(unstable), 5e-5)
+        advance(state, np.full(2000, FLOW), coefficients(light), 1e-4)
     assert not isinstance(failure.value, OverpressureError)
 
 
