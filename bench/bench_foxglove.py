@@ -19,9 +19,9 @@
 #
 #     python bench/bench_foxglove.py [--phase 15] [--cycles 2] [--json out/bench_foxglove.json]
 #
-# Two valve_nodes run side by side in one run, each in its own process and
-# namespace, on a domain of this run's own (localhost only): "plain" without
-# --foxglove, "served" with --foxglove on a free port. Phases of --phase seconds
+# Three valve_nodes run side by side in one run, each in its own process and
+# namespace, on a domain of this run's own (localhost only): "plain" and "control"
+# without --foxglove, "served" with --foxglove on a free port. Phases of --phase seconds
 # alternate, --cycles times: nobody connected to served, then a viewer connected
 # (a WebSocket client in this process that subscribes to every channel, as the
 # Foxglove app does for a layout, and receives every message). Per phase and node:
@@ -29,10 +29,12 @@
 # window, their median over the phase), the ticks and the late ticks.
 #
 # Reported: served / plain ratios of the tick compute p50 and p99, per phase kind,
-# both nodes measured over the same seconds, so the machine's load falls on both.
-# Without a viewer a ratio near 1 means the live view costs the tick nothing;
-# with one, the ratio is what serving a viewer costs. Also the messages the
-# viewer received per second. Other work on the machine shows in every figure.
+# all nodes measured over the same seconds, so the machine's load falls on all;
+# and control / plain, the same ratio between two identical nodes: the noise floor
+# of these figures on this machine. Without a viewer, served / plain within the
+# control's spread means the live view costs the tick nothing; with one, the ratio
+# is what serving a viewer costs. Also the messages the viewer received per second.
+# Other work on the machine shows in every figure.
 
 import argparse
 import asyncio
@@ -48,7 +50,7 @@ import time
 
 
 REPO = Path(__file__).resolve().parent.parent
-NODES = {'plain': [], 'served': ['--foxglove', '0']}
+NODES = {'plain': [], 'control': [], 'served': ['--foxglove', '0']}
 WARM_UP = 5.0  # [s] after both nodes publish: discovery, first ticks, the JIT
 SETTLE = 2.0  # [s] at the start of each phase, not measured (a report window spans it)
 
@@ -207,9 +209,9 @@ def main(argv=None):
 
 
 def report(phases, load_start, load_end, args):
-    def ratio(kind, key):
+    def ratio(kind, key, node='served'):
         chosen = [p for p in phases if p['viewer'] == kind]
-        return statistics.median(p['served'][key] / p['plain'][key] for p in chosen)
+        return statistics.median(p[node][key] / p['plain'][key] for p in chosen)
 
     figures = {
         'phase_s': args.phase,
@@ -220,24 +222,34 @@ def report(phases, load_start, load_end, args):
         'ratio_p99_no_viewer': ratio(False, 'p99_ms'),
         'ratio_p50_viewer': ratio(True, 'p50_ms'),
         'ratio_p99_viewer': ratio(True, 'p99_ms'),
+        'control_ratio_p50': ratio(False, 'p50_ms', 'control'),
+        'control_ratio_p99': ratio(False, 'p99_ms', 'control'),
+        'control_ratio_p50_viewer': ratio(True, 'p50_ms', 'control'),
+        'control_ratio_p99_viewer': ratio(True, 'p99_ms', 'control'),
     }
-    print(f'{"phase":<10}{"viewer msg/s":>13}{"plain p50/p99 ms":>20}{"served p50/p99 ms":>20}'
-          f'{"late plain/served":>20}')
-    for phase in phases:
-        plain, served = phase['plain'], phase['served']
-        print(
-            f'{"viewer" if phase["viewer"] else "nobody":<10}'
-            f'{phase["viewer_messages_per_s"]:>13.0f}'
-            f'{plain["p50_ms"]:>10.3f}/{plain["p99_ms"]:<9.3f}'
-            f'{served["p50_ms"]:>10.3f}/{served["p99_ms"]:<9.3f}'
-            f'{plain["late_ticks"]:>10}/{served["late_ticks"]:<9}'
-        )
     print(
-        f'served/plain tick compute, nobody connected: p50 {figures["ratio_p50_no_viewer"]:.3f}, '
-        f'p99 {figures["ratio_p99_no_viewer"]:.3f}; viewer connected: p50 '
-        f'{figures["ratio_p50_viewer"]:.3f}, p99 {figures["ratio_p99_viewer"]:.3f} '
-        f'(load average {load_start[0]:.2f} -> {load_end[0]:.2f})'
+        f'{"phase":<8}{"viewer msg/s":>13}'
+        + ''.join(f'{name + " p50/p99 ms":>20}' for name in NODES)
+        + f'{"late ticks " + "/".join(NODES):>30}'
     )
+    for phase in phases:
+        print(
+            f'{"viewer" if phase["viewer"] else "nobody":<8}'
+            f'{phase["viewer_messages_per_s"]:>13.0f}'
+            + ''.join(
+                f'{phase[name]["p50_ms"]:>11.3f}/{phase[name]["p99_ms"]:<8.3f}' for name in NODES
+            )
+            + f'{"/".join(str(phase[name]["late_ticks"]) for name in NODES):>30}'
+        )
+    for kind, label in ((False, 'nobody connected'), (True, 'viewer connected')):
+        suffix = '_viewer' if kind else ''
+        print(
+            f'{label}: served/plain p50 {ratio(kind, "p50_ms"):.3f}, p99 '
+            f'{ratio(kind, "p99_ms"):.3f}; control/plain (noise) p50 '
+            f'{figures["control_ratio_p50" + suffix]:.3f}, p99 '
+            f'{figures["control_ratio_p99" + suffix]:.3f}'
+        )
+    print(f'load average {load_start[0]:.2f} -> {load_end[0]:.2f}')
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(figures, indent=2))

@@ -184,8 +184,10 @@ def test_diagnostics_names_levels_and_hardware_id_after_a_rename(renamed_valve):
 
     ok = fresh_until(lambda d: d['level'] == DiagnosticStatus.OK[0], 'an OK status')
     assert ok['name'] == f'{RENAMED}: valve model'  # late ticks stay OK: named only
-    stale = probe.wait_for_diagnostics(lambda d: d['level'] == DiagnosticStatus.WARN[0], 'WARN')
-    assert stale['name'] == ok['name'] and 'input stale' in stale['message']
+    stale = probe.wait_for_diagnostics(  # a skip under load is WARN too: wait for the input's
+        lambda d: d['level'] == DiagnosticStatus.WARN[0] and 'input stale' in d['message'], 'WARN'
+    )
+    assert stale['name'] == ok['name']
     assert probe.set_parameters(max_inlet_flow=0.1)[0].successful
     probe.wait_for_new_samples(100)  # beyond the 20 ms trial window of that change
     probe.send_flow(0.05)  # 3000 L/min: an overpressure alarm, the model halts
@@ -210,8 +212,9 @@ class AnalyserRun:
                 Parameter('topics', value=topics),
             ],
         )
-        self.statuses, self.condition = [], threading.Condition()
+        self.statuses, self.condition, self.measures = [], threading.Condition(), []
         self.analyser.status_publisher.publish = self._capture
+        self.analyser.measures_publisher.publish = self.measures.append
         self.source = rclpy.create_node('replay', namespace='/analysed', context=context)
         self.replay = Replay(self.source)
         self.executor = rclpy.executors.SingleThreadedExecutor(context=context)
@@ -261,6 +264,9 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert (recording.name, recording.hardware_id) == (waiting.name, waiting.hardware_id)
     finally:
         run.close()
+    (measured,) = [status for array in run.measures for status in array.status]
+    assert measured.name == 'renamed_analyser: step measures'  # measured on closing
+    assert measured.hardware_id == 'rig_7/recorder'
     folder = run.analyser.bag.folder  # a rosbag2 bag folder, read by rosbags
     assert folder.parent == tmp_path and (folder / 'metadata.yaml').is_file()
     with Reader(folder) as reader:
@@ -280,8 +286,9 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         return real_message_class(type_name)
 
     monkeypatch.setattr(analyser_node, 'message_class', message_class_without_string)
-    run = AnalyserRun(context, tmp_path, ['mystery'])
+    run = AnalyserRun(context, tmp_path, ['mystery', 'quiet'])
     try:
+        run.source.create_publisher(message_class('std_msgs/msg/Float64'), 'quiet', 10)
         run.wait_for(DiagnosticStatus.WARN[0], 'no messages yet on /analysed/mystery')
         string = message_class('std_msgs/msg/String')
         run.source.create_publisher(string, 'mystery', 10).publish(string(data='?'))
@@ -289,3 +296,10 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert (error.name, error.hardware_id) == (waiting.name, waiting.hardware_id)
     finally:
         run.close()
+    with Reader(run.analyser.bag.folder) as reader:  # subscribed, silent: listed, as in rosbag2
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    # quiet, and the analysed signals (always wanted) of the replay's silent publishers
+    assert counts == dict.fromkeys(
+        ['/analysed/quiet', '/analysed/applied_inlet_flow', '/analysed/joint_states',
+         '/analysed/supply_pressure'], 0
+    )

@@ -325,3 +325,14 @@ def test_bag_files_of_an_unclosed_split_bag_in_split_order(tmp_path):
         'bag_0.mcap', 'bag_1.mcap', 'bag_2.mcap', 'bag_10.mcap'
     ]
     assert bag_files(tmp_path / 'bag_2.mcap') == [tmp_path / 'bag_2.mcap']
+
+
+def test_calibrate_reads_a_bag_folder(tmp_path, capsys):
+    """`calibrate --bag` takes a bag folder as analyse does (read_recording, bag_files)."""
+    folder = tmp_path / 'flat'
+    start = ('--start-time', '2026-11-29T12:00:00Z')
+    flat = ('--final-flow', '5L/min', '--end-time', '0.3', '--mcap', folder, '--bag-folder')
+    assert main(['simulate', *map(str, flat), *start]) == 0
+    capsys.readouterr()
+    code = main(['calibrate', '--bag', str(folder), '--fit', 'd_c', '--out', str(tmp_path / 'o')])
+    assert code == 1 and 'no usable step' in capsys.readouterr().err  # read, then judged

@@ -17,9 +17,10 @@ Fit model parameters to the paper's step measures or to a recorded bag (valve-si
 
 Target (one of): --target-measures FILE.json, the six measures with values and
 tolerances (config/calibration/figure5.json: the paper's Figure 5), or --bag
-BAG.mcap, a recording with the topic, type and ambient-pressure mapping of
-`valve-sim analyse`: the model is driven by the recorded inlet flow and fitted to
-the recorded supply pressure (and the main-valve position where recorded).
+BAG (an .mcap file or a rosbag2 bag folder), a recording with the topic, type and
+ambient-pressure mapping of `valve-sim analyse`: the model is driven by the
+recorded inlet flow and fitted to the recorded supply pressure (and the
+main-valve position where recorded).
 --fit names the parameters (ROS names, paper symbols, or preset_pressure), with
 bounds from their specs or --bounds NAME=LO:HI. Writes into --out:
   calibrated.yaml  ROS 2 parameter file (valve_node --params-file, valve-sim --params)
@@ -100,7 +101,10 @@ def add_arguments(parser):
         help='the six measures to fit: {"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}',
     )
     target.add_argument(
-        '--bag', metavar='BAG.mcap', help='a recorded step to fit (topics mapped as in analyse)'
+        '--bag',
+        metavar='BAG',
+        help='a recorded step to fit: an .mcap file or a rosbag2 bag folder (topics mapped '
+        'as in analyse)',
     )
     parser.add_argument(
         '--fit',

@@ -253,7 +253,9 @@ lane_coefficients = _lane_coefficients_function()
 
 
 @jit
-def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed, verdicts):
+def rk4_lanes(
+    states, inlet_flows, table, step, record_every, records, completed, failures, verdicts
+):
     """
     Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
 
@@ -261,9 +263,9 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     (splits_needed) takes it alone with rk4_step. table [fields x lanes]: each
     lane's Coefficients as a column. Every record_every steps the states go into
     records[lane, row]. completed[lane] is set to the number of steps the lane
-    completed: fewer than len(inlet_flows) means its state left the limits
-    (verdicts[lane] says how); that lane is then frozen (its state holds those
-    values) while the others go on.
+    completed: fewer than len(inlet_flows) means its state left the limits; that
+    state goes into failures[:, lane], verdicts[lane] says how (limits.state_check),
+    and the lane's later values mean nothing.
     """
     n, lanes = states.shape
     k1 = np.empty((n, lanes))
@@ -299,6 +301,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 verdicts[j] = state_check(state, c.burst_pressure)
                 if verdicts[j] != STATE_OK:
                     completed[j] = k
+                    failures[:, j] = state
         for j in range(lanes):
             derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
         for i in range(n):
@@ -316,17 +319,22 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                 stage[i, j] = states[i, j] + step * k3[i, j]
         for j in range(lanes):
             derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
+        # The update of every unsplit lane in one sweep (a split lane took its step above;
+        # a frozen lane's values no longer matter).
+        for i in range(n):
+            for j in range(lanes):
+                rate = k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j]
+                updated = states[i, j] + step / 6.0 * rate
+                states[i, j] = states[i, j] if split[j] else updated
         for j in range(lanes):
             if completed[j] < steps or split[j]:
                 continue
-            state = states[:, j]
-            for i in range(n):
-                state[i] += step / 6.0 * (k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j])
-            c = lane_coefficients(table, j)
+            state, c = states[:, j], lane_coefficients(table, j)
             enforce_stops(state, c)
             verdicts[j] = state_check(state, c.burst_pressure)
             if verdicts[j] != STATE_OK:
                 completed[j] = k
+                failures[:, j] = state
         until_record -= 1
         if until_record == 0:
             until_record = record_every
@@ -355,6 +363,7 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     columns = np.ascontiguousarray(start.T)
     table = np.array([tuple(c) for c in coefficient_sets], dtype=float).T.copy()
     completed = np.empty(lanes, dtype=np.int64)
+    failures = np.empty_like(columns)
     verdicts = np.empty(lanes, dtype=np.int64)
     rk4_lanes(
         columns,
@@ -364,16 +373,16 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
         max(record_every, 1),
         records,
         completed,
+        failures,
         verdicts,
     )
     errors = []
     for lane, done in enumerate(completed):
         if done < len(inlet_flows):
-            reached = columns[:, lane].copy()
             errors.append(
                 _failure(
                     start[lane],
-                    reached,
+                    failures[:, lane].copy(),
                     inlet_flows,
                     done,
                     coefficient_sets[lane],

@@ -177,7 +177,7 @@ class RecordedTopic:
     """
     A subscribed topic.
 
-    Its subscription, type, bag channel (from the first message), extractor, counters.
+    Its subscription, type, bag channel (created on subscribing), extractor, counters.
     """
 
     subscription: object
@@ -427,6 +427,9 @@ class ValveAnalyser(Node):
                 self.wanted.pop(topic)
                 continue
             qos = subscription_qos(offers, self.queue_depth)
+            # In the bag from now on, with its publishers' offers, as rosbag2 creates a topic
+            # when it subscribes (listed with its count even if no message ever comes).
+            channel = self.bag.add_topic(topic, type_name, [qos_offer(o) for o in offers])
             self.recorded[topic] = RecordedTopic(
                 self.create_subscription(
                     message_type,
@@ -438,6 +441,7 @@ class ValveAnalyser(Node):
                 ),
                 type_name,
                 self._extractor(topic, type_name),
+                channel=channel,
                 qos=qos_name(qos),
             )
             self.get_logger().info(
@@ -475,12 +479,6 @@ class ValveAnalyser(Node):
             self.last_flush = time.monotonic()
 
     def _record(self, topic, recorded, data, info):
-        if recorded.channel is None:
-            offers = [
-                qos_offer(endpoint.qos_profile)
-                for endpoint in self.get_publishers_info_by_topic(topic)
-            ]
-            recorded.channel = self.bag.add_topic(topic, recorded.type_name, offers)
         self.bag.write(
             recorded.channel, data, info['received_timestamp'], info['source_timestamp']
         )
