@@ -96,7 +96,7 @@ def test_bad_input_is_one_clear_line(args, message):
 
 def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_path):
     result = valve_sim('study', '--out', str(tmp_path))
-    assert '[26/26]' in result.stderr and 'protocol held-preset' in result.stderr
+    assert '26/26 runs' in result.stderr and 'protocol held-preset' in result.stderr
     with open(tmp_path / 'sensitivity.csv') as stream:
         rows = list(csv.DictReader(stream))
     assert list(rows[0])[:3] == ['parameter', 'variation_percent', 'protocol']

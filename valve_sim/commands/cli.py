@@ -15,8 +15,8 @@
 """
 The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
-Subcommands: simulate, study, operating-point, characteristic, analyse, calibrate, repair,
-demo.
+Subcommands: simulate, study, tolerance, sensitivity, operating-point, characteristic,
+analyse, calibrate, repair, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -35,6 +35,14 @@ SUBCOMMANDS = {
         'run the valve model offline for one inlet-flow step',
     ),
     'study': ('valve_sim.commands.study', "the paper's parameter study (Figures 6-13, Table 3)"),
+    'tolerance': (
+        'valve_sim.commands.tolerance',
+        'Monte Carlo of manufacturing tolerances: yield against limits, percentiles',
+    ),
+    'sensitivity': (
+        'valve_sim.commands.sensitivity',
+        'global sensitivity: Sobol first-order and total indices (SALib)',
+    ),
     'operating-point': (
         'valve_sim.commands.operating_point',
         'exact steady state, flows, forces and linear modes at a flow',

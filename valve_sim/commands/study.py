@@ -17,8 +17,9 @@ Reproduce the paper's parameter study: Figures 6-13 and Table 3.
 
 m_m, m_p, V_p, V_c, d_c and k_p are varied one at a time by -20, -10, 0, +10 and
 +20 % of their reference values (30 cases; the five 0 % cases are one run), and
-the six together as in Table 2: 26 distinct runs of the paper's step test,
-spread over all cores.
+the six together as in Table 2: 26 distinct runs of the paper's step test, run
+in batches by the study runner (a local Dask cluster, --scheduler for an existing
+one, a local process pool when dask is not installed).
 
 PROTOCOL (--protocol; valve_sim.analysis.study_cases.PROTOCOLS): how the preset is
 treated between cases.
@@ -31,6 +32,7 @@ The preset is the base parameter set's cracking pressure (7 MPa for
 config/reference.yaml), or --preset-pressure. Every output names its protocol.
 
 Writes into --out:
+  results.jsonl     one row per run as it completes (--resume completes a broken study)
   sensitivity.csv   parameter, variation_percent, protocol, preset and initial state, measures
   table3.csv        measure, table1, table2, relative_change_percent, protocol
   figure06_m_m.png ... figure12_k_p.png, figure08_pilot_poppet.png, figure13_P_o.png
@@ -38,29 +40,28 @@ A case without a step response (no steady state, no relief through the main
 stage, divergence) has empty measures and its reason in the CSV.
 """
 
-from concurrent.futures import as_completed, ProcessPoolExecutor
 import csv
-import os
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+import numpy as np
+from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
-from valve_sim.analysis.study_cases import (
-    case_parameters,
-    DEFAULT_PROTOCOL,
-    PROTOCOLS,
-    study_cases,
-)
+from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
+from valve_sim.analysis.study_runner import evaluate_case, run_cases, SerialBackend
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
-from valve_sim.core.integrator import IntegrationError
-from valve_sim.core.parameters import ParameterError
-from valve_sim.core.simulation import simulate
-from valve_sim.core.steady_state import cracking_pressure, SteadyStateError
+from valve_sim.commands.study_backend import (
+    add_protocol_arguments,
+    add_runner_arguments,
+    open_backend,
+    protocol_preset,
+)
+from valve_sim.core.parameters import scaled
+from valve_sim.core.steady_state import cracking_pressure
 
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
-POPPET_SAMPLE_INTERVAL = 1e-4  # [s] for Figure 8's waveforms
+FIGURE8_PARAMETER = 'm_p'  # Figure 8: the poppet waveforms of the m_p variations
 CASE_COLUMNS = (
     'protocol',
     'preset_pressure_Pa',
@@ -76,73 +77,73 @@ def add_arguments(parser):
     parser.add_argument(
         '--out', required=True, metavar='DIR', help='output folder (created if missing)'
     )
-    parser.add_argument(
-        '--protocol',
-        choices=PROTOCOLS,
-        default=DEFAULT_PROTOCOL,
-        help='held-preset: preload re-solved per case, the preset held (default, the paper); '
-        'frozen-preload: the preload of the parameter file in every case',
-    )
-    parser.add_argument(
-        '--frozen-preload',
-        dest='protocol',
-        action='store_const',
-        const='frozen-preload',
-        help='same as --protocol frozen-preload',
-    )
+    add_protocol_arguments(parser)
     parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
-    parser.add_argument(
-        '--jobs',
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar='N',
-        help='parallel processes (default: all cores)',
-    )
+    add_runner_arguments(parser)
 
 
-def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_pressure=None):
+def runner_case(index, params, changes, step_size, protocol, preset_pressure):
     """
-    Run one case; returns {'measures': as_dict(), 'poppet': (time, y), 'case': CASE_COLUMNS}.
+    Return one case of the study as the runner takes it: params scaled by changes.
 
-    preset_pressure [Pa] defaults to the cracking pressure of params. A case that
-    cannot run gets every measure None with the reason; it never raises for the physics.
+    protocol 'held-preset' has the runner re-solve the pilot spring preload so that
+    the main valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
     """
-    if preset_pressure is None:
-        preset_pressure = cracking_pressure(params)
-    case = dict.fromkeys(CASE_COLUMNS)
-    case.update(protocol=protocol, preset_pressure_Pa=preset_pressure)
-    try:
-        case_params = case_parameters(params, changes, protocol, preset_pressure)
-        case['pilot_spring_preload_m'] = case_params['pilot_spring_preload']
-        case['cracking_pressure_Pa'] = cracking_pressure(case_params)
-        waveforms = simulate(
-            case_params, REFERENCE_SCENARIO, step_size, POPPET_SAMPLE_INTERVAL
-        )
-    except (ParameterError, SteadyStateError, IntegrationError) as error:
-        reason = f'no step response: {error}'
-        measures = {
-            **dict.fromkeys(MEASURE_NAMES),
-            'reasons': dict.fromkeys(MEASURE_NAMES, reason),
-            'details': {},
+    return {
+        'index': index,
+        'params': scaled(params, changes),
+        'preset_pressure': protocol_preset(protocol, preset_pressure),
+        'scenario': REFERENCE_SCENARIO,
+        'step_size': step_size,
+        'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
+    }
+
+
+def study_result(row, protocol, preset_pressure):
+    """
+    Return a runner row as {'measures': ..., 'poppet': (time, y) or None, 'case': CASE_COLUMNS}.
+
+    A case that could not run gets every measure None with the reason.
+    """
+    case = {
+        'protocol': protocol,
+        'preset_pressure_Pa': preset_pressure,
+        'cracking_pressure_Pa': row.get('cracking_pressure'),
+        'pilot_spring_preload_m': row.get('pilot_spring_preload'),
+        'initial_supply_pressure_Pa': row.get('initial_supply_pressure'),
+        'initial_main_valve_displacement_m': row.get('initial_main_valve_displacement'),
+    }
+    if row['error']:
+        reasons = dict.fromkeys(MEASURE_NAMES, f'no step response: {row["error"]}')
+        return {
+            'measures': {**row['measures'], 'reasons': reasons, 'details': {}},
+            'poppet': None,
+            'case': case,
         }
-        return {'measures': measures, 'poppet': None, 'case': case}
-    case['initial_supply_pressure_Pa'] = float(waveforms['supply_pressure'][0])
-    case['initial_main_valve_displacement_m'] = float(waveforms['main_valve_displacement'][0])
-    measures = step_measures(
-        waveforms.time,
-        waveforms['supply_pressure'],
-        waveforms['main_valve_displacement'],
-        REFERENCE_SCENARIO.step_time,
-    ).as_dict()
+    measures = {**row['measures'], 'reasons': dict(row['reasons']), 'details': {}}
     if case['initial_main_valve_displacement_m'] <= 0.0:
         measures['details']['note'] = (
             'main stage closed before the step: the valve relieves through the pilot alone'
         )
-    return {
-        'measures': measures,
-        'poppet': (waveforms.time, waveforms['poppet_displacement']),
-        'case': case,
-    }
+    waveforms = row.get('waveforms')
+    poppet = (
+        (np.asarray(waveforms['time']), np.asarray(waveforms['poppet_displacement']))
+        if waveforms
+        else None
+    )
+    return {'measures': measures, 'poppet': poppet, 'case': case}
+
+
+def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_pressure=None):
+    """
+    Run one case here; returns {'measures', 'poppet', 'case'} as study_result().
+
+    preset_pressure [Pa] defaults to the cracking pressure of params.
+    """
+    if preset_pressure is None:
+        preset_pressure = cracking_pressure(params)
+    case = runner_case(0, params, changes, step_size, protocol, preset_pressure)
+    return study_result(evaluate_case(case), protocol, preset_pressure)
 
 
 def summary(measures):
@@ -154,23 +155,39 @@ def summary(measures):
 
 
 def run_all(
-    params, step_size, jobs, protocol=DEFAULT_PROTOCOL, preset_pressure=None, progress=print
+    params,
+    step_size,
+    backend,
+    results_path,
+    protocol=DEFAULT_PROTOCOL,
+    preset_pressure=None,
+    resume=False,
+    progress_stream=sys.stderr,
 ):
-    """Run every case in parallel; returns {label: run_case result}."""
-    if preset_pressure is None and protocol == 'held-preset':
+    """
+    Run every case on the backend (None: here, serially); returns {label: study_result}.
+
+    Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
+    defaults to the cracking pressure of params.
+    """
+    if preset_pressure is None:
         preset_pressure = cracking_pressure(params)
-    cases = study_cases()
-    results = {}
-    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {
-            pool.submit(run_case, params, changes, step_size, protocol, preset_pressure): label
-            for label, changes in cases
-        }
-        for done, future in enumerate(as_completed(futures), 1):
-            label = futures[future]
-            results[label] = future.result()
-            progress(f'[{done:2d}/{len(cases)}] {label:<14} {summary(results[label]["measures"])}')
-    return results
+    labelled = study_cases()
+    rows, _ = run_cases(
+        [
+            runner_case(index, params, changes, step_size, protocol, preset_pressure)
+            for index, (_, changes) in enumerate(labelled)
+        ],
+        results_path,
+        backend or SerialBackend(),
+        resume,
+        label='study',
+        progress_stream=progress_stream,
+    )
+    return {
+        label: study_result(rows[index], protocol, preset_pressure)
+        for index, (label, _) in enumerate(labelled)
+    }
 
 
 def _label(symbol, percent):
@@ -256,25 +273,29 @@ def write_figures(out, results, protocol):
 
 def run(args):
     params, settings = load_from_arguments(args)
-    step_size = settings['step_size']
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     preset = cracking_pressure(params)
     held = args.protocol == 'held-preset'
     print(
-        f'parameter study: {len(study_cases())} runs on {args.jobs} processes; protocol '
+        f'parameter study: {len(study_cases())} runs; protocol '
         f'{args.protocol}: {PROTOCOLS[args.protocol]}'
         + (f'; preset {preset / 1e6:.4f} MPa' if held else ''),
         file=sys.stderr,
     )
-    results = run_all(
-        params,
-        step_size,
-        args.jobs,
-        args.protocol,
-        preset,
-        progress=lambda line: print(line, file=sys.stderr, flush=True),
-    )
+    backend = open_backend(args, 'study', pool_fallback=True)
+    try:
+        results = run_all(
+            params,
+            settings['step_size'],
+            backend,
+            out / 'results.jsonl',
+            args.protocol,
+            preset,
+            args.resume,
+        )
+    finally:
+        backend.close()
     write_sensitivity(out / 'sensitivity.csv', results)
     write_table3(out / 'table3.csv', results)
     write_figures(out, results, args.protocol)

@@ -32,11 +32,10 @@ class IncompleteRunError(RuntimeError):
     """A run ended without all it was to produce; the message says what is missing and why."""
 
 
-USER_ERRORS = (
-    ParameterError,
-    IntegrationError,
-    SteadyStateError,
-    InputFileError,
-    IncompleteRunError,
-    OSError,
-)
+class StudyError(RuntimeError):
+    """A study cannot run or complete (its results file, its cluster)."""
+
+
+# What one valve of a study can fail with (recorded as that case's error).
+MODEL_ERRORS = (ParameterError, IntegrationError, SteadyStateError)
+USER_ERRORS = (*MODEL_ERRORS, InputFileError, IncompleteRunError, StudyError, OSError)

@@ -1,0 +1,367 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The study runner: many step tests in batches, on Dask or a local process pool.
+
+A case is a dict:
+  index            int, unique within its study (the bookkeeping key)
+  params           complete model parameter dict (SI), as sampled (validated here:
+                   a sample outside a parameter's limits is that case's error)
+  preset_pressure  [Pa] the valve is set to crack at this pressure before its test
+                   (the pilot spring preload y_0 re-solved, as a technician turns the
+                   screw); None keeps params' preload (frozen preload)
+  scenario         core.simulation.Scenario
+  step_size        [s] RK4 step
+  record           state names whose waveforms the row keeps (usually empty)
+evaluate_batch(cases) -> rows is the one work unit: a row holds index, the preload
+used, the cracking pressure, the initial p_s and x, the six measures, their reasons,
+and error (a message when the valve could not be set or the run failed; then the
+measures are None).
+
+run_cases() submits batches to a backend (DaskBackend, PoolBackend, SerialBackend)
+and appends every finished row to a JSON-lines results file as it arrives (first
+line: the study's fingerprint), so an interrupted study resumes with only the
+missing indices. A row whose index is already on file is dropped, so a batch that
+Dask recomputes after a worker died is never recorded twice. Dask is imported only
+by DaskBackend.
+"""
+
+from dataclasses import asdict
+import hashlib
+import json
+import math
+from pathlib import Path
+import sys
+import time
+
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.core.errors import MODEL_ERRORS, StudyError
+from valve_sim.core.parameters import validate
+from valve_sim.core.simulation import simulate
+from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
+
+
+RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
+TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
+MAX_BATCH = 64
+
+
+def evaluate_case(case):
+    """Set the valve to its preset, run the step test and measure it; return its row."""
+    row = {'index': case['index']}
+    try:
+        params = validate(case['params'])
+        if case.get('preset_pressure') is not None:
+            params = with_preset_pressure(params, case['preset_pressure'])
+        row['pilot_spring_preload'] = params['pilot_spring_preload']
+        row['cracking_pressure'] = cracking_pressure(params)
+        scenario = case['scenario']
+        waveforms = simulate(params, scenario, case['step_size'], RECORD_INTERVAL)
+        row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
+        row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
+        direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
+        measures = step_measures(
+            waveforms.time,
+            waveforms['supply_pressure'],
+            waveforms['main_valve_displacement'],
+            scenario.step_time,
+            direction,
+        ).as_dict()
+    except MODEL_ERRORS as error:
+        return {
+            **row,
+            'measures': dict.fromkeys(MEASURE_NAMES),
+            'reasons': {},
+            'error': str(error),
+        }
+    row.update(
+        measures={
+            name: None if measures[name] is None else float(measures[name])
+            for name in MEASURE_NAMES
+        },
+        reasons=measures['reasons'],
+        error=None,
+    )
+    if case.get('record'):
+        row['waveforms'] = {
+            'time': waveforms.time.tolist(),
+            **{name: waveforms[name].tolist() for name in case['record']},
+        }
+    return row
+
+
+def evaluate_batch(cases):
+    """Rows of a batch of cases (the work unit a backend runs)."""
+    return [evaluate_case(case) for case in cases]
+
+
+def fingerprint(cases):
+    """Hash of everything that determines a study's results (cases in order)."""
+    digest = hashlib.sha256()
+    for case in cases:
+        plain = {
+            key: asdict(value) if hasattr(value, '__dataclass_fields__') else value
+            for key, value in case.items()
+        }
+        digest.update(json.dumps(plain, sort_keys=True, default=list).encode())
+    return digest.hexdigest()[:16]
+
+
+def read_results(path, study):
+    """
+    Rows on file for the study with this fingerprint: {index: row}.
+
+    A missing file gives {}; a file of another study raises StudyError. Every row
+    ends with a newline: a torn last line (the process died while writing it) is
+    not a row, and drop_torn_tail() removes it before new rows are appended.
+    """
+    path = Path(path)
+    if not path.exists():
+        return {}
+    lines = path.read_text().split('\n')[:-1]
+    try:
+        header = json.loads(lines[0]) if lines else {}
+    except json.JSONDecodeError:
+        header = {}
+    if header.get('study') != study:
+        raise StudyError(
+            f'{path} holds results of a different study (other parameters, samples or '
+            'seed); give another --out or run without --resume to start afresh'
+        )
+    rows = {}
+    for number, line in enumerate(lines[1:], 2):
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            raise StudyError(f'{path}, line {number}: not a JSON row') from None
+        rows.setdefault(row['index'], row)
+    return rows
+
+
+def drop_torn_tail(path):
+    """Cut a file after its last newline (a row that was being written when it died)."""
+    with open(path, 'r+b') as stream:
+        data = stream.read()
+        stream.truncate(data.rfind(b'\n') + 1)
+
+
+def batches_of(cases, batch_size):
+    """Split cases into consecutive batches of at most batch_size."""
+    return [cases[i:i + batch_size] for i in range(0, len(cases), batch_size)]
+
+
+def default_batch_size(count, workers):
+    """About TASKS_PER_WORKER batches per worker, at most MAX_BATCH cases each."""
+    return max(1, min(MAX_BATCH, math.ceil(count / (max(1, workers) * TASKS_PER_WORKER))))
+
+
+class Progress:
+    """Progress and ETA on stderr, at most one line every `interval` seconds."""
+
+    def __init__(self, label, total, done, stream=sys.stderr, interval=2.0):
+        self.label, self.total, self.resumed = label, total, done
+        self.done, self.stream, self.interval = done, stream, interval
+        self.start = self.last = time.monotonic()
+
+    def advance(self, count):
+        self.done += count
+        now = time.monotonic()
+        if now - self.last < self.interval and self.done < self.total:
+            return
+        self.last = now
+        rate = (self.done - self.resumed) / max(now - self.start, 1e-9)
+        left = (self.total - self.done) / rate if rate > 0 else float('inf')
+        _say(
+            self.stream,
+            f'{self.label}: {self.done}/{self.total} runs ({100.0 * self.done / self.total:.0f} %)'
+            f', {rate:.1f} runs/s, elapsed {_duration(now - self.start)}, '
+            f'ETA {_duration(left)}',
+        )
+
+
+def _say(stream, text):
+    """Print a line to stream (None: stay silent)."""
+    if stream is not None:
+        print(text, file=stream, flush=True)
+
+
+def _duration(seconds):
+    if not math.isfinite(seconds):
+        return '?'
+    minutes, seconds = divmod(int(round(seconds)), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f'{hours}h{minutes:02d}m' if hours else f'{minutes}m{seconds:02d}s'
+
+
+def run_cases(
+    cases,
+    results_path,
+    backend,
+    resume=False,
+    batch_size=None,
+    evaluate=evaluate_batch,
+    label='study',
+    progress_stream=sys.stderr,
+):
+    """
+    Evaluate every case once, streaming rows to results_path; return (rows, computed).
+
+    rows: {index: row} for all cases; computed: how many were evaluated in this call
+    (the rest came from the file with resume=True). Without resume an existing file
+    is replaced. An interruption (Ctrl-C, a failed batch) leaves every finished row
+    on file and raises; resume=True then evaluates only the missing indices.
+    Progress goes to progress_stream (None: silent).
+    """
+    indices = [case['index'] for case in cases]
+    if len(set(indices)) != len(indices):
+        raise ValueError('case indices must be unique')
+    study = fingerprint(cases)
+    results_path = Path(results_path)
+    rows = read_results(results_path, study) if resume else {}
+    rows = {index: row for index, row in rows.items() if index in set(indices)}
+    missing = [case for case in cases if case['index'] not in rows]
+    if resume and rows:
+        _say(
+            progress_stream,
+            f'{label}: resuming: {len(rows)} of {len(cases)} runs on file in {results_path}',
+        )
+    if resume and results_path.exists():
+        drop_torn_tail(results_path)
+    else:
+        results_path.parent.mkdir(parents=True, exist_ok=True)
+        results_path.write_text(json.dumps({'study': study, 'cases': len(cases)}) + '\n')
+    progress = Progress(label, len(cases), len(rows), progress_stream)
+    size = batch_size or default_batch_size(len(missing), backend.workers)
+    computed = 0
+    with open(results_path, 'a') as stream:
+        try:
+            for batch_rows in backend.run(evaluate, batches_of(missing, size)):
+                fresh = [row for row in batch_rows if row['index'] not in rows]
+                for row in fresh:
+                    rows[row['index']] = row
+                    stream.write(json.dumps(row) + '\n')
+                stream.flush()
+                computed += len(fresh)
+                progress.advance(len(fresh))
+        except BaseException:
+            _say(
+                progress_stream,
+                f'{label}: stopped; {len(rows)} of {len(cases)} runs are saved in '
+                f'{results_path}: --resume completes the rest',
+            )
+            raise
+    lost = set(indices) - set(rows)
+    if lost:
+        raise StudyError(f'{len(lost)} runs produced no result; rerun with --resume')
+    return rows, computed
+
+
+class SerialBackend:
+    """Batches one after another in this process (tests, debugging)."""
+
+    workers = 1
+
+    def run(self, evaluate, batches):
+        for batch in batches:
+            yield evaluate(batch)
+
+    def close(self):
+        pass
+
+
+class PoolBackend:
+    """A local process pool: the paper's study when dask is not installed."""
+
+    def __init__(self, workers):
+        self.workers = max(1, workers)
+
+    def run(self, evaluate, batches):
+        from concurrent.futures import as_completed, ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            futures = [pool.submit(evaluate, batch) for batch in batches]
+            try:
+                for future in as_completed(futures):
+                    yield future.result()
+            finally:
+                for future in futures:
+                    future.cancel()
+
+    def close(self):
+        pass
+
+
+class DaskBackend:
+    """
+    Batches as tasks on a dask.distributed cluster.
+
+    address: a scheduler (tcp://HOST:PORT) of an existing cluster, or None for a
+    LocalCluster of `workers` single-threaded processes on this machine. A task
+    whose worker dies is rescheduled by Dask; `retries` re-runs a task that raised.
+    """
+
+    def __init__(self, address=None, workers=None, retries=3):
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        self.retries = retries
+        self.cluster = None
+        if address:
+            try:
+                self.client = Client(address, timeout='30s')
+            except OSError as error:
+                raise StudyError(f'cannot reach the Dask scheduler {address}: {error}') from None
+        else:
+            self.cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+            self.client = Client(self.cluster)
+        self.workers = max(1, sum(self.client.nthreads().values()))
+
+    def run(self, evaluate, batches):
+        from distributed import as_completed
+
+        futures = [
+            self.client.submit(evaluate, batch, retries=self.retries, pure=False)
+            for batch in batches
+        ]
+        try:
+            for future in as_completed(futures):
+                try:
+                    yield future.result()
+                except Exception as error:  # noqa: B902  (KilledWorker, a worker's bug)
+                    first, last = future_cases(batches, futures, future)
+                    raise StudyError(
+                        f'the batch of cases {first}-{last} failed on the cluster: '
+                        f'{type(error).__name__}: {error}'
+                    ) from error
+        finally:
+            self.client.cancel(futures)
+
+    def close(self):
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def future_cases(batches, futures, future):
+    """First and last case index of the batch a future ran."""
+    batch = batches[futures.index(future)]
+    return batch[0]['index'], batch[-1]['index']

@@ -1,0 +1,223 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Monte Carlo of manufacturing tolerances: how many valves of a batch meet a spec.
+
+Each sampled valve (--vary, see valve_sim.analysis.tolerances for the forms) is
+set to the preset pressure before its test, as a technician sets every valve on
+the bench (protocol held-preset: the pilot spring preload re-solved so that it
+cracks at the preset, the cracking pressure of the nominal valve or
+--preset-pressure), or keeps the nominal preload (--frozen-preload); then the
+paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
+  results.jsonl   one row per run as it completes (--resume)
+  samples.csv     index, the varied parameters, the preload used, the six
+                  measures, pass, reasons, error (one row per sample)
+  summary.json    distributions, protocol, limits, yield with its 95 % interval,
+                  failures per limit, percentiles of each measure
+  measures_cdf.png, measures_vs_<parameter>.png
+"""
+
+import csv
+import json
+from pathlib import Path
+import sys
+
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.study_cases import PROTOCOLS
+from valve_sim.analysis.study_runner import run_cases
+from valve_sim.analysis.tolerances import (
+    draw,
+    parse_limits,
+    parse_variations,
+    passes,
+    SAMPLERS,
+    summarise,
+)
+from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.commands.study_backend import (
+    add_protocol_arguments,
+    add_runner_arguments,
+    open_backend,
+    protocol_preset,
+)
+from valve_sim.core.parameters import SPECS
+from valve_sim.core.steady_state import cracking_pressure
+
+
+def add_study_arguments(parser, samples_help):
+    """--out, --samples, --seed and --step-size (tolerance and sensitivity)."""
+    add_parameter_arguments(parser)
+    parser.add_argument(
+        '--out', required=True, metavar='DIR', help='output folder (created if missing)'
+    )
+    parser.add_argument('--samples', type=int, default=256, metavar='N', help=samples_help)
+    parser.add_argument(
+        '--seed', type=int, default=0, metavar='S', help='seed of the sampler (default 0)'
+    )
+    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+
+
+def add_arguments(parser):
+    add_study_arguments(parser, 'number of sampled valves (default 256)')
+    parser.add_argument(
+        '--vary',
+        action='append',
+        required=True,
+        metavar='NAME=SPEC,...',
+        help='parameters and their distributions: NAME=±X%% (uniform, half-width), '
+        'NAME=LO:HI (uniform), NAME=MEAN~N(S%%) or NAME=~N(S) (normal, sigma); repeatable',
+    )
+    parser.add_argument(
+        '--limits',
+        metavar='SPEC',
+        default='',
+        help='pass criteria, e.g. "P_1_percent<=4,T_s_ms<=600" (all must hold)',
+    )
+    parser.add_argument(
+        '--sampler',
+        choices=SAMPLERS,
+        default='lhs',
+        help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power of two), '
+        'random: pseudo-random (all seeded)',
+    )
+    add_protocol_arguments(parser)
+    add_runner_arguments(parser)
+
+
+def preset_protocol(args, params):
+    """
+    Return (preset for the cases or None, JSON-ready statement of how each valve was set).
+
+    The preset is the cracking pressure of params (after --preset-pressure).
+    """
+    preset = cracking_pressure(params)
+    statement = {
+        'protocol': args.protocol,
+        'protocol_meaning': PROTOCOLS[args.protocol],
+        'preset_pressure': preset,
+        'nominal_pilot_spring_preload': params['pilot_spring_preload'],
+    }
+    return protocol_preset(args.protocol, preset), statement
+
+
+def sample_cases(params, names, values, preset, step_size):
+    """Runner cases for sampled values (rows of values, columns of names)."""
+    return [
+        {
+            'index': index,
+            'params': {**params, **dict(zip(names, map(float, row)))},
+            'preset_pressure': preset,
+            'scenario': REFERENCE_SCENARIO,
+            'step_size': step_size,
+            'record': [],
+        }
+        for index, row in enumerate(values)
+    ]
+
+
+def write_samples(path, names, values, rows, limits):
+    with open(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(
+            ['index', *names, 'pilot_spring_preload', *MEASURE_NAMES, 'pass', 'reasons', 'error']
+        )
+        for index, sample in enumerate(values):
+            row = rows[index]
+            writer.writerow(
+                [
+                    index,
+                    *(repr(float(v)) for v in sample),
+                    row.get('pilot_spring_preload', ''),
+                    *('' if row['measures'][n] is None else row['measures'][n]
+                      for n in MEASURE_NAMES),
+                    int(passes(row, limits)),
+                    '; '.join(f'{n}: {r}' for n, r in row['reasons'].items()),
+                    row['error'] or '',
+                ]
+            )
+
+
+def print_summary(summary):
+    result = summary['yield']
+    low, high = result['ci95']
+    print(
+        f"yield {result['passed']}/{result['total']} = {100.0 * result['fraction']:.1f} % "
+        f'(95 % interval {100.0 * low:.1f}-{100.0 * high:.1f} %) against '
+        f"{', '.join(summary['limits']) or 'no limits'}"
+    )
+    print(f'{"measure":<14}' + ''.join(f'{"p" + str(p):>10}' for p in (1, 5, 50, 95, 99)))
+    for name, entry in summary['percentiles'].items():
+        if entry['defined']:
+            cells = ''.join(f"{entry['p' + str(p)]:>10.4g}" for p in (1, 5, 50, 95, 99))
+        else:
+            cells = f'{"undefined in every run":>50}'
+        note = f"  ({entry['undefined']} undefined)" if entry['undefined'] else ''
+        print(f'{name:<14}{cells}{note}')
+
+
+def run(args):
+    params, settings = load_from_arguments(args)
+    distributions = parse_variations(args.vary, params)
+    limits = parse_limits(args.limits)
+    preset, protocol = preset_protocol(args, params)
+    names = [d.name for d in distributions]
+    values = draw(distributions, args.samples, args.seed, args.sampler)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    backend = open_backend(args, 'tolerance')
+    try:
+        results, _ = run_cases(
+            sample_cases(params, names, values, preset, settings['step_size']),
+            out / 'results.jsonl',
+            backend,
+            args.resume,
+            args.batch_size,
+            label='tolerance',
+        )
+    finally:
+        backend.close()
+    rows = [results[index] for index in range(len(values))]
+    summary = {
+        'samples': len(values),
+        'seed': args.seed,
+        'sampler': args.sampler,
+        'scenario': "the paper's step: 5 -> 20 L/min at 0.25 s, measured over 1 s",
+        **protocol,
+        'distributions': [d.describe() for d in distributions],
+        **summarise(rows, limits),
+    }
+    write_samples(out / 'samples.csv', names, values, rows, limits)
+    (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+    from valve_sim.analysis.study_plots import plot_measure_cdfs, plot_measures_against
+
+    plot_measure_cdfs(out / 'measures_cdf.png', rows, limits, f"protocol {protocol['protocol']}")
+    for index, name in enumerate(names):
+        plot_measures_against(
+            out / f'measures_vs_{name}.png',
+            name,
+            SPECS[name].unit,
+            values[:, index],
+            rows,
+            limits,
+        )
+    print(
+        f"tolerance: protocol {protocol['protocol']}: {protocol['protocol_meaning']}; preset "
+        f"{protocol['preset_pressure'] / 1e6:.4f} MPa",
+        file=sys.stderr,
+    )
+    print_summary(summary)
+    print(f'wrote {out}/samples.csv, {out}/summary.json and figures')
+    return 0
