@@ -17,7 +17,10 @@ Run the valve model offline for one inlet-flow step and report the six measures.
 
 Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 0.25 s, end at 1.25 s) with config/reference.yaml. Flows accept a unit suffix
-(5L/min) and are m^3/s otherwise; times are seconds.
+(5L/min) and are m^3/s otherwise; times are seconds. Faults and sensor settings
+(fault.*, sensor.*: docs/faults.md) come from --set and --params; --faults FILE
+schedules them at valve_node's ticks. The measures are taken on the model's p_s; the
+sensor readings are what --mcap records on the pressure topics.
 """
 
 from argparse import ArgumentTypeError
@@ -29,8 +32,11 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
+from valve_sim.core.fault_schedule import load_schedule
+from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.model import STATE_NAMES
-from valve_sim.core.parameters import check_value, load_parameters, ParameterError
+from valve_sim.core.parameters import check_value, FAULT_SCHEDULE, load_parameters, ParameterError
+from valve_sim.core.sensors import checked_settings, default_settings, read_waveforms
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.core.steady_state import with_preset_pressure
 
@@ -72,12 +78,16 @@ def start_time(text):
 
 
 def assignment(text):
-    """'NAME=VALUE' -> (NAME, float) for --set."""
+    """'NAME=VALUE' -> (NAME, value) for --set: true/false, an integer, else a float."""
     name, separator, value = text.partition('=')
     if not separator:
         raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
+    if value.strip().lower() in ('true', 'false'):
+        return name.strip(), value.strip().lower() == 'true'
+    if name.strip() == FAULT_SCHEDULE:
+        return name.strip(), value.strip()
     try:
-        return name.strip(), float(value)
+        return name.strip(), int(value) if value.strip().isdigit() else float(value)
     except ValueError:
         raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
 
@@ -111,7 +121,8 @@ def add_parameter_arguments(parser):
         type=assignment,
         action='append',
         default=[],
-        help='override one parameter (ROS name or paper symbol, SI units); repeatable',
+        help='override one parameter (ROS name or paper symbol, SI units; simulate also '
+        'takes fault.* and sensor.* settings, true/false for switches); repeatable',
     )
     parser.add_argument(
         '--preset-pressure',
@@ -122,14 +133,15 @@ def add_parameter_arguments(parser):
     )
 
 
-def load_from_arguments(args):
+def load_from_arguments(args, injection=None):
     """
     Return (params, settings) from --params, --set, --preset-pressure and --step-size.
 
-    --step-size overrides settings["step_size"]. A preset pressure (--preset-pressure,
+    --step-size overrides settings["step_size"]; fault and sensor settings go into the
+    dict injection (without one they are refused). A preset pressure (--preset-pressure,
     else preset_pressure of --set or the file) sets the pilot spring preload last.
     """
-    params, settings = load_parameters(args.params, dict(args.set))
+    params, settings = load_parameters(args.params, dict(args.set), injection)
     preset = settings.pop('preset_pressure', None)
     preset = getattr(args, 'preset_pressure', None) or preset
     if preset is not None:
@@ -184,6 +196,12 @@ def add_arguments(parser):
         metavar='S',
         help="sample interval of the output waveforms [s] (default 1e-4, the paper's)",
     )
+    parser.add_argument(
+        '--faults',
+        metavar='FILE.yaml',
+        help='fault schedule (docs/faults.md): events at t [s], applied at the first tick '
+        '(1/publish_rate) at or after t, as valve_node does',
+    )
     parser.add_argument('--json', action='store_true', help='print the six measures as JSON')
     parser.add_argument('--csv', metavar='FILE', help='write the waveforms as CSV (SI units)')
     parser.add_argument('--plot', metavar='FILE.png', help="draw the paper's Figure 5")
@@ -229,11 +247,12 @@ def add_bag_arguments(parser):
     )
 
 
-def write_bag(args, waveforms, ambient_pressure, publish_interval):
+def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
     """
     Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag).
 
     With --rig-topics (simulate only): what a rig records (valve_topics.write_rig_bag).
+    readings: the sensor stage's pressures per tick (nan: nothing published), if any.
     """
     from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
@@ -266,6 +285,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval):
         publish_interval=publish_interval,
         start_time_ns=start_ns,
         folder=args.bag_folder,
+        readings=readings,
     )
 
 
@@ -319,6 +339,17 @@ def print_table(measures, paper=False):
         print(f'  {name}: {reason}')
 
 
+def load_injection(args, injection):
+    """(FaultSet, sensor settings, schedule events) from --set/--params and --faults."""
+    faults = HEALTHY.changed({n: v for n, v in injection.items() if n in FAULT_NAMES})
+    sensors = checked_settings(
+        default_settings(),
+        {n: v for n, v in injection.items() if n not in FAULT_NAMES and n != FAULT_SCHEDULE},
+    )
+    path = args.faults or injection.get(FAULT_SCHEDULE)
+    return faults, sensors, load_schedule(path) if path else []
+
+
 def is_papers_run(params, scenario):
     """Whether a run is the paper's Figure 5 case: its step, on the reference parameters."""
     return (
@@ -330,12 +361,22 @@ def is_papers_run(params, scenario):
 
 def run(args):
     check_bag_arguments(args)
-    params, settings = load_from_arguments(args)
+    injection = {}
+    params, settings = load_from_arguments(args, injection)
+    faults, sensors, schedule = load_injection(args, injection)
     step_size = settings['step_size']
     scenario = _scenario(args)
     if args.record_interval < step_size:
         raise ParameterError(f'--record-interval must be >= the step size ({step_size:g} s)')
-    waveforms = simulate(params, scenario, step_size, args.record_interval)
+    waveforms = simulate(
+        params,
+        scenario,
+        step_size,
+        args.record_interval,
+        faults,
+        schedule,
+        1.0 / settings['publish_rate'],
+    )
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
     measures = step_measures(
         waveforms.time,
@@ -344,6 +385,13 @@ def run(args):
         scenario.step_time,
         direction,
     )
+    faulty = bool(faults.active() or waveforms.events)
+    if faulty:
+        cause = '; '.join(
+            [f'faults from the start: {faults.describe()}'] * bool(faults.active())
+            + [f'fault schedule {args.faults or injection.get(FAULT_SCHEDULE)}'] * bool(schedule)
+        )
+        measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
@@ -364,9 +412,14 @@ def run(args):
         interval = (
             1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
         )
-        write_bag(args, waveforms, settings['ambient_pressure'], interval)
+        _, readings = read_waveforms(waveforms, sensors, interval, settings['ambient_pressure'])
+        write_bag(args, waveforms, settings['ambient_pressure'], interval, readings)
     if args.json:
         print(json.dumps(measures.as_dict(), indent=2))
     else:
-        print_table(measures, paper=is_papers_run(params, scenario))
+        print_table(measures, paper=is_papers_run(params, scenario) and not faulty)
+        if faults.active():
+            print(f'faults from the start: {faults.describe()}')
+        for applied_at, changes in waveforms.events:
+            print(f'at t = {applied_at:.6f} s: {changes}')
     return 0

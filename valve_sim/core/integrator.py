@@ -96,9 +96,16 @@ def rest_on_stops(state, position, velocity, stroke):
 
 @jit
 def enforce_stops(state, c):
-    """Keep the main valve and the poppet between their seats and end stops."""
+    """
+    Keep the valves between their seats and end stops, p_s at most the supply's limit.
+
+    The supply's relief (supply_pressure_limit, model.derivatives) is a stop for p_s:
+    a step that overshoots it ends on it.
+    """
     rest_on_stops(state, X, X_DOT, c.main_valve_stroke)
     rest_on_stops(state, Y, Y_DOT, c.poppet_stroke)
+    if state[P_S] > c.supply_pressure_limit:
+        state[P_S] = c.supply_pressure_limit
 
 
 @jit

@@ -35,6 +35,15 @@ Departures from the printed equations, each explained in docs/model.md:
 - Eq. (12) is normalised by the upstream pressure max(p_s, p_p), which equals the
   printed p_s in forward flow and stays bounded in reverse flow or at zero pressure.
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
+- The supply may be pressure-limited: at supply_pressure_limit (if set) its own relief
+  (the bench pump's) takes the inflow the valve does not pass, so p_s stops rising there.
+
+Valve faults (valve_sim.core.faults, docs/faults.md) enter as physical terms here and
+nowhere else: orifice blockage and spring weakening scale K_c, K_b and k_p in
+coefficients(); friction (bearing_friction), seat leakage (seat_leakage_flow) and a stuck
+main valve (main_valve_free) act in derivatives(). With no fault every term is skipped,
+so the healthy model is computed exactly as without them.
+
 fastest_chamber_rate() tells the integrator when a fixed step must be split.
 """
 
@@ -42,6 +51,7 @@ from collections import namedtuple
 import math
 
 import numpy as np
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.jit import jit
 
 
@@ -56,6 +66,13 @@ STATE_NAMES = (
     'poppet_velocity',
 )
 P_S, P_M, P_P, P_C, X, X_DOT, Y, Y_DOT = range(8)
+
+# Karnopp stick band of the bearing friction (numerical choices, docs/faults.md): below
+# STICK_VELOCITY [m/s] the main valve counts as sticking, and static friction up to F_st
+# holds it and brings its residual velocity to zero with the time constant
+# STICK_RELAXATION_TIME [s] (RK4-stable for every allowed step size, <= 1e-4 s).
+STICK_VELOCITY = 1e-3
+STICK_RELAXATION_TIME = 1e-4
 
 # Derived constants of Eqs. (5), (8), (9), (16), in the form the kernels use.
 Coefficients = namedtuple(
@@ -93,6 +110,11 @@ Coefficients = namedtuple(
         'poppet_stroke',
         'transition_pressure',  # dp_tr                   [Pa]
         'burst_pressure',  # p_burst, a physical limit  [Pa]
+        'supply_pressure_limit',  # p_s,max (inf: none)     [Pa]
+        'coulomb_friction',  # F_c, fault               [N]
+        'static_friction',  # max(F_st, F_c), fault    [N]
+        'seat_leakage_gain',  # K_l, fault             [m^3/s/sqrt(Pa)]
+        'main_valve_free',  # 0.0 if stuck (fault), else 1.0
     ),
 )
 
@@ -102,8 +124,12 @@ def land_pressure_term(outer, inner):
     return (outer**2 - inner**2) / math.log(outer / inner)
 
 
-def coefficients(p):
-    """Derive the Coefficients from a validated parameter dict (see valve_sim.core.parameters)."""
+def coefficients(p, faults=HEALTHY):
+    """
+    Derive the Coefficients from a validated parameter dict and a FaultSet.
+
+    p: see valve_sim.core.parameters; faults: valve_sim.core.faults.FaultSet.
+    """
     root = math.sqrt(2.0 / p['fluid_density'])
     land_1 = land_pressure_term(
         p['first_throttle_outer_diameter'], p['first_throttle_inner_diameter']
@@ -113,7 +139,7 @@ def coefficients(p):
     )
     d_p, theta = p['main_valve_back_diameter'], p['poppet_half_angle']
     c_d, d_v = p['discharge_coefficient'], p['pilot_seat_diameter']
-    return Coefficients(
+    c = Coefficients(
         supply_compliance_inv=p['bulk_modulus'] / p['supply_volume'],
         intermediate_compliance_inv=p['bulk_modulus'] / p['intermediate_volume'],
         pilot_compliance_inv=p['bulk_modulus'] / p['pilot_volume'],
@@ -155,6 +181,39 @@ def coefficients(p):
         poppet_stroke=p['poppet_stroke'],
         transition_pressure=p['orifice_transition_pressure'],
         burst_pressure=p['burst_pressure'],
+        supply_pressure_limit=p['supply_pressure_limit'] or math.inf,
+        coulomb_friction=0.0,
+        static_friction=0.0,
+        seat_leakage_gain=0.0,
+        main_valve_free=1.0,
+    )
+    return with_faults(c, faults, p) if faults != HEALTHY else c
+
+
+def with_faults(c, faults, p):
+    """
+    Coefficients c changed by the faults (FaultSet), p the parameter dict c came from.
+
+    Blockage scales an orifice's flow gain with its remaining area; weakening scales
+    k_p, a broken spring has k_p = 0 and no preload. The preload position y_0 (the
+    adjusting screw) is never changed.
+    """
+    stiffness = c.pilot_spring_stiffness * (1.0 - faults.pilot_spring_weakening)
+    return c._replace(
+        damping_orifice_gain=c.damping_orifice_gain * (1.0 - faults.damping_orifice_blockage),
+        bearing_gain=c.bearing_gain * (1.0 - faults.bearing_orifice_blockage),
+        pilot_spring_stiffness=0.0 if faults.pilot_spring_broken else stiffness,
+        pilot_spring_preload=0.0 if faults.pilot_spring_broken else c.pilot_spring_preload,
+        coulomb_friction=faults.bearing_coulomb_friction,
+        static_friction=max(faults.bearing_static_friction, faults.bearing_coulomb_friction),
+        seat_leakage_gain=(
+            math.pi
+            / 4.0
+            * p['discharge_coefficient']
+            * faults.seat_leakage_diameter**2
+            * math.sqrt(2.0 / p['fluid_density'])
+        ),
+        main_valve_free=0.0 if faults.main_valve_stuck else 1.0,
     )
 
 
@@ -217,12 +276,14 @@ def fastest_chamber_rate(state, c):
         c.bearing_k1 + z * (2.0 * c.bearing_k2 + 3.0 * z * c.bearing_k3)
     ) / math.sqrt(upstream)
     bearing, leak = abs(bearing), c.rod_leakage_conductance
+    seat = c.seat_leakage_gain * orifice_root_slope(p_s, tr)  # a leaking seat (fault)
     c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
     c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
     k_sm, k_sp = math.sqrt(c_s * c_m), math.sqrt(c_s * c_p)  # couplings sqrt(C_i C_j)
     k_sc, k_pc = math.sqrt(c_s * c_c), math.sqrt(c_p * c_c)
     return max(
-        c_s * (throttle_1 + bearing + leak) + k_sm * throttle_1 + k_sp * bearing + k_sc * leak,
+        c_s * (throttle_1 + bearing + leak + seat) + k_sm * throttle_1 + k_sp * bearing
+        + k_sc * leak,
         c_m * (throttle_1 + throttle_2) + k_sm * throttle_1,
         c_p * (bearing + orifice) + k_sp * bearing + k_pc * orifice,
         c_c * (orifice + leak + poppet) + k_pc * orifice + k_sc * leak,
@@ -278,6 +339,30 @@ def net_forces(state, c):
 
 
 @jit
+def bearing_friction(velocity, force, c):
+    """
+    Friction force on the main valve [N] (fault), Karnopp's model with a stick band.
+
+    Sliding (|x_dot| > STICK_VELOCITY): F_c against the motion. In the stick band the
+    friction holds the valve against the other forces (force [N]) and brakes its residual
+    velocity, as far as the static friction F_st reaches; a valve at rest under a force
+    below F_st gets exactly zero acceleration.
+    """
+    if velocity > STICK_VELOCITY:
+        return -c.coulomb_friction
+    if velocity < -STICK_VELOCITY:
+        return c.coulomb_friction
+    hold = -force - c.main_valve_mass * velocity / STICK_RELAXATION_TIME
+    return min(max(hold, -c.static_friction), c.static_friction)
+
+
+@jit
+def seat_leakage_flow(p_s, c):
+    """Leakage past a worn main seat, supply to tank [m^3/s] (fault): q_l = K_l sgn sqrt(p_s)."""
+    return c.seat_leakage_gain * orifice_root(p_s, c.transition_pressure)
+
+
+@jit
 def stop_acceleration(position, velocity, force, mass, stroke):
     """
     Acceleration of a body between a seat at 0 and an end stop at stroke.
@@ -295,17 +380,24 @@ def stop_acceleration(position, velocity, force, mass, stroke):
 def derivatives(state, inlet_flow, c, out):
     """Write d(state)/dt into out for inlet flow q_in [m^3/s], Eqs. (1)-(7)."""
     q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
-    x_dot, y_dot = state[X_DOT], state[Y_DOT]
+    x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
     out[P_S] = c.supply_compliance_inv * (
         inlet_flow - q_m1 - q_n - q_s - c.swept_area * x_dot - c.rod_area * y_dot
     )  # (1)
+    if c.seat_leakage_gain > 0.0:
+        out[P_S] -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c)
+    if state[P_S] >= c.supply_pressure_limit and out[P_S] > 0.0:
+        out[P_S] = 0.0  # the supply's relief takes the rest of the inflow
     out[P_M] = c.intermediate_compliance_inv * (q_m1 - q_m2)  # (2)
     out[P_P] = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
     out[P_C] = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)  # (4)
     force_x, force_y = net_forces(state, c)
+    if c.static_friction > 0.0:
+        force_x += bearing_friction(x_dot, force_x, c)
     out[X] = x_dot
-    out[X_DOT] = stop_acceleration(
-        state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke
+    out[X_DOT] = (
+        stop_acceleration(state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke)
+        * c.main_valve_free
     )  # (6)
     out[Y] = y_dot
     out[Y_DOT] = stop_acceleration(

@@ -360,6 +360,18 @@ PARAMETERS = (
         '(a state beyond it is an overpressure)',
         OURS,
     ),
+    # The test bench's supply (not the valve).
+    ParameterSpec(
+        'supply_pressure_limit',
+        'p_s,max',
+        'Pa',
+        0.0,
+        5e8,
+        "highest supply pressure (gauge) the bench's supply delivers: its own relief "
+        'takes the inflow beyond it; where a valve fault drives p_s there, valve_node '
+        "raises an overpressure alarm. Set it to your bench's relief setting; 0: no limit",
+        OURS,
+    ),
     # Numerical regularisation.
     ParameterSpec(
         'orifice_transition_pressure',
@@ -579,7 +591,24 @@ def read_parameter_file(path, node_name=NODE_NAME):
     raise ParameterError(f"parameter file {path} has no '{node_name}: ros__parameters:' section")
 
 
-def load_parameters(path=None, overrides=None):
+# Parameters of fault injection (valve_sim.core.faults, valve_sim.core.sensors): prefixes
+# and the schedule file; load_parameters() hands them on unchecked.
+INJECTION_PREFIXES = ('fault.', 'sensor.')
+FAULT_SCHEDULE = 'fault_schedule'
+
+
+def flattened(raw, prefix=''):
+    """Nested mappings of a parameter file as dotted names, as ROS 2 reads them."""
+    flat = {}
+    for key, value in raw.items():
+        if isinstance(value, dict):
+            flat.update(flattened(value, f'{prefix}{key}.'))
+        else:
+            flat[f'{prefix}{key}'] = value
+    return flat
+
+
+def load_parameters(path=None, overrides=None, injection=None):
     """
     Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
@@ -587,12 +616,21 @@ def load_parameters(path=None, overrides=None):
     --params-file for the node); the rest keep their reference values. Run-time
     settings in either file (SETTINGS: step_size, publish_rate, ...) are checked
     and returned separately; any other key is an error. overrides (name or paper
-    symbol -> value) are applied last. Returns (params, settings).
+    symbol -> value) are applied last. Fault and sensor settings (fault.*, sensor.*,
+    fault_schedule) go into the dict injection, unchecked; without one they are an
+    error (the command does not use them). Returns (params, settings).
     """
-    raw = read_parameter_file(config_path('reference.yaml'))
+    raw = flattened(read_parameter_file(config_path('reference.yaml')))
     if path is not None:
-        raw.update(read_parameter_file(path))
+        raw.update(flattened(read_parameter_file(path)))
     raw.update(overrides or {})
+    for name in [n for n in raw if n.startswith(INJECTION_PREFIXES) or n == FAULT_SCHEDULE]:
+        if injection is None:
+            raise ParameterError(
+                f"'{name}': fault and sensor settings are used by valve_node and "
+                '`valve-sim simulate` only'
+            )
+        injection[name] = raw.pop(name)
     settings = {
         name: check_value(name, raw.pop(name))
         for name in list(raw)

@@ -32,8 +32,10 @@ until resume() (a reset, a new inlet flow or a parameter change).
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance, IntegrationError
 from valve_sim.core.model import coefficients
+from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 
 
@@ -63,22 +65,23 @@ class RealTimeModel:
     The valve state, its parameters and its model time [ns].
 
     params: validated parameter dict; step_size [s]; inlet_flow [m^3/s]: the
-    flow whose exact steady state is the initial state. The model time is None
-    until start() anchors it to the clock.
+    flow whose exact steady state is the initial state; faults: the FaultSet in
+    effect. The model time is None until start() anchors it to the clock.
     """
 
-    def __init__(self, params, step_size, inlet_flow):
-        self.state = steady_state(params, inlet_flow)
+    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY):
+        self.state = steady_state(params, inlet_flow, faults)
         self.time_ns = None
-        self._use(params, step_size)
-        self._previous = None  # (params, step_size) before the last retune, for roll_back()
+        self._use(params, step_size, faults)
+        self._previous = None  # (params, step_size, faults) before the last retune
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
 
-    def _use(self, params, step_size):
+    def _use(self, params, step_size, faults):
         self.params = params
         self.step_size = step_size
-        self._coefficients = coefficients(params)
+        self.faults = faults
+        self._coefficients = coefficients(params, faults)
         self._step_ns = step_ns(step_size)
 
     def start(self, now_ns):
@@ -127,24 +130,32 @@ class RealTimeModel:
         """Move the model time to the last step boundary before now_ns [ns], holding the state."""
         self.time_ns += (now_ns - self.time_ns) // self._step_ns * self._step_ns
 
-    def trial(self, params, step_size, inlet_flow):
+    def trial(self, params, step_size, inlet_flow, faults=None):
         """
-        Integrate TRIAL_STEPS steps from a copy of the state with new parameters.
+        Integrate TRIAL_STEPS steps from a copy of the state with new parameters (and faults).
 
         Raises IntegrationError if they diverge; the model itself is not touched.
         """
+        state = self.state.copy()
+        faults = self.faults if faults is None else apply_faults(state, self.faults, faults)
         advance(
-            self.state.copy(),
+            state,
             np.full(TRIAL_STEPS, float(inlet_flow)),
-            coefficients(params),
+            coefficients(params, faults),
             step_ns(step_size) / NS_PER_S,
         )
 
-    def retune(self, params, step_size):
-        """Use new parameters (validated dict) and step size [s] from the next step on."""
-        self._previous = (self.params, self.step_size)
+    def retune(self, params, step_size, faults=None):
+        """
+        Use new parameters (validated dict) and step size [s] from the next step on.
+
+        faults: {name: value} of fault parameters changed too (None: none); a main
+        valve that becomes stuck stops where it is.
+        """
+        self._previous = (self.params, self.step_size, self.faults)
         self._retuned_ns = self.time_ns
-        self._use(params, step_size)
+        faults = self.faults if faults is None else apply_faults(self.state, self.faults, faults)
+        self._use(params, step_size, faults)
 
     def roll_back(self, failure_ns):
         """
@@ -165,10 +176,10 @@ class RealTimeModel:
 
     def reset(self, inlet_flow):
         """
-        Re-initialise at the exact steady state for inlet_flow [m^3/s].
+        Re-initialise at the exact steady state for inlet_flow [m^3/s] with the faults in effect.
 
         Raises SteadyStateError (the state is then unchanged): among others for a flow or
         a steady state beyond the physical limits. A reset resumes a halted model.
         """
-        self.state = steady_state(self.params, inlet_flow)
+        self.state = steady_state(self.params, inlet_flow, self.faults)
         self.resume()

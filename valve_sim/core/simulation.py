@@ -18,7 +18,8 @@ Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms ou
 A Scenario is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
-empty, closed valve.
+empty, closed valve. Faults (a FaultSet) hold from the start; a fault schedule
+(valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 
 simulate() integrates the whole run. simulate_batch(), for studies, runs many
 parameter sets through one scenario on the lanes kernel and does not integrate
@@ -31,13 +32,15 @@ linear mode with Re(lambda) >= 0, valve_sim.core.linear) is integrated as in
 simulate(): there rounding errors grow before the step as they would on a rig.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from valve_sim.core.fault_schedule import tick_index
+from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.integrator import advance, advance_lanes
 from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
-from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES
+from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
@@ -77,9 +80,43 @@ class Waveforms:
     time: np.ndarray
     states: np.ndarray
     inlet_flow: np.ndarray
+    events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
+
+
+def apply_faults(state, faults, changes):
+    """
+    Return the FaultSet after the fault parameters in changes; state updated in place.
+
+    A main valve that becomes stuck stops where it is: its velocity becomes zero.
+    """
+    new = faults.changed({n: v for n, v in changes.items() if n in FAULT_NAMES})
+    if new.main_valve_stuck and not faults.main_valve_stuck:
+        state[X_DOT] = 0.0
+    return new
+
+
+def _event_steps(schedule, steps, step_size, record_every, tick_interval):
+    """[(step index, changes)] of the schedule's events, at their ticks, within the run."""
+    tick_steps = int(round(tick_interval / step_size))
+    if schedule and (
+        tick_steps < 1
+        or abs(tick_steps * step_size - tick_interval) > 1e-9 * tick_interval
+        or tick_steps % record_every
+    ):
+        raise ParameterError(
+            f'a fault schedule needs the tick interval ({tick_interval:g} s) to be a whole '
+            f'multiple of the step size ({step_size:g} s) and of the record interval'
+        )
+    tick_ns = int(round(tick_interval * 1e9))
+    grouped = {}
+    for event in schedule:
+        k = tick_index(event.time_ns, tick_ns) * tick_steps
+        if k <= steps:
+            grouped.setdefault(k, {}).update(event.changes)
+    return sorted(grouped.items())
 
 
 def main_stage_flow(params, states):
@@ -99,7 +136,9 @@ def step_flows(scenario, step_size):
     return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
 
 
-def _waveforms(initial, record, flows, record_every, step_size, initial_flow, held=0):
+def _waveforms(
+    initial, record, flows, record_every, step_size, initial_flow, held=0, events=()
+):
     """Waveforms of a run: the initial state, held rows of it, then the recorded rows."""
     rows = held + len(record)
     states = np.empty((rows + 1, len(initial)))
@@ -110,6 +149,7 @@ def _waveforms(initial, record, flows, record_every, step_size, initial_flow, he
         time=np.concatenate([[0.0], sample_steps * step_size]),
         states=states,
         inlet_flow=np.concatenate([[initial_flow], flows[sample_steps - 1]]),
+        events=list(events),
     )
 
 
@@ -132,31 +172,94 @@ def ramp_flows(max_flow, ramp_time, hold_time, step_size):
     return np.concatenate([up, np.full(int(round(hold_time / step_size)), max_flow), up[::-1]])
 
 
-def run_flows(params, flows, step_size=1e-5, record_interval=1e-4, initial_flow=0.0):
+def run_flows(
+    params,
+    flows,
+    step_size=1e-5,
+    record_interval=1e-4,
+    initial_flow=0.0,
+    faults=HEALTHY,
+    schedule=(),
+    tick_interval=1e-3,
+):
     """
     Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
 
     The run starts at the exact steady state of initial_flow [m^3/s] (0: the empty,
-    closed valve). Returns Waveforms sampled every record_interval [s]. Raises
-    IntegrationError if the run diverges, SteadyStateError if the start fails.
+    closed valve) with faults (a FaultSet). schedule: FaultEvents, each applied at the
+    first tick (every tick_interval [s], valve_node's publish period) at or after its
+    time. Returns Waveforms sampled every record_interval [s]; their events list what
+    was applied when (sensor settings included, for the sensor stage). Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails,
+    ParameterError for a bad fault or tick interval.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     flows = np.ascontiguousarray(flows, dtype=float)
-    state = steady_state(params, initial_flow)
+    state = steady_state(params, initial_flow, faults)
     check_schedule(params, flows)
     initial = state.copy()
-    record = advance(state, flows, coefficients(params), step_size, record_every)
-    return _waveforms(initial, record, flows, record_every, step_size, initial_flow)
+    records, events, start = [], [], 0
+    events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
+    for stop, changes in events_at:
+        records.append(
+            advance(
+                state,
+                flows[start:stop],
+                coefficients(params, faults),
+                step_size,
+                record_every,
+                start * step_size,
+            )
+        )
+        faults = apply_faults(state, faults, changes)
+        if stop == 0:
+            initial = state.copy()
+        elif len(records[-1]):
+            records[-1][-1] = state  # the tick's sample shows the state after the event
+        events.append((stop * step_size, changes))
+        start = stop
+    records.append(
+        advance(
+            state,
+            flows[start:],
+            coefficients(params, faults),
+            step_size,
+            record_every,
+            start * step_size,
+        )
+    )
+    record = np.vstack(records)
+    return _waveforms(
+        initial, record, flows, record_every, step_size, initial_flow, events=events
+    )
 
 
-def simulate(params, scenario=Scenario(), step_size=1e-5, record_interval=1e-4):
+def simulate(
+    params,
+    scenario=Scenario(),
+    step_size=1e-5,
+    record_interval=1e-4,
+    faults=HEALTHY,
+    schedule=(),
+    tick_interval=1e-3,
+):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
-    Raises IntegrationError if the run diverges, SteadyStateError if the start fails.
+    faults, schedule, tick_interval: as run_flows. Raises IntegrationError if the run
+    diverges, SteadyStateError if the start fails.
     """
     flows = step_flows(scenario, step_size)
-    return run_flows(params, flows, step_size, record_interval, scenario.initial_flow)
+    return run_flows(
+        params,
+        flows,
+        step_size,
+        record_interval,
+        scenario.initial_flow,
+        faults,
+        schedule,
+        tick_interval,
+    )
 
 
 def steady_lead(flows, initial_flow, record_every):

@@ -24,10 +24,17 @@ Newton restarts from a pseudo-transient: the model integrated with a small suppl
 volume V_s and added valve damping, which change how fast the valve settles but
 not where. Either valve may rest on its seat or end stop; then its
 position is fixed there and its force balance is replaced by the contact condition.
+
+Faults (valve_sim.core.faults) change the balances as they change the model; a stuck
+main valve is solved as free (it then sticks where the solution puts it), and friction
+is left out: the frictionless rest state is one of the states friction holds.
 """
+
+from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import brentq, root
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance, IntegrationError
 from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.model import (
@@ -151,7 +158,7 @@ def _estimate(inlet_flow, c):
     ) / c.back_area
     state[[P_S, P_M, P_P, P_C]] = p_s, p_m, min(max(p_p, 0.0), p_s), 0.0
     q_n = flows(state, c)[2]
-    p_c = max(state[P_P] - (q_n / c.damping_orifice_gain) ** 2, 0.1 * state[P_P])
+    p_c = max(state[P_P] - (q_n / max(c.damping_orifice_gain, 1e-30)) ** 2, 0.1 * state[P_P])
     state[P_C] = p_c
     q_pilot = min(q_n + c.rod_leakage_conductance * (p_s - p_c), inlet_flow)
     state[Y] = min(q_pilot / (c.poppet_gain * np.sqrt(max(p_c, 1.0))), c.poppet_stroke)
@@ -211,15 +218,34 @@ def _solve_from(guess, inlet_flow, c, tiny_flow=False):
     return best
 
 
-def steady_state(params, inlet_flow):
+def steady_coefficients(params, faults):
+    """
+    Coefficients of the valve's balances.
+
+    With the faults' terms, the main valve free, no friction, and no supply limit
+    (the supply's relief is no path of the valve; steady_state checks the limit).
+    """
+    return coefficients(
+        params,
+        replace(
+            faults,
+            main_valve_stuck=False,
+            bearing_coulomb_friction=0.0,
+            bearing_static_friction=0.0,
+        ),
+    )._replace(supply_pressure_limit=np.inf)
+
+
+def steady_state(params, inlet_flow, faults=HEALTHY):
     """
     Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
 
-    params: validated parameter dict. inlet_flow = 0 gives the empty, closed valve;
-    any flow above 0, however small, the valve held at its pilot's opening pressure.
-    Raises SteadyStateError when the flow is not a valid input (above max_inlet_flow),
-    when no consistent steady state is found, or when the steady state is beyond the
-    physical limits (burst_pressure): a steady state is never an impossible state.
+    params: validated parameter dict; faults: FaultSet. inlet_flow = 0 gives the
+    empty, closed valve; any flow above 0, however small, the valve held at its
+    pilot's opening pressure. Raises SteadyStateError when the flow is not a valid
+    input (above max_inlet_flow), when no consistent steady state is found, or when
+    the steady state is beyond the physical limits (burst_pressure) or the bench's
+    supply_pressure_limit: a steady state is never an impossible state.
     """
     problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow'])
     if problem:
@@ -229,11 +255,12 @@ def steady_state(params, inlet_flow):
     if inlet_flow < TINY_FLOW:
         # The balances are linear in the flow down here (every orifice laminar, the
         # poppet opening proportional to it): extrapolate from two resolvable flows.
-        low, high = steady_state(params, TINY_FLOW), steady_state(params, 2.0 * TINY_FLOW)
+        low = steady_state(params, TINY_FLOW, faults)
+        high = steady_state(params, 2.0 * TINY_FLOW, faults)
         state = low + (high - low) * (inlet_flow - TINY_FLOW) / TINY_FLOW
         state[Y] = max(state[Y], 0.0)
         return state
-    c = coefficients(params)
+    c = steady_coefficients(params, faults)
     estimate = _estimate(inlet_flow, c)
     state, error = _solve_from(estimate, inlet_flow, c)
     if state is None:
@@ -248,19 +275,27 @@ def steady_state(params, inlet_flow):
     problem = state_problem(state, params['burst_pressure'])
     if problem:
         raise SteadyStateError(f'the steady state at {inlet_flow:g} m^3/s is refused: {problem}')
+    if 0.0 < params['supply_pressure_limit'] < state[P_S]:
+        raise SteadyStateError(
+            f'the valve passes {inlet_flow:g} m^3/s only at p_s = {state[P_S]:.6g} Pa, above '
+            f"supply_pressure_limit = {params['supply_pressure_limit']:g} Pa"
+            + (f' (faults: {faults.describe()})' if faults.active() else '')
+        )
     return state
 
 
-def cracking_pressure(params):
+def cracking_pressure(params, faults=HEALTHY):
     """
     Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
+
+    faults: FaultSet (e.g. a weakened pilot spring lowers it).
 
     At that point the main valve rests at x = 0 with zero net force, no flow
     passes the main throttles (so p_m = p_s) and all inlet flow goes through the
     pilot stage. Solved by Newton's method on the pilot-chamber and poppet-chamber
     balances and the two force balances, in p_s, p_p, p_c and y.
     """
-    c = coefficients(params)
+    c = steady_coefficients(params, faults)
     guess = _estimate(1e-5, c)
     pressure_scale = max(guess[P_S], 1e5)
     scale = np.array([pressure_scale, pressure_scale, pressure_scale, c.poppet_stroke])

@@ -102,18 +102,28 @@ class TickMessages:
         self._applied.float64s(0)  # effort
         self._messages += [('joint_states', self._joints), ('applied_inlet_flow', self._applied)]
 
-    def fill(self, time_ns, state, applied_flow, ambient_pressure):
-        """Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa]."""
-        for (_, message), offset, pressure in zip(
-            self._messages, self._pressure_offsets, state[P_S:P_C + 1]
+    def fill(self, time_ns, state, applied_flow, ambient_pressure, readings=None):
+        """
+        Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa].
+
+        readings: the published pressures [Pa absolute] (a sensor stage's), nan for a
+        topic that publishes nothing; default: the state's pressures + ambient_pressure.
+        """
+        if readings is None:
+            readings = [pressure + ambient_pressure for pressure in state[P_S:P_C + 1]]
+        for (_, message), offset, reading in zip(
+            self._messages, self._pressure_offsets, readings
         ):
-            message.set_float64s(offset, pressure + ambient_pressure)
+            if reading == reading:  # not nan
+                message.set_float64s(offset, reading)
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
         self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
         self._applied.set_float64s(self._applied_velocity, applied_flow)
         sec, nanosec = divmod(time_ns, NS_PER_S)
         tick = []
-        for topic, message in self._messages:
+        for index, (topic, message) in enumerate(self._messages):
+            if index < len(readings) and readings[index] != readings[index]:
+                continue  # nan: this topic publishes nothing
             message.set_stamp(sec, nanosec)
             tick.append((topic, message.bytes()))
         return tick
@@ -146,6 +156,7 @@ def write_simulation_bag(
     start_time_ns,
     folder=False,
     frame_prefix=DEFAULT_FRAME_PREFIX,
+    readings=None,
 ):
     """
     Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
@@ -156,7 +167,9 @@ def write_simulation_bag(
     stamp. inlet_flow carries the command: the first flow at the start and each
     change at the last tick before it was applied. Each message is received
     (log_time) after a transport delay (transport_delays()). folder: write a
-    rosbag2 bag folder at path instead of a file. Returns the number of ticks
+    rosbag2 bag folder at path instead of a file. readings: the pressure topics'
+    values per tick [Pa absolute] (sensors.read_waveforms; nan: nothing published);
+    default: the model's pressures + ambient_pressure. Returns the number of ticks
     written; raises ParameterError for a bad interval.
     """
     every = samples_per_publish(waveforms, publish_interval)
@@ -170,7 +183,7 @@ def write_simulation_bag(
         for topic, type_name in TOPIC_TYPES.items():
             bag.add_topic('/' + topic, type_name)
         commanded = None
-        for previous, index in zip([None, *indices], indices):
+        for row, (previous, index) in enumerate(zip([None, *indices], indices)):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
             flow = float(waveforms.inlet_flow[index])
             if flow != commanded:
@@ -183,7 +196,10 @@ def write_simulation_bag(
                     '/inlet_flow', Float64(data=flow), command_ns + next(delays), command_ns
                 )
                 commanded = flow
-            for topic, data in tick.fill(time_ns, waveforms.states[index], flow, ambient_pressure):
+            published = None if readings is None else readings[row].tolist()
+            for topic, data in tick.fill(
+                time_ns, waveforms.states[index], flow, ambient_pressure, published
+            ):
                 bag.write(bag.channels['/' + topic], data, time_ns + next(delays), time_ns)
         return len(indices)
     finally:

@@ -101,6 +101,7 @@ DEFAULT_TOPICS = [
     'poppet_chamber_pressure',
     'joint_states',
     '/diagnostics',
+    'fault_status',  # valve_node's faults and sensor settings, each change (docs/faults.md)
 ]
 MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
 RECORDING_TASK = 'recording'

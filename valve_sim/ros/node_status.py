@@ -56,6 +56,7 @@ class Counters:
     rejected_parameter_changes: int = 0
     integration_failures: int = 0
     overpressures: int = 0
+    overpressure_alarms: int = 0
 
 
 @dataclass(frozen=True)
@@ -88,18 +89,29 @@ class NodeStatus:
         self.counters.long_ticks += compute_ns > LATE_FRACTION * period_ns
         self._durations_ns.append(compute_ns)
 
-    def report(self, stamp, name, hardware_id, steady_now_ns, model_time_ns, inputs, settings):
+    def report(
+        self,
+        stamp,
+        name,
+        hardware_id,
+        steady_now_ns,
+        model_time_ns,
+        inputs,
+        settings,
+        conditions=(),
+    ):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
 
         stamp: header stamp (builtin_interfaces Time); name, hardware_id: the
         status's (valve_sim.ros.diagnostics); model_time_ns: model time [ns] or None
         before the first tick; inputs: InputReport; settings: {name: value} shown as
-        they are (units in the names).
+        they are (units in the names); conditions: [(level, text)] more to report
+        (faults, overpressure).
         """
         counters, previous = self.counters, self._reported
         status = DiagnosticStatus(name=name, hardware_id=hardware_id)
-        status.level, status.message = self._summary(counters, previous, inputs)
+        status.level, status.message = self._summary(counters, previous, inputs, conditions)
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
             **self._compute_times(),
@@ -120,15 +132,18 @@ class NodeStatus:
         array.header.stamp = stamp
         return array
 
-    def _summary(self, counters, previous, inputs):
+    def _summary(self, counters, previous, inputs, conditions=()):
         """
         Return (level, message) of the status.
 
-        ERROR: an overpressure or a divergence in the window, or the model halted
-        (state held); WARN: the input is stale, or lag beyond the catch-up limit was
-        skipped; OK otherwise (late ticks are named in the message but stay OK).
+        ERROR: an overpressure beyond burst_pressure or a divergence in the window, or
+        the model halted (state held); WARN: the input is stale, or lag beyond the
+        catch-up limit was skipped; OK otherwise (late ticks are named in the message
+        but stay OK). conditions [(level, text)] (faults, the supply limit's
+        overpressure alarm) come first, at their level.
         """
-        problems, level = [], DiagnosticStatus.OK
+        problems = [text for _, text in conditions]
+        level = max([c[0] for c in conditions], default=DiagnosticStatus.OK)
         overpressures = counters.overpressures - previous.overpressures
         failures = counters.integration_failures - previous.integration_failures
         if overpressures:

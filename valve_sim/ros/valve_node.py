@@ -31,8 +31,15 @@ Topic and service names are relative, so namespaces and remapping work:
                                                             applied over the tick ending at
                                                             the stamp
   pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
+  pub  fault_status             diagnostic_msgs/DiagnosticArray, latched: every fault and sensor
+                                setting, on start and on each change, stamped from when they hold
   srv  ~/reset                  std_srvs/Trigger            exact steady state of the current
                                                             inlet flow
+
+Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a schedule file
+(fault_schedule), applied between ticks; the pressures published are the sensor stage's
+readings (the model's state is untouched); active faults show in /diagnostics (WARN), p_s
+at supply_pressure_limit as an overpressure alarm (ERROR).
 
 With --foxglove [PORT] the node also serves its tick topics and /diagnostics over the
 Foxglove WebSocket protocol (valve_sim.ros.live_view), for a live view without ROS.
@@ -52,6 +59,7 @@ import gc
 import sys
 import time
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
@@ -69,6 +77,7 @@ from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
     check_value,
+    FAULT_SCHEDULE,
     load_parameters,
     NODE_NAME,
     ParameterError,
@@ -93,6 +102,15 @@ from valve_sim.core.steady_state import (
 )
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
+from valve_sim.ros.fault_injection import (
+    declare_fault_parameters,
+    DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
+    FAULT_STATUS_QOS,
+    FAULT_STATUS_TOPIC,
+    FaultInjection,
+    INJECTION_NAMES,
+    split_changes,
+)
 from valve_sim.ros.inlet_input import InletFlowInput
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
@@ -123,7 +141,9 @@ VALVE_SPECS = {
     **SPECS,
     **SETTING_SPECS,
     PRESET_PRESSURE.name: PRESET_PRESSURE,
+    **INJECTION_DOUBLE_SPECS,
 }  # all double parameters
+LIVE_NAMES = frozenset(VALVE_SPECS) | INJECTION_NAMES | {FAULT_SCHEDULE}  # retuned between ticks
 
 
 class ReliefValveNode(Node):
@@ -135,9 +155,11 @@ class ReliefValveNode(Node):
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self._status_name = diagnostics.status_name(self, STATUS_TASK)
         self.frame_prefix = self._declare_frame_prefix()
+        faults, sensors, schedule = declare_fault_parameters(self)
+        self.injection = FaultInjection(sensors, schedule)
         started = time.perf_counter()
         self.model = RealTimeModel(
-            params, self.settings['step_size'], self.settings['initial_inlet_flow']
+            params, self.settings['step_size'], self.settings['initial_inlet_flow'], faults
         )
         # Compile (or load from numba's cache) the integration kernel before the tick timer
         # exists: compiled in the first tick, it would stall the clock for seconds.
@@ -288,14 +310,19 @@ class ReliefValveNode(Node):
 
         Then trial-integrate it from the current state.
         """
-        changes = {p.name: p.value for p in parameters if p.name in VALVE_SPECS}
+        changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
         if not changes or self._restoring:
             return SetParametersResult(successful=True)
         try:
             params, settings = self._merged(changes)
             check_preset(params, changes)
+            faults, sensors = split_changes(changes)
+            self.model.faults.changed(faults)
+            self.injection.sensors.checked(sensors)
+            if FAULT_SCHEDULE in changes:
+                FaultInjection({}, changes[FAULT_SCHEDULE])
             check_limits(params, self.model.state, self.inlet_flow)
-            self.model.trial(params, settings['step_size'], self.inlet_flow)
+            self.model.trial(params, settings['step_size'], self.inlet_flow, faults or None)
         except IntegrationError as error:
             return SetParametersResult(
                 successful=False,
@@ -304,18 +331,24 @@ class ReliefValveNode(Node):
                     f'from the current state): {error}'
                 ),
             )
-        except (ParameterError, SteadyStateError) as error:
+        except (ParameterError, SteadyStateError, InputFileError) as error:
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
 
     def _apply_parameter_change(self, parameters):
         """Post-set callback: the accepted change takes effect from the next tick."""
-        changes = {p.name: p.value for p in parameters if p.name in VALVE_SPECS}
+        changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
         if not changes or self._restoring:
             return
         params, settings = self._merged(changes)
         rate_changed = settings['publish_rate'] != self.settings['publish_rate']
-        self.model.retune(params, settings['step_size'])
+        faults, sensors = split_changes(changes)
+        self.model.retune(params, settings['step_size'], faults or None)
+        self.injection.sensors.change(sensors)
+        if FAULT_SCHEDULE in changes:
+            self.injection.use_schedule(changes[FAULT_SCHEDULE])
+        if faults or sensors:
+            self._publish_fault_status()
         self.input.max_inlet_flow = params['max_inlet_flow']
         self.settings = settings
         self._resume('a parameter change')
@@ -338,7 +371,11 @@ class ReliefValveNode(Node):
 
     def _restore_parameters(self):
         """Report the rolled-back model parameters and step size as the node's parameter values."""
-        in_use = {**self.model.params, 'step_size': self.model.step_size}
+        in_use = {
+            **self.model.params,
+            'step_size': self.model.step_size,
+            **self.model.faults.as_parameters(),
+        }
         changed = [
             Parameter(name, value=value)
             for name, value in in_use.items()
@@ -365,10 +402,13 @@ class ReliefValveNode(Node):
         self.input.stamp(now_ns)
         if self.model.time_ns is None or now_ns < self.model.time_ns:
             self._start(now_ns)
+            self._inject()
+            self._publish_state()
         else:
             self._count_lateness(now_ns)
             self._advance(now_ns)
-        self._publish_state()
+            self._inject()
+            self._publish_state()
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
         if self._housekeeping_due:
             self._housekeeping()
@@ -432,6 +472,28 @@ class ReliefValveNode(Node):
             f'{self.status.counters.skipped_ticks} tick periods since start'
         )
 
+    def _inject(self):
+        """Apply the schedule's events due at this tick; watch for overpressure."""
+        changes = self.injection.due(self.model.time_ns)
+        if changes:
+            result = self.set_parameters_atomically(
+                [Parameter(name, value=value) for name, value in changes.items()]
+            )
+            log = self.get_logger().info if result.successful else self.get_logger().error
+            log(f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
+                + ('' if result.successful else f' refused: {result.reason}'))
+        limit = self.model.params['supply_pressure_limit']
+        overpressure = self.injection.at_supply_limit(self.model.state, limit)
+        if overpressure and not self.injection.overpressure:
+            self.status.counters.overpressure_alarms += 1
+            self.get_logger().error(
+                f'OVERPRESSURE: p_s reached supply_pressure_limit = {limit:g} Pa; faults: '
+                f'{self.model.faults.describe() or "none"}'
+            )
+        elif self.injection.overpressure and not overpressure:
+            self.get_logger().info('p_s back below supply_pressure_limit')
+        self.injection.overpressure = overpressure
+
     def _recover(self, now_ns, error):
         """
         After a failure: hold the last good state; undo a parameter change that can have caused it.
@@ -485,14 +547,31 @@ class ReliefValveNode(Node):
             for topic in TICK_TOPICS
         }
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._fault_status = self.create_publisher(
+            DiagnosticArray, FAULT_STATUS_TOPIC, FAULT_STATUS_QOS
+        )
+        self._publish_fault_status()
+
+    def _publish_fault_status(self):
+        """Publish the faults and sensor settings in effect, stamped from when they hold."""
+        time_ns = self.model.time_ns
+        stamp = (
+            self.get_clock().now().to_msg()
+            if time_ns is None
+            else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
+        )
+        name = self.get_fully_qualified_name()
+        self._fault_status.publish(self.injection.status_message(self.model.faults, stamp, name))
 
     def _publish_state(self):
         """Publish the state of the model time, all messages with the same stamp."""
+        ambient = self.settings['ambient_pressure']
         tick = self._tick_messages.fill(
             self.model.time_ns,
             self.model.state,
             self.applied_flow,
-            self.settings['ambient_pressure'],
+            ambient,
+            self.injection.readings(self.model.time_ns, self.model.state, ambient),
         )
         for topic, data in tick:
             self._tick_publishers[topic].publish(data)
@@ -588,7 +667,14 @@ class ReliefValveNode(Node):
             'publish_rate_hz': self.settings['publish_rate'],
             'step_size_s': self.model.step_size,
             'input_timeout_s': self.settings['input_timeout'],
+            'faults_active': self.model.faults.describe(),
+            'sensor_dropout': ', '.join(self.injection.sensors.dropped_topics()),
+            'overpressure': self.injection.overpressure,
+            'fault_schedule_events_pending': self.injection.schedule.pending(),
         }
+        conditions = self.injection.conditions(
+            self.model.faults, self.model.state[P_S], self.model.params['supply_pressure_limit']
+        )
         report = self.status.report(
             now.to_msg(),
             self._status_name,
@@ -597,6 +683,7 @@ class ReliefValveNode(Node):
             self.model.time_ns,
             inputs,
             settings,
+            conditions,
         )
         self._diagnostics.publish(report)
         if self.live_view is not None and self.live_view.watched:

@@ -1,0 +1,207 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Valve faults: the set of injectable faults, their specs and their validation.
+
+Each fault is a physical change of the valve (docs/faults.md):
+
+  fault.bearing_coulomb_friction  F_c  N   contaminated hydrostatic bearings: sliding friction
+  fault.bearing_static_friction   F_st N   ... and stiction (taken as at least F_c)
+  fault.damping_orifice_blockage  -    1   fraction of the damping orifice's area lost (d_c)
+  fault.bearing_orifice_blockage  -    1   fraction of the bearing orifices' area lost (d_b)
+  fault.pilot_spring_weakening    -    1   fraction of the pilot spring's stiffness lost (k_p)
+  fault.pilot_spring_broken       bool     no pilot spring stiffness and no preload force
+  fault.seat_leakage_diameter     d_l  m   worn main seat: an orifice from supply to tank
+  fault.main_valve_stuck          bool     the main valve frozen where it is
+
+A fault never moves the adjusting screw: pilot_spring_preload (y_0) stays, so a weaker
+spring makes a smaller preload force and a lower cracking pressure. The numbers enter the
+model equations in valve_sim.core.model.coefficients; all zero/false is the healthy valve.
+"""
+
+from dataclasses import dataclass, fields, replace
+import math
+
+from valve_sim.core.parameters import ParameterError, ParameterSpec
+
+
+PREFIX = 'fault.'
+OURS = 'our fault model, see docs/faults.md'
+
+
+@dataclass(frozen=True)
+class SwitchSpec:
+    """A boolean fault or sensor setting: name (ROS parameter), description, source."""
+
+    name: str
+    description: str
+    source: str
+
+    def describe(self):
+        return f'{self.description} [bool]'
+
+
+FAULT_SPECS = (
+    ParameterSpec(
+        'fault.bearing_coulomb_friction',
+        'F_c',
+        'N',
+        0.0,
+        1000.0,
+        'Coulomb (sliding) friction on the main valve from contaminated hydrostatic bearings',
+        OURS,
+    ),
+    ParameterSpec(
+        'fault.bearing_static_friction',
+        'F_st',
+        'N',
+        0.0,
+        1000.0,
+        'static friction (stiction) on the main valve at rest; taken as at least F_c',
+        OURS,
+    ),
+    ParameterSpec(
+        'fault.damping_orifice_blockage',
+        'b_c',
+        '1',
+        0.0,
+        1.0,
+        "fraction of the damping orifice's flow area lost (1: fully blocked)",
+        OURS,
+    ),
+    ParameterSpec(
+        'fault.bearing_orifice_blockage',
+        'b_b',
+        '1',
+        0.0,
+        1.0,
+        "fraction of the hydrostatic bearing orifices' flow area lost (1: fully blocked)",
+        OURS,
+    ),
+    ParameterSpec(
+        'fault.pilot_spring_weakening',
+        'w_p',
+        '1',
+        0.0,
+        1.0,
+        "fraction of the pilot spring's stiffness k_p lost (preload position y_0 kept)",
+        OURS,
+    ),
+    ParameterSpec(
+        'fault.seat_leakage_diameter',
+        'd_l',
+        'm',
+        0.0,
+        0.005,
+        'worn main seat / internal leakage: equivalent orifice diameter from supply to tank '
+        '(discharge coefficient C_d)',
+        OURS,
+    ),
+)
+FAULT_SWITCHES = (
+    SwitchSpec(
+        'fault.pilot_spring_broken',
+        'broken pilot spring: no stiffness and no preload force',
+        OURS,
+    ),
+    SwitchSpec(
+        'fault.main_valve_stuck',
+        'main valve stuck: x frozen at its position when the fault is set',
+        OURS,
+    ),
+)
+FAULT_DOUBLE_SPECS = {spec.name: spec for spec in FAULT_SPECS}
+FAULT_SWITCH_SPECS = {spec.name: spec for spec in FAULT_SWITCHES}
+FAULT_NAMES = tuple(FAULT_DOUBLE_SPECS) + tuple(FAULT_SWITCH_SPECS)
+
+
+@dataclass(frozen=True)
+class FaultSet:
+    """The faults in effect; field names are the parameter names without 'fault.'."""
+
+    bearing_coulomb_friction: float = 0.0
+    bearing_static_friction: float = 0.0
+    damping_orifice_blockage: float = 0.0
+    bearing_orifice_blockage: float = 0.0
+    pilot_spring_weakening: float = 0.0
+    seat_leakage_diameter: float = 0.0
+    pilot_spring_broken: bool = False
+    main_valve_stuck: bool = False
+
+    def changed(self, changes):
+        """
+        Return a copy with changes applied; each checked.
+
+        changes: {name: value}, names with or without 'fault.'. Raises ParameterError.
+        """
+        values = {}
+        for name, value in changes.items():
+            full = name if name.startswith(PREFIX) else PREFIX + name
+            values[full[len(PREFIX):]] = check_fault(full, value)
+        return replace(self, **values)
+
+    def as_parameters(self):
+        """{'fault.<name>': value} of every fault (the ROS parameters)."""
+        return {PREFIX + f.name: getattr(self, f.name) for f in fields(self)}
+
+    def active(self):
+        """{'fault.<name>': value} of the faults that change the valve (non-zero, true)."""
+        return {name: value for name, value in self.as_parameters().items() if value}
+
+    def describe(self):
+        """One line naming each active fault with its value and unit ('' if healthy)."""
+        parts = []
+        for name, value in self.active().items():
+            if name in FAULT_SWITCH_SPECS:
+                parts.append(name)
+            else:
+                parts.append(f'{name} = {value:g} {FAULT_DOUBLE_SPECS[name].unit}')
+        return ', '.join(parts)
+
+
+HEALTHY = FaultSet()
+
+
+def check_fault(name, value):
+    """Return value checked for the fault parameter name; raise ParameterError naming it."""
+    if name in FAULT_SWITCH_SPECS:
+        if not isinstance(value, bool):
+            raise ParameterError(f"fault parameter '{name}' must be true or false, got {value!r}")
+        return value
+    spec = FAULT_DOUBLE_SPECS.get(name)
+    if spec is None:
+        raise ParameterError(f"unknown fault '{name}'; known: {', '.join(FAULT_NAMES)}")
+    return checked_number(spec, value, 'fault parameter')
+
+
+def checked_number(spec, value, kind):
+    """
+    Return value as a float if it is a finite number within spec's limits.
+
+    Raise ParameterError naming the parameter (kind, spec.name), its symbol and limits.
+    """
+    label = f"{kind} '{spec.name}' ({spec.symbol})"
+    unit = '' if spec.unit == '1' else f' {spec.unit}'
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f'{label} must be a number{unit and " in" + unit}, got {value!r}')
+    value = float(value)
+    if not math.isfinite(value):
+        raise ParameterError(f'{label} must be finite, got {value}')
+    if not spec.minimum <= value <= spec.maximum:
+        raise ParameterError(
+            f'{label} = {value:g}{unit} is outside its limits '
+            f'[{spec.minimum:g}, {spec.maximum:g}]{unit}'
+        )
+    return value

@@ -1,0 +1,198 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+valve_node's faults and sensors: parameters, schedule, sensor stage and alarms.
+
+The parameters fault.* and sensor.* (descriptors with unit, meaning and limits) and
+fault_schedule (a schedule file, valve_sim.core.fault_schedule) are declared here;
+FaultInjection holds the sensor stage, the schedule and the overpressure state, and
+says what the diagnostics report. The physics are in valve_sim.core (faults,
+sensors); valve_node only calls this.
+"""
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from valve_sim.core.fault_schedule import load_schedule, Schedule
+from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
+from valve_sim.core.model import P_C, P_S
+from valve_sim.core.parameters import FAULT_SCHEDULE
+from valve_sim.core.sensors import (
+    checked_settings,
+    default_settings,
+    NOISE_SEED,
+    SENSOR_DOUBLE_SPECS,
+    SENSOR_NAMES,
+    SENSOR_SWITCH_SPECS,
+    SensorStage,
+)
+from valve_sim.ros.ros_parameters import declare_double
+
+
+DOUBLE_SPECS = {**FAULT_DOUBLE_SPECS, **SENSOR_DOUBLE_SPECS}
+FAULT_STATUS_TOPIC = 'fault_status'
+# Latched: a late subscriber (the analyser, a bench's monitor) gets the settings in effect.
+FAULT_STATUS_QOS = QoSProfile(
+    depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
+OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
+
+
+def declare_fault_parameters(node):
+    """
+    Declare fault.*, sensor.* and fault_schedule on node.
+
+    Returns (FaultSet, sensor settings, schedule path); raises ParameterError for bad values.
+    """
+    defaults = {**HEALTHY.as_parameters(), **default_settings()}
+    values = {
+        spec.name: declare_double(node, spec, defaults[spec.name])
+        for spec in DOUBLE_SPECS.values()
+    }
+    for spec in {**FAULT_SWITCH_SPECS, **SENSOR_SWITCH_SPECS}.values():
+        descriptor = ParameterDescriptor(
+            name=spec.name,
+            type=ParameterType.PARAMETER_BOOL,
+            description=f'{spec.describe()}; source: {spec.source}',
+        )
+        values[spec.name] = node.declare_parameter(spec.name, False, descriptor).value
+    values[NOISE_SEED.name] = node.declare_parameter(
+        NOISE_SEED.name,
+        0,
+        ParameterDescriptor(
+            name=NOISE_SEED.name,
+            type=ParameterType.PARAMETER_INTEGER,
+            description=f'{NOISE_SEED.description}; source: {NOISE_SEED.source}',
+            integer_range=[IntegerRange(from_value=0, to_value=int(NOISE_SEED.maximum), step=1)],
+        ),
+    ).value
+    schedule = node.declare_parameter(
+        FAULT_SCHEDULE,
+        '',
+        ParameterDescriptor(
+            name=FAULT_SCHEDULE,
+            type=ParameterType.PARAMETER_STRING,
+            description=(
+                'fault scenario file (YAML, docs/faults.md): events at t [s] from the first '
+                "tick on the node's clock (from the next tick when set live); '' for none"
+            ),
+        ),
+    ).value
+    faults = HEALTHY.changed({name: values[name] for name in FAULT_NAMES})
+    sensors = checked_settings(
+        default_settings(), {name: values[name] for name in SENSOR_NAMES}
+    )
+    return faults, sensors, schedule
+
+
+def split_changes(changes):
+    """({fault.* changes}, {sensor.* changes}) of a {name: value} change."""
+    return (
+        {n: v for n, v in changes.items() if n in FAULT_NAMES},
+        {n: v for n, v in changes.items() if n in SENSOR_NAMES},
+    )
+
+
+class FaultInjection:
+    """
+    The node's sensor stage, fault schedule and overpressure state.
+
+    sensor_settings: checked sensor settings; schedule_path: a schedule file or ''.
+    Raises InputFileError or ParameterError for a bad schedule.
+    """
+
+    def __init__(self, sensor_settings, schedule_path=''):
+        self.sensors = SensorStage(sensor_settings)
+        self.schedule = Schedule()
+        self.schedule_path = ''
+        self.origin_ns = None  # model time of the tick the schedule counts from [ns]
+        self.overpressure = False
+        self.use_schedule(schedule_path)
+
+    def use_schedule(self, path):
+        """Load a schedule file ('' for none); its t counts from the next tick."""
+        self.schedule = Schedule(load_schedule(path) if path else ())
+        self.schedule_path = path
+        self.origin_ns = None
+
+    def due(self, time_ns):
+        """Return the schedule's {name: value} changes due at the tick at time_ns [ns]."""
+        if self.origin_ns is None:
+            self.origin_ns = time_ns
+        return self.schedule.due(time_ns - self.origin_ns) if self.schedule.pending() else {}
+
+    def readings(self, time_ns, state, ambient_pressure):
+        """Return the published pressures [Pa absolute] of a state; nan: nothing published."""
+        return self.sensors.read(time_ns, [p + ambient_pressure for p in state[P_S:P_C + 1]])
+
+    def at_supply_limit(self, state, limit):
+        """Return whether p_s [Pa gauge] of state has reached the supply's limit [Pa]."""
+        return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= state[P_S])
+
+    def status_message(self, faults, stamp, name):
+        """
+        Return the fault_status DiagnosticArray: every fault and sensor setting in effect.
+
+        stamp: builtin_interfaces Time from which they hold; name: the node's full name.
+        Level WARN while any is active; the message names the active ones.
+        """
+        active = [faults.describe()] * bool(faults.active()) + self.sensors.describe_faults()
+        settings = {**faults.as_parameters(), **self.sensors.settings}
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if active else DiagnosticStatus.OK,
+            name=f'{name}: faults',
+            hardware_id=name,
+            message=', '.join(active) or 'healthy valve, ideal sensors',
+            values=[
+                KeyValue(key=key, value=_text(value)) for key, value in settings.items()
+            ],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = stamp
+        return array
+
+    def conditions(self, faults, supply_pressure, limit):
+        """
+        Return [(level, text)] for the diagnostics: overpressure, faults, sensor faults.
+
+        The overpressure alarm (ERROR) names the faults that drove p_s to the limit.
+        """
+        conditions = []
+        named = faults.describe()
+        if self.overpressure:
+            conditions.append(
+                (
+                    DiagnosticStatus.ERROR,
+                    f'OVERPRESSURE: p_s = {supply_pressure:.6g} Pa at supply_pressure_limit '
+                    f'= {limit:g} Pa (the supply relieves the inflow); '
+                    + (f'faults: {named}' if named else 'no valve fault active'),
+                )
+            )
+        if named:
+            conditions.append((DiagnosticStatus.WARN, f'faults active: {named}'))
+        sensors = self.sensors.describe_faults()
+        if sensors:
+            dropped = self.sensors.dropped_topics()
+            text = f'sensor settings: {", ".join(sensors)}'
+            if dropped:
+                text += f'; dropout: nothing published on {", ".join(dropped)}'
+            conditions.append((DiagnosticStatus.WARN, text))
+        return conditions
+
+
+def _text(value):
+    """Format a setting as diagnostics text: true/false, or the number in full precision."""
+    return str(value).lower() if isinstance(value, bool) else repr(value)
