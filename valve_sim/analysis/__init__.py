@@ -16,7 +16,8 @@
 Response analysis on arrays: the six step-response measures, signals, plots.
 
 Lives here: the measures and step detection, streaming step analysis, signal
-mapping and joining, the paper's reference data, matplotlib figures.
+mapping and joining, the paper's reference data and study cases, parameter
+identification (calibration), the envelope check, matplotlib figures.
 May import: valve_sim.core. No ROS and no bag files: commands read bags and hand
 arrays to this wing.
 """

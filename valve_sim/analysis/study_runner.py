@@ -49,7 +49,7 @@ import time
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.parameters import validate
-from valve_sim.core.simulation import simulate
+from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
 
 
@@ -60,32 +60,62 @@ MAX_BATCH = 64
 
 def evaluate_case(case):
     """Set the valve to its preset, run the step test and measure it; return its row."""
-    row = {'index': case['index']}
-    try:
-        params = validate(case['params'])
-        if case.get('preset_pressure') is not None:
-            params = with_preset_pressure(params, case['preset_pressure'])
-        row['pilot_spring_preload'] = params['pilot_spring_preload']
-        row['cracking_pressure'] = cracking_pressure(params)
-        scenario = case['scenario']
-        waveforms = simulate(params, scenario, case['step_size'], RECORD_INTERVAL)
-        row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
-        row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
-        direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
-        measures = step_measures(
-            waveforms.time,
-            waveforms['supply_pressure'],
-            waveforms['main_valve_displacement'],
-            scenario.step_time,
-            direction,
-        ).as_dict()
-    except MODEL_ERRORS as error:
-        return {
-            **row,
-            'measures': dict.fromkeys(MEASURE_NAMES),
-            'reasons': {},
-            'error': str(error),
-        }
+    return evaluate_batch([case])[0]
+
+
+def evaluate_batch(cases):
+    """
+    Rows of a batch of cases (the work unit a backend runs), in the order of cases.
+
+    Each valve is set to its preset first. Cases that share a scenario and step
+    size then run together through core.simulation.simulate_batch: several valves
+    per kernel call, each bit-identical to a run of its own, the stable steady
+    state before the step held instead of integrated (docs/speed.md). A row does
+    not depend on which cases share its batch.
+    """
+    rows, groups = {}, {}
+    for case in cases:
+        row = {'index': case['index']}
+        try:
+            params = validate(case['params'])
+            if case.get('preset_pressure') is not None:
+                params = with_preset_pressure(params, case['preset_pressure'])
+            row['pilot_spring_preload'] = params['pilot_spring_preload']
+            row['cracking_pressure'] = cracking_pressure(params)
+        except MODEL_ERRORS as error:
+            rows[case['index']] = _failed(row, error)
+            continue
+        key = (case['scenario'], case['step_size'])
+        groups.setdefault(key, []).append((case, row, params))
+    for (scenario, step_size), members in groups.items():
+        outcomes = simulate_batch(
+            [params for _, _, params in members], scenario, step_size, RECORD_INTERVAL
+        )
+        for (case, row, _), outcome in zip(members, outcomes):
+            rows[case['index']] = (
+                _failed(row, outcome)
+                if isinstance(outcome, Exception)
+                else _measured(case, row, outcome)
+            )
+    return [rows[case['index']] for case in cases]
+
+
+def _failed(row, error):
+    return {**row, 'measures': dict.fromkeys(MEASURE_NAMES), 'reasons': {}, 'error': str(error)}
+
+
+def _measured(case, row, waveforms):
+    """Complete the row of a run: initial state, the six measures and reasons, waveforms."""
+    scenario = case['scenario']
+    row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
+    row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
+    measures = step_measures(
+        waveforms.time,
+        waveforms['supply_pressure'],
+        waveforms['main_valve_displacement'],
+        scenario.step_time,
+        1 if scenario.final_flow >= scenario.initial_flow else -1,
+    ).as_dict()
     row.update(
         measures={
             name: None if measures[name] is None else float(measures[name])
@@ -100,11 +130,6 @@ def evaluate_case(case):
             **{name: waveforms[name].tolist() for name in case['record']},
         }
     return row
-
-
-def evaluate_batch(cases):
-    """Rows of a batch of cases (the work unit a backend runs)."""
-    return [evaluate_case(case) for case in cases]
 
 
 def fingerprint(cases):

@@ -395,7 +395,8 @@ def report_text(report):
     else:
         r = report['recording']
         lines.append(
-            f'recording: {r["samples"]} samples, steps at {r["steps_at_s"]} s; p_s residual '
+            f'recording: {r["samples"]} samples, steps {r["steps_at_s"]} s after the first; '
+            'p_s residual '
             f'RMS {r["pressure_residual_rms_Pa"]:.4g} Pa (noise estimate '
             f'{r["pressure_noise_estimate_Pa"]:.4g} Pa); main valve '
             + ('recorded' if r['main_valve_recorded'] else 'not recorded')

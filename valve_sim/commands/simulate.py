@@ -44,22 +44,23 @@ from valve_sim.core.steady_state import with_preset_pressure
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 
 
-def flow_value(text):
-    """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
+def quantity(text, units, kind, example):
+    """Parse a number with an optional unit suffix of units {suffix: factor to SI} -> SI."""
     number, factor = text.strip(), 1.0
-    for suffix, scale in (
-        ('L/min', LITRE_PER_MINUTE),
-        ('l/min', LITRE_PER_MINUTE),
-        ('m^3/s', 1.0),
-        ('m3/s', 1.0),
-    ):
+    for suffix, scale in units.items():
         if number.endswith(suffix):
             number, factor = number[: -len(suffix)], scale
             break
     try:
-        value = float(number) * factor
+        return float(number) * factor
     except ValueError:
-        raise ArgumentTypeError(f'not a flow: {text!r} (use e.g. 5L/min or 8.33e-5)') from None
+        raise ArgumentTypeError(f'not a {kind}: {text!r} (use e.g. {example})') from None
+
+
+def flow_value(text):
+    """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
+    units = {'L/min': LITRE_PER_MINUTE, 'l/min': LITRE_PER_MINUTE, 'm^3/s': 1.0, 'm3/s': 1.0}
+    value = quantity(text, units, 'flow', '5L/min or 8.33e-5')
     if not math.isfinite(value) or value < 0.0:
         raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
     return value
@@ -94,15 +95,8 @@ def assignment(text):
 
 def pressure_value(text):
     """Parse a pressure from '7e6', '7e6Pa', '7MPa' or '70bar' -> Pa (argparse type)."""
-    number, factor = text.strip(), 1.0
-    for suffix, scale in (('MPa', 1e6), ('kPa', 1e3), ('bar', 1e5), ('Pa', 1.0)):
-        if number.endswith(suffix):
-            number, factor = number[: -len(suffix)], scale
-            break
-    try:
-        value = float(number) * factor
-    except ValueError:
-        raise ArgumentTypeError(f'not a pressure: {text!r} (use e.g. 7MPa or 7e6)') from None
+    units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
+    value = quantity(text, units, 'pressure', '7MPa or 7e6')
     if not math.isfinite(value) or value <= 0.0:
         raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
     return value
