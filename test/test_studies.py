@@ -287,6 +287,11 @@ def test_without_dask_the_study_runs_on_a_process_pool_and_the_others_say_what_t
         open_backend(args, 'tolerance')
 
 
+def test_a_bad_scheduler_address_is_one_clear_error():
+    with pytest.raises(StudyError, match="cannot reach the Dask scheduler 'none'"):
+        DaskBackend('none')
+
+
 def valve_sim(*args):
     result = subprocess.run(
         [sys.executable, '-m', 'valve_sim.commands.cli', *args],

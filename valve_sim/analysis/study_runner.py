@@ -347,14 +347,17 @@ class DaskBackend:
         if address:
             try:
                 self.client = Client(address, timeout='30s')
-            except OSError as error:
-                raise StudyError(f'cannot reach the Dask scheduler {address}: {error}') from None
+            except (OSError, ValueError, TimeoutError) as error:
+                raise StudyError(
+                    f'cannot reach the Dask scheduler {address!r} (expected tcp://HOST:PORT): '
+                    f'{error}'
+                ) from None
         else:
             self.cluster = LocalCluster(
                 n_workers=workers,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=':0',
                 silence_logs=logging.ERROR,
             )
             self.client = Client(self.cluster)

@@ -21,6 +21,8 @@ each uniform on +-20 % (the paper's one-at-a-time range); --vary takes the forms
 test, each valve set to the preset first (protocol held-preset, or
 --frozen-preload). Writes into --out:
   results.jsonl        one row per run as it completes (--resume)
+  samples.csv          the design: index, parameters, preload, measures, pass (= the
+                       run succeeded), reasons, error (as tolerance's samples.csv)
   indices.csv          measure, parameter, S1, S1_conf, ST, ST_conf, interaction
                        (ST - S1); conf: half-width of the 95 % bootstrap interval
   sobol_<measure>.png  S1 and ST bars with their intervals, one chart per measure
@@ -43,7 +45,12 @@ from valve_sim.commands.study_backend import (
     open_backend,
     PIP_INSTALL,
 )
-from valve_sim.commands.tolerance import add_study_arguments, preset_protocol, sample_cases
+from valve_sim.commands.tolerance import (
+    add_study_arguments,
+    preset_protocol,
+    sample_cases,
+    write_samples,
+)
 from valve_sim.core.errors import StudyError
 from valve_sim.core.parameters import SPECS
 
@@ -156,6 +163,7 @@ def run(args):
     rows = [results[index] for index in range(len(values))]
     indices = measure_indices(distributions, rows, args.seed)
     write_indices(out / 'indices.csv', distributions, indices)
+    write_samples(out / 'samples.csv', names, values, rows, [])
     (out / 'design.json').write_text(
         json.dumps(
             {
@@ -178,5 +186,8 @@ def run(args):
         if not isinstance(entry, str):
             plot_sobol_indices(out / f'sobol_{name}.png', name, labels, entry)
     print_indices(distributions, indices)
-    print(f'wrote {out}/indices.csv, {out}/design.json and the sobol_<measure>.png charts')
+    print(
+        f'wrote {out}/indices.csv, {out}/samples.csv, {out}/design.json and the '
+        'sobol_<measure>.png charts'
+    )
     return 0
