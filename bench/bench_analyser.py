@@ -18,7 +18,7 @@
 #
 #     .venv/bin/python bench/bench_analyser.py [--duration 60] [--json FILE]
 #
-# One run, three processes on this machine's DDS (own random ROS_DOMAIN_ID,
+# One run, three processes on this machine's DDS (a ROS_DOMAIN_ID of its own,
 # discovery on localhost):
 # - this script publishes valve_node's six tick topics at 1 kHz (valve_sim.recording.replay)
 #   for --duration seconds: a simulated 5 <-> 20 L/min step every 1.25 s, so the
@@ -33,9 +33,7 @@
 
 import argparse
 import json
-import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
@@ -46,6 +44,7 @@ import time
 import numpy as np
 import psutil
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate, Waveforms
+from valve_sim.ros.isolation import claim_domain
 
 
 PERIOD = 1e-3  # [s] tick period, valve_node's default
@@ -232,8 +231,7 @@ def main():
     args = parser.parse_args()
     if args.count_only:
         return count_only(args.queue_depth)
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 101)))
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    claim_domain()  # ROS_DOMAIN_ID if set, else one no other run holds; discovery on localhost
     from valve_sim.core.parameters import load_parameters
 
     waveforms = repeated(step_cycle(load_parameters()[0]), args.duration)

@@ -52,7 +52,6 @@ import argparse
 import json
 import os
 from pathlib import Path
-import random
 import struct
 import subprocess
 import sys
@@ -62,6 +61,7 @@ from valve_sim.recording.cdr import (
     STAMP,
     STAMP_OFFSET,
 )  # header.stamp (sec, nanosec) in the received CDR bytes
+from valve_sim.ros.isolation import claim_domain
 
 
 REPO = Path(__file__).resolve().parent.parent
@@ -511,10 +511,9 @@ def main(argv=None):
         return run_echo(args.echo)
     if args.timer_floor:
         return run_timer_floor(args.timer_floor)
+    claim_domain(keep_existing=False)  # a domain of this run's own, discovery on localhost
     env = dict(
         os.environ,
-        ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 101)),
-        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
         PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
     )
     os.environ.update(env)

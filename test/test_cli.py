@@ -16,12 +16,17 @@
 
 import csv
 import json
+from pathlib import Path
 import subprocess
 import sys
 
 from figure5 import outside_tolerance
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.commands.cli import SUBCOMMANDS
+
+
+TABLE2 = Path(__file__).resolve().parent.parent / 'config' / 'table2.yaml'
 
 
 def valve_sim(*args, check=True):
@@ -209,3 +214,42 @@ def test_offline_bag_analyses_to_the_offline_measures(tmp_path):
     )  # 1 kHz bag vs 10 kHz samples
     for name in ('P_o_percent', 'P_1_percent', 'r_d', 'T_d_ms', 'T_s_ms'):
         assert step[name] == pytest.approx(direct[name], rel=0.02), name
+
+
+def test_help_imports_no_model_modules():
+    """`valve-sim --help` loads neither numba, scipy nor rclpy; every `CMD --help` prints usage."""
+    code = (
+        'import contextlib, io, sys\n'
+        'from valve_sim.commands.cli import build_parser\n'
+        'with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n'
+        "    build_parser(['--help']).parse_args(['--help'])\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'numba', 'scipy', 'rclpy'}))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert result.stdout.strip() == '[]'
+    for name in SUBCOMMANDS:
+        assert valve_sim(name, '--help').stdout.startswith('usage: valve-sim ' + name)
+
+
+def test_paper_column_only_beside_the_papers_step():
+    other = valve_sim('simulate', '--final-flow', '30L/min', '--end-time', '0.3').stdout
+    assert other.splitlines()[0].split() == ['measure', 'valve_sim']
+    table2 = valve_sim('simulate', '--params', str(TABLE2), '--end-time', '0.3').stdout
+    assert 'paper' not in table2.splitlines()[0]
+
+
+def test_a_path_that_cannot_be_written_is_named(tmp_path):
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    result = valve_sim('study', '--out', str(blocker / 'out'), check=False)
+    assert result.returncode == 1
+    assert result.stderr.strip() == (
+        f'valve-sim study: error: output folder {blocker / "out"} cannot be created: '
+        'Not a directory'
+    )
+    csv_path = blocker / 'run.csv'
+    result = valve_sim('simulate', '--end-time', '0.3', '--csv', str(csv_path), check=False)
+    assert result.returncode == 1
+    assert result.stderr.strip() == f'valve-sim simulate: error: {csv_path}: Not a directory'

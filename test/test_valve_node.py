@@ -181,19 +181,23 @@ def test_step_response_matches_offline_simulation(sim_valve, reference):
             assert node.values[name] == pytest.approx(offline.values[name], rel=0.02), name
 
 
-def test_publish_rate_change_recreates_the_timer(sim_valve):
+def test_publish_rate_change_recreates_the_timer(sim_valve, reference_settings):
     """At 200 Hz the valve ticks only every 5 ms of clock time, however often /clock moves."""
     probe = sim_valve
     assert probe.set_parameters(publish_rate=200.0)[0].successful
-    changed_ns = probe.clock_ns
-    for tick in range(1, 5):
-        for millisecond in range(1, 5):
-            probe.send_clock(changed_ns + (5 * (tick - 1) + millisecond) * PERIOD_NS)
-            time.sleep(0.05)  # gives a 1 kHz timer, if there were one, the chance to tick
-        probe.tick_at(changed_ns + 5 * tick * PERIOD_NS)
-    with probe.condition:
-        stamps = [stamp for stamp, _ in probe.pressures['supply_pressure'] if stamp > changed_ns]
-    assert stamps == [changed_ns + 5 * tick * PERIOD_NS for tick in range(1, 5)]
+    try:
+        changed_ns = probe.clock_ns
+        for tick in range(1, 5):
+            for millisecond in range(1, 5):
+                probe.send_clock(changed_ns + (5 * (tick - 1) + millisecond) * PERIOD_NS)
+                time.sleep(0.05)  # gives a 1 kHz timer, if there were one, the chance to tick
+            probe.tick_at(changed_ns + 5 * tick * PERIOD_NS)
+        with probe.condition:
+            stamps = [s for s, _ in probe.pressures['supply_pressure'] if s > changed_ns]
+        assert stamps == [changed_ns + 5 * tick * PERIOD_NS for tick in range(1, 5)]
+    finally:  # the module's node goes on at 1 kHz for the tests after this one
+        rate = reference_settings['publish_rate']
+        assert probe.set_parameters(publish_rate=rate)[0].successful
 
 
 def test_diagnostics_go_on_while_the_clock_is_paused(sim_valve):
@@ -314,6 +318,14 @@ def test_invalid_parameter_changes_are_rejected_with_their_reason(valve, referen
         lambda d: int(d['rejected_parameter_changes']) >= refused_before + len(changes),
         'rejected_parameter_changes counted',
     )
+
+
+def test_an_undeclared_name_is_refused_with_the_declared_name_meant(valve):
+    (symbol,) = valve.set_parameters(m_m=0.07)
+    assert not symbol.successful
+    assert "'m_m'" in symbol.reason and "'main_valve_mass'" in symbol.reason, symbol.reason
+    (typo,) = valve.set_parameters(main_valve_mas=0.07)
+    assert not typo.successful and "did you mean 'main_valve_mass'" in typo.reason, typo.reason
 
 
 def test_inconsistent_geometry_set_atomically_is_rejected_as_a_whole(valve, reference):

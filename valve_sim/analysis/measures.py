@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The paper's six step-response measures, as docs/analyser.md defines them.
+The paper's six step-response measures, as docs/measures.md defines them.
 
 This is the only implementation: the command line, the live analyser and bag
 analysis all call step_measures() and StepDetector.
@@ -47,7 +47,7 @@ import numpy as np
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
-WINDOW = 1.0  # [s] analysis window after the step (metrics.md)
+WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
 SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
@@ -174,7 +174,7 @@ def _parabola_exit(t, deviation, band):
 
 def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
     """
-    Compute the six measures of the step at t_step [s] (metrics.md), as StepMeasures.
+    Compute the six measures of the step at t_step [s] (docs/measures.md), as StepMeasures.
 
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
     arrays; x may be None or NaN where not recorded (T_s then from p_s). direction:

@@ -21,7 +21,7 @@ beside a run of the paper's own scenario (is_reference_step).
 
 import math
 
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario
+from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario
 
 
 # Figure 5 / Table 3, Table 1 conditions, under the names of docs/measures.md.

@@ -20,7 +20,6 @@ One definition for `valve-sim study`, calibration checks and tolerance studies.
 
 from valve_sim.analysis.paper import STUDY_PARAMETERS, STUDY_VARIATIONS, TABLE2_CHANGES
 from valve_sim.core.parameters import scaled
-from valve_sim.core.steady_state import with_preset_pressure
 
 
 PROTOCOLS = {
@@ -53,6 +52,8 @@ def case_parameters(params, changes, protocol, preset_pressure):
     valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
     Raises ParameterError or SteadyStateError when the case has no such preload.
     """
+    from valve_sim.core.steady_state import with_preset_pressure  # numba, scipy: when used
+
     case = scaled(params, changes)
     if protocol == 'held-preset':
         case = with_preset_pressure(case, preset_pressure)

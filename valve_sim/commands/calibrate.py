@@ -37,18 +37,8 @@ import shlex
 import sys
 
 import numpy as np
-from valve_sim.analysis.calibration import (
-    calibrate,
-    CalibrationError,
-    CaseRelieves,
-    fit_parameters,
-    MeasuresTarget,
-    ModesDecay,
-    PilotFlowLimit,
-    RecordingTarget,
-    StudyRelieves,
-)
 from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
+from valve_sim.commands.cli import make_folder
 from valve_sim.commands.simulate import (
     add_parameter_arguments,
     flow_value,
@@ -56,8 +46,10 @@ from valve_sim.commands.simulate import (
 )
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import NODE_NAME
-from valve_sim.core.simulation import LITRE_PER_MINUTE
-from valve_sim.core.steady_state import cracking_pressure
+from valve_sim.core.scenario import LITRE_PER_MINUTE
+
+# The model's and the fit's modules (numba, scipy) are imported in the functions that
+# run them, so that `valve-sim calibrate --help` stays quick.
 
 
 def bounds_value(text):
@@ -182,6 +174,8 @@ def add_arguments(parser):
 
 
 def _target(args, step_size):
+    from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
+
     if args.target_measures:
         try:
             document = json.loads(Path(args.target_measures).read_text())
@@ -209,6 +203,16 @@ def _target(args, step_size):
 
 
 def run(args):
+    from valve_sim.analysis.calibration import (
+        calibrate,
+        CalibrationError,
+        CaseRelieves,
+        fit_parameters,
+        ModesDecay,
+        PilotFlowLimit,
+        StudyRelieves,
+    )
+
     params, settings = load_from_arguments(args)
     preset = args.preset_pressure or None
     if args.starts < 1 or not (0.0 <= args.spread <= 2.0) or not args.tolerance > 0.0:
@@ -244,8 +248,7 @@ def run(args):
         tolerance=args.tolerance,
         progress=progress,
     )
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_parameter_file(out / 'calibrated.yaml', result, settings, command)
     report = report_document(result, target, args, command)
@@ -279,6 +282,8 @@ def yaml_number(value):
 
 def write_parameter_file(path, result, settings, command):
     """calibrated.yaml: every model parameter and setting; fitted ones marked."""
+    from valve_sim.core.steady_state import cracking_pressure
+
     fitted = {p.name for p in result.fitted}
     lines = [
         f'# Written by: {command}',
@@ -298,6 +303,8 @@ def write_parameter_file(path, result, settings, command):
 
 def report_document(result, target, args, command):
     """Return the report as a JSON-ready dict."""
+    from valve_sim.core.steady_state import cracking_pressure
+
     fitted = []
     for k, p in enumerate(result.fitted):
         entry = {

@@ -45,15 +45,12 @@ from valve_sim.commands.simulate import (
     load_from_arguments,
     write_bag,
 )
+from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.parameters import ParameterError
-from valve_sim.core.simulation import LITRE_PER_MINUTE, main_stage_flow, ramp_flows, run_flows
-from valve_sim.core.steady_state import (
-    cracking_pressure,
-    flow_for_main_stage_flow,
-    steady_curve,
-    steady_state,
-    SteadyStateError,
-)
+from valve_sim.core.scenario import LITRE_PER_MINUTE
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim characteristic --help` stays quick.
 
 
 STEADY_POINTS = 80  # points of the steady-state curve
@@ -123,6 +120,12 @@ def _check(args, step_size):
 
 def steady_marks(params, rated_flow, max_flow):
     """Return the steady state's cracking (lift-off, 1 % main-stage flow) and rated pressures."""
+    from valve_sim.core.steady_state import (
+        cracking_pressure,
+        flow_for_main_stage_flow,
+        steady_state,
+    )
+
     marks = {'lift_off_pressure': None, 'cracking_pressure': None, 'cracking_flow': None}
     try:
         marks['lift_off_pressure'] = cracking_pressure(params)
@@ -142,6 +145,8 @@ def steady_marks(params, rated_flow, max_flow):
 
 def ramp_test(params, max_flow, rated_flow, ramp_time, hold_time, step_size, record_interval):
     """Run the ramp; returns (Waveforms, main-stage flow per sample, {basis: Characteristic})."""
+    from valve_sim.core.simulation import main_stage_flow, ramp_flows, run_flows
+
     waveforms = run_flows(
         params, ramp_flows(max_flow, ramp_time, hold_time, step_size), step_size, record_interval
     )
@@ -234,6 +239,7 @@ def run(args):
 def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow):
     """CSV files, JSON and the figure into out."""
     from valve_sim.analysis.plotting import plot_characteristic
+    from valve_sim.core.steady_state import steady_curve
 
     out.mkdir(parents=True, exist_ok=True)
     q_in, p_s = waveforms.inlet_flow, waveforms['supply_pressure']

@@ -70,29 +70,54 @@ SUBCOMMANDS = {
 }
 
 
-def build_parser():
+def build_parser(argv):
+    """
+    Build the parser, with the arguments of the subcommand argv names only.
+
+    Only that subcommand's module is imported: `valve-sim --help` imports none,
+    `valve-sim simulate --help` only simulate's (which keeps numba and scipy for run()).
+    """
+    chosen = next((argument for argument in argv if not argument.startswith('-')), None)
     parser = argparse.ArgumentParser(prog='valve-sim', description=__doc__.strip().splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name, (module_name, help_text) in SUBCOMMANDS.items():
-        module = importlib.import_module(module_name)
-        description = module.__doc__.strip().splitlines()[0]
-        sub = commands.add_parser(name, help=help_text, description=description)
-        module.add_arguments(sub)
-        sub.set_defaults(run=module.run)
+        sub = commands.add_parser(name, help=help_text, description=help_text)
+        if name == chosen:
+            module = importlib.import_module(module_name)
+            sub.description = module.__doc__.strip().splitlines()[0]
+            module.add_arguments(sub)
+            sub.set_defaults(run=module.run)
     return parser
+
+
+def make_folder(path):
+    """Create the output folder path (and its parents); OSError naming it if that fails."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise OSError(f'output folder {path} cannot be created: {error.strerror}') from error
+    return path
+
+
+def explained(error):
+    """Return an error's one-line message; a file the system refused is named first."""
+    if isinstance(error, OSError) and error.filename and error.strerror:
+        return f'{error.filename}: {error.strerror}'
+    return str(error)
 
 
 def main(argv=None):
     from valve_sim.core.errors import USER_ERRORS
 
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv).parse_args(argv)
     try:
         return args.run(args)
     except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except USER_ERRORS as error:
-        print(f'valve-sim {args.command}: error: {error}', file=sys.stderr)
+        print(f'valve-sim {args.command}: error: {explained(error)}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f'valve-sim {args.command}: interrupted', file=sys.stderr)

@@ -37,6 +37,7 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.commands.cli import make_folder
 from valve_sim.core.errors import IncompleteRunError
 
 
@@ -51,6 +52,7 @@ COMMAND_PERIOD = 0.02  # [s] inlet_flow is published at 50 Hz (valve_node's inpu
 READY_TIMEOUT = 180.0  # [s] for start-up (a cold kernel compile on a loaded machine) and discovery
 MEASURES_TIMEOUT = 60.0  # [s] from the step to the analyser's measures
 STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
+GAP_WARNING = 0.01  # [s] a longer gap between samples (1 ms apart) in the step window is reported
 NODES = ('valve_node', 'analyser_node')
 
 
@@ -220,6 +222,16 @@ class Driver:
         self.spin_until(lambda: time.monotonic() >= end, duration + 10.0, 'the end of a hold')
 
 
+def largest_gap(recording, t_step):
+    """Return the longest time [s] without a sample in the step's window of a Recording."""
+    from valve_sim.analysis.measures import WINDOW
+
+    shown = recording.time[
+        (recording.time >= t_step) & (recording.time <= t_step + WINDOW)
+    ]
+    return float((shown[1:] - shown[:-1]).max()) if shown.size > 1 else 0.0
+
+
 def report(folder, bag):
     """
     Print the live measures beside the paper's and the offline check; draw Figure 5.
@@ -247,6 +259,13 @@ def report(folder, bag):
         '\noffline analysis of the bag: '
         f'{"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
     )
+    gap = largest_gap(recording, live[0]['t_step'])
+    if gap > GAP_WARNING:
+        print(
+            f'warning: the recording has a gap of {gap * 1e3:.0f} ms inside the step window '
+            '(valve_node skipped lag, or messages were lost): the measures span it; '
+            'rerun on a quieter machine'
+        )
     figure = plot_steps(folder / 'figure5.png', recording, live)[0]
     for path in (bag, measures_path, figure):
         progress(f'wrote {path}')
@@ -291,13 +310,7 @@ def run(args):
     from valve_sim.ros.isolation import claim_domain
 
     folder = Path(args.out) if args.out else Path.cwd() / time.strftime('demo_%Y%m%d-%H%M%S')
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise IncompleteRunError(
-            f'output folder {folder} cannot be created: {error.strerror}'
-        ) from error
-    folder = folder.resolve()
+    folder = make_folder(folder).resolve()
     progress(f'output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
     progress('starting valve_node and analyser_node')
     processes = start_nodes(folder, args.foxglove)

@@ -23,10 +23,7 @@ docs/model.md ("operating-point --json"), all SI.
 import json
 
 from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
-from valve_sim.core.linear import oscillatory_modes
-from valve_sim.core.model import coefficients, flows
-from valve_sim.core.simulation import LITRE_PER_MINUTE
-from valve_sim.core.steady_state import cracking_pressure, steady_state
+from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def add_arguments(parser):
@@ -53,6 +50,10 @@ def operating_point(params, inlet_flow):
     rod_leakage} [m^3/s], main_valve_forces and poppet_forces [N], modes
     [{frequency_hz, damping_ratio}] slowest first.
     """
+    from valve_sim.core.linear import oscillatory_modes
+    from valve_sim.core.model import coefficients, flows
+    from valve_sim.core.steady_state import steady_state
+
     c = coefficients(params)
     state = steady_state(params, inlet_flow)
     p_s, p_m, p_p, p_c, x, _, y, _ = (float(v) for v in state)
@@ -136,6 +137,8 @@ def report(point):
 
 
 def run(args):
+    from valve_sim.core.steady_state import cracking_pressure
+
     params, _ = load_from_arguments(args)
     inlet_flows = args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE)
     if args.json:

@@ -39,6 +39,7 @@ from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import parse_variations
+from valve_sim.commands.cli import make_folder
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -66,7 +67,8 @@ def add_arguments(parser):
         '--vary',
         action='append',
         metavar='NAME=SPEC,...',
-        help=f'parameters and distributions as for tolerance (default: {PAPER_RANGES})',
+        help='parameters and distributions as for tolerance (default: '
+        + PAPER_RANGES.replace('%', '%%') + ')',
     )
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
@@ -141,8 +143,7 @@ def run(args):
     preset, protocol = preset_protocol(args, params)
     names = [d.name for d in distributions]
     values = sobol_design(distributions, args.samples, args.seed)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(args.out))
     print(
         f'sensitivity: {len(values)} runs ({args.samples} x ({len(names)} + 2)); protocol '
         f"{protocol['protocol']}: {protocol['protocol_meaning']}",

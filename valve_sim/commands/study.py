@@ -49,6 +49,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
 from valve_sim.analysis.study_runner import evaluate_case, run_cases, SerialBackend
+from valve_sim.commands.cli import make_folder
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
@@ -273,8 +274,7 @@ def write_figures(out, results, protocol):
 
 def run(args):
     params, settings = load_from_arguments(args)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(args.out))
     preset = cracking_pressure(params)
     held = args.protocol == 'held-preset'
     print(

@@ -46,6 +46,7 @@ from valve_sim.analysis.tolerances import (
     SAMPLERS,
     summarise,
 )
+from valve_sim.commands.cli import make_folder
 from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
@@ -175,8 +176,7 @@ def run(args):
     preset, protocol = preset_protocol(args, params)
     names = [d.name for d in distributions]
     values = draw(distributions, args.samples, args.seed, args.sampler)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(args.out))
     backend = open_backend(args, 'tolerance')
     try:
         results, _ = run_cases(

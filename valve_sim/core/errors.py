@@ -16,12 +16,29 @@
 The errors a user can cause (bad parameters, bad files, a diverging run).
 
 The command line prints these as one line and exits 1; anything else is a bug
-and keeps its traceback.
+and keeps its traceback. Defined here, light to import (no numba, no scipy), and
+also offered by the modules that raise them (integrator, steady_state).
 """
 
-from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.parameters import ParameterError
-from valve_sim.core.steady_state import SteadyStateError
+
+
+class IntegrationError(RuntimeError):
+    """
+    The integration diverged or produced a non-finite state.
+
+    steps_done: the steps of the call completed before the failing one.
+    """
+
+    steps_done = 0
+
+
+class OverpressureError(IntegrationError):
+    """A chamber pressure passed burst_pressure: a physical limit, not a numerical failure."""
+
+
+class SteadyStateError(RuntimeError):
+    """No steady state could be found."""
 
 
 class InputFileError(ValueError):

@@ -37,6 +37,7 @@ overlaps the lanes' independent arithmetic, which makes a study's runs faster.
 """
 
 import numpy as np
+from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import (
     describe_state,
@@ -70,20 +71,6 @@ CROSSING_TOLERANCE = 1e-3
 # between: a chamber's rate changes with the flows and openings, over milliseconds, and
 # STEP_RATE_LIMIT keeps 28 % below RK4's limit; asking every step cost a third of the run.
 CHECK_EVERY = 10
-
-
-class IntegrationError(RuntimeError):
-    """
-    The integration diverged or produced a non-finite state.
-
-    steps_done: the steps of the call completed before the failing one.
-    """
-
-    steps_done = 0
-
-
-class OverpressureError(IntegrationError):
-    """A chamber pressure passed burst_pressure: a physical limit, not a numerical failure."""
 
 
 @jit

@@ -15,7 +15,7 @@
 """
 Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms out.
 
-A Scenario is the paper's test: the valve at the exact steady state of
+A Scenario (valve_sim.core.scenario) is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve. Faults (a FaultSet) hold from the start; a fault schedule
@@ -42,31 +42,11 @@ from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
 from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
+from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario  # noqa: F401 (also offered here)
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
-LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
 LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """Inlet-flow step test. Flows in m^3/s, times in s."""
-
-    initial_flow: float = 5.0 * LITRE_PER_MINUTE
-    final_flow: float = 20.0 * LITRE_PER_MINUTE
-    step_time: float = 0.25
-    end_time: float = 1.25
-    ramp_time: float = 0.0
-
-    def inlet_flow(self, t):
-        """q_in(t) [m^3/s] (vectorised)."""
-        t = np.asarray(t, dtype=float)
-        if self.ramp_time > 0.0:
-            progress = np.clip((t - self.step_time) / self.ramp_time, 0.0, 1.0)
-        else:
-            progress = (t >= self.step_time).astype(float)
-        return self.initial_flow + (self.final_flow - self.initial_flow) * progress
 
 
 @dataclass

@@ -34,8 +34,9 @@ from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import brentq, root
+from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.integrator import advance
 from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.model import (
     coefficients,
@@ -61,10 +62,6 @@ TINY_FLOW_TOLERANCE = 1e-7  # the same relative to a tiny inlet flow: 1e-17 m^3/
 # [m^3/s] below it double precision cannot resolve the flow balances (a poppet open by
 # 1e-15 m next to 6 MPa pressures): steady_state extrapolates from above it.
 TINY_FLOW = 1e-12
-
-
-class SteadyStateError(RuntimeError):
-    """No steady state could be found."""
 
 
 def _residuals(state, inlet_flow, c, flow_scale, force_scale):

@@ -15,7 +15,7 @@
 """
 MCAP files as rosbag2 (ROS 2 Jazzy, storage plugin mcap) writes them, and reading them back.
 
-Writing (BagWriter) follows ../shared/spec/platform.md and rosbag2's own code:
+Writing (BagWriter) follows what rosbag2 (storage plugin mcap) writes on Jazzy:
 header profile "ros2"; one schema per type, named "pkg/msg/Type", encoding
 "ros2msg", holding the full definition text (message_definition()); channels with
 message encoding "cdr" and the metadata "offered_qos_profiles" (qos_profiles_yaml())

@@ -26,6 +26,7 @@ explains a bad value with the parameter's symbol, limits and unit (rclpy's own
 type refusal names neither the parameter nor the expected unit).
 """
 
+import difflib
 import math
 
 from rcl_interfaces.msg import (
@@ -116,3 +117,18 @@ def value_problem(spec, parameter):
             f'[{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
         )
     return None
+
+
+def undeclared_reason(name, specs):
+    """
+    Explain that name is no parameter of the node; suggest the declared one meant.
+
+    specs: {declared name: ParameterSpec}. A paper symbol (m_m) gets its parameter's
+    name (main_valve_mass); anything else the closest declared name, if one is close.
+    """
+    reason = f"parameter '{name}' is not declared by this node"
+    by_symbol = {spec.symbol: spec.name for spec in specs.values()}
+    if name in by_symbol:
+        return f"{reason}; '{name}' is the paper's symbol of '{by_symbol[name]}': set that"
+    close = difflib.get_close_matches(name, list(specs), n=1)
+    return f"{reason}; did you mean '{close[0]}'?" if close else reason

@@ -113,7 +113,12 @@ from valve_sim.ros.fault_injection import (
 )
 from valve_sim.ros.inlet_input import InletFlowInput
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
-from valve_sim.ros.ros_parameters import declare_double, integers_as_doubles, value_problem
+from valve_sim.ros.ros_parameters import (
+    declare_double,
+    integers_as_doubles,
+    undeclared_reason,
+    value_problem,
+)
 
 
 STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
@@ -270,10 +275,16 @@ class ReliefValveNode(Node):
         Node.set_parameters_atomically, which both parameter services call.
 
         Checks each value against its spec first, for a reason with symbol, limits
-        and unit, and counts and logs every refusal.
+        and unit, and each name (an undeclared one is named, with the declared name
+        meant), and counts and logs every refusal.
         """
         problems = (
-            value_problem(VALVE_SPECS[p.name], p) for p in parameter_list if p.name in VALVE_SPECS
+            value_problem(VALVE_SPECS[p.name], p)
+            if p.name in VALVE_SPECS
+            else None
+            if self.has_parameter(p.name)
+            else undeclared_reason(p.name, VALVE_SPECS)
+            for p in parameter_list
         )
         reason = next(filter(None, problems), None)
         try:

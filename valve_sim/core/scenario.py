@@ -1,0 +1,47 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The paper's test as data: an inlet-flow step (or ramp) from one steady flow to another.
+
+Kept apart from the simulation so that the command line and the paper's reference
+data can name scenarios without loading the integrator (numba) or scipy.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Inlet-flow step test. Flows in m^3/s, times in s."""
+
+    initial_flow: float = 5.0 * LITRE_PER_MINUTE
+    final_flow: float = 20.0 * LITRE_PER_MINUTE
+    step_time: float = 0.25
+    end_time: float = 1.25
+    ramp_time: float = 0.0
+
+    def inlet_flow(self, t):
+        """q_in(t) [m^3/s] (vectorised)."""
+        t = np.asarray(t, dtype=float)
+        if self.ramp_time > 0.0:
+            progress = np.clip((t - self.step_time) / self.ramp_time, 0.0, 1.0)
+        else:
+            progress = (t >= self.step_time).astype(float)
+        return self.initial_flow + (self.final_flow - self.initial_flow) * progress
