@@ -23,7 +23,7 @@ import pytest
 from valve_sim.analysis.measures import step_measures
 from valve_sim.core.fault_schedule import FaultEvent, parse_schedule
 from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
-from valve_sim.core.integrator import advance
+from valve_sim.core.integrator import advance, OverpressureError
 from valve_sim.core.model import (
     coefficients,
     net_forces,
@@ -194,16 +194,17 @@ def test_a_stuck_main_valve_drives_p_s_to_the_supply_limit_without_failing(param
     assert np.all(x == x[0]) and x[0] > 0.0
     assert np.all(np.diff(p_s[w.time > 0.25]) >= -1e-3 * BENCH_LIMIT)
     assert p_s[-1] == BENCH_LIMIT and np.all(p_s <= BENCH_LIMIT)
-    # Without a supply limit the frozen main throttle and the pilot stage take the flow
-    # at a far higher pressure, still without a numerical failure.
+    # Without a supply limit p_s rises until the valve's burst_pressure: an overpressure
+    # (the physical limit, issue 10), not a numerical failure.
     assert params['supply_pressure_limit'] == 0.0
-    w = simulate(params, faults=stuck)
-    assert w['supply_pressure'][-1] > 1.5 * BENCH_LIMIT
+    with pytest.raises(OverpressureError, match='burst_pressure'):
+        simulate(params, faults=stuck)
 
 
 def test_a_valve_that_sticks_mid_run_stays_where_it_stuck(params):
     schedule = parse_schedule({'events': [{'t': 0.2505, 'set': {'fault.main_valve_stuck': True}}]})
-    w = simulate(params, schedule=schedule)
+    # the bench supply's relief keeps p_s below the valve's burst_pressure
+    w = simulate(dict(params, supply_pressure_limit=BENCH_LIMIT), schedule=schedule)
     stuck_at = np.searchsorted(w.time, 0.251 - 1e-9)  # the first tick at or after 0.2505 s
     x = w['main_valve_displacement']
     assert np.all(x[stuck_at:] == x[stuck_at]) and x[stuck_at - 1] != x[stuck_at - 2]

@@ -16,10 +16,10 @@
 
 import numpy as np
 import pytest
-from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.integrator import advance, IntegrationError, OverpressureError
 from valve_sim.core.model import coefficients, P_S
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.realtime_model import RealTimeModel, step_ns
+from valve_sim.core.realtime_model import RealTimeModel, step_ns, TRIAL_STEPS
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import steady_state
 
@@ -94,13 +94,55 @@ def test_trial_refuses_a_diverging_change_without_touching_the_model(model, refe
 
 
 def test_roll_back_returns_to_the_parameters_before_the_last_change(model, reference):
-    assert not model.roll_back(), 'nothing to roll back to before any change'
+    assert not model.roll_back(START_NS), 'nothing to roll back to before any change'
     heavier = {**reference, 'main_valve_mass': reference['main_valve_mass'] * 2}
     model.retune(heavier, 2e-5)
     assert (model.params, model.step_size) == (heavier, 2e-5)
-    assert model.roll_back()
+    assert model.roll_back(START_NS + 20_000)
     assert (model.params, model.step_size) == (reference, 1e-5)
-    assert not model.roll_back(), 'one level only'
+    assert not model.roll_back(START_NS + 20_000), 'one level only'
+
+
+def test_roll_back_undoes_only_a_change_within_the_trial_window(model, reference):
+    """A failure after the trial window of a change was not caused by it: the change stays."""
+    preset_moved = {**reference, 'pilot_spring_preload': reference['pilot_spring_preload'] * 1.1}
+    model.retune(preset_moved, 1e-5)
+    window_ns = TRIAL_STEPS * 10_000
+    model.advance_to(START_NS + 3 * window_ns, FLOW, max_lag_ns=10**10)
+    assert not model.roll_back(START_NS + 3 * window_ns), 'an unrelated, later failure'
+    assert model.params == preset_moved
+    model.retune(reference, 1e-5)
+    assert model.roll_back(model.time_ns + window_ns // 2), 'a failure within the window'
+    assert model.params == preset_moved
+
+
+def test_a_halted_model_holds_its_state_until_resumed(model):
+    state = model.state.copy()
+    model.halt('overpressure')
+    assert model.advance_to(START_NS + 5_000_000, 4 * FLOW, max_lag_ns=10**9).steps == 0
+    assert np.array_equal(model.state, state) and model.time_ns == START_NS + 5_000_000
+    model.resume()
+    assert model.advance_to(START_NS + 6_000_000, 4 * FLOW, max_lag_ns=10**9).steps == 100
+    model.halt('overpressure')
+    model.reset(FLOW)
+    assert model.halted is None, 'a reset resumes'
+
+
+def test_failure_reports_the_model_time_of_the_failing_step(model, reference):
+    with pytest.raises(OverpressureError) as failure:
+        model.advance_to(START_NS + 100_000_000, 1.0, max_lag_ns=10**9)  # 60 000 L/min
+    assert START_NS < failure.value.failure_ns <= START_NS + 100_000_000
+    assert failure.value.failure_ns % 10_000 == 0
+
+
+def test_reset_at_a_tiny_flow_installs_a_state_that_holds(reference):
+    model = RealTimeModel(reference, 1e-5, 0.0)
+    model.start(START_NS)
+    model.reset(1.67e-14)  # 1e-9 L/min
+    state = model.state.copy()
+    model.advance_to(START_NS + 100_000_000, 1.67e-14, max_lag_ns=10**9)
+    assert model.state[P_S] == pytest.approx(state[P_S], rel=1e-9)
+    assert np.max(np.abs(model.state[:4] - state[:4])) < 1.0  # [Pa]
 
 
 def test_reset_goes_to_the_steady_state_of_the_given_flow(model, reference):

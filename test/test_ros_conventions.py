@@ -188,10 +188,11 @@ def test_diagnostics_names_levels_and_hardware_id_after_a_rename(renamed_valve):
         lambda d: d['level'] == DiagnosticStatus.WARN[0] and 'input stale' in d['message'], 'WARN'
     )
     assert stale['name'] == ok['name']
-    assert probe.set_parameters(main_valve_damping=1.0)[0].successful
-    probe.send_flow(1.0)  # 60 000 L/min: the model diverges
+    assert probe.set_parameters(max_inlet_flow=0.1)[0].successful
+    probe.wait_for_new_samples(100)  # beyond the 20 ms trial window of that change
+    probe.send_flow(0.05)  # 3000 L/min: an overpressure alarm, the model halts
     error = probe.wait_for_diagnostics(lambda d: d['level'] == DiagnosticStatus.ERROR[0], 'ERROR')
-    assert error['name'] == ok['name'] and 'diverged' in error['message']
+    assert error['name'] == ok['name'] and 'overpressure' in error['message']
     probe.send_flow(INITIAL_FLOW)
     probe.reset()
 

@@ -102,6 +102,11 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED):
         problems += [reader.problem] if reader.problem else []
     rows.extend(joiner.finish())
     for role in required:
+        if signal_map.topics[role] not in found and reader.problem:
+            raise InputFileError(
+                f'{reader.problem}. Nothing of {signal_map.topics[role]} ({role}) could be read '
+                'before the end: no chunk of the file is complete'
+            )
         if signal_map.topics[role] not in found:
             raise InputFileError(
                 f'{path} has no topic {signal_map.topics[role]} ({role}); its topics: '

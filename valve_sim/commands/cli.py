@@ -16,7 +16,7 @@
 The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
 Subcommands: simulate, study, tolerance, sensitivity, operating-point, characteristic,
-analyse, calibrate, demo.
+analyse, calibrate, repair, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -58,6 +58,10 @@ SUBCOMMANDS = {
     'calibrate': (
         'valve_sim.commands.calibrate',
         "fit parameters to the paper's measures or to a recorded bag",
+    ),
+    'repair': (
+        'valve_sim.commands.repair',
+        'rewrite a truncated or crash-ended MCAP file complete (as `mcap recover`)',
     ),
     'demo': (
         'valve_sim.commands.demo',

@@ -24,7 +24,17 @@ from valve_sim.core.parameters import ParameterError
 
 
 class IntegrationError(RuntimeError):
-    """The integration diverged or produced a non-finite state."""
+    """
+    The integration diverged or produced a non-finite state.
+
+    steps_done: the steps of the call completed before the failing one.
+    """
+
+    steps_done = 0
+
+
+class OverpressureError(IntegrationError):
+    """A chamber pressure passed burst_pressure: a physical limit, not a numerical failure."""
 
 
 class SteadyStateError(RuntimeError):

@@ -18,8 +18,12 @@ Fixed-step fourth-order Runge-Kutta integration of the valve model.
 The paper integrates Eqs. (1)-(16) with classical RK4 at a fixed 10 us step; so
 do we, in one kernel shared by the offline tools and the real-time node. After
 each step the valves are kept at their seats and end stops (inelastic contact),
-and the state is checked: a non-finite or absurd state stops the integration
-and raises IntegrationError instead of returning numbers.
+and the state is checked against the physical limits (valve_sim.core.limits):
+beyond burst_pressure the integration stops with OverpressureError, a
+non-finite or absurd state stops it with IntegrationError. A supply pressure
+beyond burst_pressure counts as an overpressure only if the step that crossed it
+was accurate (one step and two half steps agree): a numerical instability
+that happens to cross the limit first is a divergence.
 
 A step whose stiffest chamber would put RK4 beyond its stability
 (model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
@@ -33,15 +37,21 @@ overlaps the lanes' independent arithmetic, which makes a study's runs faster.
 """
 
 import numpy as np
-from valve_sim.core.errors import IntegrationError
+from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.jit import jit
+from valve_sim.core.limits import (
+    describe_state,
+    NUMERICAL_CEILING,
+    state_check,
+    STATE_OK,
+    STATE_OVERPRESSURE,
+    state_problem,
+)
 from valve_sim.core.model import (
     Coefficients,
     derivatives,
     fastest_chamber_rate,
-    P_C,
     P_S,
-    STATE_NAMES,
     X,
     X_DOT,
     Y,
@@ -49,16 +59,14 @@ from valve_sim.core.model import (
 )
 
 
-# A pressure beyond these limits [Pa, gauge] means the integration broke down:
-# water cannot hold 10 bar below vacuum, and nothing in the valve reaches 1 GPa.
-PRESSURE_FLOOR = -1e6
-PRESSURE_CEILING = 1e9
 # Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
 # eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
 STEP_RATE_LIMIT = 2.0
 # At most this many sub-steps per step: enough for a chamber made stiff by the operating
 # point at the paper's 10 us, not a licence for steps far beyond what the model allows.
 MAX_SPLITS = 8
+# An accurate step: its supply pressure agrees with two half steps' within this share of p_burst.
+CROSSING_TOLERANCE = 1e-3
 # The question is asked every this many steps (0.1 ms at 10 us) and its answer kept in
 # between: a chamber's rate changes with the flows and openings, over milliseconds, and
 # STEP_RATE_LIMIT keeps 28 % below RK4's limit; asking every step cost a third of the run.
@@ -88,20 +96,6 @@ def enforce_stops(state, c):
     rest_on_stops(state, Y, Y_DOT, c.poppet_stroke)
     if state[P_S] > c.supply_pressure_limit:
         state[P_S] = c.supply_pressure_limit
-
-
-@jit
-def state_is_sane(state):
-    """All entries finite and every pressure within [PRESSURE_FLOOR, PRESSURE_CEILING]."""
-    total = 0.0
-    for i in range(state.shape[0]):
-        total += state[i]
-    if total - total != 0.0:  # inf or nan anywhere makes the sum non-finite
-        return False
-    for i in range(P_S, P_C + 1):
-        if state[i] < PRESSURE_FLOOR or state[i] > PRESSURE_CEILING:
-            return False
-    return True
 
 
 @jit
@@ -137,8 +131,9 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
     inlet_flows[k] [m^3/s] is held during step k; a step is split where
     splits_needed() asks for it (asked every CHECK_EVERY steps). Every
     record_every steps the state is copied into the next row of record. Returns
-    the number of steps completed: fewer than len(inlet_flows) means the state
-    became insane (and state holds the insane values).
+    (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
+    state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
+    holds those values).
     """
     n = state.shape[0]
     k1 = np.empty(n)
@@ -156,19 +151,63 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
         h = step / splits
         for _ in range(splits):
             rk4_step(state, q, c, h, k1, k2, k3, k4, stage)
-        if not state_is_sane(state):
-            return k
+        verdict = state_check(state, c.burst_pressure)
+        if verdict != STATE_OK:
+            return k, verdict
         until_record -= 1
         if until_record == 0:
             until_record = record_every
             if row < record.shape[0]:
                 record[row, :] = state
                 row += 1
-    return inlet_flows.shape[0]
+    return inlet_flows.shape[0], STATE_OK
 
 
-def describe_state(state):
-    return ', '.join(f'{name}={value:.6g}' for name, value in zip(STATE_NAMES, state))
+def crossing_is_accurate(start, inlet_flows, done, c, step):
+    """
+    Check that step done from start (the first to cross burst_pressure) was accurate.
+
+    Repeats the steps before it, then compares that step with two half steps,
+    with the limit lifted: a physical pressure rise is resolved by the step and
+    both agree; an instability is not.
+    """
+    unlimited = c._replace(burst_pressure=NUMERICAL_CEILING)
+    before = start.copy()
+    rk4_steps(before, inlet_flows[:done], unlimited, step, 1, np.empty((0, 8)))
+    q = inlet_flows[slice(done, done + 1)]
+    full, halves = before.copy(), before.copy()
+    rk4_steps(full, q, unlimited, step, 1, np.empty((0, 8)))
+    rk4_steps(halves, np.repeat(q, 2), unlimited, 0.5 * step, 1, np.empty((0, 8)))
+    gap = abs(full[P_S] - halves[P_S])  # the supply: the pressure the limit is about
+    return bool(gap <= CROSSING_TOLERANCE * c.burst_pressure)
+
+
+def _failure(start, reached, inlet_flows, done, c, step, time, verdict):
+    """
+    Return the error of a run that left the limits at step done (0-based) of this call.
+
+    start: the state at the start of the call; reached: the state the failing step
+    produced; verdict: state_check's. OverpressureError if the step that crossed
+    burst_pressure was accurate, else IntegrationError; steps_done set.
+    """
+    where = (
+        f'at t = {time + (done + 1) * step:.6f} s (step {done + 1} of this call, '
+        f'step size {step:g} s, inlet flow {inlet_flows[done]:g} m^3/s)'
+    )
+    if verdict == STATE_OVERPRESSURE and crossing_is_accurate(
+        start, inlet_flows, done, c, float(step)
+    ):
+        error = OverpressureError(
+            f'{state_problem(reached, c.burst_pressure)} {where}; '
+            'the last state within the limits is kept.'
+        )
+    else:
+        error = IntegrationError(
+            f'integration diverged {where}: {describe_state(reached)}. '
+            'Reduce the step size or check the parameters.'
+        )
+    error.steps_done = done
+    return error
 
 
 def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
@@ -178,16 +217,19 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
     state: float64 array of 8; inlet_flows: array of q_in [m^3/s] per step;
     step: step size [s]; record_every: record the state every so many steps (0: no record);
     time: model time at the start [s], only used for error messages.
-    Returns the recorded states (rows). On divergence raises IntegrationError and
+    Returns the recorded states (rows). When a state leaves the limits raises
+    OverpressureError (beyond burst_pressure) or IntegrationError (diverged) and
     leaves state as it was before the call.
     """
     inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
     rows = len(inlet_flows) // record_every if record_every else 0
     record = np.empty((rows, 8))
     start = state.copy()
-    done = rk4_steps(state, inlet_flows, coefficients, float(step), max(record_every, 1), record)
+    done, verdict = rk4_steps(
+        state, inlet_flows, coefficients, float(step), max(record_every, 1), record
+    )
     if done < len(inlet_flows):
-        error = _divergence(state, done, step, time)
+        error = _failure(start, state.copy(), inlet_flows, done, coefficients, step, time, verdict)
         state[:] = start
         raise error
     return record
@@ -210,7 +252,9 @@ lane_coefficients = _lane_coefficients_function()
 
 
 @jit
-def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed, failures):
+def rk4_lanes(
+    states, inlet_flows, table, step, record_every, records, completed, failures, verdicts
+):
     """
     Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
 
@@ -218,8 +262,9 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     (splits_needed) takes it alone with rk4_step. table [fields x lanes]: each
     lane's Coefficients as a column. Every record_every steps the states go into
     records[lane, row]. completed[lane] is set to the number of steps the lane
-    completed: fewer than len(inlet_flows) means its state became insane; that
-    state goes into failures[:, lane], and the lane's later values mean nothing.
+    completed: fewer than len(inlet_flows) means its state left the limits; that
+    state goes into failures[:, lane], verdicts[lane] says how (limits.state_check),
+    and the lane's later values mean nothing.
     """
     n, lanes = states.shape
     k1 = np.empty((n, lanes))
@@ -233,6 +278,7 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
     steps = inlet_flows.shape[0]
     for j in range(lanes):
         completed[j] = steps
+        verdicts[j] = STATE_OK
     row = 0
     until_record = record_every
     for k in range(steps):
@@ -253,7 +299,8 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
                         single[3], single[4]
                     )
                 states[:, j] = state
-                if not state_is_sane(state):
+                verdicts[j] = state_check(state, c.burst_pressure)
+                if verdicts[j] != STATE_OK:
                     completed[j] = k
                     failures[:, j] = state
         for j in range(lanes):
@@ -283,9 +330,10 @@ def rk4_lanes(states, inlet_flows, table, step, record_every, records, completed
         for j in range(lanes):
             if completed[j] < steps or split[j]:
                 continue
-            state = states[:, j]
-            enforce_stops(state, lane_coefficients(table, j))
-            if not state_is_sane(state):
+            state, c = states[:, j], lane_coefficients(table, j)
+            enforce_stops(state, c)
+            verdicts[j] = state_check(state, c.burst_pressure)
+            if verdicts[j] != STATE_OK:
                 completed[j] = k
                 failures[:, j] = state
         until_record -= 1
@@ -303,9 +351,10 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
 
     states: float64 array [lanes x 8]; coefficient_sets: one Coefficients per lane;
     the other arguments as for advance(). Returns (records [lanes x rows x 8],
-    errors): errors[lane] is None or the IntegrationError of a lane that diverged,
-    whose state is then left as it was before the call. The lanes do not affect
-    each other, and each gives exactly what advance() gives it alone.
+    errors): errors[lane] is None or the IntegrationError (or OverpressureError) of
+    a lane that left the limits, whose state is then left as it was before the call.
+    The lanes do not affect each other, and each gives exactly what advance() gives
+    it alone.
     """
     inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
     lanes = len(states)
@@ -316,6 +365,7 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     table = np.array([tuple(c) for c in coefficient_sets], dtype=float).T.copy()
     completed = np.empty(lanes, dtype=np.int64)
     failures = np.empty_like(columns)
+    verdicts = np.empty(lanes, dtype=np.int64)
     rk4_lanes(
         columns,
         inlet_flows,
@@ -325,22 +375,25 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
         records,
         completed,
         failures,
+        verdicts,
     )
     errors = []
     for lane, done in enumerate(completed):
         if done < len(inlet_flows):
-            errors.append(_divergence(failures[:, lane], done, step, time))
+            errors.append(
+                _failure(
+                    start[lane],
+                    failures[:, lane].copy(),
+                    inlet_flows,
+                    done,
+                    coefficient_sets[lane],
+                    step,
+                    time,
+                    verdicts[lane],
+                )
+            )
             states[lane] = start[lane]
         else:
             errors.append(None)
             states[lane] = columns[:, lane]
     return records, errors
-
-
-def _divergence(state, done, step, time):
-    return IntegrationError(
-        f'integration diverged at t = {time + (done + 1) * step:.6f} s '
-        f'(step {done + 1} of this call, '
-        f'step size {step:g} s): {describe_state(state)}. '
-        'Reduce the step size or check the parameters.'
-    )

@@ -340,6 +340,26 @@ PARAMETERS = (
     ParameterSpec(
         'poppet_stroke', 'y_max', 'm', 1e-5, 0.01, 'pilot poppet stroke to its end stop', OURS
     ),
+    # Physical limits of the valve (docs/model.md, "Physical limits").
+    ParameterSpec(
+        'max_inlet_flow',
+        'q_in,max',
+        'm^3/s',
+        1e-6,
+        0.1,
+        'largest inlet flow the valve accepts; a larger one is rejected as input',
+        OURS,
+    ),
+    ParameterSpec(
+        'burst_pressure',
+        'p_burst',
+        'Pa',
+        1e6,
+        1e9,
+        'gauge pressure no chamber of the valve reaches: the real body would have burst '
+        '(a state beyond it is an overpressure)',
+        OURS,
+    ),
     # The test bench's supply (not the valve).
     ParameterSpec(
         'supply_pressure_limit',

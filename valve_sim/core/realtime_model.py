@@ -20,13 +20,20 @@ advance_to() integrates the whole number of fixed steps that fit between the
 model time and the clock, and carries the rest (less than one step) into the next
 call, so the model time never drifts from the clock. A lag beyond the catch-up
 limit is skipped: the model time jumps and the state is held over that stretch.
+
+When the state leaves the physical limits (valve_sim.core.limits: an overpressure,
+or a divergence) the model keeps its last good state. If a parameter change took
+effect within the trial window (TRIAL_STEPS steps) before, that change can have
+caused it and roll_back() undoes it; any other cause leaves the parameters alone
+and halt() stops the model: it holds its state, its time following the clock,
+until resume() (a reset, a new inlet flow or a parameter change).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.integrator import advance
+from valve_sim.core.integrator import advance, IntegrationError
 from valve_sim.core.model import coefficients
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
@@ -67,6 +74,8 @@ class RealTimeModel:
         self.time_ns = None
         self._use(params, step_size, faults)
         self._previous = None  # (params, step_size, faults) before the last retune
+        self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
+        self.halted = None  # why the model stopped advancing (str), or None while it runs
 
     def _use(self, params, step_size, faults):
         self.params = params
@@ -77,6 +86,8 @@ class RealTimeModel:
 
     def start(self, now_ns):
         """Anchor the model time to the clock time now_ns [ns] without integrating."""
+        if self.time_ns is None and self._retuned_ns is None and self._previous is not None:
+            self._retuned_ns = now_ns
         self.time_ns = now_ns
 
     def advance_to(self, now_ns, inlet_flow, max_lag_ns):
@@ -84,20 +95,36 @@ class RealTimeModel:
         Integrate with inlet_flow [m^3/s] held, up to the clock time now_ns [ns].
 
         Clock time beyond max_lag_ns [ns] behind now_ns is skipped first. Returns
-        Progress. On divergence raises IntegrationError and leaves state and
-        model time unchanged.
+        Progress. When the state leaves the limits raises IntegrationError (or its
+        OverpressureError) with failure_ns, the model time [ns] of the failing step,
+        and leaves state and model time unchanged. A halted model only holds.
         """
+        if self.halted is not None:
+            self.hold_until(now_ns)
+            return Progress(0, 0)
         skipped_ns = max(now_ns - self.time_ns - max_lag_ns, 0)
         steps = (now_ns - self.time_ns - skipped_ns) // self._step_ns
-        advance(
-            self.state,
-            np.full(steps, float(inlet_flow)),
-            self._coefficients,
-            self._step_ns / NS_PER_S,
-            time=self.time_ns / NS_PER_S,
-        )
+        try:
+            advance(
+                self.state,
+                np.full(steps, float(inlet_flow)),
+                self._coefficients,
+                self._step_ns / NS_PER_S,
+                time=(self.time_ns + skipped_ns) / NS_PER_S,
+            )
+        except IntegrationError as error:
+            error.failure_ns = self.time_ns + skipped_ns + (error.steps_done + 1) * self._step_ns
+            raise
         self.time_ns += skipped_ns + steps * self._step_ns
         return Progress(steps, skipped_ns)
+
+    def halt(self, reason):
+        """Stop advancing: hold the state (its time following the clock) until resume()."""
+        self.halted = reason
+
+    def resume(self):
+        """Advance again from the held state."""
+        self.halted = None
 
     def hold_until(self, now_ns):
         """Move the model time to the last step boundary before now_ns [ns], holding the state."""
@@ -126,16 +153,22 @@ class RealTimeModel:
         valve that becomes stuck stops where it is.
         """
         self._previous = (self.params, self.step_size, self.faults)
+        self._retuned_ns = self.time_ns
         faults = self.faults if faults is None else apply_faults(self.state, self.faults, faults)
         self._use(params, step_size, faults)
 
-    def roll_back(self):
+    def roll_back(self, failure_ns):
         """
-        Return to the parameters and step size in use before the last retune().
+        Undo the last retune() if it took effect within the trial window before failure_ns.
 
-        Returns False if there is nothing to return to (never retuned, or rolled back already).
+        failure_ns: model time [ns] of a failure (the error's failure_ns). Only a
+        change that recent can have caused it (older ones passed their trial and
+        ran since). Returns True if the parameters and step size were restored.
         """
         if self._previous is None:
+            return False
+        window_ns = TRIAL_STEPS * self._step_ns
+        if self._retuned_ns is not None and failure_ns - self._retuned_ns > window_ns:
             return False
         self._use(*self._previous)
         self._previous = None
@@ -145,6 +178,8 @@ class RealTimeModel:
         """
         Re-initialise at the exact steady state for inlet_flow [m^3/s] with the faults in effect.
 
-        Raises SteadyStateError.
+        Raises SteadyStateError (the state is then unchanged): among others for a flow or
+        a steady state beyond the physical limits. A reset resumes a halted model.
         """
         self.state = steady_state(self.params, inlet_flow, self.faults)
+        self.resume()

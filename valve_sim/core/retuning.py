@@ -20,11 +20,13 @@ preset_pressure is the valve's cracking pressure: the steady supply pressure
 Setting it sets pilot_spring_preload, the way a technician turns the adjusting
 screw; changing any model parameter moves the cracking pressure, which
 preset_pressure then reports. dependent_change() derives the partner of a
-change, check_preset() verifies that a change keeps the two consistent.
+change, check_preset() verifies that a change keeps the two consistent, and
+check_limits() that the running valve stays within its physical limits.
 """
 
 import math
 
+from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.parameters import ParameterError, SPECS, validate
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
@@ -84,4 +86,26 @@ def check_preset(params, changes):
             f'preset_pressure = {preset:g} Pa disagrees with the cracking pressure '
             f'{cracking:g} Pa given by '
             f'pilot_spring_preload = {params["pilot_spring_preload"]:g} m; set only one of the two'
+        )
+
+
+def check_limits(params, state, inlet_flow):
+    """
+    Raise ParameterError unless params keep the running valve within its physical limits.
+
+    The current inlet flow [m^3/s] must stay a valid input (max_inlet_flow), the
+    current state below burst_pressure, and the valve must crack below burst_pressure
+    (a relief valve that cannot open before its body bursts relieves nothing).
+    """
+    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow'])
+    if problem:
+        raise ParameterError(f'the current input would be refused: {problem}')
+    problem = state_problem(state, params['burst_pressure'])
+    if problem:
+        raise ParameterError(f'the current state would be refused: {problem}')
+    cracking = cracking_pressure(params)
+    if cracking >= params['burst_pressure']:
+        raise ParameterError(
+            f'the valve would crack at {cracking:g} Pa, not below burst_pressure (p_burst) = '
+            f'{params["burst_pressure"]:g} Pa'
         )

@@ -38,6 +38,7 @@ import numpy as np
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.integrator import advance, advance_lanes
+from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
 from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
@@ -132,6 +133,13 @@ def _waveforms(
     )
 
 
+def check_schedule(params, flows):
+    """Raise ParameterError if a flow of the schedule [m^3/s] is not a valid inlet flow."""
+    problem = schedule_problem(flows, params['max_inlet_flow'])
+    if problem:
+        raise ParameterError(f'inlet flow schedule: {problem}')
+
+
 def ramp_flows(max_flow, ramp_time, hold_time, step_size):
     """
     Inlet flow [m^3/s] per RK4 step of a static-characteristic test.
@@ -168,6 +176,7 @@ def run_flows(
     record_every = max(1, int(round(record_interval / step_size)))
     flows = np.ascontiguousarray(flows, dtype=float)
     state = steady_state(params, initial_flow, faults)
+    check_schedule(params, flows)
     initial = state.copy()
     records, events, start = [], [], 0
     events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
@@ -269,7 +278,8 @@ def simulate_batch(
     for index, params in enumerate(params_list):
         try:
             state = steady_state(params, scenario.initial_flow)
-        except SteadyStateError as error:
+            check_schedule(params, flows)
+        except (ParameterError, SteadyStateError) as error:
             results[index] = error
             continue
         starts[index] = (state, coefficients(params))

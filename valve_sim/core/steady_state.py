@@ -37,6 +37,7 @@ from scipy.optimize import brentq, root
 from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
+from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.model import (
     coefficients,
     derivatives,
@@ -57,6 +58,10 @@ PSEUDO_TRANSIENT_TIME = 0.3  # [s]
 PSEUDO_TRANSIENT_STEP = 5e-6  # [s]
 PSEUDO_TRANSIENT_DAMPING = (200.0, 50.0)  # [N s/m] added to main valve and poppet
 TOLERANCE = 1e-10  # relative residual of flows and forces
+TINY_FLOW_TOLERANCE = 1e-7  # the same relative to a tiny inlet flow: 1e-17 m^3/s at 1e-10
+# [m^3/s] below it double precision cannot resolve the flow balances (a poppet open by
+# 1e-15 m next to 6 MPa pressures): steady_state extrapolates from above it.
+TINY_FLOW = 1e-12
 
 
 def _residuals(state, inlet_flow, c, flow_scale, force_scale):
@@ -76,10 +81,16 @@ def _residuals(state, inlet_flow, c, flow_scale, force_scale):
     )
 
 
-def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
-    """Solve the balances from guess; a valve whose fixed position is not None rests there."""
+def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow=False):
+    """
+    Solve the balances from guess; a valve whose fixed position is not None rests there.
+
+    Flows are scaled by at least 1e-7 m^3/s and a free position by its stroke; with
+    tiny_flow, by the inlet flow and the guessed position (a poppet open by 1e-15 m at
+    1e-15 m^3/s is lost in the usual scales).
+    """
     pressure_scale = max(guess[P_S], 1e5)
-    flow_scale = max(inlet_flow, 1e-7)
+    flow_scale = inlet_flow if tiny_flow else max(inlet_flow, 1e-7)
     force_scale = c.back_area * pressure_scale
     free, equations, scale = [P_S, P_M, P_P, P_C], [0, 1, 2, 3], [pressure_scale] * 4
     for index, equation, fixed, stroke in (
@@ -89,7 +100,8 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y):
         if fixed is None:
             free.append(index)
             equations.append(equation)
-            scale.append(stroke)
+            small = tiny_flow and 0.0 < guess[index] < stroke
+            scale.append(guess[index] if small else stroke)
     scale = np.array(scale)
 
     def compose(u):
@@ -154,6 +166,19 @@ def _estimate(inlet_flow, c):
     return state
 
 
+def _pilot_opening_estimate(inlet_flow, c):
+    """
+    Estimate for a flow the pilot alone passes, barely open: the limit of a tiny flow.
+
+    All chambers at the pilot's opening pressure k_p y_0 / A_s, the main valve seated,
+    the poppet open just enough for the flow.
+    """
+    state = np.zeros(8)
+    state[[P_S, P_M, P_P, P_C]] = c.pilot_spring_stiffness * c.pilot_spring_preload / c.rod_area
+    state[Y] = inlet_flow / (c.poppet_gain * np.sqrt(state[P_C]))
+    return state
+
+
 def _pseudo_transient(params, inlet_flow, c):
     """State after integrating a fast-settling, damped copy of the model from the empty valve."""
     fast = c._replace(
@@ -170,13 +195,21 @@ def _pseudo_transient(params, inlet_flow, c):
     return state
 
 
-def _solve_from(guess, inlet_flow, c):
-    """Newton from guess over the contact modes; (state, residual), state None if none fits."""
+def _solve_from(guess, inlet_flow, c, tiny_flow=False):
+    """
+    Newton from guess over the contact modes; (state, residual), state None if none fits.
+
+    tiny_flow: flows scaled by the inlet flow itself (see _newton), where rounding of
+    the 6 MPa pressures limits the relative residual to TINY_FLOW_TOLERANCE.
+    """
+    tolerance = TINY_FLOW_TOLERANCE if tiny_flow else TOLERANCE
     best = (None, np.inf)
     for fixed_x in _contacts(guess[X], c.main_valve_stroke):
         for fixed_y in _contacts(guess[Y], c.poppet_stroke):
-            candidate, error = _newton(guess, inlet_flow, c, fixed_x, fixed_y)
-            if error < TOLERANCE and _contact_is_consistent(candidate, c):
+            candidate, error = _newton(
+                guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow
+            )
+            if error < tolerance and _contact_is_consistent(candidate, c):
                 return candidate, error
             best = (None, min(best[1], error))
     return best
@@ -205,21 +238,40 @@ def steady_state(params, inlet_flow, faults=HEALTHY):
     Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
 
     params: validated parameter dict; faults: FaultSet. inlet_flow = 0 gives the
-    empty, closed valve. Raises SteadyStateError when no consistent steady state is found.
+    empty, closed valve; any flow above 0, however small, the valve held at its
+    pilot's opening pressure. Raises SteadyStateError when the flow is not a valid
+    input (above max_inlet_flow), when no consistent steady state is found, or when
+    the steady state is beyond the physical limits (burst_pressure) or the bench's
+    supply_pressure_limit: a steady state is never an impossible state.
     """
-    if not np.isfinite(inlet_flow) or inlet_flow < 0.0:
-        raise SteadyStateError(f'inlet flow must be finite and >= 0 m^3/s, got {inlet_flow}')
+    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow'])
+    if problem:
+        raise SteadyStateError(f'no steady state: {problem}')
     if inlet_flow == 0.0:
         return np.zeros(8)
+    if inlet_flow < TINY_FLOW:
+        # The balances are linear in the flow down here (every orifice laminar, the
+        # poppet opening proportional to it): extrapolate from two resolvable flows.
+        low = steady_state(params, TINY_FLOW, faults)
+        high = steady_state(params, 2.0 * TINY_FLOW, faults)
+        state = low + (high - low) * (inlet_flow - TINY_FLOW) / TINY_FLOW
+        state[Y] = max(state[Y], 0.0)
+        return state
     c = steady_coefficients(params, faults)
-    state, error = _solve_from(_estimate(inlet_flow, c), inlet_flow, c)
+    estimate = _estimate(inlet_flow, c)
+    state, error = _solve_from(estimate, inlet_flow, c)
     if state is None:
         state, error = _solve_from(_pseudo_transient(params, inlet_flow, c), inlet_flow, c)
+    if state is None:
+        state, error = _solve_from(_pilot_opening_estimate(inlet_flow, c), inlet_flow, c, True)
     if state is None:
         raise SteadyStateError(
             f'no consistent steady state at inlet flow {inlet_flow:g} m^3/s '
             f'(smallest relative residual {error:.2e}); check the parameters'
         )
+    problem = state_problem(state, params['burst_pressure'])
+    if problem:
+        raise SteadyStateError(f'the steady state at {inlet_flow:g} m^3/s is refused: {problem}')
     if 0.0 < params['supply_pressure_limit'] < state[P_S]:
         raise SteadyStateError(
             f'the valve passes {inlet_flow:g} m^3/s only at p_s = {state[P_S]:.6g} Pa, above '

@@ -47,6 +47,7 @@ from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording import rosbag2_metadata
+from valve_sim.recording.recovery import diagnose
 import yaml
 
 
@@ -288,6 +289,13 @@ class BagWriter:
         """Complete the open chunk and hand everything written so far to the operating system."""
         self._mcap.flush()
 
+    def abandon(self):
+        """Close the file as it is after a write error: what was written stays, no summary."""
+        try:
+            self._file.close()
+        except OSError:
+            pass  # the buffered rest could not be written either; the file is closed anyway
+
     def close(self):
         """
         Write the final rosbag2 metadata, the summary and the footer; close the file.
@@ -349,12 +357,17 @@ class BagReader:
                     elif isinstance(record, Schema):
                         self.schemas[record.id] = record
             except READ_ERRORS as error:
-                if file.tell() < size:
-                    raise InputFileError(
-                        f'{self.path} is damaged before byte {file.tell()}: '
-                        f'{error or type(error).__name__}'
-                    ) from error
-                self.problem = (
-                    f'{self.path} ends before its footer (a recording that was not closed, '
-                    f'{size} bytes): read what its complete chunks hold'
-                )
+                self._diagnose(error, file.tell() < size)
+
+    def _diagnose(self, error, before_the_end):
+        """Say where the file is truncated (then problem) or damaged (InputFileError)."""
+        scan = diagnose(self.path)
+        repair = f'`valve-sim repair {self.path}` writes a complete copy of what it holds'
+        if scan.truncated or scan.damage is None and not before_the_end:
+            self.problem = (
+                f'{scan.damage or self.path}: it ends before its footer (a recording that was '
+                f'not closed); read what its complete chunks hold; {repair}'
+            )
+            return
+        where = scan.damage or f'{self.path}: {error or type(error).__name__}'
+        raise InputFileError(f'{where} (the file is damaged there); {repair}') from error

@@ -19,4 +19,40 @@ Lives here: the nodes, parameter descriptors from specs, diagnostics, spinning, 
 valve_node's fault and sensor parameters (fault_injection).
 The home of rclpy; nodes stay thin around valve_sim.core and valve_sim.analysis.
 May import: valve_sim.core, valve_sim.analysis, valve_sim.recording, rclpy.
+
+A node process (`python -m valve_sim.ros.<node>`, or its console script) ends
+quietly on SIGINT while it is still starting up: this package is imported before
+the node's own (slow) imports, and spinning.init() later installs the handlers
+that stop the node cleanly. Without this, Python's KeyboardInterrupt traceback.
 """
+
+import os
+from pathlib import Path
+import signal
+import sys
+import threading
+
+
+NODE_PROGRAMS = ('valve_node', 'analyser_node')
+
+
+def _exit_quietly(number, _frame):
+    """
+    End the process at once, as a shell expects after SIGINT (exit code 130).
+
+    Not by an exception: raised inside an extension module's import it would come
+    out as that module's ImportError, with a traceback. Nothing is open yet.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):
+            pass
+    os._exit(128 + number)
+
+
+# sys.argv[0] is '-m' while `python -m` imports the packages of the module it runs.
+if threading.current_thread() is threading.main_thread() and (
+    sys.argv[:1] == ['-m'] or sys.argv and Path(sys.argv[0]).name in NODE_PROGRAMS
+):
+    signal.signal(signal.SIGINT, _exit_quietly)

@@ -516,7 +516,10 @@ class ValveAnalyser(Node):
     def _measured(self, records):
         """Append step records to the JSON file and publish them."""
         for record in records:
-            self.measures.append(record)
+            try:
+                self.measures.append(record)
+            except OSError as error:  # name the file: a full disk's error does not
+                raise OSError(error.errno, error.strerror, str(self.measures.path)) from error
             message = measures_message(
                 record,
                 diagnostics.status_name(self, MEASURES_TASK),
@@ -575,6 +578,20 @@ class ValveAnalyser(Node):
         array.header.stamp = self.get_clock().now().to_msg()
         self.status_publisher.publish(array)
 
+    def write_failure(self, error):
+        """
+        Close what can be closed after a write error (a full disk); return the error to report.
+
+        The bag keeps every chunk completed before the error, and no summary.
+        """
+        self.bag.abandon()
+        return InputFileError(
+            f'cannot write {error.filename or self.bag.path}: {error.strerror or error}. '
+            f'Recording stopped after {self.bag.message_count} messages; {self.bag.path} ends '
+            f'after its last complete chunk: `valve-sim repair {self.bag.path}` writes a '
+            'complete copy of what it holds'
+        )
+
     def close(self):
         """Take what is still queued, measure the open steps on what there is, close the file."""
         self.drain()
@@ -592,6 +609,8 @@ def record(stop):
     try:
         spinning.spin_until(node, SingleThreadedExecutor(), stop)
         node.close()
+    except OSError as error:
+        raise node.write_failure(error) from error
     finally:
         node.destroy_node()
 

@@ -40,7 +40,9 @@ class Counters:
     A late tick ran more than half a period after it was due;
     a long tick computed for more than half a period; a missed tick never ran (its time
     was integrated by the next one); skipped time was not integrated at all because
-    the lag exceeded the catch-up limit.
+    the lag exceeded the catch-up limit. Every inlet_flow message received is an
+    accepted or a rejected input. An overpressure is a state beyond burst_pressure,
+    an integration failure a numerical divergence.
     """
 
     ticks: int = 0
@@ -49,9 +51,11 @@ class Counters:
     missed_ticks: int = 0
     skipped_ticks: int = 0
     skipped_time_s: float = 0.0
+    accepted_inputs: int = 0
     rejected_inputs: int = 0
     rejected_parameter_changes: int = 0
     integration_failures: int = 0
+    overpressures: int = 0
     overpressure_alarms: int = 0
 
 
@@ -70,6 +74,7 @@ class NodeStatus:
     def __init__(self, steady_now_ns):
         self.counters = Counters()
         self.last_failure = ''
+        self.halted = None  # why the model stopped advancing, or None while it runs
         self._reported = Counters()
         self._durations_ns = []
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
@@ -112,6 +117,7 @@ class NodeStatus:
             **self._compute_times(),
             **{field.name: getattr(counters, field.name) for field in fields(Counters)},
             'last_integration_failure': self.last_failure,
+            'halted': self.halted is not None,
             'inlet_flow_m3_s': inputs.inlet_flow,
             'seconds_since_input': inputs.seconds_since_input,
             'input_stale': inputs.stale,
@@ -130,17 +136,30 @@ class NodeStatus:
         """
         Return (level, message) of the status.
 
-        ERROR: the model diverged in the window (state held, last change undone);
-        WARN: the input is stale, or lag beyond the catch-up limit was skipped;
-        OK otherwise (late ticks are named in the message but stay OK).
-        conditions [(level, text)] (faults, overpressure) come first, at their level.
+        ERROR: an overpressure beyond burst_pressure or a divergence in the window, or
+        the model halted (state held); WARN: the input is stale, or lag beyond the
+        catch-up limit was skipped; OK otherwise (late ticks are named in the message
+        but stay OK). conditions [(level, text)] (faults, the supply limit's
+        overpressure alarm) come first, at their level.
         """
         problems = [text for _, text in conditions]
         level = max([c[0] for c in conditions], default=DiagnosticStatus.OK)
+        overpressures = counters.overpressures - previous.overpressures
         failures = counters.integration_failures - previous.integration_failures
+        if overpressures:
+            level = DiagnosticStatus.ERROR
+            problems.append(
+                f'overpressure alarm {overpressures}x, state held: {self.last_failure}'
+            )
         if failures:
             level = DiagnosticStatus.ERROR
             problems.append(f'integration diverged {failures}x, state held: {self.last_failure}')
+        if self.halted is not None:
+            level = DiagnosticStatus.ERROR
+            problems.append(
+                'model halted, publishing its last good state until a reset, a new inlet flow '
+                'or a parameter change'
+            )
         if inputs.stale:
             level = max(level, DiagnosticStatus.WARN)
             problems.append(

@@ -17,9 +17,11 @@ valve_node: the virtual relief valve as a real-time ROS 2 node.
 
 Topic and service names are relative, so namespaces and remapping work:
 
-  sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s]; best
-                                                            effort: hears reliable and
-                                                            SensorDataQoS publishers
+  sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s], 0 to
+                                                            max_inlet_flow; best effort
+                                                            (hears reliable and
+                                                            SensorDataQoS publishers) or
+                                                            reliable: inlet_flow_reliability
   pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
                                 sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
                                                             gauge pressure + ambient_pressure
@@ -54,7 +56,6 @@ See docs/valve_node.md for the behaviour in detail.
 
 import argparse
 import gc
-import math
 import sys
 import time
 
@@ -72,7 +73,7 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.integrator import IntegrationError
+from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
     check_value,
@@ -88,7 +89,12 @@ from valve_sim.core.parameters import (
     validate,
 )
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, TRIAL_STEPS
-from valve_sim.core.retuning import check_preset, dependent_change, merged_parameters
+from valve_sim.core.retuning import (
+    check_limits,
+    check_preset,
+    dependent_change,
+    merged_parameters,
+)
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -105,6 +111,7 @@ from valve_sim.ros.fault_injection import (
     INJECTION_NAMES,
     split_changes,
 )
+from valve_sim.ros.inlet_input import InletFlowInput
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
 from valve_sim.ros.ros_parameters import (
     declare_double,
@@ -124,9 +131,16 @@ YOUNG_GENERATIONS = (
 STATE_QUEUE_DEPTH = (
     1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 )
-# Best effort, as REP 2003 asks of sensor-data subscribers: it matches reliable and best-effort
-# (SensorDataQoS) publishers alike; a reliable subscription never hears the latter.
-INLET_FLOW_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+INPUT_QUEUE_DEPTH = 1000  # inlet_flow messages held for the callback: a 1 s burst at 1 kHz
+# inlet_flow_reliability: best effort by default, as REP 2003 asks of sensor-data subscribers:
+# it matches reliable and best-effort (SensorDataQoS) publishers alike (a reliable subscription
+# never hears the latter), but the middleware may drop messages in a flood before the callback
+# counts them; reliable delivers every message of a reliable publisher.
+INLET_FLOW_RELIABILITY = {
+    'best_effort': ReliabilityPolicy.BEST_EFFORT,
+    'reliable': ReliabilityPolicy.RELIABLE,
+}
+WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {
     **SPECS,
@@ -156,15 +170,17 @@ class ReliefValveNode(Node):
         # exists: compiled in the first tick, it would stall the clock for seconds.
         self.model.trial(params, self.settings['step_size'], self.settings['initial_inlet_flow'])
         self.kernels_seconds = time.perf_counter() - started
-        self.inlet_flow = self.settings['initial_inlet_flow']  # [m^3/s], last good input
+        self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
-        self.last_input_ns = None
         self.input_stale = False
+        self._lag_warned = (0, 0.0)  # (steady time [ns], skipped_time_s) of the last lag warning
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
         self._previous_slot_ns = None
         self._create_outputs()
-        self.create_subscription(Float64, 'inlet_flow', self._on_inlet_flow, INLET_FLOW_QOS)
+        self.create_subscription(
+            Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
+        )
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.live_view = None  # a LiveView once serve_live_view() started one
         self._housekeeping_due = False
@@ -186,6 +202,11 @@ class ReliefValveNode(Node):
             'ticking from the first timer call'
         )
 
+    @property
+    def inlet_flow(self):
+        """Return the last good inlet flow [m^3/s]: what the next tick applies."""
+        return self.input.flow
+
     # --- parameters -------------------------------------------------------------------------
 
     def _declare_parameters(self):
@@ -203,6 +224,25 @@ class ReliefValveNode(Node):
         params = validate({name: values[name] for name in SPECS})
         settings = {name: values[name] for name in SETTING_SPECS}
         return self._declare_preset_pressure(params), settings
+
+    def _declare_inlet_flow_qos(self):
+        """Declare inlet_flow_reliability (read-only); return the subscription's QoS."""
+        descriptor = ParameterDescriptor(
+            name='inlet_flow_reliability',
+            description=(
+                "inlet_flow subscription: 'best_effort' (default; hears every publisher, "
+                "may lose messages in a flood) or 'reliable' (reliable publishers only; "
+                'every message delivered and counted)'
+            ),
+            read_only=True,
+        )
+        choice = self.declare_parameter('inlet_flow_reliability', 'best_effort', descriptor).value
+        if choice not in INLET_FLOW_RELIABILITY:
+            raise ParameterError(
+                f"inlet_flow_reliability must be one of {', '.join(INLET_FLOW_RELIABILITY)}, "
+                f'got {choice!r}'
+            )
+        return QoSProfile(depth=INPUT_QUEUE_DEPTH, reliability=INLET_FLOW_RELIABILITY[choice])
 
     def _declare_frame_prefix(self):
         """Declare frame_prefix (read-only): the pressures' frames are it + their place."""
@@ -292,6 +332,7 @@ class ReliefValveNode(Node):
             self.injection.sensors.checked(sensors)
             if FAULT_SCHEDULE in changes:
                 FaultInjection({}, changes[FAULT_SCHEDULE])
+            check_limits(params, self.model.state, self.inlet_flow)
             self.model.trial(params, settings['step_size'], self.inlet_flow, faults or None)
         except IntegrationError as error:
             return SetParametersResult(
@@ -319,7 +360,9 @@ class ReliefValveNode(Node):
             self.injection.use_schedule(changes[FAULT_SCHEDULE])
         if faults or sensors:
             self._publish_fault_status()
+        self.input.max_inlet_flow = params['max_inlet_flow']
         self.settings = settings
+        self._resume('a parameter change')
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()
@@ -367,15 +410,16 @@ class ReliefValveNode(Node):
         """Advance the model to the clock and publish its state."""
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
+        self.input.stamp(now_ns)
         if self.model.time_ns is None or now_ns < self.model.time_ns:
             self._start(now_ns)
             self._inject()
             self._publish_state()
         else:
             self._count_lateness(now_ns)
-            if self._advance(now_ns):
-                self._inject()
-                self._publish_state()
+            self._advance(now_ns)
+            self._inject()
+            self._publish_state()
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
         if self._housekeeping_due:
             self._housekeeping()
@@ -388,7 +432,7 @@ class ReliefValveNode(Node):
                 'model time restarts from the clock'
             )
         self.model.start(now_ns)
-        self.last_input_ns = self.last_input_ns or now_ns
+        self.input.received_ns = self.input.received_ns or now_ns
         self._previous_slot_ns = None
 
     def _count_lateness(self, now_ns):
@@ -404,26 +448,40 @@ class ReliefValveNode(Node):
         self._previous_slot_ns = slot_ns
 
     def _advance(self, now_ns):
-        """Integrate up to now_ns; False if it diverged (then nothing is published)."""
+        """Integrate up to now_ns; on a failure hold the last good state (see _recover)."""
         period_ns = self._tick_timer.timer_period_ns
+        if self.input.changed:
+            self.input.changed = False
+            self._resume('a new inlet flow')
         try:
             progress = self.model.advance_to(
                 now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns
             )
         except IntegrationError as error:
             self._recover(now_ns, error)
-            return False
-        self.applied_flow = self.inlet_flow
+            return
+        if self.model.halted is None:
+            self.applied_flow = self.inlet_flow
         if progress.skipped_ns:
             counters = self.status.counters
             counters.skipped_ticks += max(round(progress.skipped_ns / period_ns), 1)
             counters.skipped_time_s += progress.skipped_ns / NS_PER_S
-            self.get_logger().warn(
-                f'{progress.skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit '
-                f'{CATCH_UP_LIMIT_PERIODS} tick periods)',
-                throttle_duration_sec=1.0,
-            )
-        return True
+            self._warn_lag(progress.skipped_ns)
+
+    def _warn_lag(self, skipped_ns):
+        """Warn of skipped lag at most once a second, with what was skipped since and in total."""
+        steady_ns = time.monotonic_ns()
+        warned_ns, warned_total_s = self._lag_warned
+        if steady_ns - warned_ns < WARNING_INTERVAL_NS:
+            return
+        total_s = self.status.counters.skipped_time_s
+        self._lag_warned = (steady_ns, total_s)
+        self.get_logger().warn(
+            f'{skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit '
+            f'{CATCH_UP_LIMIT_PERIODS} tick periods); {total_s - warned_total_s:g} s skipped '
+            f'since the last warning, {total_s:g} s in '
+            f'{self.status.counters.skipped_ticks} tick periods since start'
+        )
 
     def _inject(self):
         """Apply the schedule's events due at this tick; watch for overpressure."""
@@ -448,16 +506,45 @@ class ReliefValveNode(Node):
         self.injection.overpressure = overpressure
 
     def _recover(self, now_ns, error):
-        """After a divergence: hold the last good state, undo the last parameter change."""
-        self.status.counters.integration_failures += 1
+        """
+        After a failure: hold the last good state; undo a parameter change that can have caused it.
+
+        An overpressure (the state reached burst_pressure) is counted apart from a
+        numerical divergence. Only a change applied within the trial window before the
+        failure is rolled back, and the model then goes on; otherwise the parameters
+        stay and the model halts until a reset, a new inlet flow or a parameter change.
+        """
+        counters = self.status.counters
+        if isinstance(error, OverpressureError):
+            counters.overpressures += 1
+        else:
+            counters.integration_failures += 1
         self.status.last_failure = str(error)
-        self.get_logger().error(f'{error} The last good state is held.', throttle_duration_sec=1.0)
-        if self.model.roll_back():
+        self.get_logger().error(f'{error} The last good state is held.')
+        self.model.hold_until(now_ns)
+        if self.model.roll_back(error.failure_ns):
             self.get_logger().error(
-                'parameters rolled back to the ones in use before the last change'
+                'parameters rolled back to the ones in use before the last change, '
+                'applied within the trial window before the failure'
             )
             self._restore_parameters()
-        self.model.hold_until(now_ns)
+            self.input.max_inlet_flow = self.model.params['max_inlet_flow']
+            if self.inlet_flow <= self.input.max_inlet_flow:
+                return
+        self.model.halt(str(error))
+        self.status.halted = str(error)
+        self.get_logger().error(
+            'the model stops advancing and publishes its last good state until a reset, '
+            'a new inlet flow or a parameter change'
+        )
+
+    def _resume(self, cause):
+        """Let a halted model advance again."""
+        if self.model.halted is None:
+            return
+        self.model.resume()
+        self.status.halted = None
+        self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
 
@@ -518,27 +605,16 @@ class ReliefValveNode(Node):
             f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
         )
 
-    def _on_inlet_flow(self, message):
-        """Take a finite, non-negative inlet flow [m^3/s]; reject and count anything else."""
-        flow = message.data
-        if math.isfinite(flow) and flow >= 0.0:
-            self.inlet_flow = flow
-            self.last_input_ns = self.get_clock().now().nanoseconds
-            return
-        self.status.counters.rejected_inputs += 1
-        self.get_logger().warn(
-            f'inlet_flow {flow!r} rejected (must be finite and >= 0 m^3/s); '
-            f'holding {self.inlet_flow:g} m^3/s',
-            throttle_duration_sec=1.0,
-        )
-
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
         try:
             self.model.reset(self.inlet_flow)
         except SteadyStateError as error:
-            response.success, response.message = False, str(error)
+            response.success = False
+            response.message = f'reset refused, the state is kept: {error}'
+            self.get_logger().warn(response.message)
             return response
+        self.status.halted = None
         time_ns = self.model.time_ns or 0
         response.success = True
         response.message = (
@@ -571,8 +647,21 @@ class ReliefValveNode(Node):
         """
         self._housekeeping_due = False
         self._ticks_at_housekeeping = self.status.counters.ticks
+        self._warn_rejected_inputs()
         self._publish_diagnostics()
         gc.collect(YOUNG_GENERATIONS)
+
+    def _warn_rejected_inputs(self):
+        """Once a second at most: how many inlet_flow messages were rejected, and why."""
+        self.status.counters.rejected_inputs = self.input.rejected
+        self.status.counters.accepted_inputs = self.input.accepted
+        new, reason = self.input.report()
+        if new:
+            self.get_logger().warn(
+                f'{new} inlet_flow message(s) rejected since the last report '
+                f'({self.input.rejected} since start), the last: {reason}; '
+                f'holding {self.inlet_flow:g} m^3/s'
+            )
 
     def _publish_diagnostics(self):
         now = self.get_clock().now()
@@ -615,7 +704,9 @@ class ReliefValveNode(Node):
 
     def _input_report(self, now_ns):
         """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
-        age = 0.0 if self.last_input_ns is None else max(now_ns - self.last_input_ns, 0) / NS_PER_S
+        self.input.stamp(now_ns)
+        received_ns = self.input.received_ns
+        age = 0.0 if received_ns is None else max(now_ns - received_ns, 0) / NS_PER_S
         timeout = self.settings['input_timeout']
         return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
 

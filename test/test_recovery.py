@@ -1,0 +1,258 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Damaged recordings: diagnosed as truncated or corrupt with where, repaired like `mcap recover`.
+
+The repaired files are read with rosbags (a seeking, summary-based reader) as well.
+"""
+
+from pathlib import Path
+import re
+import resource
+import signal
+import subprocess
+import sys
+import time
+
+from mcap.reader import make_reader
+import pytest
+from rosbags.highlevel import AnyReader
+from valve_sim.commands.analyse import read_recording
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.recording.bag import BagReader
+from valve_sim.recording.recovery import diagnose, repair
+from valve_sim.recording.replay import Replay
+
+
+REPO = Path(__file__).resolve().parent.parent
+REFERENCE_BAG = REPO / 'bags' / 'reference_step.mcap'
+TIMEOUT = 60.0  # [s] for anything that waits on another process
+
+
+def rosbags_messages(path):
+    """Return [(topic, log_time, data)] as rosbags reads a file (it needs the summary)."""
+    with AnyReader([Path(path)]) as reader:
+        return [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+
+
+def messages_in_order(path):
+    """Return [(topic, log_time, data)] of a complete file in file order (the mcap library)."""
+    with open(path, 'rb') as stream:
+        return [
+            (channel.topic, message.log_time, message.data)
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
+        ]
+
+
+def cuts(size, count=20):
+    """Return count offsets from 449 bytes (inside the first chunk) to one byte short of size."""
+    return sorted({449 + (size - 450) * k // (count - 1) for k in range(count)})
+
+
+def test_a_file_cut_anywhere_is_truncated_and_repaired_to_what_it_holds(tmp_path):
+    whole = REFERENCE_BAG.read_bytes()
+    everything = messages_in_order(REFERENCE_BAG)
+    kept_before = 0
+    for cut in cuts(len(whole)):
+        damaged, repaired = tmp_path / f'cut{cut}.mcap', tmp_path / f'cut{cut}.repaired.mcap'
+        damaged.write_bytes(whole[:cut])
+        scan = diagnose(damaged)
+        assert scan.truncated and f'ends at byte {cut}' in scan.damage, scan.damage
+        try:
+            problem = read_recording(damaged).problem
+        except InputFileError as error:
+            problem = str(error)
+        assert 'truncated' in problem and f'byte {cut}' in problem, problem
+        report = repair(damaged, repaired)
+        kept = rosbags_messages(repaired)
+        assert len(kept) == report.messages >= kept_before, 'more file, no fewer messages'
+        assert sorted(kept) == sorted(everything[: len(kept)]), 'what it held, unchanged'
+        kept_before = len(kept)
+    assert kept_before > 0.9 * len(everything), 'a cut near the end keeps nearly everything'
+
+
+def test_analyse_says_truncated_and_where_for_a_file_cut_before_its_first_chunk(tmp_path):
+    """The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap."""
+    cut = tmp_path / 't.mcap'
+    cut.write_bytes(REFERENCE_BAG.read_bytes()[:449000])
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'analyse', str(cut)],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert result.returncode == 1
+    assert 'truncated' in result.stderr and 'ends at byte 449000' in result.stderr, result.stderr
+    assert 'valve-sim repair' in result.stderr and 'Traceback' not in result.stderr
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(cut)],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert result.returncode == 0, result.stderr
+    kept = rosbags_messages(tmp_path / 't.repaired.mcap')
+    assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
+    assert sorted(kept) == sorted(messages_in_order(REFERENCE_BAG)[: len(kept)])
+
+
+def test_a_complete_file_is_copied_whole_and_never_overwritten(tmp_path):
+    copy = tmp_path / 'copy.mcap'
+    report = repair(REFERENCE_BAG, copy)
+    assert report.damage is None and diagnose(copy).damage is None
+    assert sorted(rosbags_messages(copy)) == sorted(messages_in_order(REFERENCE_BAG))
+    with pytest.raises(InputFileError, match='being repaired'):
+        repair(copy, copy)
+
+
+def test_a_corrupt_chunk_is_diagnosed_where_it_is(tmp_path):
+    data = bytearray(REFERENCE_BAG.read_bytes())
+    quarter = len(data) // 4
+    data[quarter:quarter + 16] = bytes(16)  # inside the (only) chunk
+    damaged = tmp_path / 'damaged.mcap'
+    damaged.write_bytes(bytes(data))
+    scan = diagnose(damaged)
+    assert not scan.truncated and 'fails its CRC' in scan.damage, scan.damage
+    assert re.search(r'the chunk at byte \d+', scan.damage)
+    with pytest.raises(InputFileError, match='corrupt.*valve-sim repair'):
+        list(BagReader(damaged).messages())
+
+
+# --- recordings that crashed ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def node():
+    """Provide a node of this test process, in its own rclpy context."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    test_node = rclpy.create_node('recovery_test', context=context)
+    yield test_node
+    test_node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture(scope='module')
+def waveforms():
+    """Return the paper's step at 0.1 s, 1.15 s at 1 kHz: 1151 ticks of 6 messages."""
+    return simulate(
+        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
+    )
+
+
+def start_analyser(folder, file_size_limit=None):
+    """Start analyser_node recording into folder; a file size limit [bytes] acts as a full disk."""
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write beyond it fails (EFBIG)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
+
+    return subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'valve_sim.ros.analyser_node',
+            '--ros-args',
+            '-p',
+            f'output_dir:={folder}',
+            '-p',
+            'flush_interval:=0.1',
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        preexec_fn=limit if file_size_limit else None,
+    )
+
+
+def wait_for(condition, what):
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.05)
+
+
+def flushed(bag):
+    """Return the messages of the bag's complete chunks, as BagReader reads them."""
+    return sum(1 for _ in BagReader(bag).messages()) if bag.stat().st_size else 0
+
+
+def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(
+    node, waveforms, tmp_path
+):
+    analyser = start_analyser(tmp_path)
+    try:
+        replay = Replay(node)
+        replay.wait_for_subscribers(timeout=TIMEOUT)
+        wait_for(lambda: list(tmp_path.glob('*.mcap')), 'the bag file')
+        bag = next(tmp_path.glob('*.mcap'))
+        replay.publish(waveforms, time.time_ns(), every=2)
+        wait_for(lambda: flushed(bag) > 0, 'a flushed chunk')
+        analyser.kill()  # kill -9 while it records: no summary, maybe an open chunk
+        analyser.communicate(timeout=TIMEOUT)
+    finally:
+        if analyser.poll() is None:
+            analyser.kill()
+    count = flushed(bag)
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(bag), '-o', 'fixed.mcap'],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stderr
+    assert len(rosbags_messages(tmp_path / 'fixed.mcap')) >= count > 0
+
+
+def test_a_full_disk_stops_the_analyser_naming_its_file_and_the_repair(node, waveforms, tmp_path):
+    analyser = start_analyser(tmp_path, file_size_limit=150_000)
+    try:
+        replay = Replay(node)
+        replay.wait_for_subscribers(timeout=TIMEOUT)
+        deadline = time.monotonic() + TIMEOUT
+        while analyser.poll() is None:  # record until the file reaches the limit
+            assert time.monotonic() < deadline, 'the analyser never hit its full disk'
+            replay.publish(waveforms, time.time_ns(), every=5)
+        log = analyser.communicate(timeout=TIMEOUT)[0]
+    finally:
+        if analyser.poll() is None:
+            analyser.kill()
+    bag = next(tmp_path.glob('*.mcap'))
+    assert analyser.returncode == 1, log
+    assert f'cannot write {bag}' in log and 'File too large' in log, log
+    assert f'valve-sim repair {bag}' in log and 'Traceback' not in log, log
+    report = repair(bag, tmp_path / 'fixed.mcap')
+    assert len(rosbags_messages(tmp_path / 'fixed.mcap')) == report.messages >= flushed(bag) > 0
+
+
+@pytest.mark.parametrize('delay', [0.0, 0.1, 0.3, 0.6, 1.0, 2.0])
+def test_sigint_at_any_point_of_start_up_leaves_no_traceback(tmp_path, delay):
+    analyser = start_analyser(tmp_path)
+    try:
+        time.sleep(delay)  # the stimulus: a signal at this point of start-up
+        analyser.send_signal(signal.SIGINT)
+        log = analyser.communicate(timeout=TIMEOUT)[0]
+    finally:
+        if analyser.poll() is None:
+            analyser.kill()
+    assert 'Traceback' not in log and 'KeyboardInterrupt' not in log, log
+    # 0: stopped cleanly; 130: left quietly while importing; -2: killed by the signal
+    # before Python installed any handler (interpreter start-up)
+    assert analyser.returncode in (0, 128 + signal.SIGINT, -signal.SIGINT), log

@@ -1,0 +1,299 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Damaged MCAP files: where they are damaged, and a complete copy of what they hold.
+
+A recording killed mid-write (kill -9, a full disk, a power cut) ends inside a
+record and has no summary, so seeking readers (rosbags, the mcap library's
+indexed reader, rosbag2) refuse it. diagnose() says where a file is truncated or
+corrupt. repair() does what `mcap recover` does: it reads the file record by
+record, keeps every schema, channel, message, metadata and attachment it can
+(the records of a chunk cut short too, if the chunk is uncompressed, as
+rosbag2's and ours are), and writes them to a new, complete MCAP file: chunked,
+with message indexes, chunk indexes, statistics and summary. One record is in
+memory at a time.
+"""
+
+from dataclasses import dataclass
+from io import BytesIO
+from pathlib import Path
+import struct
+import zlib
+
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.stream_reader import get_chunk_data_stream
+from mcap.writer import CompressionType, Writer
+from valve_sim.core.errors import InputFileError
+
+
+MAGIC = b'\x89MCAP0\r\n'
+RECORD_HEADER = struct.Struct('<BQ')  # opcode, content length
+CHUNK_FIXED = struct.Struct('<QQQI')  # message start and end time, uncompressed size and crc
+CHUNK_SIZE = 768 * 1024  # [bytes] chunks of the repaired file: rosbag2's default
+NAMES = {opcode.value: opcode.name.lower() for opcode in Opcode}
+READERS = {
+    Opcode.HEADER: Header.read,
+    Opcode.SCHEMA: Schema.read,
+    Opcode.CHANNEL: Channel.read,
+    Opcode.METADATA: Metadata.read,
+    Opcode.ATTACHMENT: Attachment.read,
+}
+RECORD_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, EOFError)
+
+
+def _read(opcode, content):
+    """Parse the content of a record other than a chunk."""
+    stream = ReadDataStream(BytesIO(content))
+    if opcode == Opcode.MESSAGE:
+        return Message.read(stream, len(content))
+    return READERS[opcode](stream)
+
+
+class Scan:
+    """
+    The records of an MCAP file in file order, read up to where it is damaged.
+
+    Iterate records() once: Header, Schema, Channel, Message, Metadata and Attachment
+    records, those inside chunks included. Afterwards damage is None for a
+    complete file, or says where it is truncated or corrupt; complete_chunks,
+    partial_chunk_messages (from a chunk cut short) and corrupt_chunks (failed their
+    CRC, left out) count what was read; truncated says whether the damage is a
+    missing end (a recording that was not closed) rather than corrupt bytes.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.damage = None
+        self.truncated = False
+        self.complete_chunks = 0
+        self.partial_chunk_messages = 0
+        self.corrupt_chunks = 0
+        try:
+            self._file = open(self.path, 'rb')
+        except OSError as error:
+            raise InputFileError(f'cannot read {self.path}: {error.strerror}') from error
+        self.size = self.path.stat().st_size
+        if self._file.read(len(MAGIC)) != MAGIC:
+            self._file.close()
+            raise InputFileError(
+                f'{self.path} is not an MCAP file' + ('' if self.size else ' (it is empty)')
+            )
+
+    def records(self):
+        """Yield the records in file order."""
+        with self._file as file:
+            offset = len(MAGIC)
+            while offset < self.size:
+                found = self._next(file, offset)
+                if found is None:
+                    return
+                offset, records = found
+                yield from records
+            self._say(f'is truncated: it ends at byte {self.size} without a footer')
+
+    def _say(self, damage):
+        if self.damage is None:
+            self.damage = f'{self.path} {damage}'
+            self.truncated = damage.startswith('is truncated')
+
+    def _next(self, file, offset):
+        """Read the record at offset: (next offset, [records]) or None at the end or damage."""
+        header = file.read(RECORD_HEADER.size)
+        if len(header) < RECORD_HEADER.size:
+            self._say(f'is truncated: it ends at byte {self.size} inside a record header')
+            return None
+        opcode, length = RECORD_HEADER.unpack(header)
+        name, end = NAMES.get(opcode), offset + RECORD_HEADER.size + length
+        if name is None:
+            self._say(f'is corrupt at byte {offset}: no MCAP record starts there')
+            return None
+        if end > self.size:
+            self._say(
+                f'is truncated: it ends at byte {self.size} inside a {name} record that starts '
+                f'at byte {offset} and needs {end - self.size} more bytes'
+            )
+            if opcode == Opcode.CHUNK:
+                return end, self._partial_chunk(file.read(), offset)
+            return None
+        if opcode == Opcode.FOOTER:
+            file.seek(end)
+            if file.read() != MAGIC:
+                self._say(
+                    f'is truncated: it ends at byte {self.size}, after its footer at byte '
+                    f'{offset}, without the closing magic'
+                )
+            return None
+        if opcode not in READERS and opcode not in (Opcode.CHUNK, Opcode.MESSAGE):
+            file.seek(end)
+            return end, []
+        content = file.read(length)
+        try:
+            if opcode == Opcode.CHUNK:
+                return end, self._chunk(content, offset)
+            return end, [_read(opcode, content)]
+        except RECORD_ERRORS as error:
+            self._say(f'is corrupt at byte {offset} (a {name} record): {error}')
+            return None
+
+    def _chunk(self, content, offset):
+        chunk = Chunk.read(ReadDataStream(BytesIO(content)))
+        stream, size = get_chunk_data_stream(chunk)
+        data = stream.read(size)
+        if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+            self.corrupt_chunks += 1
+            self._say(f'is corrupt: the chunk at byte {offset} fails its CRC and is left out')
+            return []
+        self.complete_chunks += 1
+        return self._inner(data, offset)
+
+    def _partial_chunk(self, content, offset):
+        """Return the records an uncompressed chunk cut short still holds."""
+        fixed = CHUNK_FIXED.size
+        if len(content) < fixed + 4:
+            return []
+        (name_length,) = struct.unpack_from('<I', content, fixed)
+        data_start = fixed + 4 + name_length + 8
+        compression = content[slice(fixed + 4, fixed + 4 + name_length)]
+        if compression:
+            self.damage += f' (its {compression.decode(errors="replace")} content is lost)'
+            return []
+        records = self._inner(content[data_start:], offset)
+        self.partial_chunk_messages = sum(isinstance(r, Message) for r in records)
+        return records
+
+    def _inner(self, data, offset):
+        """Return the records of chunk data, up to the first incomplete or damaged one."""
+        records, start = [], 0
+        while start + RECORD_HEADER.size <= len(data):
+            opcode, length = RECORD_HEADER.unpack_from(data, start)
+            content_start, start = start + RECORD_HEADER.size, start + RECORD_HEADER.size + length
+            if start > len(data):
+                break
+            if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+                try:
+                    records.append(_read(opcode, data[content_start:start]))
+                except RECORD_ERRORS as error:
+                    self._say(f'is corrupt inside the chunk at byte {offset}: {error}')
+                    break
+        return records
+
+
+def diagnose(path):
+    """
+    Read an MCAP file for damage, chunk CRCs included; return the Scan.
+
+    Its damage is None for a complete, intact file.
+    """
+    scan = Scan(path)
+    for _ in scan.records():
+        pass
+    return scan
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    """What repair() kept: messages per topic, and what was wrong with the source."""
+
+    source: Path
+    target: Path
+    topics: dict
+    complete_chunks: int
+    partial_chunk_messages: int
+    damage: str
+
+    @property
+    def messages(self):
+        return sum(self.topics.values())
+
+    def summary(self):
+        """Say what was wrong and what was kept, for the user."""
+        topics = ', '.join(f'{topic} {count}' for topic, count in sorted(self.topics.items()))
+        partial = (
+            f' and {self.partial_chunk_messages} from the chunk cut short'
+            if self.partial_chunk_messages
+            else ''
+        )
+        return (
+            f'{self.damage or f"{self.source} was complete"}\n'
+            f'kept {self.messages} messages ({topics or "no topics"}) from '
+            f'{self.complete_chunks} complete chunk(s){partial}; wrote {self.target}'
+        )
+
+
+def repair(source, target):
+    """
+    Write everything source still holds into target as a complete MCAP file.
+
+    Returns a RepairReport. Raises InputFileError for a file that is not MCAP or has
+    no header, or when target is source (a repair never overwrites what it reads).
+    """
+    source, target = Path(source), Path(target)
+    if target.exists() and target.resolve() == source.resolve():
+        raise InputFileError(f'{target} is the file being repaired; write to another file')
+    scan = Scan(source)
+    records = scan.records()
+    header = next(records, None)
+    if not isinstance(header, Header):
+        raise InputFileError(f'{scan.damage or source}: no MCAP header, nothing to recover')
+    try:
+        stream = open(target, 'wb')
+    except OSError as error:
+        raise InputFileError(f'cannot write {target}: {error.strerror}') from error
+    with stream:
+        writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+        writer.start(profile=header.profile, library=header.library)
+        topics = _copy(records, writer)
+        writer.finish()
+    return RepairReport(
+        source, target, topics, scan.complete_chunks, scan.partial_chunk_messages, scan.damage
+    )
+
+
+def _copy(records, writer):
+    """Write the records, each schema and channel once; return the message count per topic."""
+    schemas, channels, topics = {0: 0}, {}, {}
+    for record in records:
+        if isinstance(record, Schema) and record.id not in schemas:
+            schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+        elif isinstance(record, Channel) and record.id not in channels:
+            channels[record.id] = (
+                writer.register_channel(
+                    record.topic,
+                    record.message_encoding,
+                    schemas.get(record.schema_id, 0),
+                    dict(record.metadata),
+                ),
+                record.topic,
+            )
+        elif isinstance(record, Message) and record.channel_id in channels:
+            channel_id, topic = channels[record.channel_id]
+            writer.add_message(
+                channel_id,
+                log_time=record.log_time,
+                data=record.data,
+                publish_time=record.publish_time,
+                sequence=record.sequence,
+            )
+            topics[topic] = topics.get(topic, 0) + 1
+        elif isinstance(record, Metadata):
+            writer.add_metadata(record.name, dict(record.metadata))
+        elif isinstance(record, Attachment):
+            writer.add_attachment(
+                record.create_time, record.log_time, record.name, record.media_type, record.data
+            )
+    return topics
