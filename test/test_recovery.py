@@ -256,3 +256,21 @@ def test_sigint_at_any_point_of_start_up_leaves_no_traceback(tmp_path, delay):
     # 0: stopped cleanly; 130: left quietly while importing; -2: killed by the signal
     # before Python installed any handler (interpreter start-up)
     assert analyser.returncode in (0, 128 + signal.SIGINT, -signal.SIGINT), log
+
+
+def test_a_bag_folder_is_repaired_file_by_file_into_a_new_folder(tmp_path):
+    """`valve-sim repair FOLDER` takes a rosbag2 bag folder, as analyse and calibrate do."""
+    folder = tmp_path / 'rig'
+    folder.mkdir()
+    (folder / 'rig_0.mcap').write_bytes(REFERENCE_BAG.read_bytes()[:449000])
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(folder)],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert result.returncode == 0, result.stderr
+    kept = rosbags_messages(tmp_path / 'rig_repaired' / 'rig_0.mcap')
+    assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
+    assert sorted(kept) == sorted(messages_in_order(REFERENCE_BAG)[: len(kept)])
+    assert (folder / 'rig_0.mcap').stat().st_size == 449000, 'the source is only read'
