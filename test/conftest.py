@@ -45,6 +45,27 @@ def context():
     context.try_shutdown()
 
 
+@pytest.fixture(scope='module')
+def node(context):
+    """Provide a node of the test process in the module's own rclpy context."""
+    import rclpy
+
+    test_node = rclpy.create_node('valve_sim_test', context=context)
+    yield test_node
+    test_node.destroy_node()
+
+
+@pytest.fixture(scope='module')
+def tick_waveforms():
+    """Simulate the paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
+    from valve_sim.core.parameters import load_parameters
+    from valve_sim.core.simulation import Scenario, simulate
+
+    return simulate(
+        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
+    )
+
+
 @pytest.fixture(scope='session')
 def reference():
     """Return the validated parameters of config/reference.yaml."""

@@ -34,8 +34,6 @@ import pytest
 import rclpy
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
-from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.recording.bag import BagReader, message_definition
 from valve_sim.recording.replay import Replay
 from valve_sim.ros.analyser_node import measures_from_message, MEASURES_QOS
@@ -43,25 +41,6 @@ import yaml
 
 
 TIMEOUT = 60.0  # [s] for anything that waits on another process
-
-
-@pytest.fixture(scope='module')
-def node():
-    """Provide a node of this test process, in its own rclpy context."""
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    test_node = rclpy.create_node('analyser_test', context=context)
-    yield test_node
-    test_node.destroy_node()
-    rclpy.try_shutdown(context=context)
-
-
-@pytest.fixture(scope='module')
-def waveforms():
-    """Simulate the paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
-    return simulate(
-        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
-    )
 
 
 @contextmanager
@@ -91,7 +70,7 @@ def running_analyser(folder, *parameters):
 
 
 @pytest.fixture(scope='module')
-def recording(node, waveforms, tmp_path_factory):
+def recording(node, tick_waveforms, tmp_path_factory):
     """
     Run the analyser once.
 
@@ -105,7 +84,7 @@ def recording(node, waveforms, tmp_path_factory):
     with running_analyser(folder) as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(waveforms, time.time_ns(), every=1)
+        replay.publish(tick_waveforms, time.time_ns(), every=1)
         deadline = time.monotonic() + TIMEOUT
         while not messages:
             executor.spin_once(timeout_sec=0.05)
@@ -174,11 +153,11 @@ def test_recording_decodes_with_mcap_ros2_and_rosbags(recording):
     assert len(positions) == recording['published']['joint_states']
 
 
-def test_hard_kill_leaves_every_flushed_chunk_readable(node, waveforms, tmp_path):
+def test_hard_kill_leaves_every_flushed_chunk_readable(node, tick_waveforms, tmp_path):
     with running_analyser(tmp_path, 'flush_interval:=0.2') as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(waveforms, time.time_ns(), every=2)
+        replay.publish(tick_waveforms, time.time_ns(), every=2)
         published, topics = (
             sum(replay.published.values()),
             {'/' + topic for topic in replay.published},

@@ -31,8 +31,6 @@ import pytest
 from rosbags.highlevel import AnyReader
 from valve_sim.commands.analyse import read_recording
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.recovery import diagnose, repair
 from valve_sim.recording.replay import Replay
@@ -135,27 +133,6 @@ def test_a_corrupt_chunk_is_diagnosed_where_it_is(tmp_path):
 # --- recordings that crashed ---------------------------------------------------------------------
 
 
-@pytest.fixture(scope='module')
-def node():
-    """Provide a node of this test process, in its own rclpy context."""
-    import rclpy
-
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    test_node = rclpy.create_node('recovery_test', context=context)
-    yield test_node
-    test_node.destroy_node()
-    rclpy.try_shutdown(context=context)
-
-
-@pytest.fixture(scope='module')
-def waveforms():
-    """Return the paper's step at 0.1 s, 1.15 s at 1 kHz: 1151 ticks of 6 messages."""
-    return simulate(
-        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
-    )
-
-
 def start_analyser(folder, file_size_limit=None):
     """Start analyser_node recording into folder; a file size limit [bytes] acts as a full disk."""
 
@@ -194,7 +171,7 @@ def flushed(bag):
 
 
 def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(
-    node, waveforms, tmp_path
+    node, tick_waveforms, tmp_path
 ):
     analyser = start_analyser(tmp_path)
     try:
@@ -202,7 +179,7 @@ def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(
         replay.wait_for_subscribers(timeout=TIMEOUT)
         wait_for(lambda: list(tmp_path.glob('*.mcap')), 'the bag file')
         bag = next(tmp_path.glob('*.mcap'))
-        replay.publish(waveforms, time.time_ns(), every=2)
+        replay.publish(tick_waveforms, time.time_ns(), every=2)
         wait_for(lambda: flushed(bag) > 0, 'a flushed chunk')
         analyser.kill()  # kill -9 while it records: no summary, maybe an open chunk
         analyser.communicate(timeout=TIMEOUT)
@@ -221,7 +198,9 @@ def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(
     assert len(rosbags_messages(tmp_path / 'fixed.mcap')) >= count > 0
 
 
-def test_a_full_disk_stops_the_analyser_naming_its_file_and_the_repair(node, waveforms, tmp_path):
+def test_a_full_disk_stops_the_analyser_naming_its_file_and_the_repair(
+    node, tick_waveforms, tmp_path
+):
     analyser = start_analyser(tmp_path, file_size_limit=150_000)
     try:
         replay = Replay(node)
@@ -229,7 +208,7 @@ def test_a_full_disk_stops_the_analyser_naming_its_file_and_the_repair(node, wav
         deadline = time.monotonic() + TIMEOUT
         while analyser.poll() is None:  # record until the file reaches the limit
             assert time.monotonic() < deadline, 'the analyser never hit its full disk'
-            replay.publish(waveforms, time.time_ns(), every=5)
+            replay.publish(tick_waveforms, time.time_ns(), every=5)
         log = analyser.communicate(timeout=TIMEOUT)[0]
     finally:
         if analyser.poll() is None:
