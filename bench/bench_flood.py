@@ -18,10 +18,11 @@
 # The summary above is also this script's --help description.
 #
 #     python bench/bench_flood.py [--duration 60] [--json out/bench_flood.json]
+#                                 [--executor {events,single-threaded}]
 #
-# One run, one valve_node (1 kHz, 10 us steps, its default executor and inlet_flow
-# QoS), two phases of --duration seconds each, on a ROS domain of its own (localhost
-# only):
+# One run, one valve_node (1 kHz, 10 us steps, its default inlet_flow QoS, on
+# --executor: valve_node's default unless given), two phases of --duration seconds
+# each, on a ROS domain of its own (localhost only):
 #
 # - quiet: no inlet_flow at all;
 # - flood: one publisher process sends inlet_flow as fast as it can (reliable,
@@ -154,14 +155,18 @@ def phase(duration, executor, diagnostics, env, flood=False):
     return figures
 
 
-def measure(duration, env):
+def measure(duration, executor_name, env):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from valve_sim.ros import node_command
 
     load_at_start = os.getloadavg()
     valve = start(
-        node_command('valve_node', parameters={'publish_rate': 1000.0, 'input_timeout': 0.0}),
+        node_command(
+            'valve_node',
+            ['--executor', executor_name],
+            {'publish_rate': 1000.0, 'input_timeout': 0.0},
+        ),
         env,
     )
     rclpy.init()
@@ -174,6 +179,7 @@ def measure(duration, env):
         spin_for(executor, WARM_UP)
         figures = {
             'duration_s': duration,
+            'executor': executor_name,
             'quiet': phase(duration, executor, diagnostics, env),
             'flood': phase(duration, executor, diagnostics, env, flood=True),
         }
@@ -188,7 +194,8 @@ def measure(duration, env):
 def table(figures):
     quiet, flood = figures['quiet'], figures['flood']
     rows = [
-        f'valve_node under a flood of inlet_flow, {figures["duration_s"]:g} s per phase',
+        f'valve_node ({figures["executor"]} executor) under a flood of inlet_flow, '
+        f'{figures["duration_s"]:g} s per phase',
         f'{"":28}{"quiet":>10}{"flood":>10}',
         f'{"node on-time ticks [%]":28}{quiet["node_on_time_percent"]:>10.3f}'
         f'{flood["node_on_time_percent"]:>10.3f}',
@@ -208,14 +215,22 @@ def table(figures):
 
 
 def main(argv=None):
+    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
+
     parser = arguments(__doc__.splitlines()[0], 'bench_flood.json', 'measured time per phase')
+    parser.add_argument(
+        '--executor',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
+        help=f"valve_node's executor (default {DEFAULT_EXECUTOR})",
+    )
     parser.add_argument('--flood', nargs=2, metavar=('SECONDS', 'FILE'), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.flood:
         return run_flood(float(args.flood[0]), args.flood[1])
     env = isolated_environment()
     (REPO / 'out').mkdir(exist_ok=True)
-    figures = measure(args.duration, env)
+    figures = measure(args.duration, args.executor, env)
     write_figures(figures, table(figures), args.json)
     return 0
 
