@@ -365,6 +365,10 @@ class DaskBackend:
     @property
     def client(self):
         """Return the Dask client; the first use starts the local cluster."""
+        return self.start()._client
+
+    def start(self):
+        """Start the local cluster now (else it starts with the first batch); return self."""
         if self._client is None:
             import logging
 
@@ -378,7 +382,7 @@ class DaskBackend:
                 silence_logs=logging.ERROR,
             )
             self._client = Client(self.cluster)
-        return self._client
+        return self
 
     def run(self, evaluate, batches):
         if not batches:
