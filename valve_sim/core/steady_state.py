@@ -66,8 +66,7 @@ TINY_FLOW = 1e-12
 
 def _residuals(state, inlet_flow, c, flow_scale, force_scale):
     """Scaled flow imbalances of chambers s, m, p, c and net forces on x and y."""
-    rates = np.empty(8)
-    derivatives(state, inlet_flow, c, rates)
+    rates = derivatives(state, inlet_flow, c)
     force_x, force_y = net_forces(state, c)
     return np.array(
         [
