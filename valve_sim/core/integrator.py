@@ -29,11 +29,13 @@ A step whose stiffest chamber would put RK4 beyond its stability
 (model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
 the paper's operating points that never happens.
 
-rk4_lanes advances several independent valves (lanes: parameter sets and
-states) through the same inlet-flow schedule at once, stage by stage across
-the lanes, calling the same model.derivatives per lane in the same order of
-operations: its results are bit-identical to rk4_steps, but the processor
-overlaps the lanes' independent arithmetic, which makes a study's runs faster.
+One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
+model's derivatives() likewise), so that the compiler keeps a state in registers.
+rk4_steps takes it for one valve; rk4_lanes takes it for LANES independent valves
+(lanes: parameter sets and states) through the same inlet-flow schedule at once,
+in one loop over the lanes that the compiler vectorises (SIMD: four lanes per
+instruction on AVX2). The same function in the same order of operations: each
+lane's result is bit-identical to rk4_steps (no fast-math), docs/speed.md.
 """
 
 import numpy as np
@@ -156,12 +158,13 @@ def as_tuple(state):
 
 
 @jit
-def rk4_steps(state, inlet_flows, c, step, record_every, record):
+def rk4_steps(state, inlet_flows, c, step, record_every, record, check_every=CHECK_EVERY):
     """
     Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
     inlet_flows[k] [m^3/s] is held during step k; a step is split where
-    splits_needed() asks for it (asked every CHECK_EVERY steps). Every
+    splits_needed() asks for it (asked every check_every steps: CHECK_EVERY, a
+    constant of the compiled kernel unless given; bench/bench_step_split.py varies it). Every
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
@@ -173,7 +176,7 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record):
     splits = 1
     for k in range(inlet_flows.shape[0]):
         q = inlet_flows[k]
-        if k % CHECK_EVERY == 0:
+        if k % check_every == 0:
             splits = splits_needed(current, c, step)
         h = step / splits
         for _ in range(splits):
@@ -310,7 +313,9 @@ def set_lane_state(states, lane, state):
 
 
 @jit
-def rk4_lanes(states, inlet_flows, table, faulty, step, record_every, records, completed, verdicts):
+def rk4_lanes(
+    states, inlet_flows, table, faulty, step, record_every, records, completed, verdicts
+):
     """
     Advance LANES valves by len(inlet_flows) RK4 steps together.
 
@@ -340,7 +345,8 @@ def rk4_lanes(states, inlet_flows, table, faulty, step, record_every, records, c
         if k % CHECK_EVERY == 0:
             for j in range(LANES):
                 if completed[j] == steps:
-                    splits[j] = splits_needed(lane_state(states, j), lane_coefficients(table, j), step)
+                    state, c = lane_state(states, j), lane_coefficients(table, j)
+                    splits[j] = splits_needed(state, c, step)
                     alone[j] = faulty[j] or splits[j] > 1
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):
@@ -392,7 +398,10 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     start = np.array(states, dtype=float).reshape((count, 8))
     table = np.array([tuple(c) for c in coefficient_sets], dtype=float)
     faulty = np.array(
-        [any(getattr(c, name) != value for name, value in HEALTHY_TERMS.items()) for c in coefficient_sets]
+        [
+            any(getattr(c, name) != value for name, value in HEALTHY_TERMS.items())
+            for c in coefficient_sets
+        ]
     )
     errors = []
     for first in range(0, count, LANES):

@@ -116,6 +116,7 @@ Coefficients = namedtuple(
         'main_valve_free',  # 0.0 if stuck (fault), else 1.0
     ),
 )
+
 # The fault terms of Coefficients (with_faults) and their values in a healthy valve.
 HEALTHY_TERMS = {
     'coulomb_friction': 0.0,
