@@ -42,7 +42,7 @@ from valve_sim.analysis.signals import (
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis
-from valve_sim.commands.simulate import flow_value
+from valve_sim.commands.options import add_options, flow_value
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
@@ -267,8 +267,8 @@ def add_arguments(parser):
         metavar='BAG',
         help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
     )
-    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
-    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+    add_options(parser, '--json', help='print the step records as JSON')
+    add_options(parser, '--plot', help='draw Figure 5 of each step')
     add_signal_arguments(parser)
     parser.add_argument(
         '--step-threshold',

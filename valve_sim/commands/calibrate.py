@@ -39,11 +39,7 @@ import sys
 import numpy as np
 from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.simulate import (
-    add_parameter_arguments,
-    flow_value,
-    load_from_arguments,
-)
+from valve_sim.commands.options import add_options, flow_value, load_from_arguments
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -85,7 +81,7 @@ def case_value(text):
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
+    add_options(parser, '--params', '--set', '--preset-pressure')
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument(
         '--target-measures',
@@ -112,7 +108,7 @@ def add_arguments(parser):
         metavar='NAME=LO:HI',
         help='bounds of a fitted parameter [SI] (default: its spec limits); repeatable',
     )
-    parser.add_argument('--out', required=True, metavar='DIR', help='output folder')
+    add_options(parser, '--out')
     parser.add_argument(
         '--max-pilot-flow',
         type=flow_value,
@@ -158,7 +154,7 @@ def add_arguments(parser):
         metavar='S',
         help='log-normal spread of the starts after the first (default 0.1, about 10 %%)',
     )
-    parser.add_argument('--seed', type=int, default=0, metavar='N', help='seed of the starts')
+    add_options(parser, '--seed', help='seed of the starts')
     parser.add_argument(
         '--tolerance',
         type=float,
@@ -166,7 +162,7 @@ def add_arguments(parser):
         metavar='TOL',
         help='ftol = xtol = gtol of least_squares (default 1e-10)',
     )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    add_options(parser, '--step-size')
     parser.add_argument(
         '--quiet', action='store_true', help='no progress lines on stderr'
     )

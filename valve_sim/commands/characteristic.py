@@ -37,14 +37,13 @@ from valve_sim.analysis.characteristic import (
     CRACKING_FRACTION,
     split_ramps,
 )
-from valve_sim.commands.simulate import (
-    add_bag_arguments,
-    add_parameter_arguments,
+from valve_sim.commands.options import (
+    add_options,
     check_bag_arguments,
     flow_value,
     load_from_arguments,
-    write_bag,
 )
+from valve_sim.commands.simulate import write_bag
 from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -57,7 +56,7 @@ STEADY_POINTS = 80  # points of the steady-state curve
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
+    add_options(parser, '--params', '--set', '--preset-pressure')
     parser.add_argument(
         '--max-flow',
         type=flow_value,
@@ -86,7 +85,7 @@ def add_arguments(parser):
         metavar='S',
         help='time held at --max-flow between the ramps [s] (default 0.5)',
     )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    add_options(parser, '--step-size')
     parser.add_argument(
         '--record-interval',
         type=float,
@@ -94,15 +93,15 @@ def add_arguments(parser):
         metavar='S',
         help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)",
     )
-    parser.add_argument('--out', metavar='DIR', help='write CSV, JSON and the figure here')
-    parser.add_argument('--json', action='store_true', help='print the marks as JSON')
-    parser.add_argument(
+    add_options(parser, '--out', required=False, help='write CSV, JSON and the figure here')
+    add_options(parser, '--json', help='print the marks as JSON')
+    add_options(
+        parser,
         '--mcap',
-        metavar='FILE.mcap',
         help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
         '(for valve-sim analyse --characteristic)',
     )
-    add_bag_arguments(parser)
+    add_options(parser, '--bag-folder', '--start-time')
 
 
 def _check(args, step_size):

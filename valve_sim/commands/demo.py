@@ -38,6 +38,7 @@ import time
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import add_options
 from valve_sim.core.errors import IncompleteRunError
 
 
@@ -290,9 +291,10 @@ def report(folder, bag):
 def add_arguments(parser):
     from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT
 
-    parser.add_argument(
+    add_options(
+        parser,
         '--out',
-        metavar='DIR',
+        required=False,
         help='folder for the bag, measures JSON, figure and logs (default: a new '
         'demo_<date>-<time> folder in the current directory)',
     )

@@ -39,6 +39,7 @@ from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.tolerances import parse_variations
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -134,8 +135,6 @@ def run(args):
         import SALib  # noqa: F401  (is it installed?)
     except ImportError:
         raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
-    from valve_sim.commands.simulate import load_from_arguments
-
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
     preset, protocol = preset_protocol(args, params)

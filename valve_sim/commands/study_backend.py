@@ -27,7 +27,6 @@ import os
 import sys
 
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
-from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
 from valve_sim.core.errors import StudyError
 
 
@@ -92,6 +91,8 @@ def open_backend(args, command, pool_fallback=False):
 
     Otherwise a missing dask raises StudyError saying what to pip-install.
     """
+    from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
+
     if args.workers < 1 or (args.batch_size is not None and args.batch_size < 1):
         raise StudyError('--workers and --batch-size must be at least 1')
     try:

@@ -37,7 +37,6 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.study_cases import PROTOCOLS
-from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import (
     draw,
     parse_limits,
@@ -47,7 +46,7 @@ from valve_sim.analysis.tolerances import (
     summarise,
 )
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.commands.options import add_options, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -55,20 +54,17 @@ from valve_sim.commands.study_backend import (
     protocol_preset,
 )
 from valve_sim.core.parameters import SPECS
-from valve_sim.core.steady_state import cracking_pressure
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim tolerance --help` stays quick.
 
 
 def add_study_arguments(parser, samples_help):
-    """--out, --samples, --seed and --step-size (tolerance and sensitivity)."""
-    add_parameter_arguments(parser)
-    parser.add_argument(
-        '--out', required=True, metavar='DIR', help='output folder (created if missing)'
-    )
+    """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
+    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
     parser.add_argument('--samples', type=int, default=256, metavar='N', help=samples_help)
-    parser.add_argument(
-        '--seed', type=int, default=0, metavar='S', help='seed of the sampler (default 0)'
-    )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    add_options(parser, '--seed', help='seed of the sampler (default 0)')
+    add_options(parser, '--step-size')
 
 
 def add_arguments(parser):
@@ -104,6 +100,8 @@ def preset_protocol(args, params):
 
     The preset is the cracking pressure of params (after --preset-pressure).
     """
+    from valve_sim.core.steady_state import cracking_pressure
+
     preset = cracking_pressure(params)
     statement = {
         'protocol': args.protocol,
@@ -176,6 +174,8 @@ def run_samples(args, label, params, names, values, preset, settings, out):
     Rows stream to out/results.jsonl (--resume continues it); the backend follows
     --scheduler/--workers as open_backend sets it up for command label.
     """
+    from valve_sim.analysis.study_runner import run_cases
+
     backend = open_backend(args, label)
     try:
         results, _ = run_cases(
