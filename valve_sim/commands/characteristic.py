@@ -57,50 +57,25 @@ STEADY_POINTS = 80  # points of the steady-state curve
 
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
-    parser.add_argument(
-        '--max-flow',
-        type=flow_value,
-        default=20.0 * LITRE_PER_MINUTE,
-        metavar='Q',
-        help="top of the ramp (default 20L/min, the paper's largest flow)",
-    )
-    parser.add_argument(
-        '--rated-flow',
-        type=flow_value,
-        metavar='Q',
-        help='rated flow of the valve: the override is taken at it and cracking at 1 %% '
-        'of it (default: --max-flow)',
-    )
-    parser.add_argument(
-        '--ramp-time',
-        type=float,
-        default=10.0,
-        metavar='S',
-        help='duration of each ramp, up and down [s] (default 10; slower is closer to static)',
-    )
-    parser.add_argument(
-        '--hold-time',
-        type=float,
-        default=0.5,
-        metavar='S',
-        help='time held at --max-flow between the ramps [s] (default 0.5)',
-    )
+    parser.add_argument('--max-flow', type=flow_value, default=20.0 * LITRE_PER_MINUTE,
+                        metavar='Q',
+                        help="top of the ramp (default 20L/min, the paper's largest flow)")
+    parser.add_argument('--rated-flow', type=flow_value, metavar='Q',
+                        help='rated flow of the valve: the override is taken at it and cracking '
+                        'at 1 %% of it (default: --max-flow)')
+    parser.add_argument('--ramp-time', type=float, default=10.0, metavar='S',
+                        help='duration of each ramp, up and down [s] (default 10; slower is '
+                        'closer to static)')
+    parser.add_argument('--hold-time', type=float, default=0.5, metavar='S',
+                        help='time held at --max-flow between the ramps [s] (default 0.5)')
     add_options(parser, '--step-size')
-    parser.add_argument(
-        '--record-interval',
-        type=float,
-        default=1e-3,
-        metavar='S',
-        help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)",
-    )
+    parser.add_argument('--record-interval', type=float, default=1e-3, metavar='S',
+                        help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)")
     add_options(parser, '--out', required=False, help='write CSV, JSON and the figure here')
     add_options(parser, '--json', help='print the marks as JSON')
-    add_options(
-        parser,
-        '--mcap',
-        help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
-        '(for valve-sim analyse --characteristic)',
-    )
+    add_options(parser, '--mcap',
+                help="also write the ramp as a rosbag2 MCAP file in valve_node's layout (for "
+                'valve-sim analyse --characteristic)')
     add_options(parser, '--bag-folder', '--start-time')
 
 

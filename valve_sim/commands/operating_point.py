@@ -28,13 +28,8 @@ from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
-    parser.add_argument(
-        '--flow',
-        type=flow_value,
-        action='append',
-        metavar='Q',
-        help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)',
-    )
+    parser.add_argument('--flow', type=flow_value, action='append', metavar='Q',
+                        help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)')
     add_options(parser, '--json', help='print the operating points as JSON (SI units)')
 
 

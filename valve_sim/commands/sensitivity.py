@@ -59,16 +59,11 @@ PAPER_RANGES = ','.join(f'{symbol}=±20%' for symbol in STUDY_PARAMETERS)
 
 
 def add_arguments(parser):
-    add_study_arguments(
-        parser, 'base samples N, a power of two: N (D + 2) runs for D parameters (default 256)'
-    )
-    parser.add_argument(
-        '--vary',
-        action='append',
-        metavar='NAME=SPEC,...',
-        help='parameters and distributions as for tolerance (default: '
-        + PAPER_RANGES.replace('%', '%%') + ')',
-    )
+    add_study_arguments(parser, 'base samples N, a power of two: N (D + 2) runs for D '
+                        'parameters (default 256)')
+    parser.add_argument('--vary', action='append', metavar='NAME=SPEC,...',
+                        help='parameters and distributions as for tolerance (default: '
+                        + PAPER_RANGES.replace('%', '%%') + ')')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
 

@@ -50,69 +50,37 @@ STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
     s = REFERENCE_SCENARIO
-    parser.add_argument(
-        '--initial-flow',
-        type=flow_value,
-        default=s.initial_flow,
-        metavar='Q',
-        help='inlet flow before the step; 0 starts from the closed, empty valve (default 5L/min)',
-    )
-    parser.add_argument(
-        '--final-flow',
-        type=flow_value,
-        default=s.final_flow,
-        metavar='Q',
-        help='inlet flow after the step (default 20L/min)',
-    )
-    parser.add_argument(
-        '--step-time', type=float, default=s.step_time, metavar='S', help='time of the step [s]'
-    )
-    parser.add_argument(
-        '--ramp-time',
-        type=float,
-        default=0.0,
-        metavar='S',
-        help='change the flow linearly over this time instead of at once [s]',
-    )
-    parser.add_argument(
-        '--end-time', type=float, default=s.end_time, metavar='S', help='end of the run [s]'
-    )
+    parser.add_argument('--initial-flow', type=flow_value, default=s.initial_flow, metavar='Q',
+                        help='inlet flow before the step; 0 starts from the closed, empty '
+                        'valve (default 5L/min)')
+    parser.add_argument('--final-flow', type=flow_value, default=s.final_flow, metavar='Q',
+                        help='inlet flow after the step (default 20L/min)')
+    parser.add_argument('--step-time', type=float, default=s.step_time, metavar='S',
+                        help='time of the step [s]')
+    parser.add_argument('--ramp-time', type=float, default=0.0, metavar='S',
+                        help='change the flow linearly over this time instead of at once [s]')
+    parser.add_argument('--end-time', type=float, default=s.end_time, metavar='S',
+                        help='end of the run [s]')
     add_options(parser, '--step-size')
-    parser.add_argument(
-        '--record-interval',
-        type=float,
-        default=1e-4,
-        metavar='S',
-        help="sample interval of the output waveforms [s] (default 1e-4, the paper's)",
-    )
-    parser.add_argument(
-        '--faults',
-        metavar='FILE.yaml',
-        help='fault schedule (docs/faults.md): events at t [s], applied at the first tick '
-        '(1/publish_rate) at or after t, as valve_node does',
-    )
+    parser.add_argument('--record-interval', type=float, default=1e-4, metavar='S',
+                        help='sample interval of the output waveforms [s] (default 1e-4, '
+                        "the paper's)")
+    parser.add_argument('--faults', metavar='FILE.yaml',
+                        help='fault schedule (docs/faults.md): events at t [s], applied at the '
+                        'first tick (1/publish_rate) at or after t, as valve_node does')
     add_options(parser, '--json', help='print the six measures as JSON')
     parser.add_argument('--csv', metavar='FILE', help='write the waveforms as CSV (SI units)')
     add_options(parser, '--plot', help="draw the paper's Figure 5")
-    add_options(
-        parser,
-        '--mcap',
-        help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
-        "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
-    )
-    parser.add_argument(
-        '--rig-topics',
-        metavar='PRESSURE,FLOW',
-        help='with --mcap: write what a test rig records instead, the supply pressure and the '
-        'inlet flow as std_msgs/msg/Float64 on these two topics (no main-valve position)',
-    )
-    parser.add_argument(
-        '--pressure-noise',
-        type=float,
-        default=0.0,
-        metavar='PA',
-        help='with --rig-topics: Gaussian noise on the recorded pressure, standard deviation [Pa]',
-    )
+    add_options(parser, '--mcap',
+                help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time "
+                "base (1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)")
+    parser.add_argument('--rig-topics', metavar='PRESSURE,FLOW',
+                        help='with --mcap: write what a test rig records instead, the supply '
+                        'pressure and the inlet flow as std_msgs/msg/Float64 on these two '
+                        'topics (no main-valve position)')
+    parser.add_argument('--pressure-noise', type=float, default=0.0, metavar='PA',
+                        help='with --rig-topics: Gaussian noise on the recorded pressure, '
+                        'standard deviation [Pa]')
     add_options(parser, '--seed', help='seed of the --pressure-noise generator')
     add_options(parser, '--bag-folder', '--start-time')
 

@@ -69,27 +69,15 @@ def add_study_arguments(parser, samples_help):
 
 def add_arguments(parser):
     add_study_arguments(parser, 'number of sampled valves (default 256)')
-    parser.add_argument(
-        '--vary',
-        action='append',
-        required=True,
-        metavar='NAME=SPEC,...',
-        help='parameters and their distributions: NAME=±X%% (uniform, half-width), '
-        'NAME=LO:HI (uniform), NAME=MEAN~N(S%%) or NAME=~N(S) (normal, sigma); repeatable',
-    )
-    parser.add_argument(
-        '--limits',
-        metavar='SPEC',
-        default='',
-        help='pass criteria, e.g. "P_1_percent<=4,T_s_ms<=600" (all must hold)',
-    )
-    parser.add_argument(
-        '--sampler',
-        choices=SAMPLERS,
-        default='lhs',
-        help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power of two), '
-        'random: pseudo-random (all seeded)',
-    )
+    parser.add_argument('--vary', action='append', required=True, metavar='NAME=SPEC,...',
+                        help='parameters and their distributions: NAME=±X%% (uniform, '
+                        'half-width), NAME=LO:HI (uniform), NAME=MEAN~N(S%%) or NAME=~N(S) '
+                        '(normal, sigma); repeatable')
+    parser.add_argument('--limits', metavar='SPEC', default='',
+                        help='pass criteria, e.g. "P_1_percent<=4,T_s_ms<=600" (all must hold)')
+    parser.add_argument('--sampler', choices=SAMPLERS, default='lhs',
+                        help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power '
+                        'of two), random: pseudo-random (all seeded)')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
