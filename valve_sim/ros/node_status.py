@@ -44,10 +44,31 @@ class Counters:
     skipped_time_s: float = 0.0  # [s] the time not integrated
     accepted_inputs: int = 0  # every inlet_flow message received is accepted ...
     rejected_inputs: int = 0  # ... or rejected
+    lost_inputs: int = 0  # sent by one publisher, never received (a gap in its sequence numbers)
     rejected_parameter_changes: int = 0
     integration_failures: int = 0  # numerical divergences
     overpressures: int = 0  # states beyond burst_pressure
     overpressure_alarms: int = 0  # p_s reached supply_pressure_limit
+
+
+class Throttle:
+    """
+    At most one event per interval_ns [ns] on the steady clock (time.monotonic_ns).
+
+    Timers that fell behind can fire several times in a row: a throttle on the
+    steady clock keeps "once a second" to once a second.
+    """
+
+    def __init__(self, interval_ns):
+        self.interval_ns = interval_ns
+        self._last_ns = None
+
+    def due(self, steady_now_ns):
+        """Return True, and start a new interval, if the last event is an interval old."""
+        if self._last_ns is not None and steady_now_ns - self._last_ns < self.interval_ns:
+            return False
+        self._last_ns = steady_now_ns
+        return True
 
 
 @dataclass(frozen=True)
