@@ -42,6 +42,7 @@ from dataclasses import asdict
 import hashlib
 import json
 import math
+import os
 from pathlib import Path
 import sys
 import time
@@ -50,7 +51,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
-from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
+from valve_sim.core.steady_state import cracking_pressure, preset_preload
 
 
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
@@ -78,10 +79,13 @@ def evaluate_batch(cases):
         row = {'index': case['index']}
         try:
             params = validate(case['params'])
-            if case.get('preset_pressure') is not None:
-                params = with_preset_pressure(params, case['preset_pressure'])
+            if case.get('preset_pressure') is None:
+                cracking = cracking_pressure(params)
+            else:
+                preload, cracking = preset_preload(params, case['preset_pressure'])
+                params = {**params, 'pilot_spring_preload': preload}
             row['pilot_spring_preload'] = params['pilot_spring_preload']
-            row['cracking_pressure'] = cracking_pressure(params)
+            row['cracking_pressure'] = cracking
         except MODEL_ERRORS as error:
             rows[case['index']] = _failed(row, error)
             continue
@@ -332,38 +336,60 @@ class DaskBackend:
     """
     Batches as tasks on a dask.distributed cluster.
 
-    address: a scheduler (tcp://HOST:PORT) of an existing cluster, or None for a
-    LocalCluster of `workers` single-threaded processes on this machine. A task
-    whose worker dies is rescheduled by Dask; `retries` re-runs a task that raised.
+    address: a scheduler (tcp://HOST:PORT) of an existing cluster, connected at once;
+    or None for a LocalCluster of `workers` single-threaded processes on this
+    machine (default: one per core), started when the first batch is submitted, so
+    that a resumed study with nothing missing starts none. A task whose worker dies
+    is rescheduled by Dask; `retries` re-runs a task that raised.
     """
 
     def __init__(self, address=None, workers=None, retries=3):
-        import logging
-
-        from distributed import Client, LocalCluster
-
         self.retries = retries
-        self.cluster = None
+        self.cluster = self._client = None
         if address:
+            from distributed import Client
+
             try:
-                self.client = Client(address, timeout='30s')
+                self._client = Client(address, timeout='30s')
             except (OSError, ValueError, TimeoutError) as error:
                 raise StudyError(
                     f'cannot reach the Dask scheduler {address!r} (expected tcp://HOST:PORT): '
                     f'{error}'
                 ) from None
+            self.workers = max(1, sum(self._client.nthreads().values()))
         else:
+            self.workers = max(1, workers or os.cpu_count() or 1)
+
+    @property
+    def started(self):
+        """Whether a client exists: connected to the scheduler, or a local cluster started."""
+        return self._client is not None
+
+    @property
+    def client(self):
+        """Return the Dask client; the first use starts the local cluster."""
+        return self.start()._client
+
+    def start(self):
+        """Start the local cluster now (else it starts with the first batch); return self."""
+        if self._client is None:
+            import logging
+
+            from distributed import Client, LocalCluster
+
             self.cluster = LocalCluster(
-                n_workers=workers,
+                n_workers=self.workers,
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=':0',
                 silence_logs=logging.ERROR,
             )
-            self.client = Client(self.cluster)
-        self.workers = max(1, sum(self.client.nthreads().values()))
+            self._client = Client(self.cluster)
+        return self
 
     def run(self, evaluate, batches):
+        if not batches:
+            return
         from distributed import as_completed
 
         futures = [
@@ -384,7 +410,8 @@ class DaskBackend:
             self.client.cancel(futures)
 
     def close(self):
-        self.client.close()
+        if self._client is not None:
+            self._client.close()
         if self.cluster is not None:
             self.cluster.close()
 
