@@ -48,8 +48,7 @@ from pathlib import Path
 import sys
 import time
 
-from common import arguments, isolated_environment, on_time_percent, REPO, start, stop
-from common import TimerFloor, write_figures
+from common import arguments, on_time_percent, REPO, run_benchmark, start, stop, TimerFloor
 
 
 FLOW = 5.0e-3 / 60.0  # [m^3/s] 5 L/min
@@ -161,6 +160,7 @@ def measure(duration, executor_name, env):
     from valve_sim.ros import node_command
 
     load_at_start = os.getloadavg()
+    (REPO / 'out').mkdir(exist_ok=True)  # the flood publisher writes its count there
     valve = start(
         node_command(
             'valve_node',
@@ -215,21 +215,14 @@ def table(figures):
 
 
 def main(argv=None):
-    parser = arguments(
-        __doc__.splitlines()[0],
-        'bench_flood.json',
-        'measured time per phase',
-        "valve_node's executor",
-    )
+    parser = arguments(__doc__, 'bench_flood.json', 'measured time per phase')
     parser.add_argument('--flood', nargs=2, metavar=('SECONDS', 'FILE'), help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.flood:
-        return run_flood(float(args.flood[0]), args.flood[1])
-    env = isolated_environment()
-    (REPO / 'out').mkdir(exist_ok=True)
-    figures = measure(args.duration, args.executor, env)
-    write_figures(figures, table(figures), args.json)
-    return 0
+    return run_benchmark(
+        parser.parse_args(argv),
+        {'flood': lambda flood: run_flood(float(flood[0]), flood[1])},
+        lambda args, env: measure(args.duration, args.executor, env),
+        table,
+    )
 
 
 if __name__ == '__main__':

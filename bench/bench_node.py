@@ -54,7 +54,7 @@ import struct
 import sys
 import time
 
-from common import arguments, isolated_environment, start, stop, TimerFloor, write_figures
+from common import arguments, run_benchmark, start, stop, TimerFloor
 from valve_sim.recording.cdr import (
     STAMP,
     STAMP_OFFSET,
@@ -418,7 +418,7 @@ def table(figures):
 
 def main(argv=None):
     parser = arguments(
-        __doc__.splitlines()[0],
+        __doc__,
         'bench_node.json',
         'measured time',
         'the executor of valve_node, the echo node and this process',
@@ -430,13 +430,12 @@ def main(argv=None):
         help='run the nodes under SCHED_FIFO with this priority (this process one lower)',
     )
     parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.echo:
-        return run_echo(args.echo)
-    env = isolated_environment()
-    figures = measure(args.duration, args.rt_priority, args.executor, env)
-    write_figures(figures, table(figures), args.json)
-    return 0
+    return run_benchmark(
+        parser.parse_args(argv),
+        {'echo': run_echo},
+        lambda args, env: measure(args.duration, args.rt_priority, args.executor, env),
+        table,
+    )
 
 
 if __name__ == '__main__':

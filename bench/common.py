@@ -34,16 +34,17 @@ REPO = Path(__file__).resolve().parent.parent
 PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
 
 
-def arguments(description, json_name, duration_help, executor_help):
+def arguments(doc, json_name, duration_help, executor_help="valve_node's executor"):
     """
     Return an ArgumentParser with --duration [s] (default 60), --json and --executor.
 
-    --json defaults to out/json_name; --executor is a valve_node executor, by default
+    doc: the benchmark's docstring, whose first line is the description; --json
+    defaults to out/json_name; --executor is a valve_node executor, by default
     valve_node's.
     """
     from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
-    parser = argparse.ArgumentParser(description=description)
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument(
         '--duration', type=float, default=60.0, help=f'{duration_help} [s] (default 60)'
     )
@@ -83,6 +84,26 @@ def write_figures(figures, table, path):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(figures, indent=2, default=float) + '\n')
     print(f'figures written to {path}')
+
+
+def run_benchmark(args, helpers, measure, table):
+    """
+    Run a benchmark on its parsed command line args; return the exit code.
+
+    args: from an arguments() parser with the benchmark's own options. helpers:
+    {dest: run} for the hidden options by which a benchmark starts itself as a helper
+    process (the flood publisher, the echo node): when args has one, run(value) is
+    all this process does. Otherwise measure(args, env) measures, its child processes
+    started with env (a ROS domain of this run's own, isolated_environment), and the
+    figures it returns are printed as table(figures) and written to args.json.
+    """
+    for dest, run in helpers.items():
+        value = getattr(args, dest)
+        if value:
+            return run(value)
+    figures = measure(args, isolated_environment())
+    write_figures(figures, table(figures), args.json)
+    return 0
 
 
 def start(command, env):
