@@ -20,6 +20,7 @@ the reference parameters at the steady state of 5 L/min and waits only on condit
 """
 
 import math
+from pathlib import Path
 import re
 import time
 
@@ -40,6 +41,7 @@ pytestmark = pytest.mark.timeout(300)
 AMBIENT = 101325.0  # [Pa] ambient_pressure default
 FLOW = 5.0 * LITRE_PER_MINUTE
 NAMESPACE = '/limits'
+DOCS = Path(__file__).resolve().parent.parent / 'docs' / 'valve_node.md'
 CHAMBER_VOLUMES = ('supply_volume', 'intermediate_volume', 'pilot_volume', 'poppet_chamber_volume')
 
 
@@ -277,3 +279,17 @@ def test_reset_works_at_a_tiny_flow(valve):
     assert response.success, response.message
     expected = steady_state(load_parameters()[0], 1.67e-14)[P_S]
     assert valve.first_after(reset_ns(response))[1] - AMBIENT == pytest.approx(expected, rel=1e-6)
+
+
+def documented_diagnostics_keys():
+    """Return the keys named in the first cell of the key table of docs/valve_node.md."""
+    section = DOCS.read_text().split('\n## Diagnostics\n')[1].split('\n## ')[0]
+    table = section[section.index('| key | unit | meaning |'):]
+    rows = [line for line in table.splitlines() if line.startswith('| `')]
+    return {key for row in rows for key in re.findall(r'`([a-z0-9_]+)`', row.split('|')[1])}
+
+
+def test_the_documentation_names_every_diagnostics_key_and_no_other(valve):
+    """docs/valve_node.md's table of diagnostics values is exactly what the node publishes."""
+    published = set(counters(valve)) - {'level', 'message', 'name'}  # the status, not values
+    assert published == documented_diagnostics_keys()
