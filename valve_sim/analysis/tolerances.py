@@ -27,6 +27,7 @@ the same seed gives the same samples everywhere. A limit is MEASURE<=VALUE (or
 a measure that does not exist (or a run that failed) fails its limits.
 """
 
+from collections import Counter
 from dataclasses import dataclass
 import math
 import re
@@ -202,8 +203,23 @@ def yield_interval(passed, total, confidence=CONFIDENCE):
     return [float(interval.low), float(interval.high)]
 
 
+def undefined_reasons(rows, name):
+    """
+    Why rows have no value of measure name: {reason: count}, commonest first.
+
+    The reason is the run's error where it failed, else the measure's own reason
+    (e.g. no second overshoot).
+    """
+    reasons = Counter(
+        row['error'] or row['reasons'].get(name, 'no reason recorded')
+        for row in rows
+        if row['measures'][name] is None
+    )
+    return dict(reasons.most_common())
+
+
 def summarise(rows, limits):
-    """Yield with its interval, failures per limit, and percentiles of each measure."""
+    """Yield with its interval, failures per limit, percentiles and undefined reasons."""
     total = len(rows)
     passed = sum(passes(row, limits) for row in rows)
     failed_runs = [row for row in rows if row['error'] is not None]
@@ -212,6 +228,8 @@ def summarise(rows, limits):
         values = np.array([row['measures'][name] for row in rows if row['measures'][name]
                            is not None], dtype=float)
         entry = {'defined': int(values.size), 'undefined': total - int(values.size)}
+        if entry['undefined']:
+            entry['undefined_reasons'] = undefined_reasons(rows, name)
         if values.size:
             entry.update(
                 {f'p{p}': float(np.percentile(values, p)) for p in PERCENTILES},

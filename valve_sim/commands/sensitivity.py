@@ -25,10 +25,11 @@ test, each valve set to the preset first (protocol held-preset, or
                        run succeeded), reasons, error (as tolerance's samples.csv)
   indices.csv          measure, parameter, S1, S1_conf, ST, ST_conf, interaction
                        (ST - S1); conf: half-width of the 95 % bootstrap interval
+  design.json          the design: distributions, protocol, failed runs, and per
+                       measure why runs have no value (undefined_reasons)
   sobol_<measure>.png  S1 and ST bars with their intervals, one chart per measure
 """
 
-from collections import Counter
 import csv
 import json
 from pathlib import Path
@@ -37,7 +38,7 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.tolerances import parse_variations
+from valve_sim.analysis.tolerances import parse_variations, undefined_reasons
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
@@ -83,12 +84,8 @@ def measure_indices(distributions, rows, seed):
         try:
             result[name] = sobol_indices(distributions, outputs, seed)
         except ValueError as error:
-            reasons = Counter(
-                row['error'] or row['reasons'].get(name, '')
-                for row in rows
-                if row['measures'][name] is None
-            )
-            common = f' (most often: {reasons.most_common(1)[0][0]})' if reasons else ''
+            reasons = undefined_reasons(rows, name)
+            common = f' (most often: {next(iter(reasons))})' if reasons else ''
             result[name] = f'indices undefined: {error}{common}'
     return result
 
@@ -161,6 +158,9 @@ def run(args):
                 'distributions': [d.describe() for d in distributions],
                 'failed_runs': sum(row['error'] is not None for row in rows),
                 'undefined': {n: e for n, e in indices.items() if isinstance(e, str)},
+                'undefined_reasons': {
+                    n: reasons for n in MEASURE_NAMES if (reasons := undefined_reasons(rows, n))
+                },
             },
             indent=2,
         )

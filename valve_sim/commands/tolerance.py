@@ -25,7 +25,8 @@ paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
   samples.csv     index, the varied parameters, the preload used, the six
                   measures, pass, reasons, error (one row per sample)
   summary.json    distributions, protocol, limits, yield with its 95 % interval,
-                  failures per limit, percentiles of each measure
+                  failures per limit, percentiles of each measure and why runs
+                  have no value of it (undefined_reasons)
   measures_cdf.png, measures_vs_<parameter>.png
 """
 
@@ -165,7 +166,11 @@ def print_summary(summary):
             cells = ''.join(f"{entry['p' + str(p)]:>10.4g}" for p in (1, 5, 50, 95, 99))
         else:
             cells = f'{"undefined in every run":>50}'
-        note = f"  ({entry['undefined']} undefined)" if entry['undefined'] else ''
+        note = (
+            f"  ({entry['undefined']} undefined, most often: "
+            f"{next(iter(entry['undefined_reasons']))})"
+            if entry['undefined'] else ''
+        )
         print(f'{name:<14}{cells}{note}')
 
 
