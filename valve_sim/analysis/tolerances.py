@@ -33,10 +33,11 @@ import math
 import re
 
 import numpy as np
-from scipy import stats
-from scipy.stats import qmc
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.core.parameters import ParameterError, resolve_name, SPECS
+
+# scipy.stats is imported in the functions that use it, so that `valve-sim tolerance
+# --help` (its parser takes SAMPLERS from here) stays quick.
 
 
 SAMPLERS = ('lhs', 'sobol', 'random')
@@ -64,6 +65,8 @@ class Distribution:
         unit = np.clip(np.asarray(unit, dtype=float), 1e-12, 1.0 - 1e-12)
         if self.kind == 'uniform':
             return self.a + unit * (self.b - self.a)
+        from scipy import stats
+
         return stats.norm.ppf(unit, loc=self.a, scale=self.b)
 
     def describe(self):
@@ -134,6 +137,8 @@ def unit_samples(count, dimensions, seed, sampler='lhs'):
     """Points in the unit cube, (count, dimensions); the same seed gives the same points."""
     if count < 1:
         raise ParameterError('--samples must be at least 1')
+    from scipy.stats import qmc
+
     if sampler == 'lhs':
         return qmc.LatinHypercube(d=dimensions, seed=seed).random(count)
     if sampler == 'sobol':
@@ -199,6 +204,8 @@ def passes(row, limits):
 
 def yield_interval(passed, total, confidence=CONFIDENCE):
     """Clopper-Pearson interval of the pass fraction (samples taken as independent)."""
+    from scipy import stats
+
     interval = stats.binomtest(passed, total).proportion_ci(confidence, method='exact')
     return [float(interval.low), float(interval.high)]
 

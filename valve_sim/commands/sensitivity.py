@@ -40,6 +40,7 @@ from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.tolerances import parse_variations, undefined_reasons
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -59,16 +60,11 @@ PAPER_RANGES = ','.join(f'{symbol}=±20%' for symbol in STUDY_PARAMETERS)
 
 
 def add_arguments(parser):
-    add_study_arguments(
-        parser, 'base samples N, a power of two: N (D + 2) runs for D parameters (default 256)'
-    )
-    parser.add_argument(
-        '--vary',
-        action='append',
-        metavar='NAME=SPEC,...',
-        help='parameters and distributions as for tolerance (default: '
-        + PAPER_RANGES.replace('%', '%%') + ')',
-    )
+    add_study_arguments(parser, 'base samples N, a power of two: N (D + 2) runs for D '
+                        'parameters (default 256)')
+    parser.add_argument('--vary', action='append', metavar='NAME=SPEC,...',
+                        help='parameters and distributions as for tolerance (default: '
+                        + PAPER_RANGES.replace('%', '%%') + ')')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
@@ -131,8 +127,6 @@ def run(args):
         import SALib  # noqa: F401  (is it installed?)
     except ImportError:
         raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
-    from valve_sim.commands.simulate import load_from_arguments
-
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
     preset, protocol = preset_protocol(args, params)
