@@ -32,8 +32,7 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.commands.analyse import Recording
-from valve_sim.commands.demo import largest_gap, report
+from valve_sim.commands.demo import report, sampling_problem
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.bag import BagReader
 
@@ -133,8 +132,23 @@ def test_demo_into_an_uncreatable_folder_is_one_line_and_exit_1(tmp_path):
     )
 
 
-def test_a_gap_in_the_step_window_is_found():
-    time = np.concatenate([np.arange(0.0, 0.5, 1e-3), np.arange(0.55, 1.5, 1e-3)])
-    recording = Recording(time, *(np.zeros_like(time) for _ in range(4)))
-    assert largest_gap(recording, 0.25) == pytest.approx(0.051)
-    assert largest_gap(recording, 0.6) == pytest.approx(1e-3)
+def test_a_step_sampled_too_sparsely_for_its_peaks_is_not_measured():
+    """A 5 ms gap among the peaks (T_1 12 % off) is a problem; 2 ms ones and later gaps are not."""
+    values = {'T_1_ms': 6.8, 'T_d_ms': 25.2}  # peaks within 44.6 ms of the step at 250 ms
+    ms = np.arange(1500)  # a state every millisecond
+
+    def without(start, end):
+        """Sample times [s] with the states from start to end [ms] (exclusive) missing."""
+        return ms[(ms < start) | (ms >= end)] * 1e-3
+
+    assert sampling_problem(ms * 1e-3, 0.25, values) is None
+    assert sampling_problem(ms[(ms > 260) | (ms % 2 == 0)] * 1e-3, 0.25, values) is None
+    assert '5.0 ms between samples in its first 45 ms' in sampling_problem(
+        without(281, 285), 0.25, values
+    )
+    assert sampling_problem(without(500, 520), 0.25, values) is None
+    assert 'a gap of 80 ms in its window (lag skipped)' in sampling_problem(
+        without(501, 580), 0.25, values
+    )
+    undefined = {'T_1_ms': None, 'T_d_ms': None}  # the whole window must be dense then
+    assert 'in its first 1000 ms' in sampling_problem(without(500, 520), 0.25, undefined)
