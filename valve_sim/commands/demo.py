@@ -55,11 +55,14 @@ COMMAND_PERIOD = 0.02  # [s] inlet_flow is published at 50 Hz (valve_node's inpu
 READY_TIMEOUT = 180.0  # [s] for start-up (a cold kernel compile on a loaded machine) and discovery
 MEASURES_TIMEOUT = 60.0  # [s] from the step to the analyser's measures
 STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
-# [s] the longest interval between samples the peak fits bear (measures.md: a parabola
-# through the samples near each peak): offline at 1 kHz, a 3 ms interval anywhere in the
-# peaks moves T_1 by 0.2 %, 5 ms by 12 %, 10 ms by 47 % (r_d by 0.29).
+# [s] Sampling the measures need (docs/analyser.md, "The demo"). Each peak is refined by
+# a parabola through the samples near it, so close to a peak (within T_d / 8) states may
+# be at most PEAK_GAP_LIMIT apart, elsewhere in the window WINDOW_GAP_LIMIT (longer is
+# also lag valve_node may have skipped: model time jumped, the state held). Offline at
+# 1 kHz a 4 ms interval next to the first peak moves T_1 by 12 %; 3 ms intervals, and 10 ms
+# ones away from the peaks, move no measure by more than a tenth of its test tolerance.
 PEAK_GAP_LIMIT = 0.003
-SKIP_GAP = 0.05  # [s] a longer interval is lag valve_node skipped: model time jumped, state held
+WINDOW_GAP_LIMIT = 0.01
 ATTEMPTS = 10  # steps tried before the demo gives up on a machine too busy for real time
 NODES = ('valve_node', 'analyser_node')
 
@@ -128,18 +131,25 @@ class Driver:
         self.measures = []  # step_measures messages
         self.model_time_ns = None  # stamp of the valve's latest state
         self.stamps = []  # [s] model times of the valve's states received
+        self.valve_ready = False  # valve_node's /diagnostics said so
         self.attempts = 0  # steps up commanded
         publisher = self.node.create_publisher(Float64, 'inlet_flow', 10)
         self.node.create_timer(COMMAND_PERIOD, lambda: publisher.publish(Float64(data=self.flow)))
 
         def on_status(array):
             recording = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its name
-            for status in (s for s in array.status if s.name == recording):
+            for status in array.status:
                 values = {pair.key: pair.value for pair in status.values}
-                if all(
+                if status.name == recording and all(
                     int(count) > 0 for key, count in values.items() if key.startswith('messages /')
                 ):
                     self.bag = Path(values['file'])
+                if 'startup_kernels_s' in values and not self.valve_ready:
+                    self.valve_ready = True  # valve_node reports only once it ticks
+                    progress(
+                        f'valve_node ready: its kernels took {float(values["startup_kernels_s"]):.1f}'
+                        ' s to compile or load'
+                    )
 
         def on_state(message):
             self.model_time_ns = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
@@ -274,23 +284,28 @@ def sampling_problem(times, t_step, values):
     """
     Say why samples at times [s] cannot carry the measures of the step at t_step [s], or None.
 
-    values: the step's measures. Its peaks, up to T_1 + 1.5 T_d after the step (the
-    whole window where those are undefined), need samples at most PEAK_GAP_LIMIT
-    apart; the window must have no interval beyond SKIP_GAP (skipped lag).
+    values: the step's measures, whose T_1 and T_d place its peaks (where those are
+    undefined, every sample counts as next to a peak).
     """
     from valve_sim.analysis.measures import WINDOW
 
+    shown = times[(times >= t_step) & (times <= t_step + WINDOW)]
+    if shown.size < 2:
+        return 'no samples in its window'
     t_1, t_d = values.get('T_1_ms'), values.get('T_d_ms')
-    peaks = (t_1 + 1.5 * t_d) * 1e-3 if t_1 is not None and t_d is not None else WINDOW
-    gap = largest_gap(times, t_step, t_step + peaks)
-    if gap > PEAK_GAP_LIMIT:
-        return (
-            f'a gap of {gap * 1e3:.1f} ms between samples in its first {peaks * 1e3:.0f} ms '
-            f'(its peaks need samples at most {PEAK_GAP_LIMIT * 1e3:g} ms apart)'
-        )
-    gap = largest_gap(times, t_step, t_step + WINDOW)
-    if gap > SKIP_GAP:
-        return f'a gap of {gap * 1e3:.0f} ms in its window (lag skipped)'
+    if t_1 is None or t_d is None:
+        peaks, near = np.array([t_step]), WINDOW
+    else:
+        peaks, near = t_step + np.array([t_1, t_1 + t_d]) * 1e-3, t_d * 1e-3 / 8
+    for start, end in zip(shown[:-1], shown[1:]):
+        at_peak = np.any((start < peaks + near) & (end > peaks - near))
+        limit = PEAK_GAP_LIMIT if at_peak else WINDOW_GAP_LIMIT
+        if end - start > limit:
+            return (
+                f'a gap of {(end - start) * 1e3:.1f} ms between samples '
+                f'{"next to a peak" if at_peak else "in its window"}, '
+                f'{(start - t_step) * 1e3:.0f} ms after the step (at most {limit * 1e3:g} ms there)'
+            )
     return None
 
 
