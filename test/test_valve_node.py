@@ -438,10 +438,12 @@ def test_diagnostics_report_health_and_stale_input(valve):
         'tick_compute_p99_ms',
         'inlet_flow_m3_s',
         'model_time_s',
+        'startup_kernels_s',
     ):
         assert key in stale, key
     assert float(stale['inlet_flow_m3_s']) == INITIAL_FLOW
     assert float(stale['real_time_factor']) > 0.0
+    assert float(stale['startup_kernels_s']) > 0.0
     with valve.condition:
         start = len(valve.diagnostics)
     for _ in range(
