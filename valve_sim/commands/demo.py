@@ -146,10 +146,8 @@ class Driver:
                     self.bag = Path(values['file'])
                 if 'startup_kernels_s' in values and not self.valve_ready:
                     self.valve_ready = True  # valve_node reports only once it ticks
-                    progress(
-                        f'valve_node ready: its kernels took {float(values["startup_kernels_s"]):.1f}'
-                        ' s to compile or load'
-                    )
+                    seconds = float(values['startup_kernels_s'])
+                    progress(f'valve_node ready: kernels compiled or loaded in {seconds:.1f} s')
 
         def on_state(message):
             self.model_time_ns = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
@@ -304,7 +302,8 @@ def sampling_problem(times, t_step, values):
             return (
                 f'a gap of {(end - start) * 1e3:.1f} ms between samples '
                 f'{"next to a peak" if at_peak else "in its window"}, '
-                f'{(start - t_step) * 1e3:.0f} ms after the step (at most {limit * 1e3:g} ms there)'
+                f'{(start - t_step) * 1e3:.0f} ms after the step '
+                f'(at most {limit * 1e3:g} ms there)'
             )
     return None
 
