@@ -17,12 +17,82 @@ Compile the numerical kernels with numba when it is installed.
 
 The kernels are plain Python; numba only makes them fast enough for real time
 (a 1 ms tick is 100 RK4 steps). Without numba they run unchanged, slowly.
+
+Compiled kernels are cached on disk (numba's cache, in __pycache__ beside the
+sources or wherever numba would put it). numba judges a cached kernel fresh by
+its own source file only, but a kernel inlines functions and constants from other
+files of valve_sim.core (the integrator inlines the model's equations): after an
+edit of model.py, or a `git pull` that changes it, numba would keep running the
+old equations. So every kernel's cache entry is also stamped with one digest of
+all valve_sim/core sources (SOURCES_DIGEST): any change there recompiles every
+kernel on its next use. Hashing the sources costs about a millisecond at import.
 """
+
+import hashlib
+from pathlib import Path
 
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - exercised only on machines without numba
     njit = None
+
+
+def sources_digest(folder=Path(__file__).parent):
+    """Return a SHA-256 hex digest of the contents of every .py file in folder (by name)."""
+    digest = hashlib.sha256()
+    for path in sorted(folder.glob('*.py')):
+        digest.update(path.name.encode() + b'\0' + path.read_bytes() + b'\0')
+    return digest.hexdigest()
+
+
+SOURCES_DIGEST = sources_digest()
+
+
+def _stamped_cache_class():
+    """
+    Return numba's FunctionCache with every source stamp joined to SOURCES_DIGEST.
+
+    The cache's location is the one numba itself chooses (NUMBA_CACHE_DIR, the
+    source tree's __pycache__, or the user-wide cache when that is not writable);
+    only its freshness check changes. None where this numba's cache does not have
+    the expected form: then the kernels are compiled in each process, never stale.
+    """
+    try:
+        from numba.core.caching import CompileResultCacheImpl, FunctionCache
+    except ImportError:  # pragma: no cover - a numba without this caching layout
+        return None
+    numba_locators = tuple(CompileResultCacheImpl._locator_classes)
+
+    class StampedLocator:
+        """numba's own locator for the function, stamped with SOURCES_DIGEST too."""
+
+        def __init__(self, locator):
+            self._locator = locator
+
+        def __getattr__(self, name):
+            return getattr(self._locator, name)
+
+        def get_source_stamp(self):
+            return (self._locator.get_source_stamp(), SOURCES_DIGEST)
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            for locator_class in numba_locators:
+                locator = locator_class.from_function(py_func, py_file)
+                if locator is not None:
+                    return cls(locator)
+            return None
+
+    class StampedCacheImpl(CompileResultCacheImpl):
+        _locator_classes = [StampedLocator]
+
+    class StampedFunctionCache(FunctionCache):
+        _impl_class = StampedCacheImpl
+
+    return StampedFunctionCache
+
+
+_CACHE_CLASS = _stamped_cache_class() if njit is not None else None
 
 
 def jit(function, cache=True):
@@ -31,8 +101,13 @@ def jit(function, cache=True):
 
     error_model="numpy": a division by zero gives inf (caught by the state check)
     instead of a Python exception, which keeps branches out of the inner loop.
+    inline="always": a kernel that calls another compiles its body in, so the
+    compiler optimises across them (and vectorises loops over their calls).
     cache=False for a function without a source file (generated with exec).
     """
     if njit is None:
         return function
-    return njit(cache=cache, nogil=True, error_model='numpy', inline='always')(function)
+    dispatcher = njit(nogil=True, error_model='numpy', inline='always')(function)
+    if cache and _CACHE_CLASS is not None:
+        dispatcher._cache = _CACHE_CLASS(function)  # what njit(cache=True) sets, restamped
+    return dispatcher

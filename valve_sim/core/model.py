@@ -74,6 +74,14 @@ P_S, P_M, P_P, P_C, X, X_DOT, Y, Y_DOT = range(8)
 STICK_VELOCITY = 1e-3
 STICK_RELAXATION_TIME = 1e-4
 
+# Parameters the kernels take unchanged, under their own names: masses m_m, m_p,
+# dampings c_m, c_p, springs k_m, x_0, k_p, y_0 and strokes x_max, y_max (SI units).
+MECHANICS = (
+    'main_valve_mass', 'main_valve_damping', 'main_spring_stiffness', 'main_spring_preload',
+    'main_valve_stroke', 'pilot_poppet_mass', 'pilot_poppet_damping', 'pilot_spring_stiffness',
+    'pilot_spring_preload', 'poppet_stroke',
+)
+
 # Derived constants of Eqs. (5), (8), (9), (16), in the form the kernels use.
 Coefficients = namedtuple(
     'Coefficients',
@@ -98,16 +106,7 @@ Coefficients = namedtuple(
         'damping_orifice_gain',  # K_c, Eq. (16)           [m^3/s/sqrt(Pa)]
         'rod_leakage_conductance',  # K_s, Eq. (16)           [m^3/s/Pa]
         'poppet_gain',  # K_p, Eq. (16)           [m^2/s/sqrt(Pa)]
-        'main_valve_mass',
-        'main_valve_damping',
-        'main_spring_stiffness',
-        'main_spring_preload',
-        'main_valve_stroke',
-        'pilot_poppet_mass',
-        'pilot_poppet_damping',
-        'pilot_spring_stiffness',
-        'pilot_spring_preload',
-        'poppet_stroke',
+        *MECHANICS,  # as in the parameter dict
         'transition_pressure',  # dp_tr                   [Pa]
         'burst_pressure',  # p_burst, a physical limit  [Pa]
         'supply_pressure_limit',  # p_s,max (inf: none)     [Pa]
@@ -169,16 +168,7 @@ def coefficients(p, faults=HEALTHY):
             / (12.0 * p['fluid_viscosity'] * p['sensing_rod_length'])
         ),
         poppet_gain=math.pi * c_d * d_v * math.sin(theta) * root,
-        main_valve_mass=p['main_valve_mass'],
-        main_valve_damping=p['main_valve_damping'],
-        main_spring_stiffness=p['main_spring_stiffness'],
-        main_spring_preload=p['main_spring_preload'],
-        main_valve_stroke=p['main_valve_stroke'],
-        pilot_poppet_mass=p['pilot_poppet_mass'],
-        pilot_poppet_damping=p['pilot_poppet_damping'],
-        pilot_spring_stiffness=p['pilot_spring_stiffness'],
-        pilot_spring_preload=p['pilot_spring_preload'],
-        poppet_stroke=p['poppet_stroke'],
+        **{name: p[name] for name in MECHANICS},
         transition_pressure=p['orifice_transition_pressure'],
         burst_pressure=p['burst_pressure'],
         supply_pressure_limit=p['supply_pressure_limit'] or math.inf,
