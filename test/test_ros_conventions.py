@@ -45,7 +45,7 @@ from valve_sim.ros import analyser_node
 from valve_sim.ros.live_view import layout_path
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 RENAMED = 'renamed_valve'
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE

@@ -45,7 +45,7 @@ from valve_sim.core.steady_state import (
 from valve_sim.ros.valve_node import CATCH_UP_LIMIT_PERIODS
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 AMBIENT = 101325.0  # [Pa] ambient_pressure default
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE

@@ -33,7 +33,7 @@ from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import steady_state
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 AMBIENT = 101325.0  # [Pa] ambient_pressure default
 FLOW = 5.0 * LITRE_PER_MINUTE
