@@ -78,8 +78,9 @@ def test_demo_records_and_measures_the_papers_step(tmp_path):
         )
     bag = next(tmp_path.glob('*.mcap'))
     steps = json.loads(bag.with_suffix('.measures.json').read_text())['steps']
-    assert len(steps) == 1 and steps[0]['direction'] == 1 and steps[0]['reasons'] == {}
-    assert outside_tolerance(steps[0]) == {}
+    retried = out.count('cannot be measured')  # steps up too sparsely sampled, stepped back down
+    assert len(steps) == 2 * retried + 1 and [s['direction'] for s in steps[-1:]] == [1]
+    assert steps[-1]['reasons'] == {} and outside_tolerance(steps[-1]) == {}
     reader = BagReader(bag)
     topics = {channel.topic for channel, _, _ in reader.messages()}
     assert reader.problem is None

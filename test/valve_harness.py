@@ -50,6 +50,9 @@ from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 REPO = Path(__file__).resolve().parent.parent
 NODE_NAME = 'relief_valve'
 TIMEOUT = 60.0  # [s] for anything that waits: start-up, discovery, a service answer
+# [messages] per tick topic: the probe's callbacks run in Python beside the test; on a
+# machine loaded to 17 they fell more than 1 s (1000 messages) behind and lost samples
+PROBE_QUEUE_DEPTH = 10_000
 
 
 def start_node(log_path, *ros_args, options=()):
@@ -147,10 +150,11 @@ class Probe:
         self.period_ns = None  # tick period [ns] on simulated time (start_clock), else None
         for topic in PRESSURE_TOPICS:
             self.node.create_subscription(
-                FluidPressure, topic, self._pressure_callback(topic), 1000
+                FluidPressure, topic, self._pressure_callback(topic), PROBE_QUEUE_DEPTH
             )
-        self.node.create_subscription(JointState, 'joint_states', self._on_joints, 1000)
-        self.node.create_subscription(JointState, 'applied_inlet_flow', self._on_applied, 1000)
+        joint_topics = {'joint_states': self._on_joints, 'applied_inlet_flow': self._on_applied}
+        for topic, callback in joint_topics.items():
+            self.node.create_subscription(JointState, topic, callback, PROBE_QUEUE_DEPTH)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.inlet = self.node.create_publisher(Float64, 'inlet_flow', 100)
         self.clock = self.node.create_publisher(Clock, '/clock', 10)
