@@ -161,19 +161,13 @@ def run_processes(folder, waveforms, queue_depth):
     """
     import rclpy
     from valve_sim.recording.replay import Replay
+    from valve_sim.ros import node_command
 
     processes = {
         'analyser_node': subprocess.Popen(
-            [
-                sys.executable,
-                '-m',
-                'valve_sim.ros.analyser_node',
-                '--ros-args',
-                '-p',
-                f'output_dir:={folder}',
-                '-p',
-                f'queue_depth:={queue_depth}',
-            ],
+            node_command(
+                'analyser_node', parameters={'output_dir': folder, 'queue_depth': queue_depth}
+            ),
             stderr=subprocess.DEVNULL,
         ),
         'bare subscriber': subprocess.Popen(

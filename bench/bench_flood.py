@@ -18,43 +18,51 @@
 # The summary above is also this script's --help description.
 #
 #     python bench/bench_flood.py [--duration 60] [--json out/bench_flood.json]
+#                                 [--executor {events,single-threaded}]
 #
-# One run, one valve_node (1 kHz, 10 us steps, its default executor), two phases of
-# --duration seconds each, on a ROS domain of its own (localhost only):
+# One run, one valve_node (1 kHz, 10 us steps, its default inlet_flow QoS, on
+# --executor: valve_node's default unless given), two phases of --duration seconds
+# each, on a ROS domain of its own (localhost only):
 #
 # - quiet: no inlet_flow at all;
 # - flood: one publisher process sends inlet_flow as fast as it can (reliable,
 #   depth 10), alternating a good flow (5 L/min) with a bad one (NaN, 1.0 m^3/s
 #   above max_inlet_flow, -1e-4, +inf in turn).
 #
-# In each phase a bare Python loop sleeping to 1 kHz slots runs in its own process
-# (bench_node.py's timer floor), counted as the node counts its ticks: what the OS
-# scheduler alone allows under the same load. Reported per phase: the node's
+# In each phase the timer floor (bench/common.py: a bare Python loop sleeping to
+# 1 kHz slots in its own process, counted as the node counts its ticks) shows what
+# the OS scheduler alone allows under the same load. Reported per phase: the node's
 # on-time ticks (ticks - late) / (ticks + missed) from its diagnostics, the floor's,
-# and the node's distance to the floor; for the flood the publisher's rate and how
-# many messages the node counted (accepted + rejected: every message its
-# subscription delivered; inlet_flow is best effort, so the middleware may drop some
-# before the callback under such a flood, and the difference is reported, not
-# hidden). Target (issue 10): under the flood, the node within 1 point of the floor.
-# The load average at start and end is reported: other work on the machine shows in
-# every figure here.
+# and the node's distance to the floor; for the flood the publisher's rate, the
+# messages the node took and counted (accepted + rejected) and those it counted as
+# lost (dropped by the middleware before a tick took them: gaps in the publisher's
+# sequence numbers), against the number published. Target (issue 10): under the
+# flood, the node within 1 point of the floor. The load average at start and end is
+# reported: other work on the machine shows in every figure here.
 
 import argparse
 import json
 import math
 import os
 from pathlib import Path
-import subprocess
 import sys
 import time
 
+from common import arguments, isolated_environment, on_time_percent, REPO, start, stop
+from common import TimerFloor, write_figures
 
-REPO = Path(__file__).resolve().parent.parent
-BENCH = Path(__file__).resolve().parent
+
 FLOW = 5.0e-3 / 60.0  # [m^3/s] 5 L/min
 BAD_FLOWS = (math.nan, 1.0, -1e-4, math.inf)  # 1.0 m^3/s: 600x max_inlet_flow
 WARM_UP = 3.0  # [s] discovery and first ticks, not measured
-COUNTERS = ('ticks', 'late_ticks', 'missed_ticks', 'accepted_inputs', 'rejected_inputs')
+COUNTERS = (
+    'ticks',
+    'late_ticks',
+    'missed_ticks',
+    'accepted_inputs',
+    'rejected_inputs',
+    'lost_inputs',
+)
 
 
 def run_flood(seconds, path):
@@ -106,18 +114,13 @@ def spin_for(executor, seconds, condition=lambda: False):
         executor.spin_once(timeout_sec=0.05)
 
 
-def phase(name, duration, executor, diagnostics, env, flood=False):
+def phase(duration, executor, diagnostics, env, flood=False):
     """Run one phase; returns its figures."""
-    import bench_node
-
-    floor_file = REPO / 'out' / f'flood_floor_{name}_{os.getpid()}.json'
     flood_file = REPO / 'out' / f'flood_publisher_{os.getpid()}.json'
-    floor = bench_node.start(
-        [sys.executable, str(BENCH / 'bench_node.py'), '--timer-floor', str(floor_file)], env
-    )
+    floor = TimerFloor(env)
     publisher = None
     if flood:
-        publisher = bench_node.start(
+        publisher = start(
             [sys.executable, __file__, '--flood', str(duration + 1.0), str(flood_file)], env
         )
     spin_for(executor, 1.0)  # the floor and the flood under way
@@ -128,19 +131,15 @@ def phase(name, duration, executor, diagnostics, env, flood=False):
     ended = time.monotonic()
     spin_for(executor, 2.5, lambda: any(t > ended for t, _ in diagnostics.reports))
     after = diagnostics.counters_after(ended)
-    bench_node.stop(floor)
+    floor_counts = floor.stop()
     if publisher is not None:
         publisher.wait(timeout=60)
     counts = {key: after[key] - before[key] for key in COUNTERS}
-    floor_counts = json.loads(floor_file.read_text())
-    floor_file.unlink()
     figures = {
-        'node_on_time_percent': on_time(
+        'node_on_time_percent': on_time_percent(
             counts['ticks'], counts['late_ticks'], counts['missed_ticks']
         ),
-        'floor_on_time_percent': on_time(
-            floor_counts['ticks'], floor_counts['late'], floor_counts['missed']
-        ),
+        'floor_on_time_percent': floor_counts['on_time_percent'],
         'node': counts,
         'floor': floor_counts,
     }
@@ -156,28 +155,19 @@ def phase(name, duration, executor, diagnostics, env, flood=False):
     return figures
 
 
-def on_time(ticks, late, missed):
-    return 100.0 * (ticks - late) / (ticks + missed) if ticks + missed else float('nan')
-
-
-def measure(duration, env):
+def measure(duration, executor_name, env):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
+    from valve_sim.ros import node_command
 
     load_at_start = os.getloadavg()
-    valve = subprocess.Popen(
-        [
-            sys.executable,
-            '-m',
-            'valve_sim.ros.valve_node',
-            '--ros-args',
-            '-p',
-            'publish_rate:=1000.0',
-            '-p',
-            'input_timeout:=0.0',
-        ],
-        env=env,
-        cwd=REPO,
+    valve = start(
+        node_command(
+            'valve_node',
+            ['--executor', executor_name],
+            {'publish_rate': 1000.0, 'input_timeout': 0.0},
+        ),
+        env,
     )
     rclpy.init()
     node = rclpy.create_node('bench_flood')
@@ -189,13 +179,12 @@ def measure(duration, env):
         spin_for(executor, WARM_UP)
         figures = {
             'duration_s': duration,
-            'quiet': phase('quiet', duration, executor, diagnostics, env),
-            'flood': phase('flood', duration, executor, diagnostics, env, flood=True),
+            'executor': executor_name,
+            'quiet': phase(duration, executor, diagnostics, env),
+            'flood': phase(duration, executor, diagnostics, env, flood=True),
         }
     finally:
-        import bench_node
-
-        bench_node.stop(valve)
+        stop(valve)
         node.destroy_node()
         rclpy.try_shutdown()
     figures['load_average'] = {'start': load_at_start[0], 'end': os.getloadavg()[0]}
@@ -205,7 +194,8 @@ def measure(duration, env):
 def table(figures):
     quiet, flood = figures['quiet'], figures['flood']
     rows = [
-        f'valve_node under a flood of inlet_flow, {figures["duration_s"]:g} s per phase',
+        f'valve_node ({figures["executor"]} executor) under a flood of inlet_flow, '
+        f'{figures["duration_s"]:g} s per phase',
         f'{"":28}{"quiet":>10}{"flood":>10}',
         f'{"node on-time ticks [%]":28}{quiet["node_on_time_percent"]:>10.3f}'
         f'{flood["node_on_time_percent"]:>10.3f}',
@@ -215,8 +205,9 @@ def table(figures):
         f'{flood["node_minus_floor_points"]:>10.3f}   (target under the flood: >= -1)',
         f'publisher rate: {flood["publisher_rate_hz"]:.0f} messages/s '
         f'({flood["published"]} sent, half of them bad)',
-        f'counted by the node (accepted + rejected): {flood["counted_by_node"]} '
-        f'({flood["node"]["accepted_inputs"]} + {flood["node"]["rejected_inputs"]})',
+        f'taken and counted by the node (accepted + rejected): {flood["counted_by_node"]} '
+        f'({flood["node"]["accepted_inputs"]} + {flood["node"]["rejected_inputs"]}); '
+        f'counted lost before a tick took them: {flood["node"]["lost_inputs"]}',
         f'load average: {figures["load_average"]["start"]:.2f} at start, '
         f'{figures["load_average"]["end"]:.2f} at the end',
     ]
@@ -224,30 +215,23 @@ def table(figures):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
+
+    parser = arguments(__doc__.splitlines()[0], 'bench_flood.json', 'measured time per phase')
     parser.add_argument(
-        '--duration', type=float, default=60.0, help='measured time per phase [s] (default 60)'
-    )
-    parser.add_argument(
-        '--json', type=Path, default=REPO / 'out' / 'bench_flood.json', help='JSON output file'
+        '--executor',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
+        help=f"valve_node's executor (default {DEFAULT_EXECUTOR})",
     )
     parser.add_argument('--flood', nargs=2, metavar=('SECONDS', 'FILE'), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.flood:
         return run_flood(float(args.flood[0]), args.flood[1])
-    from valve_sim.ros.isolation import claim_domain
-
-    claim_domain(keep_existing=False)
-    env = dict(
-        os.environ,
-        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
-    )
+    env = isolated_environment()
     (REPO / 'out').mkdir(exist_ok=True)
-    figures = measure(args.duration, env)
-    print(table(figures))
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(figures, indent=2, default=float) + '\n')
-    print(f'figures written to {args.json}')
+    figures = measure(args.duration, args.executor, env)
+    write_figures(figures, table(figures), args.json)
     return 0
 
 

@@ -36,9 +36,9 @@
 #   of a Float64 through the bare echo node, measured in the same run;
 # - the node's resident memory (psutil) after 10 s and at the end;
 # - the CPU time of the node, the echo and this process over the measured span;
-# - the timer floor: a bare Python loop sleeping to 1 kHz slots in its own process,
-#   counted as the node counts its ticks, in the same run (what the OS scheduler
-#   alone allows).
+# - the timer floor (bench/common.py): a bare Python loop sleeping to 1 kHz slots in
+#   its own process, counted as the node counts its ticks, in the same run (what the
+#   OS scheduler alone allows).
 #
 # Prints a table and writes the figures as JSON. Targets (issue 3): on-time
 # >= 99.9 %, compute p99 <= 0.5 ms, latency p99 <= 3 ms, memory growth a few MB.
@@ -49,29 +49,25 @@
 # work on the machine shows in every figure here.
 
 import argparse
-import json
 import os
-from pathlib import Path
 import struct
-import subprocess
 import sys
 import time
 
+from common import arguments, isolated_environment, start, stop, TimerFloor, write_figures
 from valve_sim.recording.cdr import (
     STAMP,
     STAMP_OFFSET,
 )  # header.stamp (sec, nanosec) in the received CDR bytes
-from valve_sim.ros.isolation import claim_domain
+from valve_sim.ros import node_command
 
 
-REPO = Path(__file__).resolve().parent.parent
 FLOW = 5.0e-3 / 60.0  # [m^3/s] 5 L/min
 FLOW_INCREMENT = 1e-12  # [m^3/s] makes every probe value unique, negligible for the valve
 PROBE_PERIOD = 0.01037  # [s] inlet and echo probes alternate; not a multiple of the tick period,
 # so the probes fall on every phase of the tick
 WARM_UP = 3.0  # [s] discovery and first ticks, not measured
 MEMORY_EARLY = 10.0  # [s] first resident-memory reading
-PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
 APPLIED_FLOW = struct.Struct('<d')  # applied_inlet_flow's velocity[0] ...
 APPLIED_FLOW_FROM_END = 12  # ... ends where the empty effort sequence (a uint32 count 0) begins
 
@@ -93,36 +89,6 @@ def run_echo(executor):
     spinning.spin_until(node, spinning.EXECUTORS[executor](), stop)
     node.destroy_node()
     rclpy.try_shutdown()
-
-
-def run_timer_floor(path):
-    """
-    Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
-
-    Its ticks are counted as valve_node counts its ticks.
-    Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
-    A tick is late if it starts more than LATE_FRACTION of a period after its slot;
-    slots that passed while it was late are missed (the loop goes on at the next slot).
-    """
-    import signal
-
-    from valve_sim.ros.node_status import LATE_FRACTION
-
-    stop = []
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: stop.append(number))
-    counts = {'ticks': 0, 'late': 0, 'missed': 0}
-    slot = time.monotonic_ns() + PERIOD_NS
-    while not stop:
-        delay = slot - time.monotonic_ns()
-        if delay > 0:
-            time.sleep(delay / 1e9)
-        lateness = time.monotonic_ns() - slot
-        counts['ticks'] += 1
-        counts['late'] += lateness > LATE_FRACTION * PERIOD_NS
-        counts['missed'] += lateness // PERIOD_NS
-        slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
-    Path(path).write_text(json.dumps(counts))
 
 
 class Bench:
@@ -252,21 +218,6 @@ def tick_figures(diagnostics):
     }
 
 
-def start(command, env):
-    return subprocess.Popen(command, env=env, cwd=REPO)
-
-
-def stop(process):
-    import signal
-
-    process.send_signal(signal.SIGINT)
-    try:
-        return process.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        return process.wait()
-
-
 def cpu_seconds(processes):
     """{name: user + system CPU time [s]} of psutil processes."""
     return {name: sum(process.cpu_times()[:2]) for name, process in processes.items()}
@@ -285,27 +236,16 @@ def measure(duration, rt_priority, executor, env):
     valve = start(
         [
             *scheduler,
-            sys.executable,
-            '-m',
-            'valve_sim.ros.valve_node',
-            '--executor',
-            executor,
-            '--ros-args',
-            '-p',
-            'publish_rate:=1000.0',
-            '-p',
-            'step_size:=1.0e-5',
-            '-p',
-            'input_timeout:=0.0',
+            *node_command(
+                'valve_node',
+                ['--executor', executor],
+                {'publish_rate': 1000.0, 'step_size': 1.0e-5, 'input_timeout': 0.0},
+            ),
         ],
         env,
     )
     echo = start([*scheduler, sys.executable, __file__, '--echo', executor], env)
-    floor_file = REPO / 'out' / f'timer_floor_{os.getpid()}.json'
-    floor_file.parent.mkdir(exist_ok=True)
-    timer_floor = start(
-        [*scheduler, sys.executable, __file__, '--timer-floor', str(floor_file)], env
-    )
+    timer_floor = TimerFloor(env, scheduler)
     processes = {
         'valve_node': psutil.Process(valve.pid),
         'echo': psutil.Process(echo.pid),
@@ -344,19 +284,16 @@ def measure(duration, rt_priority, executor, env):
         exit_codes = {
             'valve_node': stop(valve),
             'echo': stop(echo),
-            'timer_floor': stop(timer_floor),
         }
-    floor = json.loads(floor_file.read_text())
-    floor_file.unlink()
+    floor = timer_floor.stop()
+    exit_codes['timer_floor'] = timer_floor.exit_code
     return {
         'duration_s': duration,
         'publish_rate_hz': 1000.0,
         'step_size_s': 1e-5,
         'executor': executor,
         'ticks': tick_figures(bench.diagnostics),
-        'timer_floor_on_time_percent': 100.0
-        * (floor['ticks'] - floor['late'])
-        / (floor['ticks'] + floor['missed']),
+        'timer_floor_on_time_percent': floor['on_time_percent'],
         'timer_floor': floor,
         'latency': percentiles_ms(bench.latencies_ns()),
         'latency_probes_sent': len(bench.inlet_sent),
@@ -482,13 +419,7 @@ def table(figures):
 def main(argv=None):
     from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        '--duration', type=float, default=60.0, help='measured time [s] (default 60)'
-    )
-    parser.add_argument(
-        '--json', type=Path, default=REPO / 'out' / 'bench_node.json', help='JSON output file'
-    )
+    parser = arguments(__doc__.splitlines()[0], 'bench_node.json', 'measured time')
     parser.add_argument(
         '--rt-priority',
         type=int,
@@ -505,23 +436,12 @@ def main(argv=None):
         ),
     )
     parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
-    parser.add_argument('--timer-floor', metavar='FILE', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.echo:
         return run_echo(args.echo)
-    if args.timer_floor:
-        return run_timer_floor(args.timer_floor)
-    claim_domain(keep_existing=False)  # a domain of this run's own, discovery on localhost
-    env = dict(
-        os.environ,
-        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
-    )
-    os.environ.update(env)
+    env = isolated_environment()
     figures = measure(args.duration, args.rt_priority, args.executor, env)
-    print(table(figures))
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(figures, indent=2, default=float) + '\n')
-    print(f'figures written to {args.json}')
+    write_figures(figures, table(figures), args.json)
     return 0
 
 

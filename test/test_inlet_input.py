@@ -12,13 +12,15 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node's inlet-flow input: every message counted, the last good value kept."""
+"""valve_node's inlet-flow input: every message taken counted, the last good value kept."""
 
 import math
+import time
 
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 from valve_sim.ros.inlet_input import InletFlowInput
+from valve_sim.ros.node_status import Throttle
 
 
 MAX_FLOW = 1.6666666666666667e-3  # [m^3/s] max_inlet_flow of config/reference.yaml
@@ -51,3 +53,64 @@ def test_arrival_is_stamped_by_the_next_tick():
     received.stamp(5_000)
     received.stamp(9_000)
     assert received.received_ns == 5_000
+
+
+class QueuedSubscription:
+    """A raw subscription's handle as the node takes from it: messages with sequence numbers."""
+
+    msg_type = Float64
+
+    def __init__(self, values, sequences=None):
+        sequences = sequences or range(1, len(values) + 1)
+        self.queue = [
+            (cdr(value), {'publication_sequence_number': sequence})
+            for value, sequence in zip(values, sequences)
+        ]
+        self.handle = self
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_):
+        return False
+
+    def take_message(self, message_type, raw):
+        assert message_type is Float64 and raw
+        return self.queue.pop(0) if self.queue else None
+
+
+def test_a_tick_takes_a_bounded_number_of_messages_and_counts_each():
+    received = InletFlowInput(1e-4, MAX_FLOW)
+    queued = QueuedSubscription([2e-4, math.nan, 3e-4, 1.0, 4e-4])
+    assert received.take(queued, 3, time.perf_counter_ns() + 10**9) == 3
+    assert (received.accepted, received.rejected, received.flow) == (2, 1, 3e-4)
+    assert received.take(queued, 3, time.perf_counter_ns() + 10**9) == 2
+    assert (received.accepted, received.rejected, received.flow) == (3, 2, 4e-4)
+    assert received.take(queued, 3, time.perf_counter_ns() + 10**9) == 0
+
+
+def test_no_message_is_taken_after_the_deadline():
+    received = InletFlowInput(1e-4, MAX_FLOW)
+    queued = QueuedSubscription([2e-4])
+    assert received.take(queued, 10, time.perf_counter_ns() - 1) == 0
+    assert len(queued.queue) == 1 and received.accepted == 0
+
+
+def test_messages_a_single_publisher_sent_that_never_came_are_counted_lost():
+    received = InletFlowInput(1e-4, MAX_FLOW)
+    received.take(QueuedSubscription([2e-4, 3e-4], [1, 2]), 10, time.perf_counter_ns() + 10**9)
+    received.single_publisher = True
+    received.take(QueuedSubscription([2e-4, 3e-4], [5, 9]), 10, time.perf_counter_ns() + 10**9)
+    assert received.lost == 2 + 3
+    received.take(QueuedSubscription([2e-4], [1]), 10, time.perf_counter_ns() + 10**9)
+    assert received.lost == 5, 'a restarted publisher counts from 1 again: nothing lost'
+    received.single_publisher = False  # two publishers: their sequences interleave
+    received.take(QueuedSubscription([2e-4, 3e-4], [7, 3]), 10, time.perf_counter_ns() + 10**9)
+    assert received.lost == 5
+
+
+def test_a_throttle_lets_one_event_through_per_interval_of_the_steady_clock():
+    throttle = Throttle(1_000_000_000)
+    assert throttle.due(5_000_000_000)
+    assert not throttle.due(5_000_000_001) and not throttle.due(5_999_999_999)
+    assert throttle.due(6_000_000_000) and not throttle.due(6_500_000_000)

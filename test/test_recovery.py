@@ -34,6 +34,8 @@ from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.recovery import diagnose, repair
 from valve_sim.recording.replay import Replay
+from valve_sim.ros import node_command
+import yaml
 
 
 REPO = Path(__file__).resolve().parent.parent
@@ -41,8 +43,19 @@ REFERENCE_BAG = REPO / 'bags' / 'reference_step.mcap'
 TIMEOUT = 60.0  # [s] for anything that waits on another process
 
 
+def valve_sim(*args, cwd=None):
+    """Run `valve-sim ARGS` in its own process; return the CompletedProcess (text output)."""
+    return subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+        cwd=cwd,
+    )
+
+
 def rosbags_messages(path):
-    """Return [(topic, log_time, data)] as rosbags reads a file (it needs the summary)."""
+    """Return [(topic, log_time, data)] as rosbags reads a file or bag folder (needs summaries)."""
     with AnyReader([Path(path)]) as reader:
         return [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
 
@@ -87,21 +100,11 @@ def test_analyse_says_truncated_and_where_for_a_file_cut_before_its_first_chunk(
     """The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap."""
     cut = tmp_path / 't.mcap'
     cut.write_bytes(REFERENCE_BAG.read_bytes()[:449000])
-    result = subprocess.run(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'analyse', str(cut)],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-    )
+    result = valve_sim('analyse', cut)
     assert result.returncode == 1
     assert 'truncated' in result.stderr and 'ends at byte 449000' in result.stderr, result.stderr
     assert 'valve-sim repair' in result.stderr and 'Traceback' not in result.stderr
-    result = subprocess.run(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(cut)],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-    )
+    result = valve_sim('repair', cut)
     assert result.returncode == 0, result.stderr
     kept = rosbags_messages(tmp_path / 't.repaired.mcap')
     assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
@@ -141,16 +144,7 @@ def start_analyser(folder, file_size_limit=None):
         resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
 
     return subprocess.Popen(
-        [
-            sys.executable,
-            '-m',
-            'valve_sim.ros.analyser_node',
-            '--ros-args',
-            '-p',
-            f'output_dir:={folder}',
-            '-p',
-            'flush_interval:=0.1',
-        ],
+        node_command('analyser_node', parameters={'output_dir': folder, 'flush_interval': 0.1}),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -187,13 +181,7 @@ def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(
         if analyser.poll() is None:
             analyser.kill()
     count = flushed(bag)
-    result = subprocess.run(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(bag), '-o', 'fixed.mcap'],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-        cwd=tmp_path,
-    )
+    result = valve_sim('repair', bag, '-o', 'fixed.mcap', cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert len(rosbags_messages(tmp_path / 'fixed.mcap')) >= count > 0
 
@@ -237,19 +225,37 @@ def test_sigint_at_any_point_of_start_up_leaves_no_traceback(tmp_path, delay):
     assert analyser.returncode in (0, 128 + signal.SIGINT, -signal.SIGINT), log
 
 
-def test_a_bag_folder_is_repaired_file_by_file_into_a_new_folder(tmp_path):
-    """`valve-sim repair FOLDER` takes a rosbag2 bag folder, as analyse and calibrate do."""
+def test_a_bag_folder_is_repaired_file_by_file_into_a_new_bag_folder(tmp_path):
+    """
+    `valve-sim repair FOLDER`: each file repaired, and a metadata.yaml for the new folder.
+
+    A split recording that crashed: rig_0.mcap complete, rig_1.mcap cut short, no
+    metadata.yaml (rosbag2 writes it at the end). rosbags reads the repaired folder.
+    """
     folder = tmp_path / 'rig'
     folder.mkdir()
-    (folder / 'rig_0.mcap').write_bytes(REFERENCE_BAG.read_bytes()[:449000])
-    result = subprocess.run(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'repair', str(folder)],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-    )
+    (folder / 'rig_0.mcap').write_bytes(REFERENCE_BAG.read_bytes())
+    (folder / 'rig_1.mcap').write_bytes(REFERENCE_BAG.read_bytes()[:449000])
+    result = valve_sim('repair', folder)
     assert result.returncode == 0, result.stderr
-    kept = rosbags_messages(tmp_path / 'rig_repaired' / 'rig_0.mcap')
-    assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
-    assert sorted(kept) == sorted(messages_in_order(REFERENCE_BAG)[: len(kept)])
-    assert (folder / 'rig_0.mcap').stat().st_size == 449000, 'the source is only read'
+    repaired = tmp_path / 'rig_repaired'
+    cut_short = rosbags_messages(repaired / 'rig_1.mcap')
+    assert f'kept {len(cut_short)} messages' in result.stdout, result.stdout
+    assert len(cut_short) > 4000, 'the chunk cut short is salvaged'
+    everything = messages_in_order(REFERENCE_BAG)
+    assert sorted(rosbags_messages(repaired)) == sorted(everything + everything[: len(cut_short)])
+    metadata = yaml.safe_load((repaired / 'metadata.yaml').read_text())
+    bag = metadata['rosbag2_bagfile_information']
+    assert bag['relative_file_paths'] == ['rig_0.mcap', 'rig_1.mcap']
+    assert bag['message_count'] == len(everything) + len(cut_short)
+    assert [f['message_count'] for f in bag['files']] == [len(everything), len(cut_short)]
+    kept = everything + cut_short
+    assert {
+        t['topic_metadata']['name']: t['message_count'] for t in bag['topics_with_message_count']
+    } == {topic: sum(1 for t, _, _ in kept if t == topic) for topic, _, _ in kept}
+    with AnyReader([repaired]) as reader:
+        assert reader.message_count == len(kept)
+        assert reader.start_time == min(t for _, t, _ in kept)
+        assert reader.end_time == max(t for _, t, _ in kept) + 1  # rosbags: one past the last
+    assert (folder / 'rig_1.mcap').stat().st_size == 449000, 'the source is only read'
+    assert not (folder / 'metadata.yaml').exists()

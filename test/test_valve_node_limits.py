@@ -21,6 +21,7 @@ the reference parameters at the steady state of 5 L/min and waits only on condit
 
 import math
 import re
+import time
 
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -103,23 +104,31 @@ def test_absurd_flows_are_rejected_counted_and_never_applied(valve):
     assert valve.first_after(reset_ns(response))[1] - AMBIENT == pytest.approx(expected, rel=1e-6)
 
 
-def test_overpressure_holds_the_state_keeps_the_operators_changes_and_refuses_a_reset(valve):
+@pytest.mark.parametrize('flow', [0.05, 1.0])
+def test_overpressure_holds_the_state_keeps_the_operators_changes_and_refuses_a_reset(
+    valve, flow
+):
     """
     A preset change, then a flow the valve cannot relieve: an overpressure alarm, no roll-back.
 
-    The changes were applied well before the failure (beyond the trial window), so
-    neither caused it: both stay. The node halts, publishes its last good state with
-    ERROR, refuses a reset to an impossible state and resumes on a new valid flow.
+    max_inlet_flow is lifted above the flow, so the input takes it and burst_pressure
+    alone guards the state. The changes were applied well before the failure (beyond
+    the trial window), so neither caused it: both stay. The node halts, publishes its
+    last good state with ERROR, refuses a reset to the steady state of that flow (an
+    impossible state) and resumes on a new valid flow.
     """
     assert valve.set_parameters(preset_pressure=6.5e6)[0].successful
-    assert valve.set_parameters(max_inlet_flow=0.1)[0].successful
+    assert valve.set_parameters(max_inlet_flow=2 * flow)[0].successful
     valve.wait_for_new_samples(100)  # 100 ms: far beyond the 20 ms trial window
-    valve.send_flow(0.05)
+    valve.send_flow(flow)
     alarm = counters(valve, lambda d: d['halted'] == 'true', 'the model halted')
     assert alarm['level'] == 2 and 'overpressure' in alarm['message'], alarm['message']
     assert int(alarm['overpressures']) >= 1 and int(alarm['integration_failures']) == 0
     kept = valve.get_parameters('preset_pressure', 'max_inlet_flow')
-    assert kept == {'preset_pressure': pytest.approx(6.5e6, rel=1e-6), 'max_inlet_flow': 0.1}
+    assert kept == {
+        'preset_pressure': pytest.approx(6.5e6, rel=1e-6),
+        'max_inlet_flow': 2 * flow,
+    }
     failure = alarm['last_integration_failure']
     failed_ns = round(float(re.search(r'at t = ([0-9.]+) s', failure)[1]) * 1e9)
     rows = valve.pressures['supply_pressure']
@@ -131,6 +140,7 @@ def test_overpressure_holds_the_state_keeps_the_operators_changes_and_refuses_a_
     assert held.pop() - AMBIENT <= load_parameters()[0]['burst_pressure']
     response = call_reset(valve)
     assert not response.success and 'overpressure' in response.message, response.message
+    assert f'steady state at {flow:g} m^3/s is refused' in response.message, response.message
     valve.wait_for_new_samples(10)
     after = {p for stamp, p in supply_stamps_and_pressures(valve, 0) if stamp > failed_ns}
     assert len(after) == 1, 'the refused reset kept the state'
@@ -166,6 +176,23 @@ def test_a_flood_of_mixed_inputs_is_counted_message_by_message(valve):
         valve.wait_for(lambda: valve.applied[-1][1] == good, 'the last good value applied')
     finally:
         valve.node.destroy_publisher(publisher)
+
+
+def test_rejections_under_a_flood_are_warned_at_most_once_a_second(node, valve):
+    """A flood of bad flows for about 3 s: the rejection warning stays rate-limited."""
+    _, _, log = node
+    before = log.read_text().count('inlet_flow message(s) rejected since the last report')
+    rejected_before = int(counters(valve)['rejected_inputs'])
+    started = time.monotonic()
+    while time.monotonic() - started < 3.0:
+        for _ in range(100):
+            valve.send_flow(math.nan)
+    flooded_s = time.monotonic() - started
+    counters(
+        valve, lambda d: int(d['rejected_inputs']) > rejected_before + 100, 'rejections counted'
+    )
+    warnings = log.read_text().count('inlet_flow message(s) rejected since the last report')
+    assert 1 <= warnings - before <= math.ceil(flooded_s) + 2, log.read_text()[-3000:]
 
 
 @pytest.mark.parametrize('flow', [1e-15, 1e-12, 1e-9])

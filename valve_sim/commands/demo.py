@@ -34,7 +34,6 @@ from pathlib import Path
 import re
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -77,17 +76,19 @@ def start_nodes(folder, foxglove_port=None):
 
     foxglove_port: valve_node serves its live view there. Returns {name: Popen}.
     """
-    arguments = {
-        'valve_node': [] if foxglove_port is None else ['--foxglove', str(foxglove_port)],
-        'analyser_node': ['--ros-args', '-p', f'output_dir:={folder}'],
+    from valve_sim.ros import node_command
+
+    commands = {
+        'valve_node': node_command(
+            'valve_node', [] if foxglove_port is None else ['--foxglove', str(foxglove_port)]
+        ),
+        'analyser_node': node_command('analyser_node', parameters={'output_dir': folder}),
     }
     processes = {}
     for name in NODES:
         with open(folder / f'{name}.log', 'wb') as log:
             processes[name] = subprocess.Popen(
-                [sys.executable, '-m', f'valve_sim.ros.{name}', *arguments[name]],
-                stdout=log,
-                stderr=subprocess.STDOUT,
+                commands[name], stdout=log, stderr=subprocess.STDOUT
             )
     return processes
 

@@ -21,13 +21,12 @@ copy holds every schema, channel, message, metadata and attachment record still
 in the file (those of a chunk cut short too, when it is uncompressed), with
 chunk and message indexes, statistics and summary, so any MCAP reader opens it.
 The source is only read. A rosbag2 bag folder is repaired file by file into a
-new folder.
+new folder, with its metadata.yaml (as `ros2 bag reindex` writes it).
 """
 
 from pathlib import Path
 
-from valve_sim.recording.recovery import repair
-from valve_sim.recording.rosbag2_metadata import bag_files, METADATA_FILE
+from valve_sim.recording.recovery import repair, repair_folder
 
 
 def add_arguments(parser):
@@ -56,11 +55,7 @@ def run(args):
     if not Path(args.bag).is_dir():
         print(repair(args.bag, output).summary())
         return 0
-    output.mkdir(parents=True, exist_ok=True)
-    for file in bag_files(args.bag):
-        print(repair(file, output / file.name).summary())
-    print(
-        f'{output} has no {METADATA_FILE}: open its files directly, or let rosbag2 write one '
-        f'(ros2 bag reindex {output} mcap)'
-    )
+    for report in repair_folder(args.bag, output):
+        print(report.summary())
+    print(f'wrote {output}, a bag folder with its metadata.yaml')
     return 0

@@ -346,7 +346,7 @@ PARAMETERS = (
         'q_in,max',
         'm^3/s',
         1e-6,
-        0.1,
+        10.0,  # up to 6e5 L/min: a bench may lift the input limit and leave burst_pressure
         'largest inlet flow the valve accepts; a larger one is rejected as input',
         OURS,
     ),

@@ -252,11 +252,12 @@ class BagWriter:
 
     def metadata(self):
         """Return the rosbag2 BagMetadata (a dict) of what was written so far."""
+        topics = [
+            (name, type_name, rosbag2_metadata.qos_profiles(offers), type_hash, messages)
+            for name, type_name, offers, type_hash, messages in self._topics.values()
+        ]
         return rosbag2_metadata.bag_metadata(
-            self.path.name,
-            [tuple(topic) for topic in self._topics.values()],
-            *self._log_times,
-            custom_data=self._custom_data,
+            [(self.path.name, topics, *self._log_times)], custom_data=self._custom_data
         )
 
     def _write_metadata(self):

@@ -23,7 +23,8 @@ record, keeps every schema, channel, message, metadata and attachment it can
 (the records of a chunk cut short too, if the chunk is uncompressed, as
 rosbag2's and ours are), and writes them to a new, complete MCAP file: chunked,
 with message indexes, chunk indexes, statistics and summary. One record is in
-memory at a time.
+memory at a time. repair_folder() repairs a rosbag2 bag folder file by file and
+writes the new folder's metadata.yaml, as `ros2 bag reindex` does.
 """
 
 from dataclasses import dataclass
@@ -39,6 +40,8 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
+from valve_sim.recording import rosbag2_metadata
+import yaml
 
 
 MAGIC = b'\x89MCAP0\r\n'
@@ -207,7 +210,14 @@ def diagnose(path):
 
 @dataclass(frozen=True)
 class RepairReport:
-    """What repair() kept: messages per topic, and what was wrong with the source."""
+    """
+    What repair() kept, and what was wrong with the source.
+
+    topics: {topic: messages kept}; topic_metadata: [(topic, type, offered QoS
+    profiles, type hash, messages)] as rosbag2_metadata.bag_metadata() takes them;
+    start_ns, end_ns: the first and last receive time kept [ns]; custom_data: the
+    source's rosbag2 custom data (None without).
+    """
 
     source: Path
     target: Path
@@ -215,6 +225,10 @@ class RepairReport:
     complete_chunks: int
     partial_chunk_messages: int
     damage: str
+    topic_metadata: list
+    start_ns: int
+    end_ns: int
+    custom_data: dict = None
 
     @property
     def messages(self):
@@ -257,31 +271,89 @@ def repair(source, target):
     with stream:
         writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
         writer.start(profile=header.profile, library=header.library)
-        topics = _copy(records, writer)
+        copied = _Copy(writer)
+        for record in records:
+            copied.add(record)
         writer.finish()
     return RepairReport(
-        source, target, topics, scan.complete_chunks, scan.partial_chunk_messages, scan.damage
+        source,
+        target,
+        {topic: topic_metadata[4] for topic, topic_metadata in copied.topics.items()},
+        scan.complete_chunks,
+        scan.partial_chunk_messages,
+        scan.damage,
+        [tuple(topic_metadata) for topic_metadata in copied.topics.values()],
+        *copied.log_times,
+        copied.custom_data,
     )
 
 
-def _copy(records, writer):
-    """Write the records, each schema and channel once; return the message count per topic."""
-    schemas, channels, topics = {0: 0}, {}, {}
-    for record in records:
-        if isinstance(record, Schema) and record.id not in schemas:
-            schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
-        elif isinstance(record, Channel) and record.id not in channels:
-            channels[record.id] = (
+def repair_folder(source, target):
+    """
+    Repair every MCAP file of the bag folder source into the new folder target.
+
+    Writes target/metadata.yaml for the repaired files, as `ros2 bag reindex` does.
+    Returns the RepairReports, one per file in the bag's order.
+    """
+    target = Path(target)
+    files = rosbag2_metadata.bag_files(source)
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputFileError(f'cannot create {target}: {error.strerror}') from error
+    reports = [repair(file, target / file.name) for file in files]
+    metadata = rosbag2_metadata.bag_metadata(
+        [(r.target.name, r.topic_metadata, r.start_ns, r.end_ns) for r in reports],
+        custom_data=next((r.custom_data for r in reports if r.custom_data), None),
+    )
+    rosbag2_metadata.write_metadata_file(target, metadata)
+    return reports
+
+
+class _Copy:
+    """
+    Writes records to a Writer, each schema and channel once.
+
+    Notes per topic [topic, type, offered QoS profiles, type hash, messages], the
+    span of receive times and the rosbag2 custom data, for the bag's metadata.
+    """
+
+    def __init__(self, writer):
+        self.writer = writer
+        self.schemas = {0: (0, '')}  # source id -> (target id, type name)
+        self.channels = {}  # source id -> (target id, topic)
+        self.topics = {}
+        self.log_times = [rosbag2_metadata.NOT_STARTED_NS, 0]
+        self.custom_data = None
+
+    def add(self, record):
+        writer = self.writer
+        if isinstance(record, Schema) and record.id not in self.schemas:
+            self.schemas[record.id] = (
+                writer.register_schema(record.name, record.encoding, record.data),
+                record.name,
+            )
+        elif isinstance(record, Channel) and record.id not in self.channels:
+            schema_id, type_name = self.schemas.get(record.schema_id, (0, ''))
+            metadata = dict(record.metadata)
+            self.channels[record.id] = (
                 writer.register_channel(
-                    record.topic,
-                    record.message_encoding,
-                    schemas.get(record.schema_id, 0),
-                    dict(record.metadata),
+                    record.topic, record.message_encoding, schema_id, metadata
                 ),
                 record.topic,
             )
-        elif isinstance(record, Message) and record.channel_id in channels:
-            channel_id, topic = channels[record.channel_id]
+            self.topics.setdefault(
+                record.topic,
+                [
+                    record.topic,
+                    type_name,
+                    _profiles(metadata.get('offered_qos_profiles', '')),
+                    metadata.get('topic_type_hash', ''),
+                    0,
+                ],
+            )
+        elif isinstance(record, Message) and record.channel_id in self.channels:
+            channel_id, topic = self.channels[record.channel_id]
             writer.add_message(
                 channel_id,
                 log_time=record.log_time,
@@ -289,11 +361,33 @@ def _copy(records, writer):
                 publish_time=record.publish_time,
                 sequence=record.sequence,
             )
-            topics[topic] = topics.get(topic, 0) + 1
+            self.topics[topic][4] += 1
+            self.log_times[0] = min(self.log_times[0], record.log_time)
+            self.log_times[1] = max(self.log_times[1], record.log_time)
         elif isinstance(record, Metadata):
             writer.add_metadata(record.name, dict(record.metadata))
+            if record.name == rosbag2_metadata.RECORD_NAME:
+                self.custom_data = _custom_data(record.metadata) or self.custom_data
         elif isinstance(record, Attachment):
             writer.add_attachment(
                 record.create_time, record.log_time, record.name, record.media_type, record.data
             )
-    return topics
+
+
+def _profiles(text):
+    """Return the offered QoS profiles of a channel's metadata (YAML), [] if none is readable."""
+    try:
+        profiles = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return []
+    return profiles if isinstance(profiles, list) else []
+
+
+def _custom_data(metadata):
+    """custom_data of a rosbag2 Metadata record's serialized BagMetadata, or None."""
+    try:
+        bag = yaml.safe_load(metadata.get(rosbag2_metadata.RECORD_KEY, ''))
+    except yaml.YAMLError:
+        return None
+    custom_data = bag.get('custom_data') if isinstance(bag, dict) else None
+    return custom_data if isinstance(custom_data, dict) else None

@@ -77,21 +77,32 @@ def qos_profiles(offers):
     ]
 
 
-def bag_metadata(file_name, topics, start_ns, end_ns, custom_data=None):
+def bag_metadata(files, custom_data=None):
     """
-    Return the BagMetadata of a one-file bag, as YAML::convert<BagMetadata>::encode orders it.
+    Return the BagMetadata of a bag, as YAML::convert<BagMetadata>::encode orders it.
 
-    topics: [(name, type, offers, type hash, message count)]; start_ns, end_ns: the
-    first and last receive time [ns] (start NOT_STARTED_NS while there is none).
+    files: [(file name, topics, start_ns, end_ns)] in the bag's order; topics: [(name,
+    type, QoS profiles as qos_profiles() encodes them, type hash, message count)];
+    start_ns, end_ns: the file's first and last receive time [ns] (start NOT_STARTED_NS
+    while there is none). A topic in several files is listed once, with its total.
     """
-    count = sum(topic[4] for topic in topics)
-    duration = {'nanoseconds': max(end_ns - start_ns, 0) if count else 0}
-    starting_time = {'nanoseconds_since_epoch': start_ns if count else NOT_STARTED_NS}
+    topics, entries, spans = {}, [], []
+    for file_name, file_topics, start_ns, end_ns in files:
+        for name, type_name, profiles, type_hash, messages in file_topics:
+            topics.setdefault(name, [type_name, profiles, type_hash, 0])[3] += messages
+        count = sum(topic[4] for topic in file_topics)
+        entries.append({'path': file_name, **_span(count, start_ns, end_ns)})
+        if count:
+            spans.append((start_ns, end_ns))
+    count = sum(topic[3] for topic in topics.values())
+    span = _span(
+        count, min((s for s, _ in spans), default=0), max((e for _, e in spans), default=0)
+    )
     return {
         'version': VERSION,
         'storage_identifier': STORAGE_IDENTIFIER,
-        'duration': duration,
-        'starting_time': starting_time,
+        'duration': span['duration'],
+        'starting_time': span['starting_time'],
         'message_count': count,
         'topics_with_message_count': [
             {
@@ -99,26 +110,28 @@ def bag_metadata(file_name, topics, start_ns, end_ns, custom_data=None):
                     'name': name,
                     'type': type_name,
                     'serialization_format': 'cdr',
-                    'offered_qos_profiles': qos_profiles(offers),
+                    'offered_qos_profiles': profiles,
                     'type_description_hash': type_hash,
                 },
                 'message_count': messages,
             }
-            for name, type_name, offers, type_hash, messages in topics
+            for name, (type_name, profiles, type_hash, messages) in topics.items()
         ],
         'compression_format': '',
         'compression_mode': '',
-        'relative_file_paths': [file_name],
-        'files': [
-            {
-                'path': file_name,
-                'starting_time': starting_time,
-                'duration': duration,
-                'message_count': count,
-            }
-        ],
+        'relative_file_paths': [entry['path'] for entry in entries],
+        'files': entries,
         'custom_data': dict(custom_data) if custom_data else None,
         'ros_distro': ros_distro(),
+    }
+
+
+def _span(count, start_ns, end_ns):
+    """starting_time, duration and message_count of count messages received start_ns..end_ns."""
+    return {
+        'starting_time': {'nanoseconds_since_epoch': start_ns if count else NOT_STARTED_NS},
+        'duration': {'nanoseconds': max(end_ns - start_ns, 0) if count else 0},
+        'message_count': count,
     }
 
 

@@ -36,6 +36,20 @@ import threading
 NODE_PROGRAMS = ('valve_node', 'analyser_node')
 
 
+def node_command(program, options=(), parameters=None, ros_args=()):
+    """
+    Return the command that runs a node program of NODE_PROGRAMS with this Python.
+
+    python -m valve_sim.ros.PROGRAM OPTIONS [--ros-args -p NAME:=VALUE ... ROS_ARGS];
+    parameters: {name: value} set at start.
+    """
+    ros = [f'{name}:={value}' for name, value in (parameters or {}).items()]
+    ros = [item for assignment in ros for item in ('-p', assignment)] + list(ros_args)
+    return [sys.executable, '-m', f'valve_sim.ros.{program}', *options] + (
+        ['--ros-args', *ros] if ros else []
+    )
+
+
 def _exit_quietly(number, _frame):
     """
     End the process at once, as a shell expects after SIGINT (exit code 130).

@@ -13,18 +13,24 @@
 # limitations under the License.
 
 """
-valve_node's inlet-flow input: every received message counted, the last good one kept.
+valve_node's inlet-flow input: every message taken is counted, the last good one kept.
 
-The subscription callback only calls offer_cdr() on the raw message: the double
-read from the CDR bytes (no message object), a check against the physical limits
-(valve_sim.core.limits), a counter and, for a good value, a few assignments; not
-even the clock is read (the next tick stamps the arrival). The tick uses the last
-good value; a flood of messages costs the tick nothing but these callbacks, and
-nothing is logged per message: report() gives the rejections since the last
-report, for one rate-limited warning.
+The node takes inlet_flow messages itself, at the start of each tick, from a
+subscription no executor runs (ReliefValveNode.subscriptions leaves it out): a flood
+never wakes the executor, so it cannot queue callbacks ahead of the tick timer.
+take() reads at most a few queued messages per tick, and none after its deadline:
+each take locks the middleware's reader, which a flood keeps busy, so the tick
+bounds how often it waits for that lock. Each message is checked as CDR bytes (the
+double read from them, no message object) against the physical limits
+(valve_sim.core.limits) and counted as accepted or rejected; only the last good
+value matters to the tick. What the middleware dropped before the node took it
+shows, for a single publisher, as gaps in its publication sequence numbers (lost).
+Nothing is logged per message: report() gives the rejections since the last report,
+for one rate-limited warning.
 """
 
 import struct
+import time
 
 from valve_sim.core.limits import inlet_flow_problem
 
@@ -38,8 +44,10 @@ class InletFlowInput:
     The inlet flow [m^3/s]: the last good value and counts of what was received.
 
     flow: the flow held until a good message comes; max_inlet_flow [m^3/s]: the limit.
-    accepted and rejected count every message offered; changed is set by a good value
-    that differs from the one held (cleared by the node when it used it).
+    accepted and rejected count every message offered, lost the messages a single
+    publisher sent that never came (single_publisher, set by the node); changed is
+    set by a good value that differs from the one held (cleared by the node when it
+    used it).
     """
 
     def __init__(self, flow, max_inlet_flow):
@@ -47,11 +55,14 @@ class InletFlowInput:
         self.max_inlet_flow = max_inlet_flow
         self.accepted = 0
         self.rejected = 0
+        self.lost = 0
+        self.single_publisher = False
         self.changed = False
         self.received = False  # a good message came since the last stamp()
         self.received_ns = None  # clock time [ns] of the tick after the last good message
         self.last_rejection = ''
-        self._reported_rejected = 0
+        self.reported_rejected = 0  # rejected at the last report()
+        self._last_sequence = None
 
     def offer(self, flow):
         """Take a received value: keep it if it is a valid inlet flow, count it either way."""
@@ -74,6 +85,33 @@ class InletFlowInput:
             return False
         return self.offer(FLOAT64_CDR.unpack_from(data, CDR_HEADER)[0])
 
+    def take(self, subscription, limit, deadline_ns):
+        """
+        Take up to limit queued messages of subscription, none after deadline_ns.
+
+        subscription: an rclpy raw subscription that no executor runs; deadline_ns
+        [ns] on time.perf_counter_ns(). Returns how many were taken.
+        """
+        handle, message_type = subscription.handle, subscription.msg_type
+        taken = 0
+        with handle:
+            while taken < limit and time.perf_counter_ns() < deadline_ns:
+                message = handle.take_message(message_type, True)
+                if message is None:
+                    break
+                data, info = message
+                self._count_gap(info['publication_sequence_number'])
+                self.offer_cdr(data)
+                taken += 1
+        return taken
+
+    def _count_gap(self, sequence):
+        """Count the messages missing before this one, if they all came from one publisher."""
+        last = self._last_sequence
+        if self.single_publisher and last is not None and sequence is not None:
+            self.lost += max(sequence - last - 1, 0)
+        self._last_sequence = sequence
+
     def stamp(self, now_ns):
         """At a tick: a good message received since the last tick arrived by now_ns [ns]."""
         if self.received:
@@ -82,6 +120,6 @@ class InletFlowInput:
 
     def report(self):
         """Return (rejections since the last report, the last reason) and start a new count."""
-        new = self.rejected - self._reported_rejected
-        self._reported_rejected = self.rejected
+        new = self.rejected - self.reported_rejected
+        self.reported_rejected = self.rejected
         return new, self.last_rejection

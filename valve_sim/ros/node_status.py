@@ -41,8 +41,9 @@ class Counters:
     a long tick computed for more than half a period; a missed tick never ran (its time
     was integrated by the next one); skipped time was not integrated at all because
     the lag exceeded the catch-up limit. Every inlet_flow message received is an
-    accepted or a rejected input. An overpressure is a state beyond burst_pressure,
-    an integration failure a numerical divergence.
+    accepted or a rejected input; a lost input is one a single publisher sent that
+    never reached the node (a gap in its sequence numbers). An overpressure is a
+    state beyond burst_pressure, an integration failure a numerical divergence.
     """
 
     ticks: int = 0
@@ -53,10 +54,31 @@ class Counters:
     skipped_time_s: float = 0.0
     accepted_inputs: int = 0
     rejected_inputs: int = 0
+    lost_inputs: int = 0
     rejected_parameter_changes: int = 0
     integration_failures: int = 0
     overpressures: int = 0
     overpressure_alarms: int = 0
+
+
+class Throttle:
+    """
+    At most one event per interval_ns [ns] on the steady clock (time.monotonic_ns).
+
+    Timers that fell behind can fire several times in a row: a throttle on the
+    steady clock keeps "once a second" to once a second.
+    """
+
+    def __init__(self, interval_ns):
+        self.interval_ns = interval_ns
+        self._last_ns = None
+
+    def due(self, steady_now_ns):
+        """Return True, and start a new interval, if the last event is an interval old."""
+        if self._last_ns is not None and steady_now_ns - self._last_ns < self.interval_ns:
+            return False
+        self._last_ns = steady_now_ns
+        return True
 
 
 @dataclass(frozen=True)

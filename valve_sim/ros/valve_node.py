@@ -21,7 +21,8 @@ Topic and service names are relative, so namespaces and remapping work:
                                                             max_inlet_flow; best effort
                                                             (hears reliable and
                                                             SensorDataQoS publishers) or
-                                                            reliable: inlet_flow_reliability
+                                                            reliable: inlet_flow_reliability;
+                                                            taken by the tick itself
   pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
                                 sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
                                                             gauge pressure + ambient_pressure
@@ -112,7 +113,7 @@ from valve_sim.ros.fault_injection import (
     split_changes,
 )
 from valve_sim.ros.inlet_input import InletFlowInput
-from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus
+from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus, Throttle
 from valve_sim.ros.ros_parameters import (
     declare_double,
     integers_as_doubles,
@@ -131,16 +132,25 @@ YOUNG_GENERATIONS = (
 STATE_QUEUE_DEPTH = (
     1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
 )
-INPUT_QUEUE_DEPTH = 1000  # inlet_flow messages held for the callback: a 1 s burst at 1 kHz
+# A tick takes at most INPUTS_PER_TICK inlet_flow messages, and none after INPUT_SHARE of
+# its period: under a flood each take waits for the middleware's busy reader lock.
+INPUTS_PER_TICK = 10
+INPUT_SHARE = 0.2
+RELIABLE_INPUT_DEPTH = 1000  # a 1 s burst at 1 kHz
 # inlet_flow_reliability: best effort by default, as REP 2003 asks of sensor-data subscribers:
 # it matches reliable and best-effort (SensorDataQoS) publishers alike (a reliable subscription
-# never hears the latter), but the middleware may drop messages in a flood before the callback
-# counts them; reliable delivers every message of a reliable publisher.
-INLET_FLOW_RELIABILITY = {
-    'best_effort': ReliabilityPolicy.BEST_EFFORT,
-    'reliable': ReliabilityPolicy.RELIABLE,
+# never hears the latter). Its queue keeps the last INPUTS_PER_TICK messages, all that the next
+# tick takes, so the value applied is never older than the tick; a flood beyond that is dropped
+# by the middleware (counted as lost for a single publisher). Reliable keeps a burst for the
+# ticks to take and count, at the price of up to RELIABLE_INPUT_DEPTH / INPUTS_PER_TICK ticks
+# of delay while a reliable flood keeps it full (a deep full queue also costs the middleware
+# more per message).
+INLET_FLOW_QOS = {
+    'best_effort': QoSProfile(depth=INPUTS_PER_TICK, reliability=ReliabilityPolicy.BEST_EFFORT),
+    'reliable': QoSProfile(depth=RELIABLE_INPUT_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
 }
 WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
+HOUSEKEEPING_INTERVAL_NS = 500_000_000  # calls of the 1 Hz timer closer than this: a backlog
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 VALVE_SPECS = {
     **SPECS,
@@ -155,6 +165,7 @@ class ReliefValveNode(Node):
     """The valve model on a timer at publish_rate, fed by inlet_flow, publishing its state."""
 
     def __init__(self, **kwargs):
+        self._inlet_subscription = None  # taken by the tick, left out of subscriptions
         super().__init__(NODE_NAME, **kwargs)
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
@@ -173,12 +184,15 @@ class ReliefValveNode(Node):
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
         self.input_stale = False
-        self._lag_warned = (0, 0.0)  # (steady time [ns], skipped_time_s) of the last lag warning
+        self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
+        self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
+        self._rejection_warnings = Throttle(WARNING_INTERVAL_NS)
+        self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
         self._previous_slot_ns = None
         self._create_outputs()
-        self.create_subscription(
+        self._inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
@@ -207,6 +221,17 @@ class ReliefValveNode(Node):
         """Return the last good inlet flow [m^3/s]: what the next tick applies."""
         return self.input.flow
 
+    @property
+    def subscriptions(self):
+        """
+        Return the subscriptions an executor runs: all but inlet_flow's, the tick takes it.
+
+        Both executors ask the node for these (the EventsExecutor ignores callback
+        groups), so a flood of inlet_flow never wakes the executor and never queues
+        callbacks ahead of the tick (_take_inputs).
+        """
+        return (s for s in super().subscriptions if s is not self._inlet_subscription)
+
     # --- parameters -------------------------------------------------------------------------
 
     def _declare_parameters(self):
@@ -231,18 +256,19 @@ class ReliefValveNode(Node):
             name='inlet_flow_reliability',
             description=(
                 "inlet_flow subscription: 'best_effort' (default; hears every publisher, "
-                "may lose messages in a flood) or 'reliable' (reliable publishers only; "
-                'every message delivered and counted)'
+                f'keeps the last {INPUTS_PER_TICK} messages for the next tick) or '
+                "'reliable' (reliable publishers only; keeps a burst of "
+                f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
             ),
             read_only=True,
         )
         choice = self.declare_parameter('inlet_flow_reliability', 'best_effort', descriptor).value
-        if choice not in INLET_FLOW_RELIABILITY:
+        if choice not in INLET_FLOW_QOS:
             raise ParameterError(
-                f"inlet_flow_reliability must be one of {', '.join(INLET_FLOW_RELIABILITY)}, "
+                f"inlet_flow_reliability must be one of {', '.join(INLET_FLOW_QOS)}, "
                 f'got {choice!r}'
             )
-        return QoSProfile(depth=INPUT_QUEUE_DEPTH, reliability=INLET_FLOW_RELIABILITY[choice])
+        return INLET_FLOW_QOS[choice]
 
     def _declare_frame_prefix(self):
         """Declare frame_prefix (read-only): the pressures' frames are it + their place."""
@@ -410,6 +436,7 @@ class ReliefValveNode(Node):
         """Advance the model to the clock and publish its state."""
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
+        self._take_inputs(started)
         self.input.stamp(now_ns)
         if self.model.time_ns is None or now_ns < self.model.time_ns:
             self._start(now_ns)
@@ -470,15 +497,13 @@ class ReliefValveNode(Node):
 
     def _warn_lag(self, skipped_ns):
         """Warn of skipped lag at most once a second, with what was skipped since and in total."""
-        steady_ns = time.monotonic_ns()
-        warned_ns, warned_total_s = self._lag_warned
-        if steady_ns - warned_ns < WARNING_INTERVAL_NS:
+        if not self._lag_warnings.due(time.monotonic_ns()):
             return
         total_s = self.status.counters.skipped_time_s
-        self._lag_warned = (steady_ns, total_s)
+        since_s, self._lag_warned_total_s = total_s - self._lag_warned_total_s, total_s
         self.get_logger().warn(
             f'{skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit '
-            f'{CATCH_UP_LIMIT_PERIODS} tick periods); {total_s - warned_total_s:g} s skipped '
+            f'{CATCH_UP_LIMIT_PERIODS} tick periods); {since_s:g} s skipped '
             f'since the last warning, {total_s:g} s in '
             f'{self.status.counters.skipped_ticks} tick periods since start'
         )
@@ -605,8 +630,17 @@ class ReliefValveNode(Node):
             f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
         )
 
+    def _take_inputs(self, started_ns):
+        """Take queued inlet_flow messages: INPUTS_PER_TICK, within INPUT_SHARE of a period."""
+        self.input.take(
+            self._inlet_subscription,
+            INPUTS_PER_TICK,
+            started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns,
+        )
+
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
+        self._take_inputs(time.perf_counter_ns())  # a flow sent just before the reset counts
         try:
             self.model.reset(self.inlet_flow)
         except SteadyStateError as error:
@@ -631,9 +665,14 @@ class ReliefValveNode(Node):
 
         Run from this timer's callback it could delay a tick: it takes up to about a
         millisecond. Without ticks (none since the last housekeeping, or none for a
-        second to run pending housekeeping: none yet, or a paused /clock) it runs at once.
+        second to run pending housekeeping: none yet, or a paused /clock) it runs at once,
+        and takes the inlet_flow messages no tick took. Calls that a busy executor queued
+        back to back count once (the steady clock decides).
         """
+        if not self._housekeeping_calls.due(time.monotonic_ns()):
+            return
         if self._housekeeping_due or self.status.counters.ticks == self._ticks_at_housekeeping:
+            self._take_inputs(time.perf_counter_ns())
             self._housekeeping()
         else:
             self._housekeeping_due = True
@@ -647,16 +686,25 @@ class ReliefValveNode(Node):
         """
         self._housekeeping_due = False
         self._ticks_at_housekeeping = self.status.counters.ticks
+        self._count_inputs()
         self._warn_rejected_inputs()
         self._publish_diagnostics()
         gc.collect(YOUNG_GENERATIONS)
 
+    def _count_inputs(self):
+        """Copy the input's counts to the diagnostics; note if one publisher sends inlet_flow."""
+        counters = self.status.counters
+        counters.accepted_inputs = self.input.accepted
+        counters.rejected_inputs = self.input.rejected
+        counters.lost_inputs = self.input.lost
+        self.input.single_publisher = self._inlet_subscription.get_publisher_count() == 1
+
     def _warn_rejected_inputs(self):
-        """Once a second at most: how many inlet_flow messages were rejected, and why."""
-        self.status.counters.rejected_inputs = self.input.rejected
-        self.status.counters.accepted_inputs = self.input.accepted
-        new, reason = self.input.report()
-        if new:
+        """At most once a second (steady clock): how many inlet_flow messages were rejected."""
+        if self.input.rejected == self.input.reported_rejected:
+            return
+        if self._rejection_warnings.due(time.monotonic_ns()):
+            new, reason = self.input.report()
             self.get_logger().warn(
                 f'{new} inlet_flow message(s) rejected since the last report '
                 f'({self.input.rejected} since start), the last: {reason}; '

@@ -1,0 +1,144 @@
+#!/usr/bin/env python3
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What the node benchmarks share: their processes, the timer floor, options and output.
+
+Run as a script, it is the timer floor: python bench/common.py FILE (see
+run_timer_floor).
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+
+REPO = Path(__file__).resolve().parent.parent
+PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
+
+
+def arguments(description, json_name, duration_help):
+    """Return an ArgumentParser with --duration [s] (default 60) and --json (out/json_name)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument(
+        '--duration', type=float, default=60.0, help=f'{duration_help} [s] (default 60)'
+    )
+    parser.add_argument(
+        '--json', type=Path, default=REPO / 'out' / json_name, help='JSON output file'
+    )
+    return parser
+
+
+def isolated_environment():
+    """
+    Claim a ROS domain of this run's own (discovery on localhost); return the child env.
+
+    The children import valve_sim from this checkout; this process's environment gets
+    the same settings.
+    """
+    from valve_sim.ros.isolation import claim_domain
+
+    claim_domain(keep_existing=False)
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])),
+    )
+    os.environ.update(env)
+    return env
+
+
+def write_figures(figures, table, path):
+    """Print the table and write the figures as JSON to path."""
+    print(table)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(figures, indent=2, default=float) + '\n')
+    print(f'figures written to {path}')
+
+
+def start(command, env):
+    return subprocess.Popen(command, env=env, cwd=REPO)
+
+
+def stop(process):
+    """SIGINT the process and return its exit code (killed after 30 s)."""
+    process.send_signal(signal.SIGINT)
+    try:
+        return process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        return process.wait()
+
+
+class TimerFloor:
+    """
+    The timer floor in its own process, from construction until stop().
+
+    scheduler: a command prefix such as chrt.
+    """
+
+    def __init__(self, env, scheduler=()):
+        self.path = REPO / 'out' / f'timer_floor_{os.getpid()}_{time.monotonic_ns()}.json'
+        self.path.parent.mkdir(exist_ok=True)
+        self.process = start([*scheduler, sys.executable, __file__, str(self.path)], env)
+        self.exit_code = None
+
+    def stop(self):
+        """Stop it; return {ticks, late, missed, on_time_percent}."""
+        self.exit_code = stop(self.process)
+        counts = json.loads(self.path.read_text())
+        self.path.unlink()
+        return {**counts, 'on_time_percent': on_time_percent(**counts)}
+
+
+def run_timer_floor(path):
+    """
+    Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
+
+    Its ticks are counted as valve_node counts its ticks.
+    Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
+    A tick is late if it starts more than LATE_FRACTION of a period after its slot;
+    slots that passed while it was late are missed (the loop goes on at the next slot).
+    """
+    from valve_sim.ros.node_status import LATE_FRACTION
+
+    stopped = []
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: stopped.append(number))
+    counts = {'ticks': 0, 'late': 0, 'missed': 0}
+    slot = time.monotonic_ns() + PERIOD_NS
+    while not stopped:
+        delay = slot - time.monotonic_ns()
+        if delay > 0:
+            time.sleep(delay / 1e9)
+        lateness = time.monotonic_ns() - slot
+        counts['ticks'] += 1
+        counts['late'] += lateness > LATE_FRACTION * PERIOD_NS
+        counts['missed'] += lateness // PERIOD_NS
+        slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
+    Path(path).write_text(json.dumps(counts))
+
+
+def on_time_percent(ticks, late, missed):
+    """On-time ticks as valve_node's diagnostics count them: (ticks - late) / (ticks + missed)."""
+    return 100.0 * (ticks - late) / (ticks + missed) if ticks + missed else float('nan')
+
+
+if __name__ == '__main__':
+    sys.exit(run_timer_floor(sys.argv[1]))
