@@ -81,6 +81,26 @@ def batch_path(params_list):
     return [measure(waveforms) for waveforms in simulate_batch(params_list, SCENARIO)]
 
 
+def packed_instructions():
+    """
+    Count rk4_lanes' vector instructions: {instruction: count} on 4- or 8-double registers.
+
+    Compiled afresh from its source (numba does not show the machine code of a kernel
+    loaded from its disk cache), for the signature simulate_batch used.
+    """
+    import re
+
+    from numba import njit
+    from valve_sim.core import integrator
+
+    signature = integrator.rk4_lanes.signatures[0]
+    fresh = njit(nogil=True, error_model='numpy')(integrator.rk4_lanes.py_func)
+    fresh.compile(signature)
+    packed = r'\b(v(?:sqrt|div|mul|add|sub)pd)\s[^\n]*%[yz]mm'
+    found = re.findall(packed, fresh.inspect_asm(signature))
+    return {name: found.count(name) for name in sorted(set(found))}
+
+
 def _process_cpu_seconds():
     import psutil
 
@@ -123,6 +143,11 @@ def main():
     parser.add_argument('--workers', type=int, default=os.cpu_count() or 1)
     parser.add_argument('--seed', type=int, default=12)
     parser.add_argument('--json', metavar='FILE', help='also write the results as JSON')
+    parser.add_argument(
+        '--simd',
+        action='store_true',
+        help='also compile rk4_lanes afresh (about a minute) and count its vector instructions',
+    )
     args = parser.parse_args()
     reference, _ = load_parameters()
     preset = cracking_pressure(reference)
@@ -191,6 +216,12 @@ def main():
         f'idle cores that is {(worker_cpu + client_cpu) / args.workers:.1f} s of computing'
     )
     print(f'load average at the end (other processes share the cores): {result["load_average"]}')
+    if args.simd:
+        counts = result['rk4_lanes_vector_instructions'] = packed_instructions()
+        print(
+            'rk4_lanes vector instructions (4 or 8 doubles each): '
+            + ', '.join(f'{n} {name}' for name, n in counts.items())
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2) + '\n')
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.faults import FaultSet, HEALTHY
 from valve_sim.core.integrator import (
     advance,
     advance_lanes,
@@ -40,33 +41,40 @@ def test_lanes_give_exactly_the_single_run_kernel(reference):
     Each lane is bit-identical to advance() alone; a diverging lane leaves the others.
 
     The 3 MPa valve at 25 L/min needs split steps (test_model): that lane takes them
-    alone while the others run on together.
+    alone while the others run on together; so does a valve with faults (friction and
+    a leaking seat), whose terms the vectorised step leaves out. 18 valves: more than
+    one group of LANES.
     """
+    faults = FaultSet(
+        bearing_coulomb_friction=5.0, bearing_static_friction=8.0, seat_leakage_diameter=2e-4
+    )
     variants = [
-        reference,
-        scaled(reference, {'d_c': 10}),
-        with_preset_pressure(reference, 3e6),
-    ]
+        (reference, HEALTHY),
+        (with_preset_pressure(reference, 3e6), HEALTHY),
+        (reference, faults),
+    ] + [(scaled(reference, {'d_c': change}), HEALTHY) for change in np.linspace(-8, 8, 15)]
     flows = np.concatenate([np.full(300, 5.0), np.full(4700, 25.0)]) * LITRE_PER_MINUTE
-    starts = [steady_state(p, 5 * LITRE_PER_MINUTE) for p in variants]
+    starts = [steady_state(p, 5 * LITRE_PER_MINUTE) for p, _ in variants]
+    coefficient_sets = [coefficients(p, f) for p, f in variants]
     alone = []
-    for params, start in zip(variants, starts):
+    for c, start in zip(coefficient_sets, starts):
         state = start.copy()
-        alone.append((advance(state, flows, coefficients(params), 1e-5, record_every=7), state))
-    # A fourth lane whose supply chamber is absurdly stiff diverges at once.
+        alone.append((advance(state, flows, c, 1e-5, record_every=7), state))
+    # One more valve, whose supply chamber is absurdly stiff, diverges at once.
     broken = coefficients(reference)._replace(supply_compliance_inv=1e20)
     states = np.array(starts + [starts[0]])
     records, errors = advance_lanes(
-        states, flows, [coefficients(p) for p in variants] + [broken], 1e-5, record_every=7
+        states, flows, coefficient_sets + [broken], 1e-5, record_every=7
     )
-    c = coefficients(variants[2])
-    assert max(1e-5 * fastest_chamber_rate(s, c) for s in records[2]) > STEP_RATE_LIMIT
+    c = coefficient_sets[1]
+    assert max(1e-5 * fastest_chamber_rate(s, c) for s in records[1]) > STEP_RATE_LIMIT
+    assert not np.array_equal(records[2], records[0])  # the faults act
     for lane, (record, final) in enumerate(alone):
         assert errors[lane] is None
         assert np.array_equal(records[lane], record)
         assert np.array_equal(states[lane], final)
-    assert isinstance(errors[3], IntegrationError) and 'diverged' in str(errors[3])
-    assert np.array_equal(states[3], starts[0])  # a diverged lane is left as it was
+    assert isinstance(errors[-1], IntegrationError) and 'diverged' in str(errors[-1])
+    assert np.array_equal(states[-1], starts[0])  # a diverged lane is left as it was
 
 
 def _measures(waveforms, scenario):

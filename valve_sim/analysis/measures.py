@@ -152,13 +152,18 @@ def _settling_time(t, x, x_0, x_inf, t_step, width=None, signal='the main valve'
     # A later swing whose samples stay inside but whose peak leaves the band between
     # samples (seen at 1 kHz, not at 10 kHz) is an exit too: refine each later local
     # extreme by the parabola through it and its neighbours, as the overshoot peaks.
+    # A swing far inside cannot leave: the parabola through a local extreme d_1 and its
+    # neighbours d_0, d_2 (about evenly spaced) peaks at most (2 d_1 - d_0 - d_2) / 8
+    # above d_1, so only the extremes with d_1 + (2 d_1 - d_0 - d_2) >= band / 2 are fitted.
     deviation = np.abs(x - x_inf)
     band = SETTLING_BAND * width
-    for j in range(last + 2, len(x) - 1):
-        if deviation[j] >= deviation[j - 1] and deviation[j] >= deviation[j + 1]:
-            exit_time = _parabola_exit(t[j - 1:j + 2], deviation[j - 1:j + 2], band)
-            if exit_time is not None:
-                entry = exit_time
+    later = np.arange(last + 2, len(x) - 1)
+    before, here, after = deviation[later - 1], deviation[later], deviation[later + 1]
+    reach = here + (2.0 * here - before - after)
+    for j in later[(here >= before) & (here >= after) & (reach >= 0.5 * band)]:
+        exit_time = _parabola_exit(t[j - 1:j + 2], deviation[j - 1:j + 2], band)
+        if exit_time is not None:
+            entry = exit_time
     return entry - t_step, None
 
 

@@ -50,7 +50,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
-from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
+from valve_sim.core.steady_state import cracking_pressure, preset_preload
 
 
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
@@ -78,10 +78,13 @@ def evaluate_batch(cases):
         row = {'index': case['index']}
         try:
             params = validate(case['params'])
-            if case.get('preset_pressure') is not None:
-                params = with_preset_pressure(params, case['preset_pressure'])
+            if case.get('preset_pressure') is None:
+                cracking = cracking_pressure(params)
+            else:
+                preload, cracking = preset_preload(params, case['preset_pressure'])
+                params = {**params, 'pilot_spring_preload': preload}
             row['pilot_spring_preload'] = params['pilot_spring_preload']
-            row['cracking_pressure'] = cracking_pressure(params)
+            row['cracking_pressure'] = cracking
         except MODEL_ERRORS as error:
             rows[case['index']] = _failed(row, error)
             continue

@@ -29,11 +29,13 @@ A step whose stiffest chamber would put RK4 beyond its stability
 (model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
 the paper's operating points that never happens.
 
-rk4_lanes advances several independent valves (lanes: parameter sets and
-states) through the same inlet-flow schedule at once, stage by stage across
-the lanes, calling the same model.derivatives per lane in the same order of
-operations: its results are bit-identical to rk4_steps, but the processor
-overlaps the lanes' independent arithmetic, which makes a study's runs faster.
+One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
+model's derivatives() likewise), so that the compiler keeps a state in registers.
+rk4_steps takes it for one valve; rk4_lanes takes it for LANES independent valves
+(lanes: parameter sets and states) through the same inlet-flow schedule at once,
+in one loop over the lanes that the compiler vectorises (SIMD: four lanes per
+instruction on AVX2). The same function in the same order of operations: each
+lane's result is bit-identical to rk4_steps (no fast-math), docs/speed.md.
 """
 
 import numpy as np
@@ -51,6 +53,10 @@ from valve_sim.core.model import (
     Coefficients,
     derivatives,
     fastest_chamber_rate,
+    HEALTHY_TERMS,
+    P_C,
+    P_M,
+    P_P,
     P_S,
     X,
     X_DOT,
@@ -71,31 +77,32 @@ CROSSING_TOLERANCE = 1e-3
 # between: a chamber's rate changes with the flows and openings, over milliseconds, and
 # STEP_RATE_LIMIT keeps 28 % below RK4's limit; asking every step cost a third of the run.
 CHECK_EVERY = 10
+# Valves rk4_lanes advances together: a few vector registers' worth (4 doubles each).
+LANES = 16
 
 
 @jit
-def rest_on_stops(state, position, velocity, stroke):
+def rest_on_stops(position, velocity, stroke):
     """Inelastic contact: a body that passed its seat (0) or end stop (stroke) rests on it."""
-    if state[position] <= 0.0:
-        state[position] = 0.0
-        state[velocity] = max(state[velocity], 0.0)
-    elif state[position] >= stroke:
-        state[position] = stroke
-        state[velocity] = min(state[velocity], 0.0)
+    if position <= 0.0:
+        return 0.0, max(velocity, 0.0)
+    if position >= stroke:
+        return stroke, min(velocity, 0.0)
+    return position, velocity
 
 
 @jit
-def enforce_stops(state, c):
+def on_stops(state, c):
     """
-    Keep the valves between their seats and end stops, p_s at most the supply's limit.
+    Return state (an 8-tuple) with the valves between their seats and end stops.
 
     The supply's relief (supply_pressure_limit, model.derivatives) is a stop for p_s:
     a step that overshoots it ends on it.
     """
-    rest_on_stops(state, X, X_DOT, c.main_valve_stroke)
-    rest_on_stops(state, Y, Y_DOT, c.poppet_stroke)
-    if state[P_S] > c.supply_pressure_limit:
-        state[P_S] = c.supply_pressure_limit
+    x, x_dot = rest_on_stops(state[X], state[X_DOT], c.main_valve_stroke)
+    y, y_dot = rest_on_stops(state[Y], state[Y_DOT], c.poppet_stroke)
+    p_s = c.supply_pressure_limit if state[P_S] > c.supply_pressure_limit else state[P_S]
+    return p_s, state[P_M], state[P_P], state[P_C], x, x_dot, y, y_dot
 
 
 @jit
@@ -105,61 +112,87 @@ def splits_needed(state, c, step):
 
 
 @jit
-def rk4_step(state, q, c, h, k1, k2, k3, k4, stage):
-    """One classical RK4 step of size h [s] at inlet flow q, then the seats and stops."""
-    n = state.shape[0]
-    derivatives(state, q, c, k1)
-    for i in range(n):
-        stage[i] = state[i] + 0.5 * h * k1[i]
-    derivatives(stage, q, c, k2)
-    for i in range(n):
-        stage[i] = state[i] + 0.5 * h * k2[i]
-    derivatives(stage, q, c, k3)
-    for i in range(n):
-        stage[i] = state[i] + h * k3[i]
-    derivatives(stage, q, c, k4)
-    for i in range(n):
-        state[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-    enforce_stops(state, c)
+def moved(state, factor, rate):
+    """Return state + factor * rate, element by element (8-tuples)."""
+    return (
+        state[0] + factor * rate[0],
+        state[1] + factor * rate[1],
+        state[2] + factor * rate[2],
+        state[3] + factor * rate[3],
+        state[4] + factor * rate[4],
+        state[5] + factor * rate[5],
+        state[6] + factor * rate[6],
+        state[7] + factor * rate[7],
+    )
 
 
 @jit
-def rk4_steps(state, inlet_flows, c, step, record_every, record):
+def rk4_rate(k1, k2, k3, k4):
+    """Return RK4's weighted rate k1 + 2 k2 + 2 k3 + k4, element by element (8-tuples)."""
+    return (
+        k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0],
+        k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1],
+        k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2],
+        k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3],
+        k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4],
+        k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5],
+        k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6],
+        k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7],
+    )
+
+
+@jit
+def rk4_step(state, q, c, h):
+    """Return the state (an 8-tuple) after one classical RK4 step of size h [s] at inlet flow q."""
+    k1 = derivatives(state, q, c)
+    k2 = derivatives(moved(state, 0.5 * h, k1), q, c)
+    k3 = derivatives(moved(state, 0.5 * h, k2), q, c)
+    k4 = derivatives(moved(state, h, k3), q, c)
+    return on_stops(moved(state, h / 6.0, rk4_rate(k1, k2, k3, k4)), c)
+
+
+@jit
+def as_tuple(state):
+    """Return the 8-array state as an 8-tuple."""
+    return state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7]
+
+
+@jit
+def rk4_steps(state, inlet_flows, c, step, record_every, record, check_every=CHECK_EVERY):
     """
     Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
     inlet_flows[k] [m^3/s] is held during step k; a step is split where
-    splits_needed() asks for it (asked every CHECK_EVERY steps). Every
+    splits_needed() asks for it (asked every check_every steps: CHECK_EVERY, a
+    constant of the compiled kernel unless given; bench/bench_step_split.py varies it). Every
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
     holds those values).
     """
-    n = state.shape[0]
-    k1 = np.empty(n)
-    k2 = np.empty(n)
-    k3 = np.empty(n)
-    k4 = np.empty(n)
-    stage = np.empty(n)
+    current = as_tuple(state)
     row = 0
     until_record = record_every
     splits = 1
     for k in range(inlet_flows.shape[0]):
         q = inlet_flows[k]
-        if k % CHECK_EVERY == 0:
-            splits = splits_needed(state, c, step)
+        if k % check_every == 0:
+            splits = splits_needed(current, c, step)
         h = step / splits
         for _ in range(splits):
-            rk4_step(state, q, c, h, k1, k2, k3, k4, stage)
-        verdict = state_check(state, c.burst_pressure)
+            current = rk4_step(current, q, c, h)
+        verdict = state_check(current, c.burst_pressure)
         if verdict != STATE_OK:
+            state[:] = current
             return k, verdict
         until_record -= 1
         if until_record == 0:
             until_record = record_every
             if row < record.shape[0]:
-                record[row, :] = state
+                for i in range(8):
+                    record[row, i] = current[i]
                 row += 1
+    state[:] = current
     return inlet_flows.shape[0], STATE_OK
 
 
@@ -235,113 +268,114 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
     return record
 
 
-def _lane_coefficients_function():
+def _lane_coefficients_function(fixed):
     """
-    Compile lane_coefficients(table, lane) -> Coefficients of column lane of table.
+    Compile lane_coefficients(table, lane) -> Coefficients of lane in table [fields x LANES].
 
-    Generated from Coefficients' fields so that it follows any field added to the
-    model; a namedtuple cannot be built from an array column any other way in numba.
+    Fields named in fixed take its constant values instead of the table's. Generated
+    from Coefficients' fields so that it follows any field added to the model; a
+    namedtuple cannot be built from an array column any other way in numba.
     """
-    arguments = ', '.join(f'table[{i}, lane]' for i in range(len(Coefficients._fields)))
-    namespace = {'Coefficients': Coefficients}
+    arguments = ', '.join(
+        repr(fixed[name]) if name in fixed else f'table[{i} * LANES + lane]'
+        for i, name in enumerate(Coefficients._fields)
+    )
+    namespace = {'Coefficients': Coefficients, 'LANES': LANES}
     exec(f'def lane_coefficients(table, lane):\n    return Coefficients({arguments})\n', namespace)
     return jit(namespace['lane_coefficients'], cache=False)
 
 
-lane_coefficients = _lane_coefficients_function()
+lane_coefficients = _lane_coefficients_function({})
+# The same for lanes without a fault: the compiler then leaves the fault terms out.
+healthy_lane_coefficients = _lane_coefficients_function(HEALTHY_TERMS)
+
+
+@jit
+def lane_state(states, lane):
+    """Return the state of lane in states [8 x LANES, flat] as an 8-tuple."""
+    return (
+        states[P_S * LANES + lane],
+        states[P_M * LANES + lane],
+        states[P_P * LANES + lane],
+        states[P_C * LANES + lane],
+        states[X * LANES + lane],
+        states[X_DOT * LANES + lane],
+        states[Y * LANES + lane],
+        states[Y_DOT * LANES + lane],
+    )
+
+
+@jit
+def set_lane_state(states, lane, state):
+    """Write the 8-tuple state of lane into states [8 x LANES, flat]."""
+    for i in range(8):
+        states[i * LANES + lane] = state[i]
 
 
 @jit
 def rk4_lanes(
-    states, inlet_flows, table, step, record_every, records, completed, failures, verdicts
+    states, inlet_flows, table, faulty, step, record_every, records, completed, verdicts
 ):
     """
-    Advance every lane (column) of states [8 x lanes] by len(inlet_flows) RK4 steps.
+    Advance LANES valves by len(inlet_flows) RK4 steps together.
 
-    The same arithmetic as rk4_steps, lane by lane: a lane whose step must be split
-    (splits_needed) takes it alone with rk4_step. table [fields x lanes]: each
-    lane's Coefficients as a column. Every record_every steps the states go into
-    records[lane, row]. completed[lane] is set to the number of steps the lane
-    completed: fewer than len(inlet_flows) means its state left the limits; that
-    state goes into failures[:, lane], verdicts[lane] says how (limits.state_check),
-    and the lane's later values mean nothing.
+    states [8 x LANES] and table [fields x LANES] (each lane's Coefficients) are flat
+    arrays in rows: a state or coefficient of every lane side by side, so that the
+    loop over lanes reads and writes contiguous memory at offsets the compiler
+    knows, and vectorises. Each lane takes rk4_step exactly as rk4_steps does. The
+    vectorised loop leaves the fault terms out; a lane with a fault (faulty[lane]:
+    a fault term differs from model.HEALTHY_TERMS) or whose step must be split
+    (splits_needed) takes its step alone after it. Every record_every steps the
+    states go into records[lane, row]. completed[lane] is set to the number of
+    steps the lane completed: fewer than len(inlet_flows) means its state left the
+    limits; the lane then stops with that state in states, and verdicts[lane] says
+    how (limits.state_check).
     """
-    n, lanes = states.shape
-    k1 = np.empty((n, lanes))
-    k2 = np.empty((n, lanes))
-    k3 = np.empty((n, lanes))
-    k4 = np.empty((n, lanes))
-    stage = np.empty((n, lanes))
-    single = np.empty((5, n))
-    split = np.zeros(lanes, dtype=np.bool_)
-    splits = np.ones(lanes, dtype=np.int64)
     steps = inlet_flows.shape[0]
-    for j in range(lanes):
+    splits = np.ones(LANES, dtype=np.int64)
+    alone = np.zeros(LANES, dtype=np.bool_)  # stepped after the vectorised loop, or stopped
+    checked = np.empty(LANES, dtype=np.int64)
+    for j in range(LANES):
         completed[j] = steps
         verdicts[j] = STATE_OK
     row = 0
     until_record = record_every
     for k in range(steps):
         q = inlet_flows[k]
-        for j in range(lanes):
-            split[j] = False
+        if k % CHECK_EVERY == 0:
+            for j in range(LANES):
+                if completed[j] == steps:
+                    state, c = lane_state(states, j), lane_coefficients(table, j)
+                    splits[j] = splits_needed(state, c, step)
+                    alone[j] = faulty[j] or splits[j] > 1
+        # One step of every healthy lane at once: pure arithmetic over contiguous rows.
+        for j in range(LANES):
+            c = healthy_lane_coefficients(table, j)
+            state = lane_state(states, j)
+            stepped = rk4_step(state, q, c, step)
+            set_lane_state(states, j, state if alone[j] else stepped)
+            checked[j] = state_check(stepped, c.burst_pressure)
+        for j in range(LANES):
             if completed[j] < steps:
                 continue
-            c = lane_coefficients(table, j)
-            if k % CHECK_EVERY == 0:
-                splits[j] = splits_needed(states[:, j], c, step)
-            if splits[j] > 1:
-                split[j] = True
-                state = states[:, j].copy()
+            if alone[j]:
+                c = lane_coefficients(table, j)
+                state = lane_state(states, j)
                 for _ in range(splits[j]):
-                    rk4_step(
-                        state, q, c, step / splits[j], single[0], single[1], single[2],
-                        single[3], single[4]
-                    )
-                states[:, j] = state
-                verdicts[j] = state_check(state, c.burst_pressure)
-                if verdicts[j] != STATE_OK:
-                    completed[j] = k
-                    failures[:, j] = state
-        for j in range(lanes):
-            derivatives(states[:, j], q, lane_coefficients(table, j), k1[:, j])
-        for i in range(n):
-            for j in range(lanes):
-                stage[i, j] = states[i, j] + 0.5 * step * k1[i, j]
-        for j in range(lanes):
-            derivatives(stage[:, j], q, lane_coefficients(table, j), k2[:, j])
-        for i in range(n):
-            for j in range(lanes):
-                stage[i, j] = states[i, j] + 0.5 * step * k2[i, j]
-        for j in range(lanes):
-            derivatives(stage[:, j], q, lane_coefficients(table, j), k3[:, j])
-        for i in range(n):
-            for j in range(lanes):
-                stage[i, j] = states[i, j] + step * k3[i, j]
-        for j in range(lanes):
-            derivatives(stage[:, j], q, lane_coefficients(table, j), k4[:, j])
-        # The update of every unsplit lane in one sweep (a split lane took its step above;
-        # a frozen lane's values no longer matter).
-        for i in range(n):
-            for j in range(lanes):
-                rate = k1[i, j] + 2.0 * k2[i, j] + 2.0 * k3[i, j] + k4[i, j]
-                updated = states[i, j] + step / 6.0 * rate
-                states[i, j] = states[i, j] if split[j] else updated
-        for j in range(lanes):
-            if completed[j] < steps or split[j]:
-                continue
-            state, c = states[:, j], lane_coefficients(table, j)
-            enforce_stops(state, c)
-            verdicts[j] = state_check(state, c.burst_pressure)
-            if verdicts[j] != STATE_OK:
+                    state = rk4_step(state, q, c, step / splits[j])
+                set_lane_state(states, j, state)
+                checked[j] = state_check(state, c.burst_pressure)
+            if checked[j] != STATE_OK:
                 completed[j] = k
-                failures[:, j] = state
+                verdicts[j] = checked[j]
+                alone[j] = True
         until_record -= 1
         if until_record == 0:
             until_record = record_every
             if row < records.shape[1]:
-                for j in range(lanes):
-                    records[j, row, :] = states[:, j]
+                for j in range(LANES):
+                    for i in range(8):
+                        records[j, row, i] = states[i * LANES + j]
                 row += 1
 
 
@@ -349,51 +383,63 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     """
     Advance several valves (rows of states, modified in place) through the same inlet_flows.
 
-    states: float64 array [lanes x 8]; coefficient_sets: one Coefficients per lane;
-    the other arguments as for advance(). Returns (records [lanes x rows x 8],
-    errors): errors[lane] is None or the IntegrationError (or OverpressureError) of
-    a lane that left the limits, whose state is then left as it was before the call.
-    The lanes do not affect each other, and each gives exactly what advance() gives
-    it alone.
+    states: float64 array [valves x 8]; coefficient_sets: one Coefficients per valve;
+    the other arguments as for advance(). The valves run LANES at a time through
+    rk4_lanes (the last group filled up with copies of its first valve). Returns
+    (records [valves x rows x 8], errors): errors[valve] is None or the
+    IntegrationError (or OverpressureError) of a valve that left the limits, whose
+    state is then left as it was before the call. The valves do not affect each
+    other, and each gives exactly what advance() gives it alone.
     """
     inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
-    lanes = len(states)
+    count = len(states)
     rows = len(inlet_flows) // record_every if record_every else 0
-    records = np.empty((lanes, rows, 8))
-    start = np.array(states, dtype=float)
-    columns = np.ascontiguousarray(start.T)
-    table = np.array([tuple(c) for c in coefficient_sets], dtype=float).T.copy()
-    completed = np.empty(lanes, dtype=np.int64)
-    failures = np.empty_like(columns)
-    verdicts = np.empty(lanes, dtype=np.int64)
-    rk4_lanes(
-        columns,
-        inlet_flows,
-        table,
-        float(step),
-        max(record_every, 1),
-        records,
-        completed,
-        failures,
-        verdicts,
+    records = np.empty((count, rows, 8))
+    start = np.array(states, dtype=float).reshape((count, 8))
+    table = np.array([tuple(c) for c in coefficient_sets], dtype=float)
+    faulty = np.array(
+        [
+            any(getattr(c, name) != value for name, value in HEALTHY_TERMS.items())
+            for c in coefficient_sets
+        ]
     )
     errors = []
-    for lane, done in enumerate(completed):
-        if done < len(inlet_flows):
-            errors.append(
-                _failure(
-                    start[lane],
-                    failures[:, lane].copy(),
-                    inlet_flows,
-                    done,
-                    coefficient_sets[lane],
-                    step,
-                    time,
-                    verdicts[lane],
+    for first in range(0, count, LANES):
+        group = list(range(first, min(first + LANES, count)))
+        lanes = group + [first] * (LANES - len(group))
+        columns = np.ascontiguousarray(start[lanes].T).reshape(-1)
+        completed = np.empty(LANES, dtype=np.int64)
+        verdicts = np.empty(LANES, dtype=np.int64)
+        lane_records = np.empty((LANES, rows, 8))
+        rk4_lanes(
+            columns,
+            inlet_flows,
+            np.ascontiguousarray(table[lanes].T).reshape(-1),
+            faulty[lanes],
+            float(step),
+            max(record_every, 1),
+            lane_records,
+            completed,
+            verdicts,
+        )
+        ends = columns.reshape((8, LANES)).T
+        records[group] = lane_records[: len(group)]
+        for lane, valve in enumerate(group):
+            if completed[lane] < len(inlet_flows):
+                errors.append(
+                    _failure(
+                        start[valve],
+                        ends[lane].copy(),
+                        inlet_flows,
+                        completed[lane],
+                        coefficient_sets[valve],
+                        step,
+                        time,
+                        verdicts[lane],
+                    )
                 )
-            )
-            states[lane] = start[lane]
-        else:
-            errors.append(None)
-            states[lane] = columns[:, lane]
+                states[valve] = start[valve]
+            else:
+                errors.append(None)
+                states[valve] = ends[lane]
     return records, errors

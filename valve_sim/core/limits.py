@@ -49,9 +49,9 @@ NUMERICAL_CEILING = 1e9
 
 @jit
 def state_check(state, burst_pressure):
-    """Return STATE_OK, STATE_OVERPRESSURE or STATE_DIVERGED for an 8-state."""
+    """Return STATE_OK, STATE_OVERPRESSURE or STATE_DIVERGED for an 8-state (array or tuple)."""
     total = 0.0
-    for i in range(state.shape[0]):
+    for i in range(len(state)):
         total += state[i]
     if total - total != 0.0:  # inf or nan anywhere makes the sum non-finite
         return STATE_DIVERGED

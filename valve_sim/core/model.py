@@ -117,6 +117,14 @@ Coefficients = namedtuple(
     ),
 )
 
+# The fault terms of Coefficients (with_faults) and their values in a healthy valve.
+HEALTHY_TERMS = {
+    'coulomb_friction': 0.0,
+    'static_friction': 0.0,
+    'seat_leakage_gain': 0.0,
+    'main_valve_free': 1.0,
+}
+
 
 def land_pressure_term(outer, inner):
     """(D^2 - d^2) / ln(D/d) [m^2]: the log-profile integral of a flat annular land."""
@@ -172,10 +180,7 @@ def coefficients(p, faults=HEALTHY):
         transition_pressure=p['orifice_transition_pressure'],
         burst_pressure=p['burst_pressure'],
         supply_pressure_limit=p['supply_pressure_limit'] or math.inf,
-        coulomb_friction=0.0,
-        static_friction=0.0,
-        seat_leakage_gain=0.0,
-        main_valve_free=1.0,
+        **HEALTHY_TERMS,
     )
     return with_faults(c, faults, p) if faults != HEALTHY else c
 
@@ -214,24 +219,27 @@ def orifice_root(dp, transition):
 
     Exactly the paper's turbulent law for |dp| >= transition; below it the cubic
     sqrt(tr) (1.25 r - 0.25 r^3), r = dp / tr, which matches it in value and slope
-    at |dp| = tr and has the finite slope 1.25 / sqrt(tr) at zero.
+    at |dp| = tr and has the finite slope 1.25 / sqrt(tr) at zero. One square root
+    serves both regions (sqrt(|dp|) or sqrt(tr)), so that a loop over many valves
+    vectorises with one root per orifice.
     """
-    if dp >= transition:
-        return math.sqrt(dp)
-    if dp <= -transition:
-        return -math.sqrt(-dp)
+    magnitude = abs(dp)
+    root = math.sqrt(max(magnitude, transition))
+    if magnitude >= transition:
+        return math.copysign(root, dp)
     r = dp / transition
-    return math.sqrt(transition) * r * (1.25 - 0.25 * r * r)
+    return root * r * (1.25 - 0.25 * r * r)
 
 
 @jit
 def orifice_root_slope(dp, transition):
     """Return the slope of orifice_root at dp [1/sqrt(Pa)]: a unit orifice's conductance."""
     magnitude = abs(dp)
+    root = math.sqrt(max(magnitude, transition))
     if magnitude >= transition:
-        return 0.5 / math.sqrt(magnitude)
+        return 0.5 / root
     r = dp / transition
-    return (1.25 - 0.75 * r * r) / math.sqrt(transition)
+    return (1.25 - 0.75 * r * r) / root
 
 
 @jit
@@ -367,36 +375,38 @@ def stop_acceleration(position, velocity, force, mass, stroke):
 
 
 @jit
-def derivatives(state, inlet_flow, c, out):
-    """Write d(state)/dt into out for inlet flow q_in [m^3/s], Eqs. (1)-(7)."""
+def derivatives(state, inlet_flow, c):
+    """
+    Return d(state)/dt (an 8-tuple, SI) at inlet flow q_in [m^3/s], Eqs. (1)-(7).
+
+    state: the 8 states as a tuple or an array. A pure function of scalars, so that
+    the integrator can evaluate it for many valves at once in vector registers.
+    """
     q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
     x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
-    out[P_S] = c.supply_compliance_inv * (
+    supply = c.supply_compliance_inv * (
         inlet_flow - q_m1 - q_n - q_s - c.swept_area * x_dot - c.rod_area * y_dot
     )  # (1)
     if c.seat_leakage_gain > 0.0:
-        out[P_S] -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c)
-    if state[P_S] >= c.supply_pressure_limit and out[P_S] > 0.0:
-        out[P_S] = 0.0  # the supply's relief takes the rest of the inflow
-    out[P_M] = c.intermediate_compliance_inv * (q_m1 - q_m2)  # (2)
-    out[P_P] = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
-    out[P_C] = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)  # (4)
+        supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c)
+    if state[P_S] >= c.supply_pressure_limit and supply > 0.0:
+        supply = 0.0  # the supply's relief takes the rest of the inflow
+    intermediate = c.intermediate_compliance_inv * (q_m1 - q_m2)  # (2)
+    pilot = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
+    poppet_chamber = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)  # (4)
     force_x, force_y = net_forces(state, c)
     if c.static_friction > 0.0:
         force_x += bearing_friction(x_dot, force_x, c)
-    out[X] = x_dot
-    out[X_DOT] = (
+    main_valve = (
         stop_acceleration(state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke)
         * c.main_valve_free
     )  # (6)
-    out[Y] = y_dot
-    out[Y_DOT] = stop_acceleration(
+    poppet = stop_acceleration(
         state[Y], y_dot, force_y, c.pilot_poppet_mass, c.poppet_stroke
     )  # (7)
+    return supply, intermediate, pilot, poppet_chamber, x_dot, main_valve, y_dot, poppet
 
 
 def state_derivative(state, inlet_flow, c):
     """d(state)/dt as a new array (convenience for analysis and tests)."""
-    out = np.empty(8)
-    derivatives(np.asarray(state, dtype=float), float(inlet_flow), c, out)
-    return out
+    return np.array(derivatives(np.asarray(state, dtype=float), float(inlet_flow), c))

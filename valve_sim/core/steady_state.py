@@ -37,6 +37,7 @@ from scipy.optimize import brentq, root
 from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
+from valve_sim.core.jit import jit
 from valve_sim.core.limits import inlet_flow_problem, state_problem
 from valve_sim.core.model import (
     coefficients,
@@ -64,21 +65,27 @@ TINY_FLOW_TOLERANCE = 1e-7  # the same relative to a tiny inlet flow: 1e-17 m^3/
 TINY_FLOW = 1e-12
 
 
+@jit
+def _balances(state, inlet_flow, c):
+    """Net flows into chambers s, m, p, c [m^3/s] and net forces on x, y [N], in one call."""
+    rates = derivatives(state, inlet_flow, c)
+    force_x, force_y = net_forces(state, c)
+    return (
+        rates[P_S] / c.supply_compliance_inv,
+        rates[P_M] / c.intermediate_compliance_inv,
+        rates[P_P] / c.pilot_compliance_inv,
+        rates[P_C] / c.poppet_chamber_compliance_inv,
+        force_x,
+        force_y,
+    )
+
+
 def _residuals(state, inlet_flow, c, flow_scale, force_scale):
     """Scaled flow imbalances of chambers s, m, p, c and net forces on x and y."""
-    rates = np.empty(8)
-    derivatives(state, inlet_flow, c, rates)
-    force_x, force_y = net_forces(state, c)
-    return np.array(
-        [
-            rates[P_S] / c.supply_compliance_inv / flow_scale,
-            rates[P_M] / c.intermediate_compliance_inv / flow_scale,
-            rates[P_P] / c.pilot_compliance_inv / flow_scale,
-            rates[P_C] / c.poppet_chamber_compliance_inv / flow_scale,
-            force_x / force_scale,
-            force_y / force_scale,
-        ]
-    )
+    residuals = np.array(_balances(state, inlet_flow, c))
+    residuals[:4] /= flow_scale
+    residuals[4:] /= force_scale
+    return residuals
 
 
 def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow=False):
@@ -322,14 +329,15 @@ def cracking_pressure(params, faults=HEALTHY):
     return float(state[P_S])
 
 
-def preload_for_cracking_pressure(params, pressure):
+def preset_preload(params, pressure):
     """
-    Pilot spring preload y_0 [m] that makes the main valve crack at pressure [Pa].
+    Return (pilot spring preload y_0 [m], cracking pressure [Pa]) for the preset pressure [Pa].
 
-    What a technician does with the adjusting screw. The cracking pressure rises
-    almost linearly with y_0 (poppet balance A_s p_s ~ k_p (y + y_0)), so a few
-    secant steps from that estimate converge; raises ParameterError if the preload
-    would leave its limits.
+    What a technician does with the adjusting screw: y_0 that makes the main valve
+    crack at pressure, and the cracking pressure that y_0 gives (within 1e-9 of it).
+    The cracking pressure rises almost linearly with y_0 (poppet balance
+    A_s p_s ~ k_p (y + y_0)), so a few secant steps from that estimate converge;
+    raises ParameterError if the preload would leave its limits.
     """
     spec = SPECS['pilot_spring_preload']
     trial = dict(params)
@@ -348,13 +356,20 @@ def preload_for_cracking_pressure(params, pressure):
                 f'preset pressure {pressure:g} Pa needs pilot_spring_preload (y_0) = {y1:g} m, '
                 f'outside its limits [{spec.minimum:g}, {spec.maximum:g}] m'
             )
-        e1 = error(y1)
+        trial['pilot_spring_preload'] = y1
+        cracking = cracking_pressure(trial)
+        e1 = cracking - pressure
         if abs(e1) < 1e-9 * pressure:
-            return validate(trial)['pilot_spring_preload']
+            return validate(trial)['pilot_spring_preload'], cracking
         if e1 != e0:
             slope = (y1 - y0) / (e1 - e0)
         y0, e0 = y1, e1
     raise SteadyStateError(f'could not find a preload for a cracking pressure of {pressure:g} Pa')
+
+
+def preload_for_cracking_pressure(params, pressure):
+    """Pilot spring preload y_0 [m] that makes the main valve crack at pressure [Pa]."""
+    return preset_preload(params, pressure)[0]
 
 
 def with_preset_pressure(params, pressure):
