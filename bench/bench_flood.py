@@ -215,14 +215,11 @@ def table(figures):
 
 
 def main(argv=None):
-    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
-
-    parser = arguments(__doc__.splitlines()[0], 'bench_flood.json', 'measured time per phase')
-    parser.add_argument(
-        '--executor',
-        choices=EXECUTORS,
-        default=DEFAULT_EXECUTOR,
-        help=f"valve_node's executor (default {DEFAULT_EXECUTOR})",
+    parser = arguments(
+        __doc__.splitlines()[0],
+        'bench_flood.json',
+        'measured time per phase',
+        "valve_node's executor",
     )
     parser.add_argument('--flood', nargs=2, metavar=('SECONDS', 'FILE'), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

@@ -141,7 +141,7 @@ def main():
 
     cores = os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as out:
-        startup_seconds, dask = best_time(lambda: DaskBackend(None, cores), 1)
+        startup_seconds, dask = best_time(lambda: DaskBackend(None, cores).start(), 1)
         try:
             study_seconds, _ = best_time(
                 lambda: run_all(params, 1e-5, dask, f'{out}/dask.jsonl', progress_stream=None), 1

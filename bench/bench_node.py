@@ -417,23 +417,17 @@ def table(figures):
 
 
 def main(argv=None):
-    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
-
-    parser = arguments(__doc__.splitlines()[0], 'bench_node.json', 'measured time')
+    parser = arguments(
+        __doc__.splitlines()[0],
+        'bench_node.json',
+        'measured time',
+        'the executor of valve_node, the echo node and this process',
+    )
     parser.add_argument(
         '--rt-priority',
         type=int,
         default=0,
         help='run the nodes under SCHED_FIFO with this priority (this process one lower)',
-    )
-    parser.add_argument(
-        '--executor',
-        choices=EXECUTORS,
-        default=DEFAULT_EXECUTOR,
-        help=(
-            'the executor of valve_node, the echo node and this process '
-            f'(default {DEFAULT_EXECUTOR})'
-        ),
     )
     parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

@@ -34,14 +34,27 @@ REPO = Path(__file__).resolve().parent.parent
 PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
 
 
-def arguments(description, json_name, duration_help):
-    """Return an ArgumentParser with --duration [s] (default 60) and --json (out/json_name)."""
+def arguments(description, json_name, duration_help, executor_help):
+    """
+    Return an ArgumentParser with --duration [s] (default 60), --json and --executor.
+
+    --json defaults to out/json_name; --executor is a valve_node executor, by default
+    valve_node's.
+    """
+    from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
+
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument(
         '--duration', type=float, default=60.0, help=f'{duration_help} [s] (default 60)'
     )
     parser.add_argument(
         '--json', type=Path, default=REPO / 'out' / json_name, help='JSON output file'
+    )
+    parser.add_argument(
+        '--executor',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
+        help=f'{executor_help} (default {DEFAULT_EXECUTOR})',
     )
     return parser
 

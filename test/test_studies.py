@@ -21,6 +21,7 @@ scheduler` / `dask worker` subprocesses, as a user starts them on other machines
 
 import argparse
 import csv
+import io
 import json
 import math
 import os
@@ -31,16 +32,23 @@ import sys
 import time
 
 import pytest
+from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
 from valve_sim.analysis.study_runner import (
     DaskBackend,
     evaluate_batch,
     PoolBackend,
+    Progress,
     run_cases,
     SerialBackend,
 )
-from valve_sim.analysis.tolerances import Distribution, parse_limits, parse_variations
+from valve_sim.analysis.tolerances import (
+    Distribution,
+    parse_limits,
+    parse_variations,
+    summarise,
+)
 from valve_sim.commands.study import run_all
 from valve_sim.commands.study_backend import open_backend
 from valve_sim.core.errors import StudyError
@@ -246,6 +254,29 @@ def test_resume_after_an_interruption_computes_only_the_missing_runs(reference, 
         run_cases(other, path, SerialBackend(), resume=True, progress_stream=None)
 
 
+def test_a_resumed_study_with_nothing_missing_starts_no_local_cluster(reference, tmp_path):
+    cases = valve_cases(reference, 2)
+    path = tmp_path / 'results.jsonl'
+    done, _ = run_cases(cases, path, SerialBackend(), progress_stream=None)
+    backend = DaskBackend(workers=2)  # a local cluster, started on the first batch
+    try:
+        rows, computed = run_cases(cases, path, backend, resume=True, progress_stream=None)
+        assert not backend.started and backend.cluster is None
+    finally:
+        backend.close()
+    assert computed == 0 and rows == done
+
+
+def test_progress_shows_the_rate_and_an_eta():
+    stream = io.StringIO()
+    progress = Progress('tolerance', 10, 2, stream, interval=0.0)  # 2 runs resumed
+    progress.advance(3)
+    assert re.fullmatch(
+        r'tolerance: 5/10 runs \(50 %\), [\d.]+ runs/s, elapsed 0m00s, ETA \d+m\d\ds\n',
+        stream.getvalue(),
+    )
+
+
 def test_the_papers_study_on_a_cluster_equals_the_pool_and_resumes(
     cluster, reference, tmp_path
 ):
@@ -306,8 +337,10 @@ def valve_sim(*args):
 def test_tolerance_yield_and_percentiles_on_a_known_answer(cluster, reference, tmp_path):
     # P_1 falls monotonically with d_c. With d_c uniform on +-5 % and a 20-point Latin
     # hypercube (one sample in each 5 % stratum of d_c), a limit at P_1 of the d_c
-    # quantile q = 0.25 is met by exactly the 15 valves above that quantile, and the
-    # sample median lies between P_1 at the quantiles 0.45 and 0.55.
+    # quantile q = 0.25 is met by exactly the 15 valves above that quantile; the sample
+    # median lies between P_1 at the quantiles 0.45 and 0.55, and p5 and p95 (numpy's
+    # interpolation between the two most extreme samples) between P_1 at 0.9 and 1
+    # and at 0 and 0.1.
     def p1_at(quantile):
         case = valve_cases(reference, 1)[0]
         case['params'] = scaled(reference, {'d_c': -5.0 + 10.0 * quantile})
@@ -332,10 +365,34 @@ def test_tolerance_yield_and_percentiles_on_a_known_answer(cluster, reference, t
     assert summary['yield']['passed'] == 15 and summary['yield']['fraction'] == 0.75
     low, high = summary['yield']['ci95']
     assert low < 0.75 < high
-    assert p1_at(0.55) <= summary['percentiles']['P_1_percent']['p50'] <= p1_at(0.45)
+    percentiles = summary['percentiles']['P_1_percent']
+    assert p1_at(0.55) <= percentiles['p50'] <= p1_at(0.45)
+    assert p1_at(1.0) <= percentiles['p5'] <= p1_at(0.9)
+    assert p1_at(0.1) <= percentiles['p95'] <= p1_at(0.0)
     assert 'yield 15/20 = 75.0 %' in result.stdout
     assert (out / 'measures_cdf.png').exists()
     assert (out / 'measures_vs_damping_orifice_diameter.png').exists()
+
+
+def test_the_summary_says_why_measures_are_undefined():
+    def row(undefined=(), error=None):
+        return {
+            'error': error,
+            'measures': {name: None if name in undefined else 1.0 for name in MEASURE_NAMES},
+            'reasons': {} if error else dict.fromkeys(undefined, 'no second overshoot'),
+        }
+
+    failed = row(MEASURE_NAMES, 'no cracking point found: ...')
+    rows = [row(), row(['r_d', 'T_d_ms']), row(['r_d', 'T_d_ms']), failed]
+    summary = summarise(rows, parse_limits('P_1_percent<=2'))
+    assert summary['yield']['passed'] == 3
+    assert summary['percentiles']['r_d']['undefined_reasons'] == {
+        'no second overshoot': 2, 'no cracking point found: ...': 1
+    }
+    assert summary['percentiles']['P_1_percent']['undefined_reasons'] == {
+        'no cracking point found: ...': 1
+    }
+    assert 'undefined_reasons' not in summarise(rows[:1], [])['percentiles']['r_d']
 
 
 def test_sensitivity_writes_indices_and_charts(cluster, tmp_path):

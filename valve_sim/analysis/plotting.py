@@ -45,6 +45,20 @@ def _measure_text(measures):
     return '\n'.join(lines)
 
 
+def _text_box(axis, corner, text, opacity):
+    """Write monospace text in a white box whose lower right corner is at corner (axis units)."""
+    axis.text(
+        *corner,
+        text,
+        transform=axis.transAxes,
+        ha='right',
+        va='bottom',
+        fontsize=8,
+        family='monospace',
+        bbox={'facecolor': 'white', 'alpha': opacity, 'edgecolor': '0.8'},
+    )
+
+
 def plot_step_response(
     path,
     time,
@@ -86,17 +100,7 @@ def plot_step_response(
     axes[-1].set_xlabel('time [s]')
     axes[0].set_title(title)
     if measures:
-        axes[0].text(
-            0.99,
-            0.05,
-            _measure_text(measures),
-            transform=axes[0].transAxes,
-            ha='right',
-            va='bottom',
-            fontsize=8,
-            family='monospace',
-            bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': '0.8'},
-        )
+        _text_box(axes[0], (0.99, 0.05), _measure_text(measures), opacity=0.8)
     figure.savefig(path, dpi=120)
     plt.close(figure)
 
@@ -296,17 +300,7 @@ def plot_characteristic(
         lines.append(f'{label}: ' + (f'{value * 1e-6:.4f} MPa' if value is not None else 'none'))
     if steady_marks and steady_marks.get('cracking_pressure') is not None:
         lines.append(f'steady-state cracking: {steady_marks["cracking_pressure"] * 1e-6:.4f} MPa')
-    axes[1].text(
-        0.98,
-        0.04,
-        '\n'.join(lines),
-        transform=axes[1].transAxes,
-        ha='right',
-        va='bottom',
-        fontsize=8,
-        family='monospace',
-        bbox={'facecolor': 'white', 'alpha': 0.85, 'edgecolor': '0.8'},
-    )
+    _text_box(axes[1], (0.98, 0.04), '\n'.join(lines), opacity=0.85)
     if marked:
         low, high = min(marked), max(marked + [float(np.max(p))])
         margin = max(high - low, 1e-4)

@@ -42,6 +42,7 @@ from dataclasses import asdict
 import hashlib
 import json
 import math
+import os
 from pathlib import Path
 import sys
 import time
@@ -335,38 +336,60 @@ class DaskBackend:
     """
     Batches as tasks on a dask.distributed cluster.
 
-    address: a scheduler (tcp://HOST:PORT) of an existing cluster, or None for a
-    LocalCluster of `workers` single-threaded processes on this machine. A task
-    whose worker dies is rescheduled by Dask; `retries` re-runs a task that raised.
+    address: a scheduler (tcp://HOST:PORT) of an existing cluster, connected at once;
+    or None for a LocalCluster of `workers` single-threaded processes on this
+    machine (default: one per core), started when the first batch is submitted, so
+    that a resumed study with nothing missing starts none. A task whose worker dies
+    is rescheduled by Dask; `retries` re-runs a task that raised.
     """
 
     def __init__(self, address=None, workers=None, retries=3):
-        import logging
-
-        from distributed import Client, LocalCluster
-
         self.retries = retries
-        self.cluster = None
+        self.cluster = self._client = None
         if address:
+            from distributed import Client
+
             try:
-                self.client = Client(address, timeout='30s')
+                self._client = Client(address, timeout='30s')
             except (OSError, ValueError, TimeoutError) as error:
                 raise StudyError(
                     f'cannot reach the Dask scheduler {address!r} (expected tcp://HOST:PORT): '
                     f'{error}'
                 ) from None
+            self.workers = max(1, sum(self._client.nthreads().values()))
         else:
+            self.workers = max(1, workers or os.cpu_count() or 1)
+
+    @property
+    def started(self):
+        """Whether a client exists: connected to the scheduler, or a local cluster started."""
+        return self._client is not None
+
+    @property
+    def client(self):
+        """Return the Dask client; the first use starts the local cluster."""
+        return self.start()._client
+
+    def start(self):
+        """Start the local cluster now (else it starts with the first batch); return self."""
+        if self._client is None:
+            import logging
+
+            from distributed import Client, LocalCluster
+
             self.cluster = LocalCluster(
-                n_workers=workers,
+                n_workers=self.workers,
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=':0',
                 silence_logs=logging.ERROR,
             )
-            self.client = Client(self.cluster)
-        self.workers = max(1, sum(self.client.nthreads().values()))
+            self._client = Client(self.cluster)
+        return self
 
     def run(self, evaluate, batches):
+        if not batches:
+            return
         from distributed import as_completed
 
         futures = [
@@ -387,7 +410,8 @@ class DaskBackend:
             self.client.cancel(futures)
 
     def close(self):
-        self.client.close()
+        if self._client is not None:
+            self._client.close()
         if self.cluster is not None:
             self.cluster.close()
 

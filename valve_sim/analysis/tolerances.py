@@ -27,15 +27,17 @@ the same seed gives the same samples everywhere. A limit is MEASURE<=VALUE (or
 a measure that does not exist (or a run that failed) fails its limits.
 """
 
+from collections import Counter
 from dataclasses import dataclass
 import math
 import re
 
 import numpy as np
-from scipy import stats
-from scipy.stats import qmc
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.core.parameters import ParameterError, resolve_name, SPECS
+
+# scipy.stats is imported in the functions that use it, so that `valve-sim tolerance
+# --help` (its parser takes SAMPLERS from here) stays quick.
 
 
 SAMPLERS = ('lhs', 'sobol', 'random')
@@ -63,6 +65,8 @@ class Distribution:
         unit = np.clip(np.asarray(unit, dtype=float), 1e-12, 1.0 - 1e-12)
         if self.kind == 'uniform':
             return self.a + unit * (self.b - self.a)
+        from scipy import stats
+
         return stats.norm.ppf(unit, loc=self.a, scale=self.b)
 
     def describe(self):
@@ -133,6 +137,8 @@ def unit_samples(count, dimensions, seed, sampler='lhs'):
     """Points in the unit cube, (count, dimensions); the same seed gives the same points."""
     if count < 1:
         raise ParameterError('--samples must be at least 1')
+    from scipy.stats import qmc
+
     if sampler == 'lhs':
         return qmc.LatinHypercube(d=dimensions, seed=seed).random(count)
     if sampler == 'sobol':
@@ -198,12 +204,29 @@ def passes(row, limits):
 
 def yield_interval(passed, total, confidence=CONFIDENCE):
     """Clopper-Pearson interval of the pass fraction (samples taken as independent)."""
+    from scipy import stats
+
     interval = stats.binomtest(passed, total).proportion_ci(confidence, method='exact')
     return [float(interval.low), float(interval.high)]
 
 
+def undefined_reasons(rows, name):
+    """
+    Why rows have no value of measure name: {reason: count}, commonest first.
+
+    The reason is the run's error where it failed, else the measure's own reason
+    (e.g. no second overshoot).
+    """
+    reasons = Counter(
+        row['error'] or row['reasons'].get(name, 'no reason recorded')
+        for row in rows
+        if row['measures'][name] is None
+    )
+    return dict(reasons.most_common())
+
+
 def summarise(rows, limits):
-    """Yield with its interval, failures per limit, and percentiles of each measure."""
+    """Yield with its interval, failures per limit, percentiles and undefined reasons."""
     total = len(rows)
     passed = sum(passes(row, limits) for row in rows)
     failed_runs = [row for row in rows if row['error'] is not None]
@@ -212,6 +235,8 @@ def summarise(rows, limits):
         values = np.array([row['measures'][name] for row in rows if row['measures'][name]
                            is not None], dtype=float)
         entry = {'defined': int(values.size), 'undefined': total - int(values.size)}
+        if entry['undefined']:
+            entry['undefined_reasons'] = undefined_reasons(rows, name)
         if values.size:
             entry.update(
                 {f'p{p}': float(np.percentile(values, p)) for p in PERCENTILES},

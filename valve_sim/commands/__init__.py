@@ -15,6 +15,8 @@
 """
 The `valve-sim` command line: the entry (cli) and one module per subcommand.
 
-Each subcommand module has add_arguments(parser) and run(args) -> exit code.
+Each subcommand module has add_arguments(parser) and run(args) -> exit code; options
+declares the options several of them take. A subcommand's module level loads no numba,
+scipy, matplotlib, dask or rclpy (run() does), so that `valve-sim CMD --help` is quick.
 May import: every other wing. Commands that drive nodes (demo) may use rclpy.
 """

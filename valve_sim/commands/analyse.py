@@ -42,7 +42,7 @@ from valve_sim.analysis.signals import (
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis
-from valve_sim.commands.simulate import flow_value
+from valve_sim.commands.options import add_options, flow_value
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
@@ -232,77 +232,42 @@ def add_signal_arguments(parser):
     """--topic-*, --joint-*, --ambient-pressure and --clock: where a bag's signals are."""
     for role in ROLES:
         option = role.name.replace('_', '-')
-        parser.add_argument(
-            f'--topic-{option}',
-            metavar='TOPIC',
-            default='/' + role.topic,
-            help=f'topic of the {role.meaning} (default /{role.topic})',
-        )
+        parser.add_argument(f'--topic-{option}', metavar='TOPIC', default='/' + role.topic,
+                            help=f'topic of the {role.meaning} (default /{role.topic})')
         if role.joint:
-            parser.add_argument(
-                f'--joint-{option}',
-                metavar='NAME',
-                default=role.joint,
-                help=f'JointState joint name of the {role.meaning} (default {role.joint})',
-            )
-    parser.add_argument(
-        '--ambient-pressure',
-        type=float,
-        default=STANDARD_ATMOSPHERE,
-        metavar='PA',
-        help='subtracted from the recorded pressure to get gauge pressure; 0 for a gauge sensor '
-        f'(default {STANDARD_ATMOSPHERE:g})',
-    )
-    parser.add_argument(
-        '--clock',
-        choices=CLOCKS,
-        default='header',
-        help='time of a sample: its header stamp, or its receive time (needed for Float64 topics)',
-    )
+            parser.add_argument(f'--joint-{option}', metavar='NAME', default=role.joint,
+                                help=f'JointState joint name of the {role.meaning} '
+                                f'(default {role.joint})')
+    parser.add_argument('--ambient-pressure', type=float, default=STANDARD_ATMOSPHERE,
+                        metavar='PA',
+                        help='subtracted from the recorded pressure to get gauge pressure; 0 '
+                        f'for a gauge sensor (default {STANDARD_ATMOSPHERE:g})')
+    parser.add_argument('--clock', choices=CLOCKS, default='header',
+                        help='time of a sample: its header stamp, or its receive time (needed '
+                        'for Float64 topics)')
 
 
 def add_arguments(parser):
-    parser.add_argument(
-        'bag',
-        metavar='BAG',
-        help="rosbag2 MCAP file or bag folder (valve_node's topics, or mapped ones)",
-    )
-    parser.add_argument('--json', action='store_true', help='print the step records as JSON')
-    parser.add_argument('--plot', metavar='FILE.png', help='draw Figure 5 of each step')
+    parser.add_argument('bag', metavar='BAG',
+                        help="rosbag2 MCAP file or bag folder (valve_node's topics, or "
+                        'mapped ones)')
+    add_options(parser, '--json', help='print the step records as JSON')
+    add_options(parser, '--plot', help='draw Figure 5 of each step')
     add_signal_arguments(parser)
-    parser.add_argument(
-        '--step-threshold',
-        type=float,
-        default=1e-6,
-        metavar='Q',
-        help='smallest inlet-flow change taken as a step [m^3/s] (default 1e-6)',
-    )
-    parser.add_argument(
-        '--step-time',
-        type=float,
-        metavar='S',
-        help="analyse one step at this time [s, on the bag's time axis] "
-        'instead of detecting steps; the inlet flow is then not needed',
-    )
-    parser.add_argument(
-        '--characteristic',
-        action='store_true',
-        help='the bag is a slow flow ramp up and down: report the static characteristic '
-        '(cracking, rated-flow and reseat pressures, override, hysteresis) instead of steps',
-    )
-    parser.add_argument(
-        '--rated-flow',
-        type=flow_value,
-        metavar='Q',
-        help='with --characteristic: rated flow of the valve (default: the largest inlet flow '
-        'in the bag)',
-    )
-    parser.add_argument(
-        '--step-direction',
-        choices=('up', 'down'),
-        default='up',
-        help='direction of the inlet-flow change at --step-time (default up)',
-    )
+    parser.add_argument('--step-threshold', type=float, default=1e-6, metavar='Q',
+                        help='smallest inlet-flow change taken as a step [m^3/s] (default 1e-6)')
+    parser.add_argument('--step-time', type=float, metavar='S',
+                        help="analyse one step at this time [s, on the bag's time axis] instead "
+                        'of detecting steps; the inlet flow is then not needed')
+    parser.add_argument('--characteristic', action='store_true',
+                        help='the bag is a slow flow ramp up and down: report the static '
+                        'characteristic (cracking, rated-flow and reseat pressures, override, '
+                        'hysteresis) instead of steps')
+    parser.add_argument('--rated-flow', type=flow_value, metavar='Q',
+                        help='with --characteristic: rated flow of the valve (default: the '
+                        'largest inlet flow in the bag)')
+    parser.add_argument('--step-direction', choices=('up', 'down'), default='up',
+                        help='direction of the inlet-flow change at --step-time (default up)')
 
 
 def signal_map_from(args):

@@ -39,11 +39,7 @@ import sys
 import numpy as np
 from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.simulate import (
-    add_parameter_arguments,
-    flow_value,
-    load_from_arguments,
-)
+from valve_sim.commands.options import add_options, flow_value, load_from_arguments
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -85,91 +81,50 @@ def case_value(text):
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
+    add_options(parser, '--params', '--set', '--preset-pressure')
     target = parser.add_mutually_exclusive_group(required=True)
-    target.add_argument(
-        '--target-measures',
-        metavar='FILE.json',
-        help='the six measures to fit: {"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}',
-    )
-    target.add_argument(
-        '--bag',
-        metavar='BAG',
-        help='a recorded step to fit: an .mcap file or a rosbag2 bag folder (topics mapped '
-        'as in analyse)',
-    )
-    parser.add_argument(
-        '--fit',
-        required=True,
-        metavar='NAMES',
-        help='comma-separated parameters to fit (ROS names, paper symbols or preset_pressure)',
-    )
-    parser.add_argument(
-        '--bounds',
-        type=bounds_value,
-        action='append',
-        default=[],
-        metavar='NAME=LO:HI',
-        help='bounds of a fitted parameter [SI] (default: its spec limits); repeatable',
-    )
-    parser.add_argument('--out', required=True, metavar='DIR', help='output folder')
-    parser.add_argument(
-        '--max-pilot-flow',
-        type=flow_value,
-        metavar='Q',
-        help='constraint: pilot flow (bearings, damping orifice, rod clearance) at most Q '
-        '(e.g. 1.2L/min) at --pilot-flow-at',
-    )
-    parser.add_argument(
-        '--pilot-flow-at',
-        type=flow_value,
-        default=5 * LITRE_PER_MINUTE,
-        metavar='Q',
-        help='inlet flow of the pilot-flow constraint (default 5L/min)',
-    )
-    parser.add_argument(
-        '--table2-decays',
-        action='store_true',
-        help="constraint: every linear mode of the paper's Table 2 case (preset held) decays "
-        'by 95 %% within the 1 s window of the measures, at 5 and 20 L/min',
-    )
-    parser.add_argument(
-        '--relieves',
-        type=case_value,
-        action='append',
-        default=[],
-        metavar='SYMBOL=PERCENT[,...]',
-        help="constraint: this case of the paper's study (preset held; e.g. d_c=-20) ends its "
-        'step test relieving through the main stage; repeatable',
-    )
-    parser.add_argument(
-        '--study-relieves',
-        action='store_true',
-        help="check: every case of the paper's study (preset held) opens the main stage "
-        'and ends its step test relieving through it (26 runs per start)',
-    )
-    parser.add_argument(
-        '--starts', type=int, default=3, metavar='N', help='optimiser starts (default 3)'
-    )
-    parser.add_argument(
-        '--spread',
-        type=float,
-        default=0.1,
-        metavar='S',
-        help='log-normal spread of the starts after the first (default 0.1, about 10 %%)',
-    )
-    parser.add_argument('--seed', type=int, default=0, metavar='N', help='seed of the starts')
-    parser.add_argument(
-        '--tolerance',
-        type=float,
-        default=1e-10,
-        metavar='TOL',
-        help='ftol = xtol = gtol of least_squares (default 1e-10)',
-    )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
-    parser.add_argument(
-        '--quiet', action='store_true', help='no progress lines on stderr'
-    )
+    target.add_argument('--target-measures', metavar='FILE.json',
+                        help='the six measures to fit: '
+                        '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}')
+    target.add_argument('--bag', metavar='BAG',
+                        help='a recorded step to fit: an .mcap file or a rosbag2 bag folder '
+                        '(topics mapped as in analyse)')
+    parser.add_argument('--fit', required=True, metavar='NAMES',
+                        help='comma-separated parameters to fit (ROS names, paper symbols or '
+                        'preset_pressure)')
+    parser.add_argument('--bounds', type=bounds_value, action='append', default=[],
+                        metavar='NAME=LO:HI',
+                        help='bounds of a fitted parameter [SI] (default: its spec limits); '
+                        'repeatable')
+    add_options(parser, '--out')
+    parser.add_argument('--max-pilot-flow', type=flow_value, metavar='Q',
+                        help='constraint: pilot flow (bearings, damping orifice, rod clearance) '
+                        'at most Q (e.g. 1.2L/min) at --pilot-flow-at')
+    parser.add_argument('--pilot-flow-at', type=flow_value, default=5 * LITRE_PER_MINUTE,
+                        metavar='Q',
+                        help='inlet flow of the pilot-flow constraint (default 5L/min)')
+    parser.add_argument('--table2-decays', action='store_true',
+                        help="constraint: every linear mode of the paper's Table 2 case "
+                        '(preset held) decays by 95 %% within the 1 s window of the measures, '
+                        'at 5 and 20 L/min')
+    parser.add_argument('--relieves', type=case_value, action='append', default=[],
+                        metavar='SYMBOL=PERCENT[,...]',
+                        help="constraint: this case of the paper's study (preset held; e.g. "
+                        'd_c=-20) ends its step test relieving through the main stage; '
+                        'repeatable')
+    parser.add_argument('--study-relieves', action='store_true',
+                        help="check: every case of the paper's study (preset held) opens the main "
+                        'stage and ends its step test relieving through it (26 runs per start)')
+    parser.add_argument('--starts', type=int, default=3, metavar='N',
+                        help='optimiser starts (default 3)')
+    parser.add_argument('--spread', type=float, default=0.1, metavar='S',
+                        help='log-normal spread of the starts after the first (default 0.1, '
+                        'about 10 %%)')
+    add_options(parser, '--seed', help='seed of the starts')
+    parser.add_argument('--tolerance', type=float, default=1e-10, metavar='TOL',
+                        help='ftol = xtol = gtol of least_squares (default 1e-10)')
+    add_options(parser, '--step-size')
+    parser.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
     add_signal_arguments(parser)
 
 

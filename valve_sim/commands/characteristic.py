@@ -37,14 +37,13 @@ from valve_sim.analysis.characteristic import (
     CRACKING_FRACTION,
     split_ramps,
 )
-from valve_sim.commands.simulate import (
-    add_bag_arguments,
-    add_parameter_arguments,
+from valve_sim.commands.options import (
+    add_options,
     check_bag_arguments,
     flow_value,
     load_from_arguments,
-    write_bag,
 )
+from valve_sim.commands.simulate import write_bag
 from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -57,52 +56,27 @@ STEADY_POINTS = 80  # points of the steady-state curve
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
-    parser.add_argument(
-        '--max-flow',
-        type=flow_value,
-        default=20.0 * LITRE_PER_MINUTE,
-        metavar='Q',
-        help="top of the ramp (default 20L/min, the paper's largest flow)",
-    )
-    parser.add_argument(
-        '--rated-flow',
-        type=flow_value,
-        metavar='Q',
-        help='rated flow of the valve: the override is taken at it and cracking at 1 %% '
-        'of it (default: --max-flow)',
-    )
-    parser.add_argument(
-        '--ramp-time',
-        type=float,
-        default=10.0,
-        metavar='S',
-        help='duration of each ramp, up and down [s] (default 10; slower is closer to static)',
-    )
-    parser.add_argument(
-        '--hold-time',
-        type=float,
-        default=0.5,
-        metavar='S',
-        help='time held at --max-flow between the ramps [s] (default 0.5)',
-    )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
-    parser.add_argument(
-        '--record-interval',
-        type=float,
-        default=1e-3,
-        metavar='S',
-        help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)",
-    )
-    parser.add_argument('--out', metavar='DIR', help='write CSV, JSON and the figure here')
-    parser.add_argument('--json', action='store_true', help='print the marks as JSON')
-    parser.add_argument(
-        '--mcap',
-        metavar='FILE.mcap',
-        help="also write the ramp as a rosbag2 MCAP file in valve_node's layout "
-        '(for valve-sim analyse --characteristic)',
-    )
-    add_bag_arguments(parser)
+    add_options(parser, '--params', '--set', '--preset-pressure')
+    parser.add_argument('--max-flow', type=flow_value, default=20.0 * LITRE_PER_MINUTE,
+                        metavar='Q',
+                        help="top of the ramp (default 20L/min, the paper's largest flow)")
+    parser.add_argument('--rated-flow', type=flow_value, metavar='Q',
+                        help='rated flow of the valve: the override is taken at it and cracking '
+                        'at 1 %% of it (default: --max-flow)')
+    parser.add_argument('--ramp-time', type=float, default=10.0, metavar='S',
+                        help='duration of each ramp, up and down [s] (default 10; slower is '
+                        'closer to static)')
+    parser.add_argument('--hold-time', type=float, default=0.5, metavar='S',
+                        help='time held at --max-flow between the ramps [s] (default 0.5)')
+    add_options(parser, '--step-size')
+    parser.add_argument('--record-interval', type=float, default=1e-3, metavar='S',
+                        help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)")
+    add_options(parser, '--out', required=False, help='write CSV, JSON and the figure here')
+    add_options(parser, '--json', help='print the marks as JSON')
+    add_options(parser, '--mcap',
+                help="also write the ramp as a rosbag2 MCAP file in valve_node's layout (for "
+                'valve-sim analyse --characteristic)')
+    add_options(parser, '--bag-folder', '--start-time')
 
 
 def _check(args, step_size):

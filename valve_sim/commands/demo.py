@@ -40,6 +40,7 @@ import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import add_options
 from valve_sim.core.errors import IncompleteRunError
 
 
@@ -369,18 +370,13 @@ def report(folder, bag, attempts=1):
 def add_arguments(parser):
     from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT
 
-    parser.add_argument(
-        '--out',
-        metavar='DIR',
-        help='folder for the bag, measures JSON, figure and logs (default: a new '
-        'demo_<date>-<time> folder in the current directory)',
-    )
-    add_port_option(
-        parser,
-        'valve_node serves a live view over the Foxglove WebSocket protocol on this port '
-        f'of this machine (default {DEFAULT_PORT}; 0: any free port): open it in the Foxglove '
-        'app with the layout share/valve_sim/foxglove/valve_layout.json',
-    )
+    add_options(parser, '--out', required=False,
+                help='folder for the bag, measures JSON, figure and logs (default: a new '
+                'demo_<date>-<time> folder in the current directory)')
+    add_port_option(parser, 'valve_node serves a live view over the Foxglove WebSocket protocol '
+                    f'on this port of this machine (default {DEFAULT_PORT}; 0: any free port): '
+                    'open it in the Foxglove app with the layout '
+                    'share/valve_sim/foxglove/valve_layout.json')
 
 
 def run(args):

@@ -22,22 +22,15 @@ docs/model.md ("operating-point --json"), all SI.
 
 import json
 
-from valve_sim.commands.simulate import add_parameter_arguments, flow_value, load_from_arguments
+from valve_sim.commands.options import add_options, flow_value, load_from_arguments
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
-    parser.add_argument(
-        '--flow',
-        type=flow_value,
-        action='append',
-        metavar='Q',
-        help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)',
-    )
-    parser.add_argument(
-        '--json', action='store_true', help='print the operating points as JSON (SI units)'
-    )
+    add_options(parser, '--params', '--set', '--preset-pressure')
+    parser.add_argument('--flow', type=flow_value, action='append', metavar='Q',
+                        help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)')
+    add_options(parser, '--json', help='print the operating points as JSON (SI units)')
 
 
 def operating_point(params, inlet_flow):

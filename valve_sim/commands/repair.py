@@ -30,16 +30,11 @@ from valve_sim.recording.recovery import repair, repair_folder
 
 
 def add_arguments(parser):
-    parser.add_argument(
-        'bag', metavar='BAG', help='the damaged MCAP file, or a rosbag2 bag folder (only read)'
-    )
-    parser.add_argument(
-        '-o',
-        '--output',
-        metavar='OUT',
-        help='the complete copy (default: BAG.repaired.mcap beside a file, '
-        'BAG_repaired/ beside a folder)',
-    )
+    parser.add_argument('bag', metavar='BAG',
+                        help='the damaged MCAP file, or a rosbag2 bag folder (only read)')
+    parser.add_argument('-o', '--output', metavar='OUT',
+                        help='the complete copy (default: BAG.repaired.mcap beside a file, '
+                        'BAG_repaired/ beside a folder)')
 
 
 def default_output(bag):

@@ -25,10 +25,11 @@ test, each valve set to the preset first (protocol held-preset, or
                        run succeeded), reasons, error (as tolerance's samples.csv)
   indices.csv          measure, parameter, S1, S1_conf, ST, ST_conf, interaction
                        (ST - S1); conf: half-width of the 95 % bootstrap interval
+  design.json          the design: distributions, protocol, failed runs, and per
+                       measure why runs have no value (undefined_reasons)
   sobol_<measure>.png  S1 and ST bars with their intervals, one chart per measure
 """
 
-from collections import Counter
 import csv
 import json
 from pathlib import Path
@@ -37,8 +38,9 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.tolerances import parse_variations
+from valve_sim.analysis.tolerances import parse_variations, undefined_reasons
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -58,16 +60,11 @@ PAPER_RANGES = ','.join(f'{symbol}=±20%' for symbol in STUDY_PARAMETERS)
 
 
 def add_arguments(parser):
-    add_study_arguments(
-        parser, 'base samples N, a power of two: N (D + 2) runs for D parameters (default 256)'
-    )
-    parser.add_argument(
-        '--vary',
-        action='append',
-        metavar='NAME=SPEC,...',
-        help='parameters and distributions as for tolerance (default: '
-        + PAPER_RANGES.replace('%', '%%') + ')',
-    )
+    add_study_arguments(parser, 'base samples N, a power of two: N (D + 2) runs for D '
+                        'parameters (default 256)')
+    parser.add_argument('--vary', action='append', metavar='NAME=SPEC,...',
+                        help='parameters and distributions as for tolerance (default: '
+                        + PAPER_RANGES.replace('%', '%%') + ')')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
@@ -83,12 +80,8 @@ def measure_indices(distributions, rows, seed):
         try:
             result[name] = sobol_indices(distributions, outputs, seed)
         except ValueError as error:
-            reasons = Counter(
-                row['error'] or row['reasons'].get(name, '')
-                for row in rows
-                if row['measures'][name] is None
-            )
-            common = f' (most often: {reasons.most_common(1)[0][0]})' if reasons else ''
+            reasons = undefined_reasons(rows, name)
+            common = f' (most often: {next(iter(reasons))})' if reasons else ''
             result[name] = f'indices undefined: {error}{common}'
     return result
 
@@ -134,8 +127,6 @@ def run(args):
         import SALib  # noqa: F401  (is it installed?)
     except ImportError:
         raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
-    from valve_sim.commands.simulate import load_from_arguments
-
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
     preset, protocol = preset_protocol(args, params)
@@ -161,6 +152,9 @@ def run(args):
                 'distributions': [d.describe() for d in distributions],
                 'failed_runs': sum(row['error'] is not None for row in rows),
                 'undefined': {n: e for n, e in indices.items() if isinstance(e, str)},
+                'undefined_reasons': {
+                    n: reasons for n in MEASURE_NAMES if (reasons := undefined_reasons(rows, n))
+                },
             },
             indent=2,
         )

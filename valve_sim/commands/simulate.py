@@ -23,222 +23,66 @@ schedules them at valve_node's ticks. The measures are taken on the model's p_s;
 sensor readings are what --mcap records on the pressure topics.
 """
 
-from argparse import ArgumentTypeError
 import csv
-from datetime import datetime, timezone
 import json
 import math
 import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
-from valve_sim.core.fault_schedule import load_schedule
+from valve_sim.commands.options import (
+    add_options,
+    check_bag_arguments,
+    flow_value,
+    load_from_arguments,
+)
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
-from valve_sim.core.model import STATE_NAMES
-from valve_sim.core.parameters import check_value, FAULT_SCHEDULE, load_parameters, ParameterError
-from valve_sim.core.sensors import checked_settings, default_settings, read_waveforms
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.core.steady_state import with_preset_pressure
+from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
+from valve_sim.core.scenario import Scenario
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim simulate --help` stays quick.
 
 
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 
 
-def quantity(text, units, kind, example):
-    """Parse a number with an optional unit suffix of units {suffix: factor to SI} -> SI."""
-    number, factor = text.strip(), 1.0
-    for suffix, scale in units.items():
-        if number.endswith(suffix):
-            number, factor = number[: -len(suffix)], scale
-            break
-    try:
-        return float(number) * factor
-    except ValueError:
-        raise ArgumentTypeError(f'not a {kind}: {text!r} (use e.g. {example})') from None
-
-
-def flow_value(text):
-    """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
-    units = {'L/min': LITRE_PER_MINUTE, 'l/min': LITRE_PER_MINUTE, 'm^3/s': 1.0, 'm3/s': 1.0}
-    value = quantity(text, units, 'flow', '5L/min or 8.33e-5')
-    if not math.isfinite(value) or value < 0.0:
-        raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
-    return value
-
-
-def start_time(text):
-    """ISO 8601 time (UTC unless it says otherwise) -> ns since the epoch (argparse type)."""
-    try:
-        moment = datetime.fromisoformat(text.strip().replace('Z', '+00:00'))
-    except ValueError:
-        raise ArgumentTypeError(f'not an ISO 8601 time: {text!r} (e.g. 2026-11-29T12:00:00Z)')
-    if moment.tzinfo is None:
-        moment = moment.replace(tzinfo=timezone.utc)
-    delta = moment - datetime(1970, 1, 1, tzinfo=timezone.utc)
-    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
-
-
-def assignment(text):
-    """'NAME=VALUE' -> (NAME, value) for --set: true/false, an integer, else a float."""
-    name, separator, value = text.partition('=')
-    if not separator:
-        raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
-    if value.strip().lower() in ('true', 'false'):
-        return name.strip(), value.strip().lower() == 'true'
-    if name.strip() == FAULT_SCHEDULE:
-        return name.strip(), value.strip()
-    try:
-        return name.strip(), int(value) if value.strip().isdigit() else float(value)
-    except ValueError:
-        raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
-
-
-def pressure_value(text):
-    """Parse a pressure from '7e6', '7e6Pa', '7MPa' or '70bar' -> Pa (argparse type)."""
-    units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
-    value = quantity(text, units, 'pressure', '7MPa or 7e6')
-    if not math.isfinite(value) or value <= 0.0:
-        raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
-    return value
-
-
-def add_parameter_arguments(parser):
-    """--params, --set and --preset-pressure, shared by every command that runs the model."""
-    parser.add_argument(
-        '--params',
-        metavar='FILE.yaml',
-        help='ROS 2 parameter file overlaid on config/reference.yaml (e.g. config/table2.yaml)',
-    )
-    parser.add_argument(
-        '--set',
-        metavar='NAME=VALUE',
-        type=assignment,
-        action='append',
-        default=[],
-        help='override one parameter (ROS name or paper symbol, SI units; simulate also '
-        'takes fault.* and sensor.* settings, true/false for switches); repeatable',
-    )
-    parser.add_argument(
-        '--preset-pressure',
-        type=pressure_value,
-        metavar='P',
-        help='main-valve cracking pressure (gauge, e.g. 7MPa): sets pilot_spring_preload like '
-        'the adjusting screw, after --params and --set (also preset_pressure in a file or --set)',
-    )
-
-
-def load_from_arguments(args, injection=None):
-    """
-    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
-
-    --step-size overrides settings["step_size"]; fault and sensor settings go into the
-    dict injection (without one they are refused). A preset pressure (--preset-pressure,
-    else preset_pressure of --set or the file) sets the pilot spring preload last.
-    """
-    params, settings = load_parameters(args.params, dict(args.set), injection)
-    preset = settings.pop('preset_pressure', None)
-    preset = getattr(args, 'preset_pressure', None) or preset
-    if preset is not None:
-        params = with_preset_pressure(params, check_value('preset_pressure', preset))
-    if getattr(args, 'step_size', None):
-        settings['step_size'] = args.step_size
-    if not 1e-7 <= settings['step_size'] <= 1e-4:
-        raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
-    return params, settings
-
-
 def add_arguments(parser):
-    add_parameter_arguments(parser)
+    add_options(parser, '--params', '--set', '--preset-pressure')
     s = REFERENCE_SCENARIO
-    parser.add_argument(
-        '--initial-flow',
-        type=flow_value,
-        default=s.initial_flow,
-        metavar='Q',
-        help='inlet flow before the step; 0 starts from the closed, empty valve (default 5L/min)',
-    )
-    parser.add_argument(
-        '--final-flow',
-        type=flow_value,
-        default=s.final_flow,
-        metavar='Q',
-        help='inlet flow after the step (default 20L/min)',
-    )
-    parser.add_argument(
-        '--step-time', type=float, default=s.step_time, metavar='S', help='time of the step [s]'
-    )
-    parser.add_argument(
-        '--ramp-time',
-        type=float,
-        default=0.0,
-        metavar='S',
-        help='change the flow linearly over this time instead of at once [s]',
-    )
-    parser.add_argument(
-        '--end-time', type=float, default=s.end_time, metavar='S', help='end of the run [s]'
-    )
-    parser.add_argument(
-        '--step-size',
-        type=float,
-        metavar='S',
-        help='RK4 step [s] (default: step_size of the parameter file, 1e-5)',
-    )
-    parser.add_argument(
-        '--record-interval',
-        type=float,
-        default=1e-4,
-        metavar='S',
-        help="sample interval of the output waveforms [s] (default 1e-4, the paper's)",
-    )
-    parser.add_argument(
-        '--faults',
-        metavar='FILE.yaml',
-        help='fault schedule (docs/faults.md): events at t [s], applied at the first tick '
-        '(1/publish_rate) at or after t, as valve_node does',
-    )
-    parser.add_argument('--json', action='store_true', help='print the six measures as JSON')
+    parser.add_argument('--initial-flow', type=flow_value, default=s.initial_flow, metavar='Q',
+                        help='inlet flow before the step; 0 starts from the closed, empty '
+                        'valve (default 5L/min)')
+    parser.add_argument('--final-flow', type=flow_value, default=s.final_flow, metavar='Q',
+                        help='inlet flow after the step (default 20L/min)')
+    parser.add_argument('--step-time', type=float, default=s.step_time, metavar='S',
+                        help='time of the step [s]')
+    parser.add_argument('--ramp-time', type=float, default=0.0, metavar='S',
+                        help='change the flow linearly over this time instead of at once [s]')
+    parser.add_argument('--end-time', type=float, default=s.end_time, metavar='S',
+                        help='end of the run [s]')
+    add_options(parser, '--step-size')
+    parser.add_argument('--record-interval', type=float, default=1e-4, metavar='S',
+                        help='sample interval of the output waveforms [s] (default 1e-4, '
+                        "the paper's)")
+    parser.add_argument('--faults', metavar='FILE.yaml',
+                        help='fault schedule (docs/faults.md): events at t [s], applied at the '
+                        'first tick (1/publish_rate) at or after t, as valve_node does')
+    add_options(parser, '--json', help='print the six measures as JSON')
     parser.add_argument('--csv', metavar='FILE', help='write the waveforms as CSV (SI units)')
-    parser.add_argument('--plot', metavar='FILE.png', help="draw the paper's Figure 5")
-    parser.add_argument(
-        '--mcap',
-        metavar='FILE.mcap',
-        help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time base "
-        "(1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)",
-    )
-    parser.add_argument(
-        '--rig-topics',
-        metavar='PRESSURE,FLOW',
-        help='with --mcap: write what a test rig records instead, the supply pressure and the '
-        'inlet flow as std_msgs/msg/Float64 on these two topics (no main-valve position)',
-    )
-    parser.add_argument(
-        '--pressure-noise',
-        type=float,
-        default=0.0,
-        metavar='PA',
-        help='with --rig-topics: Gaussian noise on the recorded pressure, standard deviation [Pa]',
-    )
-    parser.add_argument(
-        '--seed', type=int, default=0, metavar='N', help='seed of the --pressure-noise generator'
-    )
-    add_bag_arguments(parser)
-
-
-def add_bag_arguments(parser):
-    """--bag-folder and --start-time, for the commands that write --mcap."""
-    parser.add_argument(
-        '--bag-folder',
-        action='store_true',
-        help='with --mcap: write a rosbag2 bag folder there instead (metadata.yaml + '
-        '<folder name>_0.mcap; the folder must not exist yet)',
-    )
-    parser.add_argument(
-        '--start-time',
-        type=start_time,
-        metavar='UTC',
-        help='with --mcap: wall-clock time of model time 0, ISO 8601 (e.g. '
-        '2026-11-29T12:00:00Z; default: now, to the millisecond)',
-    )
+    add_options(parser, '--plot', help="draw the paper's Figure 5")
+    add_options(parser, '--mcap',
+                help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time "
+                "base (1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)")
+    parser.add_argument('--rig-topics', metavar='PRESSURE,FLOW',
+                        help='with --mcap: write what a test rig records instead, the supply '
+                        'pressure and the inlet flow as std_msgs/msg/Float64 on these two '
+                        'topics (no main-valve position)')
+    parser.add_argument('--pressure-noise', type=float, default=0.0, metavar='PA',
+                        help='with --rig-topics: Gaussian noise on the recorded pressure, '
+                        'standard deviation [Pa]')
+    add_options(parser, '--seed', help='seed of the --pressure-noise generator')
+    add_options(parser, '--bag-folder', '--start-time')
 
 
 def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
@@ -293,11 +137,6 @@ def rig_topics(text):
     return ['/' + topic.lstrip('/') for topic in topics]
 
 
-def check_bag_arguments(args):
-    if (args.bag_folder or args.start_time is not None) and not args.mcap:
-        raise ParameterError('--bag-folder and --start-time need --mcap')
-
-
 def _scenario(args):
     if not 0.0 <= args.step_time < args.end_time or args.ramp_time < 0.0 or args.end_time > 3600.0:
         raise ParameterError('need 0 <= --step-time < --end-time <= 3600 s and --ramp-time >= 0')
@@ -308,6 +147,8 @@ def _scenario(args):
 
 def write_csv(path, waveforms):
     """Waveforms as CSV: time, applied inlet flow and the eight states, SI units in the header."""
+    from valve_sim.core.model import STATE_NAMES
+
     header = ['time_s', 'inlet_flow_m3_s'] + [
         f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)
     ]
@@ -335,6 +176,9 @@ def print_table(measures, paper=False):
 
 def load_injection(args, injection):
     """(FaultSet, sensor settings, schedule events) from --set/--params and --faults."""
+    from valve_sim.core.fault_schedule import load_schedule
+    from valve_sim.core.sensors import checked_settings, default_settings
+
     faults = HEALTHY.changed({n: v for n, v in injection.items() if n in FAULT_NAMES})
     sensors = checked_settings(
         default_settings(),
@@ -354,6 +198,9 @@ def is_papers_run(params, scenario):
 
 
 def run(args):
+    from valve_sim.core.sensors import read_waveforms
+    from valve_sim.core.simulation import simulate
+
     check_bag_arguments(args)
     injection = {}
     params, settings = load_from_arguments(args, injection)

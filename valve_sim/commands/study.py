@@ -48,9 +48,8 @@ import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
-from valve_sim.analysis.study_runner import evaluate_case, run_cases, SerialBackend
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.commands.options import add_options, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -58,7 +57,9 @@ from valve_sim.commands.study_backend import (
     protocol_preset,
 )
 from valve_sim.core.parameters import scaled
-from valve_sim.core.steady_state import cracking_pressure
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim study --help` stays quick.
 
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
@@ -74,12 +75,9 @@ CASE_COLUMNS = (
 
 
 def add_arguments(parser):
-    add_parameter_arguments(parser)
-    parser.add_argument(
-        '--out', required=True, metavar='DIR', help='output folder (created if missing)'
-    )
+    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
     add_protocol_arguments(parser)
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    add_options(parser, '--step-size')
     add_runner_arguments(parser)
 
 
@@ -141,6 +139,9 @@ def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_press
 
     preset_pressure [Pa] defaults to the cracking pressure of params.
     """
+    from valve_sim.analysis.study_runner import evaluate_case
+    from valve_sim.core.steady_state import cracking_pressure
+
     if preset_pressure is None:
         preset_pressure = cracking_pressure(params)
     case = runner_case(0, params, changes, step_size, protocol, preset_pressure)
@@ -171,6 +172,9 @@ def run_all(
     Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
     defaults to the cracking pressure of params.
     """
+    from valve_sim.analysis.study_runner import run_cases, SerialBackend
+    from valve_sim.core.steady_state import cracking_pressure
+
     if preset_pressure is None:
         preset_pressure = cracking_pressure(params)
     labelled = study_cases()
@@ -273,6 +277,8 @@ def write_figures(out, results, protocol):
 
 
 def run(args):
+    from valve_sim.core.steady_state import cracking_pressure
+
     params, settings = load_from_arguments(args)
     out = make_folder(Path(args.out))
     preset = cracking_pressure(params)

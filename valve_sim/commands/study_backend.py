@@ -27,7 +27,6 @@ import os
 import sys
 
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
-from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
 from valve_sim.core.errors import StudyError
 
 
@@ -36,20 +35,12 @@ PIP_INSTALL = "pip install 'dask[distributed]' SALib"
 
 def add_protocol_arguments(parser):
     """--protocol and its short form --frozen-preload."""
-    parser.add_argument(
-        '--protocol',
-        choices=PROTOCOLS,
-        default=DEFAULT_PROTOCOL,
-        help='held-preset: preload re-solved per case, the preset held (default, the paper); '
-        'frozen-preload: the preload of the parameter file in every case',
-    )
-    parser.add_argument(
-        '--frozen-preload',
-        dest='protocol',
-        action='store_const',
-        const='frozen-preload',
-        help='same as --protocol frozen-preload',
-    )
+    parser.add_argument('--protocol', choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
+                        help='held-preset: preload re-solved per case, the preset held '
+                        '(default, the paper); frozen-preload: the preload of the parameter '
+                        'file in every case')
+    parser.add_argument('--frozen-preload', dest='protocol', action='store_const',
+                        const='frozen-preload', help='same as --protocol frozen-preload')
 
 
 def protocol_preset(protocol, preset_pressure):
@@ -61,29 +52,16 @@ def protocol_preset(protocol, preset_pressure):
 
 def add_runner_arguments(parser):
     """--scheduler, --workers, --batch-size and --resume."""
-    parser.add_argument(
-        '--scheduler',
-        metavar='tcp://HOST:PORT',
-        help='address of a running Dask scheduler (default: a local cluster on this machine)',
-    )
-    parser.add_argument(
-        '--workers',
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar='N',
-        help='worker processes of the local cluster (default: all cores)',
-    )
-    parser.add_argument(
-        '--batch-size',
-        type=int,
-        metavar='N',
-        help='runs per task (default: about 8 tasks per worker, at most 64 runs)',
-    )
-    parser.add_argument(
-        '--resume',
-        action='store_true',
-        help='keep the runs already in DIR/results.jsonl and compute only the missing ones',
-    )
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                        help='address of a running Dask scheduler (default: a local cluster '
+                        'on this machine)')
+    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1, metavar='N',
+                        help='worker processes of the local cluster (default: all cores)')
+    parser.add_argument('--batch-size', type=int, metavar='N',
+                        help='runs per task (default: about 8 tasks per worker, at most 64 runs)')
+    parser.add_argument('--resume', action='store_true',
+                        help='keep the runs already in DIR/results.jsonl and compute only the '
+                        'missing ones')
 
 
 def open_backend(args, command, pool_fallback=False):
@@ -92,6 +70,8 @@ def open_backend(args, command, pool_fallback=False):
 
     Otherwise a missing dask raises StudyError saying what to pip-install.
     """
+    from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
+
     if args.workers < 1 or (args.batch_size is not None and args.batch_size < 1):
         raise StudyError('--workers and --batch-size must be at least 1')
     try:

@@ -25,7 +25,8 @@ paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
   samples.csv     index, the varied parameters, the preload used, the six
                   measures, pass, reasons, error (one row per sample)
   summary.json    distributions, protocol, limits, yield with its 95 % interval,
-                  failures per limit, percentiles of each measure
+                  failures per limit, percentiles of each measure and why runs
+                  have no value of it (undefined_reasons)
   measures_cdf.png, measures_vs_<parameter>.png
 """
 
@@ -37,7 +38,6 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.study_cases import PROTOCOLS
-from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import (
     draw,
     parse_limits,
@@ -47,7 +47,7 @@ from valve_sim.analysis.tolerances import (
     summarise,
 )
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.simulate import add_parameter_arguments, load_from_arguments
+from valve_sim.commands.options import add_options, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -55,45 +55,30 @@ from valve_sim.commands.study_backend import (
     protocol_preset,
 )
 from valve_sim.core.parameters import SPECS
-from valve_sim.core.steady_state import cracking_pressure
+
+# The model's modules (numba, scipy) are imported in the functions that run it, so that
+# `valve-sim tolerance --help` stays quick.
 
 
 def add_study_arguments(parser, samples_help):
-    """--out, --samples, --seed and --step-size (tolerance and sensitivity)."""
-    add_parameter_arguments(parser)
-    parser.add_argument(
-        '--out', required=True, metavar='DIR', help='output folder (created if missing)'
-    )
+    """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
+    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
     parser.add_argument('--samples', type=int, default=256, metavar='N', help=samples_help)
-    parser.add_argument(
-        '--seed', type=int, default=0, metavar='S', help='seed of the sampler (default 0)'
-    )
-    parser.add_argument('--step-size', type=float, metavar='S', help='RK4 step [s] (default 1e-5)')
+    add_options(parser, '--seed', help='seed of the sampler (default 0)')
+    add_options(parser, '--step-size')
 
 
 def add_arguments(parser):
     add_study_arguments(parser, 'number of sampled valves (default 256)')
-    parser.add_argument(
-        '--vary',
-        action='append',
-        required=True,
-        metavar='NAME=SPEC,...',
-        help='parameters and their distributions: NAME=±X%% (uniform, half-width), '
-        'NAME=LO:HI (uniform), NAME=MEAN~N(S%%) or NAME=~N(S) (normal, sigma); repeatable',
-    )
-    parser.add_argument(
-        '--limits',
-        metavar='SPEC',
-        default='',
-        help='pass criteria, e.g. "P_1_percent<=4,T_s_ms<=600" (all must hold)',
-    )
-    parser.add_argument(
-        '--sampler',
-        choices=SAMPLERS,
-        default='lhs',
-        help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power of two), '
-        'random: pseudo-random (all seeded)',
-    )
+    parser.add_argument('--vary', action='append', required=True, metavar='NAME=SPEC,...',
+                        help='parameters and their distributions: NAME=±X%% (uniform, '
+                        'half-width), NAME=LO:HI (uniform), NAME=MEAN~N(S%%) or NAME=~N(S) '
+                        '(normal, sigma); repeatable')
+    parser.add_argument('--limits', metavar='SPEC', default='',
+                        help='pass criteria, e.g. "P_1_percent<=4,T_s_ms<=600" (all must hold)')
+    parser.add_argument('--sampler', choices=SAMPLERS, default='lhs',
+                        help='lhs: Latin hypercube (default), sobol: scrambled Sobol (N a power '
+                        'of two), random: pseudo-random (all seeded)')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
 
@@ -104,6 +89,8 @@ def preset_protocol(args, params):
 
     The preset is the cracking pressure of params (after --preset-pressure).
     """
+    from valve_sim.core.steady_state import cracking_pressure
+
     preset = cracking_pressure(params)
     statement = {
         'protocol': args.protocol,
@@ -165,7 +152,11 @@ def print_summary(summary):
             cells = ''.join(f"{entry['p' + str(p)]:>10.4g}" for p in (1, 5, 50, 95, 99))
         else:
             cells = f'{"undefined in every run":>50}'
-        note = f"  ({entry['undefined']} undefined)" if entry['undefined'] else ''
+        note = (
+            f"  ({entry['undefined']} undefined, most often: "
+            f"{next(iter(entry['undefined_reasons']))})"
+            if entry['undefined'] else ''
+        )
         print(f'{name:<14}{cells}{note}')
 
 
@@ -176,6 +167,8 @@ def run_samples(args, label, params, names, values, preset, settings, out):
     Rows stream to out/results.jsonl (--resume continues it); the backend follows
     --scheduler/--workers as open_backend sets it up for command label.
     """
+    from valve_sim.analysis.study_runner import run_cases
+
     backend = open_backend(args, label)
     try:
         results, _ = run_cases(

@@ -288,6 +288,32 @@ def steady_state(params, inlet_flow, faults=HEALTHY):
     return state
 
 
+def _cracking_problem(state, error, poppet_stroke):
+    """
+    Why a solution of the cracking balances is no cracking point (None if it is one).
+
+    The residual and the poppet's place decide, not hybr's progress flag: with
+    xtol 1e-13 hybr often sits on the root (residual ~1e-16) yet reports that it
+    is "not making good progress".
+    """
+    if not error <= TOLERANCE:  # also NaN
+        return (
+            f'the pilot-stage balances have no solution near the design estimate '
+            f'(relative residual {error:.2e} where the solver stopped); check the parameters'
+        )
+    if not state[Y] < poppet_stroke:
+        return (
+            f'the poppet would have to open {state[Y]:.4g} m, beyond its stroke y_max = '
+            f'{poppet_stroke:g} m: it reaches its end stop before the main valve lifts off'
+        )
+    if not state[Y] > 0.0:
+        return (
+            f'the poppet would have to be closed (y = {state[Y]:.4g} m): the main valve '
+            'lifts off before the pilot opens'
+        )
+    return None
+
+
 def cracking_pressure(params, faults=HEALTHY):
     """
     Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
@@ -317,15 +343,9 @@ def cracking_pressure(params, faults=HEALTHY):
         residual, guess[[P_S, P_P, P_C, Y]] / scale, method='hybr', options={'xtol': 1e-13}
     )
     state = compose(solution.x)
-    if (
-        not solution.success
-        or np.max(np.abs(residual(solution.x))) > TOLERANCE
-        or not 0.0 < state[Y] < c.poppet_stroke
-    ):
-        raise SteadyStateError(
-            'no cracking point found: the pilot stage cannot hold the main valve at its seat '
-            'with these parameters'
-        )
+    problem = _cracking_problem(state, np.max(np.abs(residual(solution.x))), c.poppet_stroke)
+    if problem:
+        raise SteadyStateError(f'no cracking point found: {problem}')
     return float(state[P_S])
 
 

@@ -34,31 +34,21 @@ LATE_FRACTION = (
 
 @dataclass
 class Counters:
-    """
-    Events since node start.
-
-    A late tick ran more than half a period after it was due;
-    a long tick computed for more than half a period; a missed tick never ran (its time
-    was integrated by the next one); skipped time was not integrated at all because
-    the lag exceeded the catch-up limit. Every inlet_flow message received is an
-    accepted or a rejected input; a lost input is one a single publisher sent that
-    never reached the node (a gap in its sequence numbers). An overpressure is a
-    state beyond burst_pressure, an integration failure a numerical divergence.
-    """
+    """Events since node start, as diagnostics report them."""
 
     ticks: int = 0
-    late_ticks: int = 0
-    long_ticks: int = 0
-    missed_ticks: int = 0
-    skipped_ticks: int = 0
-    skipped_time_s: float = 0.0
-    accepted_inputs: int = 0
-    rejected_inputs: int = 0
-    lost_inputs: int = 0
+    late_ticks: int = 0  # started over LATE_FRACTION of a period after they were due
+    long_ticks: int = 0  # computed for over LATE_FRACTION of a period
+    missed_ticks: int = 0  # never ran (the next tick integrated their time)
+    skipped_ticks: int = 0  # periods not integrated at all: lag beyond the catch-up limit
+    skipped_time_s: float = 0.0  # [s] the time not integrated
+    accepted_inputs: int = 0  # every inlet_flow message received is accepted ...
+    rejected_inputs: int = 0  # ... or rejected
+    lost_inputs: int = 0  # sent by one publisher, never received (a gap in its sequence numbers)
     rejected_parameter_changes: int = 0
-    integration_failures: int = 0
-    overpressures: int = 0
-    overpressure_alarms: int = 0
+    integration_failures: int = 0  # numerical divergences
+    overpressures: int = 0  # states beyond burst_pressure
+    overpressure_alarms: int = 0  # p_s reached supply_pressure_limit
 
 
 class Throttle:

@@ -1,0 +1,182 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The options several commands take, declared once (OPTIONS), and the argument types.
+
+A command adds the shared options it takes by name, add_options(parser, '--params', ...),
+and declares its own beside them with parser.add_argument, so that its add_arguments()
+still lists its options in the order of its --help. Changes adapt a shared option to
+the command: add_options(parser, '--json', help='print the marks as JSON').
+
+This module imports only the standard library and valve_sim's light modules, and so do
+the commands' module levels, so that `valve-sim CMD --help` is quick: the model
+(numba, scipy) loads when a command runs, as in load_from_arguments.
+"""
+
+from argparse import ArgumentTypeError
+from datetime import datetime, timezone
+import math
+
+from valve_sim.core.parameters import (
+    check_value,
+    FAULT_SCHEDULE,
+    load_parameters,
+    ParameterError,
+)
+from valve_sim.core.scenario import LITRE_PER_MINUTE
+
+
+def quantity(text, units, kind, example):
+    """Parse a number with an optional unit suffix of units {suffix: factor to SI} -> SI."""
+    number, factor = text.strip(), 1.0
+    for suffix, scale in units.items():
+        if number.endswith(suffix):
+            number, factor = number[: -len(suffix)], scale
+            break
+    try:
+        return float(number) * factor
+    except ValueError:
+        raise ArgumentTypeError(f'not a {kind}: {text!r} (use e.g. {example})') from None
+
+
+def flow_value(text):
+    """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
+    units = {'L/min': LITRE_PER_MINUTE, 'l/min': LITRE_PER_MINUTE, 'm^3/s': 1.0, 'm3/s': 1.0}
+    value = quantity(text, units, 'flow', '5L/min or 8.33e-5')
+    if not math.isfinite(value) or value < 0.0:
+        raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
+    return value
+
+
+def pressure_value(text):
+    """Parse a pressure from '7e6', '7e6Pa', '7MPa' or '70bar' -> Pa (argparse type)."""
+    units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
+    value = quantity(text, units, 'pressure', '7MPa or 7e6')
+    if not math.isfinite(value) or value <= 0.0:
+        raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
+    return value
+
+
+def start_time(text):
+    """ISO 8601 time (UTC unless it says otherwise) -> ns since the epoch (argparse type)."""
+    try:
+        moment = datetime.fromisoformat(text.strip().replace('Z', '+00:00'))
+    except ValueError:
+        raise ArgumentTypeError(f'not an ISO 8601 time: {text!r} (e.g. 2026-11-29T12:00:00Z)')
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=timezone.utc)
+    delta = moment - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+
+
+def assignment(text):
+    """'NAME=VALUE' -> (NAME, value) for --set: true/false, an integer, else a float."""
+    name, separator, value = text.partition('=')
+    if not separator:
+        raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
+    if value.strip().lower() in ('true', 'false'):
+        return name.strip(), value.strip().lower() == 'true'
+    if name.strip() == FAULT_SCHEDULE:
+        return name.strip(), value.strip()
+    try:
+        return name.strip(), int(value) if value.strip().isdigit() else float(value)
+    except ValueError:
+        raise ArgumentTypeError(f'value of {name.strip()!r} is not a number: {value!r}') from None
+
+
+OPTIONS = {
+    # The model: a parameter file, single parameters, the preset; see load_from_arguments.
+    '--params': {
+        'metavar': 'FILE.yaml',
+        'help': 'ROS 2 parameter file overlaid on config/reference.yaml '
+        '(e.g. config/table2.yaml)',
+    },
+    '--set': {
+        'type': assignment,
+        'action': 'append',
+        'default': [],
+        'metavar': 'NAME=VALUE',
+        'help': 'override one parameter (ROS name or paper symbol, SI units; simulate also '
+        'takes fault.* and sensor.* settings, true/false for switches); repeatable',
+    },
+    '--preset-pressure': {
+        'type': pressure_value,
+        'metavar': 'P',
+        'help': 'main-valve cracking pressure (gauge, e.g. 7MPa): sets pilot_spring_preload '
+        'like the adjusting screw, after --params and --set (also preset_pressure in a file '
+        'or --set)',
+    },
+    '--step-size': {
+        'type': float,
+        'metavar': 'S',
+        'help': 'RK4 step [s] (default: step_size of the parameter file, 1e-5)',
+    },
+    # What a command writes; most commands say in their own words what (help=...).
+    '--out': {'metavar': 'DIR', 'required': True, 'help': 'output folder (created if missing)'},
+    '--json': {'action': 'store_true'},
+    '--plot': {'metavar': 'FILE.png'},
+    '--mcap': {'metavar': 'FILE.mcap'},
+    '--bag-folder': {
+        'action': 'store_true',
+        'help': 'with --mcap: write a rosbag2 bag folder there instead (metadata.yaml + '
+        '<folder name>_0.mcap; the folder must not exist yet)',
+    },
+    '--start-time': {
+        'type': start_time,
+        'metavar': 'UTC',
+        'help': 'with --mcap: wall-clock time of model time 0, ISO 8601 (e.g. '
+        '2026-11-29T12:00:00Z; default: now, to the millisecond)',
+    },
+    '--seed': {'type': int, 'default': 0, 'metavar': 'N'},
+}
+
+
+def add_options(parser, *flags, **changes):
+    """
+    Add the shared options flags to parser, in that order, as OPTIONS declares them.
+
+    changes (help=..., default=...) replace keywords of the declaration: give them with
+    one flag, to say what the option means to this command.
+    """
+    for flag in flags:
+        parser.add_argument(flag, **{**OPTIONS[flag], **changes})
+
+
+def load_from_arguments(args, injection=None):
+    """
+    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
+
+    --step-size overrides settings["step_size"]; fault and sensor settings go into the
+    dict injection (without one they are refused). A preset pressure (--preset-pressure,
+    else preset_pressure of --set or the file) sets the pilot spring preload last.
+    """
+    from valve_sim.core.steady_state import with_preset_pressure
+
+    params, settings = load_parameters(args.params, dict(args.set), injection)
+    preset = settings.pop('preset_pressure', None)
+    preset = getattr(args, 'preset_pressure', None) or preset
+    if preset is not None:
+        params = with_preset_pressure(params, check_value('preset_pressure', preset))
+    if getattr(args, 'step_size', None):
+        settings['step_size'] = args.step_size
+    if not 1e-7 <= settings['step_size'] <= 1e-4:
+        raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
+    return params, settings
+
+
+def check_bag_arguments(args):
+    """Refuse --bag-folder and --start-time without --mcap (ParameterError)."""
+    if (args.bag_folder or args.start_time is not None) and not args.mcap:
+        raise ParameterError('--bag-folder and --start-time need --mcap')
