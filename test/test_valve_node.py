@@ -31,8 +31,10 @@ import time
 
 import numpy as np
 import pytest
+import rclpy
+from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import Float64
-from valve_harness import PRESSURE_TOPICS, running_valve, start_node
+from valve_harness import PRESSURE_TOPICS, running_valve, start_node, TIMEOUT
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import config_path, load_parameters, SPECS
@@ -205,10 +207,18 @@ def test_reset_returns_to_the_steady_state_of_the_current_flow(sim_valve, refere
 
 
 def test_diagnostics_go_on_while_the_clock_is_paused(sim_valve):
-    """Housekeeping follows a tick; with /clock paused (no ticks) the 1 Hz report still comes."""
-    first = sim_valve.wait_for_diagnostics()
+    """
+    Housekeeping follows a tick; with /clock paused (no ticks) the 1 Hz report still comes.
+
+    The first report awaited is one of the paused clock's (a report of the tick before
+    may still be on its way); the next must come, a second later, with nothing moved.
+    """
+    paused = repr(sim_valve.clock_ns / 1e9)
+    first = sim_valve.wait_for_diagnostics(
+        lambda d: d['model_time_s'] == paused, 'a report at the paused model time'
+    )
     second = sim_valve.wait_for_diagnostics()
-    assert first['model_time_s'] == second['model_time_s'] == repr(sim_valve.clock_ns / 1e9)
+    assert second['model_time_s'] == paused
     assert int(second['ticks']) == int(first['ticks'])
 
 
@@ -358,21 +368,25 @@ def test_inconsistent_geometry_set_atomically_is_rejected_as_a_whole(valve, refe
     assert valve.get_parameters('main_valve_mass')['main_valve_mass'] != mass
 
 
-def test_a_best_effort_inlet_flow_publisher_is_heard(valve):
-    """A bench publishing with SensorDataQoS (best effort) drives the valve too."""
-    from rclpy.qos import qos_profile_sensor_data
+def test_a_best_effort_inlet_flow_publisher_is_heard(context, valve):
+    """
+    A bench publishing with SensorDataQoS (best effort) drives the valve too.
 
-    publisher = valve.node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
+    The publisher is on a node of its own: the probe's node is not changed while its
+    executor spins it in another thread.
+    """
+    bench = rclpy.create_node('best_effort_bench', context=context)
+    publisher = bench.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
     try:
         valve.wait_for(
             lambda: publisher.get_subscription_count() > 0, 'valve_node matching a best-effort one'
         )
-        deadline = time.monotonic() + 60.0
+        deadline = time.monotonic() + TIMEOUT
         while not valve._wait(lambda: valve.applied[-1][1] == FINAL_FLOW, 0.05):
             assert time.monotonic() < deadline, 'the best-effort flow was never applied'
             publisher.publish(Float64(data=FINAL_FLOW))  # periodically, as a bench does
     finally:
-        valve.node.destroy_publisher(publisher)
+        bench.destroy_node()
 
 
 def test_flood_of_bad_inlet_flows_is_rejected_and_never_reaches_an_output(valve_process, valve):
@@ -446,15 +460,15 @@ def test_diagnostics_report_health_and_stale_input(valve):
     assert float(stale['startup_kernels_s']) > 0.0
     with valve.condition:
         start = len(valve.diagnostics)
-    for _ in range(
-        1200
-    ):  # inputs every 50 ms, within the 0.2 s timeout, until a report shows them
+
+    def fresh():
+        return any(d['input_stale'] == 'false' for d in valve.diagnostics[start:])
+
+    deadline = time.monotonic() + TIMEOUT
+    # an input every 50 ms, within the 0.2 s timeout, until a report shows it fresh
+    while not valve._wait(fresh, 0.05):
+        assert time.monotonic() < deadline, 'input never reported fresh again'
         valve.send_flow(INITIAL_FLOW)
-        if any(d['input_stale'] == 'false' for d in valve.diagnostics[start:]):
-            break
-        time.sleep(0.05)
-    else:
-        pytest.fail('input never reported fresh again')
 
 
 # --- the executor option ----------------------------------------------------------------------
