@@ -274,12 +274,6 @@ class Driver:
         self.spin_until(lambda: time.monotonic() >= end, duration + 10.0, 'the end of a hold')
 
 
-def largest_gap(times, start, end):
-    """Return the longest interval [s] between the sample times [s] from start to end [s]."""
-    shown = times[(times >= start) & (times <= end)]
-    return float((shown[1:] - shown[:-1]).max()) if shown.size > 1 else math.inf
-
-
 def sampling_problem(times, t_step, values):
     """
     Say why samples at times [s] cannot carry the measures of the step at t_step [s], or None.
