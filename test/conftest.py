@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Test isolation: a ROS domain of this session's own, discovery on localhost.
+Test isolation: a ROS domain of this session's own, discovery on localhost, Ctrl-C delivered.
 
 Every test session claims a ROS_DOMAIN_ID that no other run on this machine holds
 (valve_sim.ros.isolation, a lock file per domain) and keeps discovery on localhost,
@@ -23,11 +23,17 @@ Child processes inherit both.
 
 import os
 from pathlib import Path
+import signal
 import time
 
 from valve_sim.ros.isolation import claim_domain
 
 claim_domain(keep_existing=False)
+# Children get SIGINT's default action, as from a terminal. Run as a background job,
+# this process inherits SIGINT ignored, and so would every node a test starts (Python
+# keeps an ignored SIGINT ignored): the tests that send Ctrl-C could not deliver it.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('MPLBACKEND', 'Agg')
 

@@ -220,14 +220,15 @@ def orifice_root(dp, transition):
     Exactly the paper's turbulent law for |dp| >= transition; below it the cubic
     sqrt(tr) (1.25 r - 0.25 r^3), r = dp / tr, which matches it in value and slope
     at |dp| = tr and has the finite slope 1.25 / sqrt(tr) at zero. One square root
-    serves both regions (sqrt(|dp|) or sqrt(tr)), so that a loop over many valves
-    vectorises with one root per orifice.
+    serves both regions (sqrt(|dp|) or sqrt(tr)), and r is a product with 1 / tr,
+    one division for all orifices of an evaluation: the vectorised kernel computes
+    both regions for every orifice (docs/speed.md).
     """
     magnitude = abs(dp)
     root = math.sqrt(max(magnitude, transition))
     if magnitude >= transition:
         return math.copysign(root, dp)
-    r = dp / transition
+    r = dp * (1.0 / transition)
     return root * r * (1.25 - 0.25 * r * r)
 
 

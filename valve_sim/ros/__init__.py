@@ -21,19 +21,46 @@ The home of rclpy; nodes stay thin around valve_sim.core and valve_sim.analysis.
 May import: valve_sim.core, valve_sim.analysis, valve_sim.recording, rclpy.
 
 A node process (`python -m valve_sim.ros.<node>`, or its console script) ends
-quietly on SIGINT while it is still starting up: this package is imported before
-the node's own (slow) imports, and spinning.init() later installs the handlers
-that stop the node cleanly. Without this, Python's KeyboardInterrupt traceback.
+quietly on SIGINT or SIGTERM while it is still starting up (exit code 128 + the
+signal's number): this package is imported before the node's own (slow) imports,
+and spinning.init() later installs the handlers that stop the node cleanly.
+Without this, Python's KeyboardInterrupt traceback. The handlers are installed
+before anything else runs here; what runs before this package (the interpreter's
+own start-up) is CPython's, which ends on SIGINT with a message of its own.
 """
 
+# The builtin _signal: importing `signal` would first run its enum set-up, during
+# which a Ctrl-C would still give a traceback.
+import _signal
 import os
-from pathlib import Path
-import signal
 import sys
-import threading
 
 
 NODE_PROGRAMS = ('valve_node', 'analyser_node')
+
+
+def _exit_quietly(number, _frame):
+    """
+    End the process at once, as a shell expects after a signal (exit code 128 + number).
+
+    Not by an exception: raised inside an extension module's import it would come
+    out as that module's ImportError, with a traceback. Nothing is open yet.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):
+            pass
+    os._exit(128 + number)
+
+
+# sys.argv[0] is '-m' while `python -m` imports the packages of the module it runs.
+if sys.argv[:1] == ['-m'] or sys.argv and os.path.basename(sys.argv[0]) in NODE_PROGRAMS:
+    try:
+        _signal.signal(_signal.SIGINT, _exit_quietly)
+        _signal.signal(_signal.SIGTERM, _exit_quietly)
+    except ValueError:  # not the main thread: an embedding program's own handlers
+        pass
 
 
 def node_command(program, options=(), parameters=None, ros_args=()):
@@ -48,25 +75,3 @@ def node_command(program, options=(), parameters=None, ros_args=()):
     return [sys.executable, '-m', f'valve_sim.ros.{program}', *options] + (
         ['--ros-args', *ros] if ros else []
     )
-
-
-def _exit_quietly(number, _frame):
-    """
-    End the process at once, as a shell expects after SIGINT (exit code 130).
-
-    Not by an exception: raised inside an extension module's import it would come
-    out as that module's ImportError, with a traceback. Nothing is open yet.
-    """
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (AttributeError, OSError, ValueError):
-            pass
-    os._exit(128 + number)
-
-
-# sys.argv[0] is '-m' while `python -m` imports the packages of the module it runs.
-if threading.current_thread() is threading.main_thread() and (
-    sys.argv[:1] == ['-m'] or sys.argv and Path(sys.argv[0]).name in NODE_PROGRAMS
-):
-    signal.signal(signal.SIGINT, _exit_quietly)
