@@ -24,6 +24,7 @@ Child processes inherit both.
 import os
 from pathlib import Path
 import signal
+import time
 
 from valve_sim.ros.isolation import claim_domain
 
@@ -70,6 +71,36 @@ def tick_waveforms():
     return simulate(
         load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
     )
+
+
+KERNELS_TIMEOUT = 900.0  # [s] a cold compile of valve_node's kernels: ~30 s quiet, minutes loaded
+
+
+@pytest.fixture(scope='session')
+def valve_node_kernels(tmp_path_factory):
+    """
+    Fill numba's cache with valve_node's kernels, once, before a test starts a node.
+
+    A node compiles them at start when the cache lacks them (a fresh clone, or any edit
+    of valve_sim/core): 20-40 s, minutes on a loaded machine, which the node tests'
+    waits (valve_harness.TIMEOUT) are not meant to cover. One node started here (in a
+    namespace of its own) compiles them; every node after it loads them in a second.
+    Asserted: the node logs that it is ready, and exits 0 on SIGINT.
+    """
+    from valve_harness import start_node, stop_node
+    from valve_sim.ros.valve_node import READY_MESSAGE
+
+    log = tmp_path_factory.mktemp('valve_node_kernels') / 'valve_node.log'
+    process = start_node(log, '-r', '__ns:=/kernels')
+    deadline = time.monotonic() + KERNELS_TIMEOUT
+    try:
+        while f'{READY_MESSAGE}: ' not in log.read_text():
+            assert process.poll() is None, f'valve_node ended:\n{log.read_text()}'
+            assert time.monotonic() < deadline, f'no ready line in {KERNELS_TIMEOUT:g} s'
+            time.sleep(0.2)  # polls the log for the condition
+    finally:
+        exit_code = stop_node(process)
+    assert exit_code == 0, log.read_text()
 
 
 @pytest.fixture(scope='session')

@@ -74,7 +74,8 @@ def recording(node, tick_waveforms, tmp_path_factory):
     """
     Run the analyser once.
 
-    The step replayed, its measures received, the analyser stopped with SIGTERM.
+    The step replayed, its measures received, every message delivered to the analyser
+    (the measures come 50 ms of messages before the end), then SIGTERM.
     """
     folder = tmp_path_factory.mktemp('recording')
     messages = []
@@ -90,6 +91,7 @@ def recording(node, tick_waveforms, tmp_path_factory):
             executor.spin_once(timeout_sec=0.05)
             assert time.monotonic() < deadline, 'no step_measures message'
         executor.remove_node(node)
+        replay.wait_until_delivered(timeout=TIMEOUT)  # published is not yet received
         analyser.send_signal(signal.SIGTERM)
         log = analyser.communicate(timeout=TIMEOUT)[0]
     bag = next(folder.glob('*.mcap'))

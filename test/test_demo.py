@@ -27,13 +27,12 @@ import signal
 import subprocess
 import sys
 
-from figure5 import outside_tolerance
+from figure5 import outside_tolerance, TOLERANCES
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.commands.analyse import Recording
-from valve_sim.commands.demo import largest_gap, report
+from valve_sim.commands.demo import report, sampling_problem
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.bag import BagReader
 
@@ -79,8 +78,9 @@ def test_demo_records_and_measures_the_papers_step(tmp_path):
         )
     bag = next(tmp_path.glob('*.mcap'))
     steps = json.loads(bag.with_suffix('.measures.json').read_text())['steps']
-    assert len(steps) == 1 and steps[0]['direction'] == 1 and steps[0]['reasons'] == {}
-    assert outside_tolerance(steps[0]) == {}
+    retried = out.count('cannot be measured')  # steps up too sparsely sampled, stepped back down
+    assert len(steps) == 2 * retried + 1 and [s['direction'] for s in steps[-1:]] == [1]
+    assert steps[-1]['reasons'] == {} and outside_tolerance(steps[-1]) == {}
     reader = BagReader(bag)
     topics = {channel.topic for channel, _, _ in reader.messages()}
     assert reader.problem is None
@@ -93,8 +93,8 @@ def test_demo_records_and_measures_the_papers_step(tmp_path):
     } <= topics
     assert (tmp_path / 'figure5.png').stat().st_size > 10_000
     assert {'valve_node.log', 'analyser_node.log'} <= {path.name for path in tmp_path.iterdir()}
-    # The kernels were ready before the first tick (no stall in it); lag the node skips
-    # later under load is reported by the demo as a gap, not failed on here.
+    # The kernels were ready before the first tick (no stall in it); a step the node fell
+    # behind on later, under load, is tried again by the demo (counted in retried above).
     assert 'ready: model kernels compiled or loaded' in (tmp_path / 'valve_node.log').read_text()
 
 
@@ -122,6 +122,12 @@ def test_report_names_an_undefined_measure_and_fails(tmp_path):
         report(tmp_path, bag)
 
 
+def test_report_of_retried_steps_needs_every_step_in_the_bag(tmp_path):
+    """Two steps up commanded (one stepped back down) but one step recorded: refused."""
+    with pytest.raises(IncompleteRunError, match='measured 1 steps instead of the 3 commanded'):
+        report(tmp_path, recorded_step(tmp_path), attempts=2)
+
+
 def test_demo_into_an_uncreatable_folder_is_one_line_and_exit_1(tmp_path):
     blocker = tmp_path / 'file'
     blocker.write_text('')
@@ -133,8 +139,54 @@ def test_demo_into_an_uncreatable_folder_is_one_line_and_exit_1(tmp_path):
     )
 
 
-def test_a_gap_in_the_step_window_is_found():
-    time = np.concatenate([np.arange(0.0, 0.5, 1e-3), np.arange(0.55, 1.5, 1e-3)])
-    recording = Recording(time, *(np.zeros_like(time) for _ in range(4)))
-    assert largest_gap(recording, 0.25) == pytest.approx(0.051)
-    assert largest_gap(recording, 0.6) == pytest.approx(1e-3)
+def test_a_step_sampled_too_sparsely_for_its_peaks_is_not_measured():
+    """A 5 ms interval next to a peak is a problem; one of 9 ms elsewhere is not."""
+    values = {'T_1_ms': 6.8, 'T_d_ms': 25.2}  # peaks 6.8 and 32 ms after the step at 250 ms
+    ms = np.arange(1500)  # a state every millisecond
+
+    def without(start, end):
+        """Sample times [s] with the states from start to end [ms] (exclusive) missing."""
+        return ms[(ms < start) | (ms >= end)] * 1e-3
+
+    assert sampling_problem(ms * 1e-3, 0.25, values) is None
+    assert sampling_problem(ms[(ms > 260) | (ms % 2 == 0)] * 1e-3, 0.25, values) is None
+    assert sampling_problem(without(500, 508), 0.25, values) is None
+    assert sampling_problem(without(281, 285), 0.25, values) == (
+        'a gap of 5.0 ms between samples next to a peak, 30 ms after the step (at most 3 ms there)'
+    )
+    assert sampling_problem(without(501, 520), 0.25, values) == (
+        'a gap of 20.0 ms between samples in its window, 250 ms after the step '
+        '(at most 10 ms there)'
+    )
+    undefined = {'T_1_ms': None, 'T_d_ms': None}  # then every interval counts as at a peak
+    assert 'next to a peak' in sampling_problem(without(500, 503), 0.25, undefined)
+    assert sampling_problem(ms[ms < 300] * 1e-3, 0.25, values) is None  # a window cut short
+    assert sampling_problem(ms[ms < 250] * 1e-3, 0.25, values) == 'no samples in its window'
+
+
+def test_every_step_the_sampling_check_passes_has_its_measures_within_a_tenth_of_tolerance(
+    tick_waveforms,
+):
+    """
+    The paper's step at 1 kHz with one gap of 2-20 ms anywhere in the first 80 ms.
+
+    Wherever sampling_problem finds nothing, no measure moved by more than a tenth of
+    its tolerance (figure5.TOLERANCES) from the gapless run's. And it does not refuse
+    every gap: many of them were measured.
+    """
+    t, t_step = tick_waveforms.time, 0.1
+    p_s, x = tick_waveforms['supply_pressure'], tick_waveforms['main_valve_displacement']
+    dense = step_measures(t, p_s, x, t_step).values
+    measured = 0
+    for gap_ms in (2, 3, 4, 5, 6, 8, 10, 12, 16, 20):
+        for start_ms in range(0, 80):
+            ms = np.arange(len(t))
+            keep = (ms <= 100 + start_ms) | (ms >= 100 + start_ms + gap_ms)
+            values = step_measures(t[keep], p_s[keep], x[keep], t_step).values
+            if sampling_problem(t[keep], t_step, values) is not None:
+                continue
+            measured += 1
+            for name, (tolerance, kind) in TOLERANCES.items():
+                allowed = 0.1 * tolerance * (abs(dense[name]) if kind == 'rel' else 1.0)
+                assert values[name] == pytest.approx(dense[name], abs=allowed), (gap_ms, start_ms)
+    assert measured > 250

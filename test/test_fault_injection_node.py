@@ -32,7 +32,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from valve_harness import Probe, start_node, stop_node, TIMEOUT
+from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.fault_schedule import load_schedule
 from valve_sim.core.model import P_S
 from valve_sim.core.sensors import default_settings, read_waveforms
@@ -40,7 +40,7 @@ from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.core.steady_state import steady_state
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 AMBIENT = 101325.0  # [Pa]
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE
@@ -100,37 +100,27 @@ def faulty(context, tmp_path_factory):
     folder = tmp_path_factory.mktemp('faulty')
     schedule = folder / 'schedule.yaml'
     schedule.write_text(SCHEDULE)
-    process = start_node(folder / 'valve_node.log', '-r', f'__ns:={NAMESPACE}',
-                         '-p', 'use_sim_time:=true', '-p', f'fault_schedule:={schedule}')
     recorder = Recorder(folder)
-    probe = Probe(context, NAMESPACE)
-    recorded = []
-    probe.node.create_subscription(DiagnosticArray, '/diagnostics', recorded.append, 10)
     try:
-        probe.wait_until_connected(use_sim_time=True)
+        with running_valve(context, folder / 'valve_node.log', '-p', f'fault_schedule:={schedule}',
+                           namespace=NAMESPACE, use_sim_time=True,
+                           stop_signal=signal.SIGTERM) as (_, probe):
+            recorded = []
+            probe.node.create_subscription(DiagnosticArray, '/diagnostics', recorded.append, 10)
 
-        # The analyser records the valve's (latched) fault status before the schedule starts.
-        def fault_status_recorded():
-            return any(kv.key == f'messages {NAMESPACE}/fault_status' and int(kv.value) > 0
-                       for message in list(recorded) for status in message.status
-                       for kv in status.values)
+            # The analyser records the valve's (latched) fault status before the schedule starts.
+            def fault_status_recorded():
+                return any(kv.key == f'messages {NAMESPACE}/fault_status' and int(kv.value) > 0
+                           for message in list(recorded) for status in message.status
+                           for kv in status.values)
 
-        probe.wait_for(fault_status_recorded, 'the analyser recording fault_status')
-        probe.start_ns = probe.start_clock(100 * 1_000_000_000, PERIOD_NS)
-        probe.schedule = load_schedule(schedule)
-        probe.recorder = recorder
-        yield probe
-        assert probe.non_finite == 0
+            probe.wait_for(fault_status_recorded, 'the analyser recording fault_status')
+            probe.start_ns = probe.start_clock(100 * 1_000_000_000, PERIOD_NS)
+            probe.schedule = load_schedule(schedule)
+            probe.recorder = recorder
+            yield probe
     finally:
-        probe.close()
         recorder.stop()
-        exit_code = stop_node(process, signal.SIGTERM)
-    assert exit_code == 0, f'valve_node exit code {exit_code}'
-
-
-def run_until(probe, end_ns):
-    while probe.clock_ns < end_ns:
-        probe.tick_at(probe.clock_ns + PERIOD_NS)
 
 
 def published(probe, topic, since_ns):
@@ -139,7 +129,7 @@ def published(probe, topic, since_ns):
 
 
 def test_a_schedule_gives_the_same_supply_pressure_live_as_offline(faulty, reference):
-    run_until(faulty, faulty.start_ns + SCHEDULE_END_NS)
+    faulty.run_until(faulty.start_ns + SCHEDULE_END_NS)
     live = published(faulty, 'supply_pressure', faulty.start_ns)
     assert [t - faulty.start_ns for t, _ in live] == list(range(0, SCHEDULE_END_NS + 1, PERIOD_NS))
     offline = simulate(reference, Scenario(INITIAL_FLOW, INITIAL_FLOW, 0.0, 0.2),
@@ -175,7 +165,7 @@ def test_a_fault_driving_p_s_to_the_supply_limit_raises_an_overpressure_alarm(fa
     while faulty.latest()[1] - AMBIENT < limit * (1 - 1e-6):
         assert faulty.clock_ns < deadline, 'p_s never reached the limit'
         faulty.tick_at(faulty.clock_ns + PERIOD_NS)
-    run_until(faulty, faulty.clock_ns + 50 * PERIOD_NS)  # it keeps running, p_s held
+    faulty.run_until(faulty.clock_ns + 50 * PERIOD_NS)  # it keeps running, p_s held
     tail = [p - AMBIENT for _, p in published(faulty, 'supply_pressure', faulty.clock_ns - 40e6)]
     assert len(tail) == 41 and max(tail) == pytest.approx(limit, rel=1e-12)
     values = faulty.wait_for_diagnostics(lambda d: d['level'] == 2, 'an ERROR')
@@ -203,7 +193,7 @@ def test_sensor_noise_and_bias_are_measured_on_the_published_samples(faulty, ref
     assert faulty.set_parameters(**{'sensor.supply_pressure.noise_std': 2000.0,
                                     'sensor.supply_pressure.bias': 5000.0})[-1].successful
     since = faulty.clock_ns + PERIOD_NS
-    run_until(faulty, faulty.clock_ns + 1000 * PERIOD_NS)
+    faulty.run_until(faulty.clock_ns + 1000 * PERIOD_NS)
     errors = np.array([p for _, p in published(faulty, 'supply_pressure', since)]) - true
     assert len(errors) == 1000
     assert np.mean(errors) == pytest.approx(5000.0, abs=4 * 2000.0 / math.sqrt(1000))
@@ -215,14 +205,14 @@ def test_sensor_noise_and_bias_are_measured_on_the_published_samples(faulty, ref
 def test_dropout_publishes_nothing_and_the_diagnostics_say_so(faulty):
     assert faulty.set_parameters(**{'sensor.pilot_pressure.dropout': True})[0].successful
     since = faulty.clock_ns + PERIOD_NS
-    run_until(faulty, faulty.clock_ns + 20 * PERIOD_NS)
+    faulty.run_until(faulty.clock_ns + 20 * PERIOD_NS)
     assert published(faulty, 'pilot_pressure', since) == []
     assert len(published(faulty, 'supply_pressure', since)) == 20
     values = faulty.wait_for_diagnostics(lambda d: d['level'] == 1, 'a WARN')
     assert 'dropout: nothing published on pilot_pressure' in values['message']
     assert values['sensor_dropout'] == 'pilot_pressure'
     assert faulty.set_parameters(**{'sensor.pilot_pressure.dropout': False})[0].successful
-    run_until(faulty, faulty.clock_ns + 2 * PERIOD_NS)
+    faulty.run_until(faulty.clock_ns + 2 * PERIOD_NS)
     assert len(published(faulty, 'pilot_pressure', since)) == 2
 
 

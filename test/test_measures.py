@@ -149,6 +149,20 @@ def test_truncated_window_is_reported():
     assert 'truncated' in result.details['note']
 
 
+def test_a_gap_over_the_window_end_is_no_settled_value():
+    """No sample in the window's last 50 ms (lag skipped there): every measure null, not NaN."""
+    t, p, x = synthetic(rate=1e3)
+    keep = t < T_STEP + 0.94  # and the next sample after the window's end
+    result = step_measures(
+        np.append(t[keep], T_STEP + 1.06),
+        np.append(p[keep], P0 + DELTA),
+        np.append(x[keep], X_INF),
+        T_STEP,
+    )
+    assert all(result.values[name] is None for name in MEASURE_NAMES), result.values
+    assert 'no sample in the last 50 ms of the window' in result.reasons['P_o_percent']
+
+
 def test_step_detector_dates_steps_at_the_last_old_sample():
     t = np.arange(0.0, 3.0, 1e-3)
     q = np.full_like(t, 5.0)

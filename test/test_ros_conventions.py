@@ -36,7 +36,7 @@ from mcap_ros2.decoder import DecoderFactory
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from valve_harness import Probe, start_node, stop_node, TIMEOUT
+from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.recording.replay import Replay
@@ -45,7 +45,7 @@ from valve_sim.ros import analyser_node
 from valve_sim.ros.live_view import layout_path
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 RENAMED = 'renamed_valve'
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE
@@ -58,20 +58,19 @@ PUBLISHED = {'/' + topic: TOPIC_TYPES[topic] for topic in TICK_TOPICS} | {
 def renamed_valve(context, tmp_path_factory):
     """Yield (probe, Foxglove port) of a valve_node renamed at start, input timeout 0.5 s."""
     log = tmp_path_factory.mktemp('renamed_valve') / 'valve_node.log'
-    process = start_node(
-        log, '-r', f'__node:={RENAMED}', '-p', 'input_timeout:=0.5', options=('--foxglove', '0')
-    )
-    probe = Probe(context, node_name=RENAMED)
-    try:
-        probe.wait_until_connected()
+    with running_valve(
+        context,
+        log,
+        '-r',
+        f'__node:={RENAMED}',
+        '-p',
+        'input_timeout:=0.5',
+        node_name=RENAMED,
+        options=('--foxglove', '0'),
+    ) as (_, probe):
         found = re.search(r'Foxglove live view on ws://127\.0\.0\.1:(\d+)', log.read_text())
         assert found, log.read_text()
         yield probe, int(found[1])
-        assert process.poll() is None, f'valve_node died:\n{log.read_text()}'
-    finally:
-        probe.close()
-        exit_code = stop_node(process)
-    assert exit_code == 0, f'valve_node exit code {exit_code}:\n{log.read_text()}'
 
 
 async def foxglove_samples(port, topic, count):

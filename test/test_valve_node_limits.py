@@ -29,14 +29,14 @@ import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from valve_harness import Probe, start_node, stop_node
+from valve_harness import running_valve
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import steady_state
 
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 AMBIENT = 101325.0  # [Pa] ambient_pressure default
 FLOW = 5.0 * LITRE_PER_MINUTE
@@ -47,34 +47,19 @@ CHAMBER_VOLUMES = ('supply_volume', 'intermediate_volume', 'pilot_volume', 'popp
 
 @pytest.fixture(scope='module')
 def node(context, tmp_path_factory):
-    """Start the node and its probe; check a clean SIGINT exit at the end."""
+    """Run the node, inlet_flow subscribed reliably, with its probe: (process, probe, log)."""
     log = tmp_path_factory.mktemp('limits') / 'valve_node.log'
-    process = start_node(
-        log, '-r', f'__ns:={NAMESPACE}', '-p', 'inlet_flow_reliability:=reliable'
-    )
-    probe = Probe(context, NAMESPACE)
-    try:
-        probe.wait_until_connected()
+    with running_valve(
+        context, log, '-p', 'inlet_flow_reliability:=reliable', namespace=NAMESPACE
+    ) as (process, probe):
         yield process, probe, log
-        assert process.poll() is None, f'valve_node died:\n{log.read_text()}'
-    finally:
-        probe.close()
-        exit_code = stop_node(process)
-    assert exit_code == 0, f'valve_node exit code {exit_code} after SIGINT:\n{log.read_text()}'
 
 
 @pytest.fixture
 def valve(node):
-    """Yield the probe with the node at the reference parameters, 5 L/min, steady state."""
+    """Yield the probe, the node restored: reference parameters, 5 L/min, steady state."""
     process, probe, _ = node
-    reference = load_parameters()[0]
-    probe.send_flow(FLOW)
-    probe.wait_for(lambda: probe.applied and probe.applied[-1][1] == FLOW, 'flow at 5 L/min')
-    current = probe.get_parameters(*reference)
-    changed = {name: value for name, value in reference.items() if current[name] != value}
-    if changed:
-        assert probe.set_parameters_atomically(**changed).successful
-    assert call_reset(probe).success
+    probe.restore(load_parameters()[0], FLOW)
     yield probe
     assert process.poll() is None, 'valve_node died'
     assert probe.non_finite == 0, 'a NaN or inf was published'

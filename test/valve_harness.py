@@ -18,10 +18,12 @@ Drive valve_node over DDS from a test: the node runs in its own process, a probe
 The probe records everything the valve publishes (as plain floats, keyed by the
 header stamp in ns), counts any non-finite field, and wraps the inlet_flow
 topic, /clock, the parameter services and ~/reset. Its executor spins in a
-background thread; waiting happens on a condition variable, so tests never
-depend on how fast this machine is, only on generous timeouts.
+background thread; a test waits for a condition on what arrived, checked every
+POLL_INTERVAL, so tests never depend on how fast this machine is, only on
+generous timeouts.
 """
 
+from contextlib import contextmanager
 import math
 import os
 from pathlib import Path
@@ -49,6 +51,13 @@ from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 REPO = Path(__file__).resolve().parent.parent
 NODE_NAME = 'relief_valve'
 TIMEOUT = 60.0  # [s] for anything that waits: start-up, discovery, a service answer
+# [messages] per tick topic: the probe's callbacks run in Python beside the test; on a
+# machine loaded to 17 they fell more than 1 s (1000 messages) behind and lost samples
+PROBE_QUEUE_DEPTH = 10_000
+# [s] how often a wait checks its condition. Waking the waiting test thread on every
+# message instead (6 kHz) starved the probe's executor of the GIL: it fell more than
+# 1000 messages behind and lost samples, even at load 4.
+POLL_INTERVAL = 0.01
 
 
 def start_node(log_path, *ros_args, options=()):
@@ -84,6 +93,40 @@ def stop_node(process, sig=signal.SIGINT):
     return process.returncode
 
 
+@contextmanager
+def running_valve(
+    context,
+    log_path,
+    *ros_args,
+    namespace='/',
+    node_name=NODE_NAME,
+    options=(),
+    use_sim_time=False,
+    stop_signal=signal.SIGINT,
+):
+    """
+    Run valve_node (start_node's arguments, in namespace) with a connected Probe.
+
+    Yields (process, probe). On the way out: the node must still run and never have
+    published a NaN or inf, and after stop_signal it must exit with code 0.
+    """
+    if namespace != '/':
+        ros_args = ('-r', f'__ns:={namespace}', *ros_args)
+    if use_sim_time:
+        ros_args = ('-p', 'use_sim_time:=true', *ros_args)
+    process = start_node(log_path, *ros_args, options=options)
+    probe = Probe(context, namespace, node_name)
+    try:
+        probe.wait_until_connected(use_sim_time)
+        yield process, probe
+        assert process.poll() is None, f'valve_node died:\n{log_path.read_text()}'
+        assert probe.non_finite == 0, 'a NaN or inf was published'
+    finally:
+        probe.close()
+        exit_code = stop_node(process, stop_signal)
+    assert exit_code == 0, f'valve_node exit code {exit_code}:\n{log_path.read_text()}'
+
+
 def stamp_ns(header):
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
@@ -109,12 +152,14 @@ class Probe:
         self.diagnostics = []  # [{key: value}] of this node's status
         self.non_finite = 0  # published fields that were NaN or inf
         self.clock_ns = None  # last /clock sent [ns]
+        self.period_ns = None  # tick period [ns] on simulated time (start_clock), else None
         for topic in PRESSURE_TOPICS:
             self.node.create_subscription(
-                FluidPressure, topic, self._pressure_callback(topic), 1000
+                FluidPressure, topic, self._pressure_callback(topic), PROBE_QUEUE_DEPTH
             )
-        self.node.create_subscription(JointState, 'joint_states', self._on_joints, 1000)
-        self.node.create_subscription(JointState, 'applied_inlet_flow', self._on_applied, 1000)
+        joint_topics = {'joint_states': self._on_joints, 'applied_inlet_flow': self._on_applied}
+        for topic, callback in joint_topics.items():
+            self.node.create_subscription(JointState, topic, callback, PROBE_QUEUE_DEPTH)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.inlet = self.node.create_publisher(Float64, 'inlet_flow', 100)
         self.clock = self.node.create_publisher(Clock, '/clock', 10)
@@ -136,7 +181,6 @@ class Probe:
             if not all(math.isfinite(value) for value in row[1:]):
                 self.non_finite += 1
             target.append(row)
-            self.condition.notify_all()
 
     def _pressure_callback(self, topic):
         def callback(message):
@@ -157,11 +201,10 @@ class Probe:
                 values.update(level=status.level[0], message=status.message, name=status.name)
                 with self.condition:
                     self.diagnostics.append(values)
-                    self.condition.notify_all()
 
     def _wait(self, condition, timeout):
         """
-        Block until condition() holds (checked on every message) or timeout [s].
+        Block until condition() holds (checked every POLL_INTERVAL) or timeout [s].
 
         Returns whether it holds.
         """
@@ -171,7 +214,7 @@ class Probe:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
-                self.condition.wait(min(left, 0.1))
+                self.condition.wait(min(left, POLL_INTERVAL))
             return True
 
     def wait_for(self, condition, what, timeout=TIMEOUT):
@@ -244,7 +287,9 @@ class Probe:
         Publish /clock from start_ns, a period at a time, until the valve's first state arrives.
 
         Returns that state's stamp [ns]: the valve anchors its model time at its first tick.
+        From then on the probe drives the valve one period_ns at a time (next_tick).
         """
+        self.period_ns = period_ns
         deadline = time.monotonic() + TIMEOUT
         time_ns = start_ns
         self.send_clock(time_ns)
@@ -272,6 +317,18 @@ class Probe:
         while not self._wait(published, 1.0):
             assert time.monotonic() < deadline, f'no valve state stamped {time_ns} ns'
             self.send_clock(time_ns)
+
+    def run_until(self, end_ns):
+        """Lockstep the valve through every tick period up to end_ns [ns] (simulated time)."""
+        while self.clock_ns < end_ns:
+            self.tick_at(self.clock_ns + self.period_ns)
+
+    def next_tick(self):
+        """Let the valve tick once more: on simulated time drive it, else wait for it."""
+        if self.period_ns is None:
+            self.wait_for_new_samples(topic='applied_inlet_flow')
+        else:
+            self.tick_at(self.clock_ns + self.period_ns)
 
     def _result(self, future):
         done = threading.Event()
@@ -322,7 +379,9 @@ class Probe:
         its response shows it happened at flow (the flow message may still be on
         its way), and the call returns only once a sample of every tick topic
         stamped after the reset has arrived: from then on the probe's latest
-        samples are the restored valve's, however far its queues lagged. Returns
+        samples are the restored valve's, however far its queues lagged. On
+        simulated time the probe ticks the valve itself (next_tick), and the
+        restored valve has published exactly one state since the reset. Returns
         the reset's model time [ns].
         """
         current = self.get_parameters(*parameters)
@@ -338,13 +397,14 @@ class Probe:
             if math.isclose(reset_flow, flow, rel_tol=1e-5, abs_tol=1e-12):
                 break
             assert time.monotonic() < deadline, f'the valve never took inlet_flow {flow:g}'
-            self.wait_for_new_samples(topic='applied_inlet_flow')
+            self.next_tick()
+        if self.period_ns is not None:
+            self.next_tick()
         for topic in PRESSURE_TOPICS:
             self.first_after(reset_ns, topic)
         self.first_after(reset_ns, 'joint_states')
         applied = self.first_after(reset_ns, 'applied_inlet_flow')
         assert applied[1] == flow, f'applied_inlet_flow after the reset: {applied[1]:g} m^3/s'
-
         return reset_ns
 
     def first_after(self, time_ns, topic='supply_pressure'):

@@ -205,6 +205,15 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     inside = (t >= t_step) & (t <= end)
     tw, pw, xw = t[inside], p[inside], x[inside]
     settled = tw >= end - SETTLED_SPAN
+    if not settled.any():  # a gap in the recording over the window's end: no p_inf
+        reasons.update(
+            dict.fromkeys(
+                MEASURE_NAMES,
+                f'no sample in the last {SETTLED_SPAN * 1e3:g} ms of the window '
+                '(a gap in the recording), so the settled values are undefined',
+            )
+        )
+        return StepMeasures(values, reasons)
     x_recorded = bool(np.all(np.isfinite(xw))) and np.isfinite(_interpolate(t, x, t_step))
     p_0 = _interpolate(t, p, t_step)
     p_inf = float(np.mean(pw[settled]))

@@ -22,7 +22,9 @@ count is exact and the mean rate holds). Publishers are reliable, KEEP_LAST
 with QUEUE_DEPTH: a reliable writer drops its oldest unacknowledged sample when
 its queue is full, so the depth must cover the longest stall of the machine (a
 loaded 2-core machine stalls for a few hundred ms at times). wait_for_subscribers()
-before publish() makes sure that nothing published is lost to discovery.
+before publish() makes sure that nothing published is lost to discovery;
+wait_until_delivered() after it, that every message has reached every subscriber
+(publish() only queues them), before the subscriber is stopped.
 """
 
 import time
@@ -60,6 +62,16 @@ class Replay:
                     f'not {count} subscriber(s) for every valve topic within {timeout:g} s'
                 )
             time.sleep(0.01)
+
+    def wait_until_delivered(self, timeout=60.0):
+        """Wait until every subscriber acknowledged every message; raises TimeoutError."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        for topic, publisher in self.publishers.items():
+            left = max(deadline - time.monotonic(), 0.0)
+            if not publisher.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))):
+                raise TimeoutError(f'{topic}: not every message acknowledged within {timeout:g} s')
 
     def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
         """

@@ -35,7 +35,6 @@ import numpy as np
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
 from valve_sim.core.parameters import NODE_NAME, ParameterError, STANDARD_ATMOSPHERE
-from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.cdr import CdrMessage
 
 
@@ -172,6 +171,8 @@ def write_simulation_bag(
     default: the model's pressures + ambient_pressure. Returns the number of ticks
     written; raises ParameterError for a bad interval.
     """
+    from valve_sim.recording.bag import BagWriter  # here: valve_node needs no MCAP library
+
     every = samples_per_publish(waveforms, publish_interval)
     bag = BagWriter(
         path, folder=folder, custom_data={'source': 'valve-sim simulate (offline model run)'}
@@ -229,6 +230,8 @@ def write_rig_bag(
     receive time (log_time) is the sample time, start_time_ns [ns since the epoch]
     + the model time. folder: a rosbag2 bag folder at path. Returns the number of samples.
     """
+    from valve_sim.recording.bag import BagWriter
+
     every = samples_per_publish(waveforms, publish_interval)
     indices = np.arange(0, len(waveforms.time), every)
     noise = np.random.default_rng(seed).normal(0.0, pressure_noise, len(indices))

@@ -28,7 +28,6 @@ from pathlib import Path
 import sys
 
 from valve_sim.core.errors import InputFileError
-from valve_sim.recording.bag import message_definition
 
 
 DEFAULT_PORT = 8765  # Foxglove's default WebSocket port
@@ -60,6 +59,8 @@ class LiveView:
         Port 0 takes a free port (see self.port). Raises InputFileError if
         foxglove-sdk is missing or the port cannot be opened.
         """
+        from valve_sim.recording.bag import message_definition  # a node without a view: no MCAP
+
         try:
             import foxglove
         except ImportError as error:
