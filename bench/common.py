@@ -124,13 +124,16 @@ class TimerFloor:
     """
     The timer floor in its own process, from construction until stop().
 
-    scheduler: a command prefix such as chrt.
+    scheduler: a command prefix such as chrt; flooded: the loop's process also
+    subscribes to inlet_flow as valve_node does (never taking a message), so that a
+    flood costs it the middleware's receiving too.
     """
 
-    def __init__(self, env, scheduler=()):
+    def __init__(self, env, scheduler=(), flooded=False):
         self.path = REPO / 'out' / f'timer_floor_{os.getpid()}_{time.monotonic_ns()}.json'
         self.path.parent.mkdir(exist_ok=True)
-        self.process = start([*scheduler, sys.executable, __file__, str(self.path)], env)
+        command = [*scheduler, sys.executable, __file__, str(self.path)]
+        self.process = start(command + (['--flooded'] if flooded else []), env)
         self.exit_code = None
 
     def stop(self):
@@ -141,7 +144,7 @@ class TimerFloor:
         return {**counts, 'on_time_percent': on_time_percent(**counts)}
 
 
-def run_timer_floor(path):
+def run_timer_floor(path, flooded=False):
     """
     Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
 
@@ -149,9 +152,21 @@ def run_timer_floor(path):
     Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
     A tick is late if it starts more than LATE_FRACTION of a period after its slot;
     slots that passed while it was late are missed (the loop goes on at the next slot).
+    flooded: first subscribe to inlet_flow with valve_node's default QoS; the
+    middleware receives every message into it, the loop never takes one.
     """
     from valve_sim.ros.node_status import LATE_FRACTION
 
+    if flooded:
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+        from std_msgs.msg import Float64
+        from valve_sim.ros.valve_node import INLET_FLOW_QOS
+
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node('flooded_timer_floor')
+        qos = INLET_FLOW_QOS['best_effort']
+        node.create_subscription(Float64, 'inlet_flow', lambda _: None, qos)
     stopped = []
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stopped.append(number))
@@ -175,4 +190,4 @@ def on_time_percent(ticks, late, missed):
 
 
 if __name__ == '__main__':
-    sys.exit(run_timer_floor(sys.argv[1]))
+    sys.exit(run_timer_floor(sys.argv[1], flooded=sys.argv[2:] == ['--flooded']))
