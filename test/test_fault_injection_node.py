@@ -219,7 +219,7 @@ def test_dropout_publishes_nothing_and_the_diagnostics_say_so(faulty):
 def test_fault_parameters_are_described_and_checked(faulty):
     names = ['fault.bearing_coulomb_friction', 'fault.main_valve_stuck',
              'sensor.supply_pressure.noise_std']
-    described = faulty.call(lambda: faulty.parameters.describe_parameters(names)).descriptors
+    described = faulty._result(faulty.parameters.describe_parameters(names)).descriptors
     assert 'Coulomb' in described[0].description and described[0].floating_point_range
     assert described[0].floating_point_range[0].to_value == 1000.0
     assert 'stuck' in described[1].description

@@ -280,8 +280,10 @@ def test_publishes_each_tick_with_one_stamp_at_the_steady_state(valve, reference
 
 
 def test_parameter_descriptors_carry_unit_and_range(valve):
-    names = ['main_valve_mass', 'preset_pressure', 'step_size']
-    descriptors = valve.call(lambda: valve.parameters.describe_parameters(names)).descriptors
+    future = valve.parameters.describe_parameters(
+        ['main_valve_mass', 'preset_pressure', 'step_size']
+    )
+    descriptors = valve._result(future).descriptors
     mass, preset, step = descriptors
     assert '[kg]' in mass.description and 'Table 1' in mass.description
     assert (mass.floating_point_range[0].from_value, mass.floating_point_range[0].to_value) == (

@@ -68,7 +68,7 @@ def valve(node):
 
 def call_reset(probe):
     """Call ~/reset; return the response (success or not)."""
-    return probe.call(lambda: probe.reset_client.call_async(Trigger.Request()))
+    return probe._result(probe.reset_client.call_async(Trigger.Request()))
 
 
 def reset_ns(response):
