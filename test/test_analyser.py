@@ -32,6 +32,7 @@ from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 import pytest
 import rclpy
+from valve_harness import flushed
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.recording.bag import BagReader, message_definition
@@ -153,11 +154,6 @@ def test_recording_decodes_with_mcap_ros2_and_rosbags(recording):
             bag.deserialize(raw, c.msgtype).position for c, _, raw in bag.messages(connections)
         ]
     assert len(positions) == recording['published']['joint_states']
-
-
-def flushed(bag, topics):
-    """Return the messages on topics in the bag's complete chunks (0 while the file is empty)."""
-    return sum(1 for _ in BagReader(bag).messages(topics)) if bag.stat().st_size else 0
 
 
 def test_hard_kill_leaves_every_flushed_chunk_readable(node, tick_waveforms, tmp_path):

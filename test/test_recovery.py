@@ -29,6 +29,7 @@ import time
 from mcap.reader import make_reader
 import pytest
 from rosbags.highlevel import AnyReader
+from valve_harness import flushed
 from valve_sim.commands.analyse import read_recording
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
@@ -157,11 +158,6 @@ def wait_for(condition, what):
     while not condition():
         assert time.monotonic() < deadline, f'timed out waiting for {what}'
         time.sleep(0.05)
-
-
-def flushed(bag):
-    """Return the messages of the bag's complete chunks, as BagReader reads them."""
-    return sum(1 for _ in BagReader(bag).messages()) if bag.stat().st_size else 0
 
 
 def test_kill_9_mid_recording_then_repair_keeps_at_least_every_flushed_message(

@@ -20,7 +20,7 @@ header stamp in ns), counts any non-finite field, and wraps the inlet_flow
 topic, /clock, the parameter services and ~/reset. Its executor spins in a
 background thread; a test waits for a condition on what arrived, checked every
 POLL_INTERVAL, so tests never depend on how fast this machine is, only on
-generous timeouts.
+generous timeouts. flushed() counts what a recording node has written so far.
 """
 
 from contextlib import contextmanager
@@ -45,6 +45,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
+from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 
 
@@ -79,6 +80,11 @@ def start_node(log_path, *ros_args, options=()):
             env=env,
             cwd=REPO,
         )
+
+
+def flushed(bag, topics=None):
+    """Return the messages (on topics) in the bag's complete chunks; 0 while the file is empty."""
+    return sum(1 for _ in BagReader(bag).messages(topics)) if bag.stat().st_size else 0
 
 
 def stop_node(process, sig=signal.SIGINT):
