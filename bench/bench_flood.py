@@ -19,10 +19,11 @@
 #
 #     python bench/bench_flood.py [--duration 60] [--json out/bench_flood.json]
 #                                 [--executor {events,single-threaded}] [--flooded-floor]
+#                                 [--receive-threads {idle,normal}]
 #
 # One run, one valve_node (1 kHz, 10 us steps, its default inlet_flow QoS, on
-# --executor: valve_node's default unless given), two phases of --duration seconds
-# each, on a ROS domain of its own (localhost only):
+# --executor and with --receive-threads: valve_node's defaults unless given), two
+# phases of --duration seconds each, on a ROS domain of its own (localhost only):
 #
 # - quiet: no inlet_flow at all;
 # - flood: one publisher process sends inlet_flow as fast as it can (reliable,
@@ -32,9 +33,10 @@
 # In each phase the timer floor (bench/common.py: a bare Python loop sleeping to
 # 1 kHz slots in its own process, counted as the node counts its ticks) shows what
 # the OS scheduler alone allows under the same load. With --flooded-floor, the floor's
-# process also subscribes to inlet_flow as valve_node does (its default QoS, never
-# taking a message): what receiving the flood costs any subscriber is then in the
-# floor too, and the distance to it is what valve_node itself adds. The publisher
+# process also subscribes to inlet_flow as valve_node does (its default QoS, its
+# receive threads as --receive-threads puts valve_node's, never taking a message):
+# what receiving the flood costs any subscriber is then in the floor too, and the
+# distance to it is what valve_node itself adds. The publisher
 # then sends to both. Reported per phase: the node's
 # on-time ticks (ticks - late) / (ticks + missed) from its diagnostics, the floor's,
 # and the node's distance to the floor; for the flood the publisher's rate, the
@@ -52,7 +54,16 @@ from pathlib import Path
 import sys
 import time
 
-from common import arguments, on_time_percent, REPO, run_benchmark, start, stop, TimerFloor
+from common import (
+    add_receive_threads_option,
+    arguments,
+    on_time_percent,
+    REPO,
+    run_benchmark,
+    start,
+    stop,
+    TimerFloor,
+)
 
 
 FLOW = 5.0e-3 / 60.0  # [m^3/s] 5 L/min
@@ -61,6 +72,7 @@ WARM_UP = 3.0  # [s] discovery and first ticks, not measured
 COUNTERS = (
     'ticks',
     'late_ticks',
+    'long_ticks',
     'missed_ticks',
     'accepted_inputs',
     'rejected_inputs',
@@ -117,8 +129,8 @@ def spin_for(executor, seconds, condition=lambda: False):
         executor.spin_once(timeout_sec=0.05)
 
 
-def phase(duration, executor, diagnostics, env, flood=False, flooded_floor=False):
-    """Run one phase; returns its figures."""
+def phase(duration, executor, diagnostics, env, flood=False, flooded_floor=None):
+    """Run one phase (flooded_floor: None or the floor's receive-thread policy); figures."""
     flood_file = REPO / 'out' / f'flood_publisher_{os.getpid()}.json'
     floor = TimerFloor(env, flooded=flooded_floor)
     publisher = None
@@ -158,7 +170,7 @@ def phase(duration, executor, diagnostics, env, flood=False, flooded_floor=False
     return figures
 
 
-def measure(duration, executor_name, flooded_floor, env):
+def measure(duration, executor_name, receive_threads, flooded_floor, env):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from valve_sim.ros import node_command
@@ -168,7 +180,7 @@ def measure(duration, executor_name, flooded_floor, env):
     valve = start(
         node_command(
             'valve_node',
-            ['--executor', executor_name],
+            ['--executor', executor_name, '--receive-threads', receive_threads],
             {'publish_rate': 1000.0, 'input_timeout': 0.0},
         ),
         env,
@@ -178,15 +190,19 @@ def measure(duration, executor_name, flooded_floor, env):
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     diagnostics = Diagnostics(node)
+    floor_receive_threads = receive_threads if flooded_floor else None
     try:
         spin_for(executor, 120.0, lambda: diagnostics.reports)
         spin_for(executor, WARM_UP)
         figures = {
             'duration_s': duration,
             'executor': executor_name,
+            'receive_threads': receive_threads,
             'flooded_floor': flooded_floor,
-            'quiet': phase(duration, executor, diagnostics, env, flooded_floor=flooded_floor),
-            'flood': phase(duration, executor, diagnostics, env, True, flooded_floor),
+            'quiet': phase(
+                duration, executor, diagnostics, env, flooded_floor=floor_receive_threads
+            ),
+            'flood': phase(duration, executor, diagnostics, env, True, floor_receive_threads),
         }
     finally:
         stop(valve)
@@ -200,7 +216,8 @@ def table(figures):
     quiet, flood = figures['quiet'], figures['flood']
     floor_label = 'floor, subscribed [%]' if figures['flooded_floor'] else 'bare-loop floor [%]'
     rows = [
-        f'valve_node ({figures["executor"]} executor) under a flood of inlet_flow, '
+        f'valve_node ({figures["executor"]} executor, receive threads '
+        f'{figures["receive_threads"]}) under a flood of inlet_flow, '
         f'{figures["duration_s"]:g} s per phase',
         f'{"":28}{"quiet":>10}{"flood":>10}',
         f'{"node on-time ticks [%]":28}{quiet["node_on_time_percent"]:>10.3f}'
@@ -227,11 +244,14 @@ def main(argv=None):
         action='store_true',
         help="the floor's process subscribes to inlet_flow too (receives the flood)",
     )
+    add_receive_threads_option(parser)
     parser.add_argument('--flood', nargs=2, metavar=('SECONDS', 'FILE'), help=argparse.SUPPRESS)
     return run_benchmark(
         parser.parse_args(argv),
         {'flood': lambda flood: run_flood(float(flood[0]), flood[1])},
-        lambda args, env: measure(args.duration, args.executor, args.flooded_floor, env),
+        lambda args, env: measure(
+            args.duration, args.executor, args.receive_threads, args.flooded_floor, env
+        ),
         table,
     )
 

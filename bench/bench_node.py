@@ -19,6 +19,7 @@
 #
 #     python bench/bench_node.py [--duration 60] [--json out/bench_node.json]
 #                                [--executor {events,single-threaded}] [--rt-priority 50]
+#                                [--receive-threads {idle,normal}]
 #
 # Starts valve_node and a bare rclpy echo node, each in its own process, on a
 # private ROS domain (localhost only), and measures from this process:
@@ -45,7 +46,8 @@
 # --executor picks the rclpy executor of all three processes (valve_node's
 # --executor). --rt-priority P runs valve_node and the echo node under SCHED_FIFO
 # priority P and this measuring process at P - 1 (needs the privilege), as a test
-# rig would run its nodes. The load average at start and end is reported: other
+# rig would run its nodes. --receive-threads is valve_node's (its default unless
+# given; the echo node's are left as started). The load average at start and end is reported: other
 # work on the machine shows in every figure here.
 
 import argparse
@@ -54,7 +56,7 @@ import struct
 import sys
 import time
 
-from common import arguments, run_benchmark, start, stop, TimerFloor
+from common import add_receive_threads_option, arguments, run_benchmark, start, stop, TimerFloor
 from valve_sim.recording.cdr import (
     STAMP,
     STAMP_OFFSET,
@@ -223,7 +225,7 @@ def cpu_seconds(processes):
     return {name: sum(process.cpu_times()[:2]) for name, process in processes.items()}
 
 
-def measure(duration, rt_priority, executor, env):
+def measure(duration, rt_priority, executor, receive_threads, env):
     """Run the node, the echo and the probes for duration [s]; returns the figures."""
     import psutil
     import rclpy
@@ -238,7 +240,7 @@ def measure(duration, rt_priority, executor, env):
             *scheduler,
             *node_command(
                 'valve_node',
-                ['--executor', executor],
+                ['--executor', executor, '--receive-threads', receive_threads],
                 {'publish_rate': 1000.0, 'step_size': 1.0e-5, 'input_timeout': 0.0},
             ),
         ],
@@ -292,6 +294,7 @@ def measure(duration, rt_priority, executor, env):
         'publish_rate_hz': 1000.0,
         'step_size_s': 1e-5,
         'executor': executor,
+        'receive_threads': receive_threads,
         'ticks': tick_figures(bench.diagnostics),
         'timer_floor_on_time_percent': floor['on_time_percent'],
         'timer_floor': floor,
@@ -403,7 +406,7 @@ def table(figures):
     lines = [
         f'valve_node benchmark: {figures["duration_s"]:g} s at {figures["publish_rate_hz"]:g} Hz, '
         f'steps of {figures["step_size_s"] * 1e6:g} us, executor {figures["executor"]}, '
-        f'scheduler {figures["scheduler"]}, '
+        f'scheduler {figures["scheduler"]}, receive threads {figures["receive_threads"]}, '
         f'{figures["cpus"]} CPUs, load average (1 min) '
         f'{figures["load_average_at_start"][0]:.2f} at start, '
         f'{figures["load_average_at_end"][0]:.2f} at end',
@@ -429,11 +432,14 @@ def main(argv=None):
         default=0,
         help='run the nodes under SCHED_FIFO with this priority (this process one lower)',
     )
+    add_receive_threads_option(parser)
     parser.add_argument('--echo', metavar='EXECUTOR', help=argparse.SUPPRESS)
     return run_benchmark(
         parser.parse_args(argv),
         {'echo': run_echo},
-        lambda args, env: measure(args.duration, args.rt_priority, args.executor, env),
+        lambda args, env: measure(
+            args.duration, args.rt_priority, args.executor, args.receive_threads, env
+        ),
         table,
     )
 

@@ -60,6 +60,18 @@ def arguments(doc, json_name, duration_help, executor_help="valve_node's executo
     return parser
 
 
+def add_receive_threads_option(parser):
+    """Add --receive-threads: valve_node's option of that name, by default valve_node's."""
+    from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES
+
+    parser.add_argument(
+        '--receive-threads',
+        choices=POLICIES,
+        default=DEFAULT_POLICY,
+        help=f"valve_node's --receive-threads (default {DEFAULT_POLICY})",
+    )
+
+
 def isolated_environment():
     """
     Claim a ROS domain of this run's own (discovery on localhost); return the child env.
@@ -124,16 +136,17 @@ class TimerFloor:
     """
     The timer floor in its own process, from construction until stop().
 
-    scheduler: a command prefix such as chrt; flooded: the loop's process also
-    subscribes to inlet_flow as valve_node does (never taking a message), so that a
-    flood costs it the middleware's receiving too.
+    scheduler: a command prefix such as chrt; flooded: None, or the loop's process
+    also subscribes to inlet_flow as valve_node does (never taking a message), its
+    receive threads under this valve_node --receive-threads policy, so that a flood
+    costs it the middleware's receiving too.
     """
 
-    def __init__(self, env, scheduler=(), flooded=False):
+    def __init__(self, env, scheduler=(), flooded=None):
         self.path = REPO / 'out' / f'timer_floor_{os.getpid()}_{time.monotonic_ns()}.json'
         self.path.parent.mkdir(exist_ok=True)
         command = [*scheduler, sys.executable, __file__, str(self.path)]
-        self.process = start(command + (['--flooded'] if flooded else []), env)
+        self.process = start(command + (['--flooded', flooded] if flooded else []), env)
         self.exit_code = None
 
     def stop(self):
@@ -144,7 +157,7 @@ class TimerFloor:
         return {**counts, 'on_time_percent': on_time_percent(**counts)}
 
 
-def run_timer_floor(path, flooded=False):
+def run_timer_floor(path, flooded=None):
     """
     Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
 
@@ -152,8 +165,9 @@ def run_timer_floor(path, flooded=False):
     Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
     A tick is late if it starts more than LATE_FRACTION of a period after its slot;
     slots that passed while it was late are missed (the loop goes on at the next slot).
-    flooded: first subscribe to inlet_flow with valve_node's default QoS; the
-    middleware receives every message into it, the loop never takes one.
+    flooded: None, or first subscribe to inlet_flow with valve_node's default QoS
+    and put the receive threads under this --receive-threads policy, as valve_node
+    does; the middleware receives every message into it, the loop never takes one.
     """
     from valve_sim.ros.node_status import LATE_FRACTION
 
@@ -161,12 +175,14 @@ def run_timer_floor(path, flooded=False):
         import rclpy
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Float64
+        from valve_sim.ros.receive_threads import ReceiveThreads
         from valve_sim.ros.valve_node import INLET_FLOW_QOS
 
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node('flooded_timer_floor')
         qos = INLET_FLOW_QOS['best_effort']
         node.create_subscription(Float64, 'inlet_flow', lambda _: None, qos)
+        ReceiveThreads(flooded).update()
     stopped = []
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stopped.append(number))
@@ -190,4 +206,5 @@ def on_time_percent(ticks, late, missed):
 
 
 if __name__ == '__main__':
-    sys.exit(run_timer_floor(sys.argv[1], flooded=sys.argv[2:] == ['--flooded']))
+    path, *flooded = sys.argv[1:]  # FILE [--flooded POLICY]
+    sys.exit(run_timer_floor(path, flooded=flooded[1] if flooded else None))

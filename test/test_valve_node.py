@@ -26,6 +26,8 @@ asserts wall-clock timing.
 """
 
 import math
+import os
+from pathlib import Path
 import signal
 import time
 
@@ -44,6 +46,7 @@ from valve_sim.core.steady_state import (
     preload_for_cracking_pressure,
     steady_state,
 )
+from valve_sim.ros.receive_threads import RECEIVE_THREAD
 from valve_sim.ros.valve_node import CATCH_UP_LIMIT_PERIODS
 
 
@@ -469,6 +472,40 @@ def test_diagnostics_report_health_and_stale_input(valve):
     while not valve._wait(fresh, 0.05):
         assert time.monotonic() < deadline, 'input never reported fresh again'
         valve.send_flow(INITIAL_FLOW)
+
+
+# --- the receive threads ----------------------------------------------------------------------
+
+
+def receive_thread_policies(pid):
+    """Return {name: scheduling policy} of the middleware receive threads of process pid."""
+    policies = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        name = (task / 'comm').read_text().strip()
+        if RECEIVE_THREAD.match(name):
+            policies[name] = os.sched_getscheduler(int(task.name))
+    return policies
+
+
+def test_the_receive_threads_run_behind_the_tick(valve_process, valve):
+    process, _ = valve_process
+    policies = receive_thread_policies(process.pid)
+    assert policies and set(policies.values()) == {os.SCHED_IDLE}, policies
+    assert os.sched_getscheduler(process.pid) == os.SCHED_OTHER  # the main thread ticks
+    reported = valve.wait_for_diagnostics()['receive_threads']
+    assert reported.startswith('SCHED_IDLE: ')
+    assert set(reported.removeprefix('SCHED_IDLE: ').split(', ')) == set(policies)
+
+
+def test_receive_threads_normal_leaves_them_as_started(context, tmp_path):
+    log = tmp_path / 'valve_node.log'
+    with running_valve(
+        context, log, namespace='/normal', options=('--receive-threads', 'normal')
+    ) as (process, probe):
+        assert probe.wait_for_diagnostics()['receive_threads'].startswith('normal')
+        policies = receive_thread_policies(process.pid)
+    assert policies and set(policies.values()) == {os.SCHED_OTHER}, policies
+    assert 'middleware receive threads: normal' in log.read_text()
 
 
 # --- the executor option ----------------------------------------------------------------------

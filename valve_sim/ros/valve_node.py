@@ -114,6 +114,7 @@ from valve_sim.ros.fault_injection import (
 )
 from valve_sim.ros.inlet_input import InletFlowInput
 from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus, Throttle
+from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
 from valve_sim.ros.ros_parameters import (
     declare_double,
     integers_as_doubles,
@@ -197,6 +198,7 @@ class ReliefValveNode(Node):
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.live_view = None  # a LiveView once serve_live_view() started one
+        self.receive_threads = ReceiveThreads('normal')  # main() sets its --receive-threads
         self._housekeeping_due = False
         self._ticks_at_housekeeping = 0
         self.create_timer(
@@ -688,6 +690,7 @@ class ReliefValveNode(Node):
         self._ticks_at_housekeeping = self.status.counters.ticks
         self._count_inputs()
         self._warn_rejected_inputs()
+        self._update_receive_threads()
         self._publish_diagnostics()
         gc.collect(YOUNG_GENERATIONS)
 
@@ -711,6 +714,19 @@ class ReliefValveNode(Node):
                 f'holding {self.inlet_flow:g} m^3/s'
             )
 
+    def keep_receive_threads_behind(self, policy):
+        """Put the middleware's receive threads under policy (a POLICIES key), now and later."""
+        self.receive_threads = ReceiveThreads(policy)
+        self.receive_threads.update()
+        self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
+
+    def _update_receive_threads(self):
+        """Give receive threads started since the last housekeeping their policy too."""
+        if self.receive_threads.update():
+            self.get_logger().info(
+                f'middleware receive threads: {self.receive_threads.describe()}'
+            )
+
     def _publish_diagnostics(self):
         now = self.get_clock().now()
         inputs = self._input_report(now.nanoseconds)
@@ -731,6 +747,7 @@ class ReliefValveNode(Node):
             'overpressure': self.injection.overpressure,
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
+            'receive_threads': self.receive_threads.describe(),
         }
         conditions = self.injection.conditions(
             self.model.faults, self.model.state[P_S], self.model.params['supply_pressure_limit']
@@ -764,7 +781,7 @@ STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
 
 
 def parse_arguments(args):
-    """valve_node's own command line (ROS arguments removed): the executor."""
+    """valve_node's own command line (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
         prog='valve_node', description='The virtual relief valve as a ROS 2 node.'
     )
@@ -776,6 +793,16 @@ def parse_arguments(args):
             f'rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; '
             "events, rclpy's EventsExecutor, "
             "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
+        ),
+    )
+    parser.add_argument(
+        '--receive-threads',
+        choices=POLICIES,
+        default=DEFAULT_POLICY,
+        help=(
+            f"scheduling of the middleware's receive threads (default {DEFAULT_POLICY}: "
+            'SCHED_IDLE, so that a flood of messages cannot delay the tick; normal: as '
+            'the middleware starts them; docs/valve_node.md)'
         ),
     )
     live_view.add_port_option(
@@ -809,6 +836,7 @@ def main(args=None):
         if options.foxglove is not None:
             node.serve_live_view(options.foxglove, options.foxglove_host)
         node.get_logger().info(f'executor: {options.executor}')
+        node.keep_receive_threads_behind(options.receive_threads)
         gc.freeze()  # start-up objects stay out of the garbage collector's scans
         gc.disable()  # the node collects in its housekeeping, between ticks
         spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
