@@ -328,8 +328,11 @@ def report(folder, bag, attempts=1):
     step = live[-1]
     print()
     if attempts > 1:
-        print(f'the step of attempt {attempts}; the {len(live) - 1} before it are in the bag too')
-    print_steps([step], recording)
+        print(
+            f'the step up of attempt {attempts}: the {attempts - 1} before it could not be '
+            'measured; they and their steps back down are in the bag too'
+        )
+    print_steps([step], recording, first_number=len(live))
     same = [[record[name] for name in MEASURE_NAMES] for record in offline] == [
         [record[name] for name in MEASURE_NAMES] for record in live
     ]
@@ -337,7 +340,7 @@ def report(folder, bag, attempts=1):
         '\noffline analysis of the bag: '
         f'{"the same measures" if same else "DIFFERENT measures: " + str(offline)}'
     )
-    figure = plot_steps(folder / 'figure5.png', recording, [step])[0]
+    figure = plot_steps(folder / 'figure5.png', recording, [step], first_number=len(live))[0]
     for path in (bag, measures_path, figure):
         progress(f'wrote {path}')
     undefined = {
