@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.commands.analyse import print_steps, read_recording
 from valve_sim.commands.demo import report, sampling_problem
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.bag import BagReader
@@ -81,6 +82,7 @@ def test_demo_records_and_measures_the_papers_step(tmp_path):
     retried = out.count('cannot be measured')  # steps up too sparsely sampled, stepped back down
     assert len(steps) == 2 * retried + 1 and [s['direction'] for s in steps[-1:]] == [1]
     assert steps[-1]['reasons'] == {} and outside_tolerance(steps[-1]) == {}
+    assert f'step {len(steps)}: up at' in out  # numbered as in the bag, retries before it
     reader = BagReader(bag)
     topics = {channel.topic for channel, _, _ in reader.messages()}
     assert reader.problem is None
@@ -120,6 +122,13 @@ def test_report_names_an_undefined_measure_and_fails(tmp_path):
     )
     with pytest.raises(IncompleteRunError, match='T_d_ms: fewer than 3 samples'):
         report(tmp_path, bag)
+
+
+def test_steps_are_printed_with_their_number_in_the_recording(capsys):
+    bag = BAGS / 'reference_step.mcap'
+    step = json.loads(bag.with_suffix('.measures.json').read_text())['steps'][0]
+    print_steps([step], read_recording(bag), first_number=3)
+    assert capsys.readouterr().out.startswith('step 3: up at')
 
 
 def test_report_of_retried_steps_needs_every_step_in_the_bag(tmp_path):

@@ -116,6 +116,18 @@ def test_roll_back_undoes_only_a_change_within_the_trial_window(model, reference
     assert model.params == preset_moved
 
 
+def test_a_retune_that_changes_nothing_leaves_the_change_before_it_to_roll_back(
+    model, reference
+):
+    """A sensor or publish-rate change retunes with the model unchanged: not a cause."""
+    heavier = {**reference, 'main_valve_mass': reference['main_valve_mass'] * 2}
+    model.retune(heavier, 1e-5)
+    model.advance_to(START_NS + 100_000, FLOW, max_lag_ns=10**9)
+    model.retune(dict(heavier), 1e-5)  # equal values, later
+    assert model.roll_back(START_NS + 150_000)
+    assert model.params == reference
+
+
 def test_a_halted_model_holds_its_state_until_resumed(model):
     state = model.state.copy()
     model.halt('overpressure')

@@ -17,8 +17,9 @@ Drive valve_node over DDS from a test: the node runs in its own process, a probe
 
 The probe records everything the valve publishes (as plain floats, keyed by the
 header stamp in ns), counts any non-finite field, and wraps the inlet_flow
-topic, /clock, the parameter services and ~/reset. Its executor spins in a
-background thread; a test waits for a condition on what arrived, checked every
+topic, /clock, the parameter services and ~/reset. Its executor (the events
+executor where rclpy has one, as valve_node uses) spins in a background thread;
+a test waits for a condition on what arrived, checked every
 POLL_INTERVAL, so tests never depend on how fast this machine is, only on
 generous timeouts. flushed() counts what a recording node has written so far.
 """
@@ -38,7 +39,6 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMessage
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rosgraph_msgs.msg import Clock
@@ -47,6 +47,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import PRESSURE_TOPICS
+from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
 
 REPO = Path(__file__).resolve().parent.parent
@@ -55,6 +56,11 @@ TIMEOUT = 60.0  # [s] for anything that waits: start-up, discovery, a service an
 # [messages] per tick topic: the probe's callbacks run in Python beside the test; on a
 # machine loaded to 17 they fell more than 1 s (1000 messages) behind and lost samples
 PROBE_QUEUE_DEPTH = 10_000
+# The probe takes 6,000 messages/s. On the SingleThreadedExecutor, whose Python wait set
+# is rebuilt for every message, it took 500-650 supply samples/s with both cores busy,
+# fell up to a minute behind and answered services 15-70 s late; the events executor
+# (C++) keeps it current: bench/bench_probe.py measures both.
+PROBE_EXECUTOR = EXECUTORS[DEFAULT_EXECUTOR]
 # [s] how often a wait checks its condition. Waking the waiting test thread on every
 # message instead (6 kHz) starved the probe's executor of the GIL: it fell more than
 # 1000 messages behind and lost samples, even at load 4.
@@ -109,6 +115,7 @@ def running_valve(
     options=(),
     use_sim_time=False,
     stop_signal=signal.SIGINT,
+    probe_executor=PROBE_EXECUTOR,
 ):
     """
     Run valve_node (start_node's arguments, in namespace) with a connected Probe.
@@ -121,7 +128,7 @@ def running_valve(
     if use_sim_time:
         ros_args = ('-p', 'use_sim_time:=true', *ros_args)
     process = start_node(log_path, *ros_args, options=options)
-    probe = Probe(context, namespace, node_name)
+    probe = Probe(context, namespace, node_name, probe_executor)
     try:
         probe.wait_until_connected(use_sim_time)
         yield process, probe
@@ -145,10 +152,11 @@ class Probe:
     """
     Test-side node: records the valve's outputs and drives its inputs and services.
 
-    The probe lives in the valve's namespace, so relative topic names match.
+    The probe lives in the valve's namespace, so relative topic names match;
+    executor is the class of executor it spins on.
     """
 
-    def __init__(self, context, namespace='/', node_name=NODE_NAME):
+    def __init__(self, context, namespace='/', node_name=NODE_NAME, executor=PROBE_EXECUTOR):
         self.node = rclpy.create_node('valve_probe', namespace=namespace, context=context)
         self.valve_name = f'{namespace.rstrip("/")}/{node_name}'
         self.condition = threading.Condition()
@@ -171,7 +179,7 @@ class Probe:
         self.clock = self.node.create_publisher(Clock, '/clock', 10)
         self.parameters = AsyncParameterClient(self.node, self.valve_name)
         self.reset_client = self.node.create_client(Trigger, f'{self.valve_name}/reset')
-        self.executor = SingleThreadedExecutor(context=context)
+        self.executor = executor(context=context)
         self.executor.add_node(self.node)
         self.closing = threading.Event()
         self.thread = threading.Thread(target=self._spin, daemon=True)

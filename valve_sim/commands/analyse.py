@@ -159,20 +159,21 @@ def analyse_step(recording, t_step, direction):
     return step_record(t_step, None, direction, measures)
 
 
-def plot_steps(path, recording, records):
+def plot_steps(path, recording, records, first_number=1):
     """
     Draw Figure 5 of each step.
 
     The figure goes to path itself for one step, and to path with _step<k> before
-    the suffix for several. Titles give the step's time from the first sample
-    (a bag's own time axis is often the epoch).
+    the suffix for several. Titles give the step's number in the recording (the
+    first record's is first_number) and its time from the first sample (a bag's
+    own time axis is often the epoch).
     """
     from pathlib import Path
 
     from valve_sim.analysis.plotting import plot_step_response
 
     path, written = Path(path), []
-    for k, record in enumerate(records, start=1):
+    for k, record in enumerate(records, start=first_number):
         target = path if len(records) == 1 else path.with_name(f'{path.stem}_step{k}{path.suffix}')
         t_step = record['t_step']
         shown = (recording.time >= t_step - PLOT_LEAD) & (recording.time <= t_step + WINDOW)
@@ -200,16 +201,17 @@ def flows_around(recording, record):
     return recording.inlet_flow[max(before, 0)], recording.inlet_flow[max(after, 0)]
 
 
-def print_steps(records, recording):
+def print_steps(records, recording, first_number=1):
     """
     Print each step's measures as a table (valve_sim.commands.simulate.print_table).
 
-    The paper's values are shown beside the paper's own 5 -> 20 L/min step only.
+    Steps are numbered in the recording from first_number. The paper's values are
+    shown beside the paper's own 5 -> 20 L/min step only.
     """
     from valve_sim.analysis.paper import is_reference_step
     from valve_sim.commands.simulate import print_table
 
-    for k, record in enumerate(records, start=1):
+    for k, record in enumerate(records, start=first_number):
         direction = 'up' if record['direction'] > 0 else 'down'
         print(
             f'step {k}: {direction} at t = {record["t_step"]:.6f} s '

@@ -150,8 +150,12 @@ class RealTimeModel:
         Use new parameters (validated dict) and step size [s] from the next step on.
 
         faults: {name: value} of fault parameters changed too (None: none); a main
-        valve that becomes stuck stops where it is.
+        valve that becomes stuck stops where it is. A retune that changes none of
+        them (the node's sensor or publish-rate changes) is no change: the change
+        before it stays the one that roll_back() undoes.
         """
+        if params == self.params and step_size == self.step_size and not faults:
+            return
         self._previous = (self.params, self.step_size, self.faults)
         self._retuned_ns = self.time_ns
         faults = self.faults if faults is None else apply_faults(self.state, self.faults, faults)
