@@ -487,25 +487,24 @@ def receive_thread_policies(pid):
     return policies
 
 
-def test_the_receive_threads_run_behind_the_tick(valve_process, valve):
-    process, _ = valve_process
-    policies = receive_thread_policies(process.pid)
+def test_receive_threads_idle_run_them_behind_the_tick(context, tmp_path):
+    log = tmp_path / 'valve_node.log'
+    with running_valve(
+        context, log, namespace='/idle', options=('--receive-threads', 'idle')
+    ) as (process, probe):
+        reported = probe.wait_for_diagnostics()['receive_threads']
+        policies = receive_thread_policies(process.pid)
+        assert os.sched_getscheduler(process.pid) == os.SCHED_OTHER  # the main thread ticks
     assert policies and set(policies.values()) == {os.SCHED_IDLE}, policies
-    assert os.sched_getscheduler(process.pid) == os.SCHED_OTHER  # the main thread ticks
-    reported = valve.wait_for_diagnostics()['receive_threads']
     assert reported.startswith('SCHED_IDLE: ')
     assert set(reported.removeprefix('SCHED_IDLE: ').split(', ')) == set(policies)
 
 
-def test_receive_threads_normal_leaves_them_as_started(context, tmp_path):
-    log = tmp_path / 'valve_node.log'
-    with running_valve(
-        context, log, namespace='/normal', options=('--receive-threads', 'normal')
-    ) as (process, probe):
-        assert probe.wait_for_diagnostics()['receive_threads'].startswith('normal')
-        policies = receive_thread_policies(process.pid)
+def test_receive_threads_are_left_as_started_by_default(valve_process, valve):
+    process, _ = valve_process
+    assert valve.wait_for_diagnostics()['receive_threads'].startswith('normal')
+    policies = receive_thread_policies(process.pid)
     assert policies and set(policies.values()) == {os.SCHED_OTHER}, policies
-    assert 'middleware receive threads: normal' in log.read_text()
 
 
 # --- the executor option ----------------------------------------------------------------------

@@ -37,7 +37,9 @@ import re
 
 RECEIVE_THREAD = re.compile(r'dds\.(udp|udp6|shm|tcp|tcp6)\.\d+$')  # Fast DDS: transport.port
 POLICIES = {'idle': 'SCHED_IDLE', 'normal': None}  # --receive-threads: os's policy names
-DEFAULT_POLICY = 'idle'
+# normal by default: on a machine busy with other work an idle receive thread waits long
+# for the CPU and delays the tick more than it spares it (docs/valve_node.md)
+DEFAULT_POLICY = 'normal'
 TASKS = Path('/proc/self/task')
 
 

@@ -800,9 +800,9 @@ def parse_arguments(args):
         choices=POLICIES,
         default=DEFAULT_POLICY,
         help=(
-            f"scheduling of the middleware's receive threads (default {DEFAULT_POLICY}: "
-            'SCHED_IDLE, so that a flood of messages cannot delay the tick; normal: as '
-            'the middleware starts them; docs/valve_node.md)'
+            f"scheduling of the middleware's receive threads (default {DEFAULT_POLICY}: as "
+            'the middleware starts them; idle: SCHED_IDLE, so that a flood of messages '
+            'cannot delay the tick on a machine that does nothing else; docs/valve_node.md)'
         ),
     )
     live_view.add_port_option(
