@@ -130,7 +130,12 @@ def spin_for(executor, seconds, condition=lambda: False):
 
 
 def phase(duration, executor, diagnostics, env, flood=False, flooded_floor=None):
-    """Run one phase (flooded_floor: None or the floor's receive-thread policy); figures."""
+    """
+    Run one phase and return its figures.
+
+    flooded_floor: None (a bare floor) or the receive-thread policy of a floor that
+    subscribes to the flood too.
+    """
     flood_file = REPO / 'out' / f'flood_publisher_{os.getpid()}.json'
     floor = TimerFloor(env, flooded=flooded_floor)
     publisher = None
