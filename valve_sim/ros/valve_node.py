@@ -714,7 +714,7 @@ class ReliefValveNode(Node):
                 f'holding {self.inlet_flow:g} m^3/s'
             )
 
-    def keep_receive_threads_behind(self, policy):
+    def use_receive_thread_policy(self, policy):
         """Put the middleware's receive threads under policy (a POLICIES key), now and later."""
         self.receive_threads = ReceiveThreads(policy)
         self.receive_threads.update()
@@ -836,7 +836,7 @@ def main(args=None):
         if options.foxglove is not None:
             node.serve_live_view(options.foxglove, options.foxglove_host)
         node.get_logger().info(f'executor: {options.executor}')
-        node.keep_receive_threads_behind(options.receive_threads)
+        node.use_receive_thread_policy(options.receive_threads)
         gc.freeze()  # start-up objects stay out of the garbage collector's scans
         gc.disable()  # the node collects in its housekeeping, between ticks
         spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
