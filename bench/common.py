@@ -32,6 +32,7 @@ import time
 
 REPO = Path(__file__).resolve().parent.parent
 PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
+SAMPLE_TICKS = 10  # the timer floor notes its counts, stamped, every this many ticks
 
 
 def arguments(doc, json_name, duration_help, executor_help="valve_node's executor"):
@@ -149,12 +150,29 @@ class TimerFloor:
         self.process = start(command + (['--flooded', flooded] if flooded else []), env)
         self.exit_code = None
 
-    def stop(self):
-        """Stop it; return {ticks, late, missed, on_time_percent}."""
+    def stop(self, window=None):
+        """
+        Stop it; return {ticks, late, missed, on_time_percent}.
+
+        window: None (counted from start to stop) or (start, end) [ns, system clock]:
+        counted between the floor's last notes before start and before end (at most
+        SAMPLE_TICKS ticks early), to compare with a node's counters stamped so.
+        """
         self.exit_code = stop(self.process)
-        counts = json.loads(self.path.read_text())
+        written = json.loads(self.path.read_text())
         self.path.unlink()
+        counts = {key: written[key] for key in ('ticks', 'late', 'missed')}
+        if window is not None:
+            first, last = (_last_note_before(written['notes'], moment) for moment in window)
+            counts = {key: last[key] - first[key] for key in counts}
         return {**counts, 'on_time_percent': on_time_percent(**counts)}
+
+
+def _last_note_before(notes, moment):
+    """Return the counts {ticks, late, missed} of the last of notes stamped before moment."""
+    earlier = [note for note in notes if note[0] <= moment]  # notes are in time order
+    _, ticks, late, missed = earlier[-1] if earlier else notes[0]
+    return {'ticks': ticks, 'late': late, 'missed': missed}
 
 
 def run_timer_floor(path, flooded=None):
@@ -162,7 +180,8 @@ def run_timer_floor(path, flooded=None):
     Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
 
     Its ticks are counted as valve_node counts its ticks.
-    Runs until SIGINT or SIGTERM, then writes {ticks, late, missed} as JSON to path.
+    Runs until SIGINT or SIGTERM, then writes {ticks, late, missed, notes} as JSON to
+    path; notes: [system clock time [ns], ticks, late, missed] every SAMPLE_TICKS ticks.
     A tick is late if it starts more than LATE_FRACTION of a period after its slot;
     slots that passed while it was late are missed (the loop goes on at the next slot).
     flooded: None, or first subscribe to inlet_flow with valve_node's default QoS
@@ -187,6 +206,7 @@ def run_timer_floor(path, flooded=None):
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stopped.append(number))
     counts = {'ticks': 0, 'late': 0, 'missed': 0}
+    notes = []
     slot = time.monotonic_ns() + PERIOD_NS
     while not stopped:
         delay = slot - time.monotonic_ns()
@@ -197,7 +217,9 @@ def run_timer_floor(path, flooded=None):
         counts['late'] += lateness > LATE_FRACTION * PERIOD_NS
         counts['missed'] += lateness // PERIOD_NS
         slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
-    Path(path).write_text(json.dumps(counts))
+        if counts['ticks'] % SAMPLE_TICKS == 0:
+            notes.append((time.time_ns(), counts['ticks'], counts['late'], counts['missed']))
+    Path(path).write_text(json.dumps({**counts, 'notes': notes}))
 
 
 def on_time_percent(ticks, late, missed):
