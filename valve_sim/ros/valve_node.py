@@ -198,7 +198,7 @@ class ReliefValveNode(Node):
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.live_view = None  # a LiveView once serve_live_view() started one
-        self.receive_threads = ReceiveThreads('normal')  # main() sets its --receive-threads
+        self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
         self._housekeeping_due = False
         self._ticks_at_housekeeping = 0
         self.create_timer(
