@@ -47,8 +47,8 @@
 # --executor). --rt-priority P runs valve_node and the echo node under SCHED_FIFO
 # priority P and this measuring process at P - 1 (needs the privilege), as a test
 # rig would run its nodes. --receive-threads is valve_node's (its default unless
-# given; the echo node's are left as started). The load average at start and end is reported: other
-# work on the machine shows in every figure here.
+# given; the echo node's are left as started). The load average at start and end
+# is reported: other work on the machine shows in every figure here.
 
 import argparse
 import os
