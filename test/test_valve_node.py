@@ -487,6 +487,24 @@ def receive_thread_policies(pid):
     return policies
 
 
+def test_a_stalled_node_counts_the_slots_it_slept_through(valve_process, valve):
+    """SIGSTOP for 0.3 s: the next tick is late, 0.3 s of slots missed, the lag skipped."""
+    process, _ = valve_process
+    report = valve.wait_for_diagnostics()
+    before = {key: float(report[key]) for key in ('late_ticks', 'missed_ticks', 'skipped_time_s')}
+    process.send_signal(signal.SIGSTOP)
+    try:
+        time.sleep(0.3)  # the stall itself (at least this long), not a wait for a condition
+    finally:
+        process.send_signal(signal.SIGCONT)
+    after = valve.wait_for_diagnostics(
+        lambda d: float(d['missed_ticks']) >= before['missed_ticks'] + 250, 'the stall counted'
+    )
+    assert float(after['late_ticks']) > before['late_ticks']
+    # the catch-up limit is 50 periods: at least 0.3 s - 50 ms of the lag is skipped
+    assert float(after['skipped_time_s']) >= before['skipped_time_s'] + 0.2
+
+
 def test_receive_threads_idle_run_them_behind_the_tick(context, tmp_path):
     log = tmp_path / 'valve_node.log'
     with running_valve(

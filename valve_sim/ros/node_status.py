@@ -90,6 +90,24 @@ class NodeStatus:
         self._reported = Counters()
         self._durations_ns = []
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
+        self.previous_slot_ns = None  # the slot of the last tick counted by tick_started()
+
+    def tick_started(self, now_ns, newest_slot_ns, period_ns):
+        """
+        Count a tick that started at now_ns [ns] as late or not, and the slots it missed.
+
+        newest_slot_ns [ns]: the newest slot at or before now_ns, the one an rcl
+        timer calls the tick for however many passed; period_ns [ns]: the period.
+        The tick was due at the first slot after the previous tick's (the newest
+        slot at the first tick, or after previous_slot_ns was set to None): it is
+        late if it started over LATE_FRACTION of a period after that slot, so a
+        tick after a stall is late, and the slots after its own are missed.
+        """
+        previous_ns = self.previous_slot_ns
+        due_ns = newest_slot_ns if previous_ns is None else previous_ns + period_ns
+        self.counters.late_ticks += now_ns - due_ns > LATE_FRACTION * period_ns
+        self.counters.missed_ticks += max(round((newest_slot_ns - due_ns) / period_ns), 0)
+        self.previous_slot_ns = newest_slot_ns
 
     def tick_done(self, compute_ns, period_ns):
         """

@@ -113,7 +113,7 @@ from valve_sim.ros.fault_injection import (
     split_changes,
 )
 from valve_sim.ros.inlet_input import InletFlowInput
-from valve_sim.ros.node_status import InputReport, LATE_FRACTION, NodeStatus, Throttle
+from valve_sim.ros.node_status import InputReport, NodeStatus, Throttle
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
 from valve_sim.ros.ros_parameters import (
     declare_double,
@@ -191,7 +191,6 @@ class ReliefValveNode(Node):
         self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
-        self._previous_slot_ns = None
         self._create_outputs()
         self._inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
@@ -431,7 +430,7 @@ class ReliefValveNode(Node):
     # --- stepping ---------------------------------------------------------------------------
 
     def _create_tick_timer(self):
-        self._previous_slot_ns = None
+        self.status.previous_slot_ns = None
         return self.create_timer(1.0 / self.settings['publish_rate'], self._tick)
 
     def _tick(self):
@@ -462,19 +461,13 @@ class ReliefValveNode(Node):
             )
         self.model.start(now_ns)
         self.input.received_ns = self.input.received_ns or now_ns
-        self._previous_slot_ns = None
+        self.status.previous_slot_ns = None
 
     def _count_lateness(self, now_ns):
-        """Count this tick as late, and the timer slots that passed without a tick as missed."""
+        """Count this tick as late or not, and the timer slots that passed without a tick."""
         period_ns = self._tick_timer.timer_period_ns
-        slot_ns = now_ns + self._tick_timer.time_until_next_call() - period_ns
-        if now_ns - slot_ns > LATE_FRACTION * period_ns:
-            self.status.counters.late_ticks += 1
-        if self._previous_slot_ns is not None:
-            self.status.counters.missed_ticks += max(
-                round((slot_ns - self._previous_slot_ns) / period_ns) - 1, 0
-            )
-        self._previous_slot_ns = slot_ns
+        newest_slot_ns = now_ns + self._tick_timer.time_until_next_call() - period_ns
+        self.status.tick_started(now_ns, newest_slot_ns, period_ns)
 
     def _advance(self, now_ns):
         """Integrate up to now_ns; on a failure hold the last good state (see _recover)."""

@@ -1,0 +1,51 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""valve_node's tick counts: late and missed ticks against the slots they were due at."""
+
+from valve_sim.ros.node_status import NodeStatus
+
+
+PERIOD = 1_000_000  # [ns] 1 kHz
+
+
+def counted(ticks):
+    """Count ticks [(start, newest slot at or before it)] [ns]; return (late, missed)."""
+    status = NodeStatus(0)
+    for now_ns, newest_slot_ns in ticks:
+        status.tick_started(now_ns, newest_slot_ns, PERIOD)
+    return status.counters.late_ticks, status.counters.missed_ticks
+
+
+def test_ticks_within_half_a_period_of_their_slots_are_on_time():
+    assert counted([(slot + 400_000, slot) for slot in range(0, 10 * PERIOD, PERIOD)]) == (0, 0)
+
+
+def test_a_tick_over_half_a_period_after_its_slot_is_late():
+    assert counted([(0, 0), (PERIOD + 600_000, PERIOD)]) == (1, 0)
+
+
+def test_a_tick_after_a_stall_is_late_and_the_slots_it_slept_through_missed():
+    # due at 1 ms, started at 4.2 ms: the timer calls it for the 4 ms slot, 0.2 ms after
+    # it, but it is 3.2 ms late for the slot it was due at; 2, 3 and 4 ms had no tick of
+    # their own
+    assert counted([(0, 0), (4_200_000, 4 * PERIOD)]) == (1, 3)
+
+
+def test_counting_starts_again_after_the_previous_slot_is_forgotten():
+    status = NodeStatus(0)
+    status.tick_started(0, 0, PERIOD)
+    status.previous_slot_ns = None  # the clock jumped back, or the timer was recreated
+    status.tick_started(50 * PERIOD + 100_000, 50 * PERIOD, PERIOD)
+    assert (status.counters.late_ticks, status.counters.missed_ticks) == (0, 0)
