@@ -179,7 +179,7 @@ def run_timer_floor(path, flooded=None):
     """
     Run the timer floor: a bare Python loop sleeping to 1 kHz slots.
 
-    Its ticks are counted as valve_node counts its ticks.
+    Its ticks are counted by valve_node's own counting (NodeStatus.tick_started).
     Runs until SIGINT or SIGTERM, then writes {ticks, late, missed, notes} as JSON to
     path; notes: [system clock time [ns], ticks, late, missed] every SAMPLE_TICKS ticks.
     A tick is late if it starts more than LATE_FRACTION of a period after its slot;
@@ -188,7 +188,7 @@ def run_timer_floor(path, flooded=None):
     and put the receive threads under this --receive-threads policy, as valve_node
     does; the middleware receives every message into it, the loop never takes one.
     """
-    from valve_sim.ros.node_status import LATE_FRACTION
+    from valve_sim.ros.node_status import NodeStatus
 
     if flooded:
         import rclpy
@@ -205,21 +205,34 @@ def run_timer_floor(path, flooded=None):
     stopped = []
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stopped.append(number))
-    counts = {'ticks': 0, 'late': 0, 'missed': 0}
+    status = NodeStatus(0)
+    counters = status.counters
     notes = []
     slot = time.monotonic_ns() + PERIOD_NS
+    status.previous_slot_ns = slot - PERIOD_NS  # so the first tick is due at slot
     while not stopped:
         delay = slot - time.monotonic_ns()
         if delay > 0:
             time.sleep(delay / 1e9)
-        lateness = time.monotonic_ns() - slot
-        counts['ticks'] += 1
-        counts['late'] += lateness > LATE_FRACTION * PERIOD_NS
-        counts['missed'] += lateness // PERIOD_NS
-        slot += (lateness // PERIOD_NS + 1) * PERIOD_NS
-        if counts['ticks'] % SAMPLE_TICKS == 0:
-            notes.append((time.time_ns(), counts['ticks'], counts['late'], counts['missed']))
-    Path(path).write_text(json.dumps({**counts, 'notes': notes}))
+        now = time.monotonic_ns()
+        newest_slot = slot + (now - slot) // PERIOD_NS * PERIOD_NS
+        status.tick_started(now, newest_slot, PERIOD_NS)
+        counters.ticks += 1
+        slot = newest_slot + PERIOD_NS
+        if counters.ticks % SAMPLE_TICKS == 0:
+            notes.append(
+                (time.time_ns(), counters.ticks, counters.late_ticks, counters.missed_ticks)
+            )
+    Path(path).write_text(
+        json.dumps(
+            {
+                'ticks': counters.ticks,
+                'late': counters.late_ticks,
+                'missed': counters.missed_ticks,
+                'notes': notes,
+            }
+        )
+    )
 
 
 def on_time_percent(ticks, late, missed):
