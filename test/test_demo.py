@@ -116,6 +116,20 @@ def test_report_of_a_complete_run_passes(tmp_path, capsys):
     assert 'the same measures' in capsys.readouterr().out
 
 
+def test_report_takes_live_measures_equal_to_the_last_bits(tmp_path, capsys):
+    """A measures file written on another machine may differ in the last bits: the same."""
+    live = json.loads((BAGS / 'reference_step.measures.json').read_text())['steps'][0]
+    report(tmp_path, recorded_step(tmp_path, r_d=live['r_d'] * (1 + 4e-16)))
+    assert 'the same measures' in capsys.readouterr().out
+
+
+def test_report_of_a_live_measure_the_bag_does_not_give_fails(tmp_path, capsys):
+    live = json.loads((BAGS / 'reference_step.measures.json').read_text())['steps'][0]
+    with pytest.raises(IncompleteRunError, match='gives different measures'):
+        report(tmp_path, recorded_step(tmp_path, T_1_ms=live['T_1_ms'] * (1 + 1e-6)))
+    assert 'DIFFERENT measures' in capsys.readouterr().out
+
+
 def test_report_names_an_undefined_measure_and_fails(tmp_path):
     bag = recorded_step(
         tmp_path, T_d_ms=None, reasons={'T_d_ms': 'fewer than 3 samples in the window'}
