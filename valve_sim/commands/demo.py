@@ -45,7 +45,7 @@ from valve_sim.core.errors import IncompleteRunError
 
 
 # Live and offline measures come from the same code on the same samples; they may differ
-# in the last bits when the analyser ran on another machine or NumPy build (SIMD sums).
+# in the last bits when the analyser ran on another machine or NumPy build.
 SAME_MEASURE_TOLERANCE = 1e-9  # relative
 INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow  # [m^3/s] 5 L/min
 FINAL_FLOW = REFERENCE_SCENARIO.final_flow  # [m^3/s] 20 L/min
@@ -333,9 +333,8 @@ def measures_agree(first, second):
         if a is None or b is None:
             if a is not b:
                 return False
-        elif not math.isclose(a, b, rel_tol=SAME_MEASURE_TOLERANCE, abs_tol=0.0):
-            if not (math.isnan(a) and math.isnan(b)):
-                return False
+        elif not math.isclose(a, b, rel_tol=SAME_MEASURE_TOLERANCE):
+            return False
     return True
 
 
