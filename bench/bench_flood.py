@@ -49,8 +49,8 @@
 # 1 point of the floor. On a 2-core machine one flood phase's distance varies by
 # a few points from round to round (which threads share a core), so the rounds
 # alternate quiet and flood and the summary gives the median and the worst round.
-# The load average at start and end is reported: other work on the machine shows in
-# every figure here.
+# The load average at start and end and the host's steal time over the run (a VM's
+# CPU time given to other guests) are reported: both show in every figure here.
 
 import argparse
 import json
@@ -64,10 +64,12 @@ import time
 from common import (
     add_receive_threads_option,
     arguments,
+    HostSteal,
     on_time_percent,
     REPO,
     run_benchmark,
     start,
+    steal_text,
     stop,
     TimerFloor,
 )
@@ -195,7 +197,7 @@ def measure(duration, rounds, executor_name, receive_threads, flooded_floor, env
     from rclpy.executors import SingleThreadedExecutor
     from valve_sim.ros import node_command
 
-    load_at_start = os.getloadavg()
+    load_at_start, steal = os.getloadavg(), HostSteal()
     (REPO / 'out').mkdir(exist_ok=True)  # the flood publisher writes its count there
     valve = start(
         node_command(
@@ -230,6 +232,7 @@ def measure(duration, rounds, executor_name, receive_threads, flooded_floor, env
         node.destroy_node()
         rclpy.try_shutdown()
     figures['load_average'] = {'start': load_at_start[0], 'end': os.getloadavg()[0]}
+    figures['host_steal_percent'] = steal.percent()
     for name in ('quiet', 'flood'):
         distances = [r[name]['node_minus_floor_points'] for r in figures['rounds']]
         figures[name] = {
@@ -276,7 +279,8 @@ def table(figures):
         'publisher: messages/s, half of them bad; counted: taken and counted by the node '
         '(accepted + rejected); lost: counted lost before a tick took them',
         f'load average: {figures["load_average"]["start"]:.2f} at start, '
-        f'{figures["load_average"]["end"]:.2f} at the end',
+        f'{figures["load_average"]["end"]:.2f} at the end; host steal time: '
+        + steal_text(figures['host_steal_percent']),
     ]
     return '\n'.join(rows)
 

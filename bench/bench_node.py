@@ -48,7 +48,8 @@
 # priority P and this measuring process at P - 1 (needs the privilege), as a test
 # rig would run its nodes. --receive-threads is valve_node's (its default unless
 # given; the echo node's are left as started). The load average at start and end
-# is reported: other work on the machine shows in every figure here.
+# and the host's steal time over the run (a VM's CPU time given to other guests)
+# are reported: both show in every figure here.
 
 import argparse
 import os
@@ -56,7 +57,16 @@ import struct
 import sys
 import time
 
-from common import add_receive_threads_option, arguments, run_benchmark, start, stop, TimerFloor
+from common import (
+    add_receive_threads_option,
+    arguments,
+    HostSteal,
+    run_benchmark,
+    start,
+    steal_text,
+    stop,
+    TimerFloor,
+)
 from valve_sim.recording.cdr import (
     STAMP,
     STAMP_OFFSET,
@@ -234,7 +244,7 @@ def measure(duration, rt_priority, executor, receive_threads, env):
     scheduler = ['chrt', '--fifo', str(rt_priority)] if rt_priority else []
     if rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority - 1))
-    load_at_start = os.getloadavg()
+    load_at_start, steal = os.getloadavg(), HostSteal()
     valve = start(
         [
             *scheduler,
@@ -310,6 +320,7 @@ def measure(duration, rt_priority, executor, receive_threads, env):
         'cpus': os.cpu_count(),
         'load_average_at_start': load_at_start,
         'load_average_at_end': os.getloadavg(),
+        'host_steal_percent': steal.percent(),
     }
 
 
@@ -409,7 +420,8 @@ def table(figures):
         f'scheduler {figures["scheduler"]}, receive threads {figures["receive_threads"]}, '
         f'{figures["cpus"]} CPUs, load average (1 min) '
         f'{figures["load_average_at_start"][0]:.2f} at start, '
-        f'{figures["load_average_at_end"][0]:.2f} at end',
+        f'{figures["load_average_at_end"][0]:.2f} at end, host steal time '
+        + steal_text(figures['host_steal_percent']),
         f'{"measure":<{width}}  {"value":>12}  {"target":<16}  notes',
     ]
     lines += [

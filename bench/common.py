@@ -33,6 +33,7 @@ import time
 REPO = Path(__file__).resolve().parent.parent
 PERIOD_NS = 1_000_000  # [ns] the tick period at 1 kHz
 SAMPLE_TICKS = 10  # the timer floor notes its counts, stamped, every this many ticks
+STEAL = 7  # /proc/stat cpu columns: user nice system idle iowait irq softirq steal ...
 
 
 def arguments(doc, json_name, duration_help, executor_help="valve_node's executor"):
@@ -233,6 +234,39 @@ def run_timer_floor(path, flooded=None):
             }
         )
     )
+
+
+class HostSteal:
+    """
+    The share of CPU time the hypervisor gave to other guests, from construction to percent().
+
+    Read from /proc/stat's steal column (Linux; None elsewhere). A VM's figures move
+    with it: a tick the host stalls is late in the node and in the floor alike.
+    """
+
+    def __init__(self):
+        self._start = _cpu_times()
+
+    def percent(self):
+        """Return steal time as a percentage of all CPU time since construction, or None."""
+        end = _cpu_times()
+        if self._start is None or end is None:
+            return None
+        total = sum(end) - sum(self._start)
+        return 100.0 * (end[STEAL] - self._start[STEAL]) / total if total else 0.0
+
+
+def steal_text(percent):
+    """Return HostSteal.percent() for a table: 'x.xx % of the CPU time' or 'unknown'."""
+    return 'unknown (no /proc/stat)' if percent is None else f'{percent:.2f} % of the CPU time'
+
+
+def _cpu_times():
+    try:
+        fields = Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:]
+    except OSError:
+        return None
+    return [int(field) for field in fields[: STEAL + 1]]
 
 
 def on_time_percent(ticks, late, missed):
