@@ -314,8 +314,8 @@ def search(problem, backend, folder, population, generations, resume=False,
         algorithm.tell(infills=offspring)
         records += [(generation, row) for row in rows]
     if on_file:
-        _say(stream, f'optimise: {on_file} of {len(records)} candidates read from {folder} '
-             '(--resume), the rest computed')
+        _say(stream, f'optimise: resumed: {on_file} of {len(records)} candidates read from '
+             f'{folder}, {len(records) - on_file} computed')
     return records
 
 
