@@ -46,7 +46,7 @@ D_C = 'damping_orifice_diameter'
 
 
 def problem_of(reference, design, minimise, limits, tolerances, **settings):
-    """A RobustProblem on the reference valve, preset held at its cracking pressure."""
+    """Return a RobustProblem on the reference valve, preset held at its cracking pressure."""
     preset, _ = preset_protocol('held-preset', reference)
     return RobustProblem(
         params=reference,
@@ -199,7 +199,7 @@ GOOD = ['--design', 'd_c=±20%', '--minimise', 'P_1_percent', '--tolerance', 'd_
         (['--limits', 'P_9<=1'], "limit 'P_9<=1': expected MEASURE<=VALUE"),
         (['--limits', 'r_d<<0.8'], "limit 'r_d<<0.8'"),
         (['--minimise', 'P_9'], "--minimise 'P_9': not a measure"),
-        (['--tolerance', 'd_c=0.9e-3:1.1e-3'], "tolerance must follow its value"),
+        (['--tolerance', 'd_c=0.9e-3:1.1e-3'], 'tolerance must follow its value'),
         (['--tolerance', 'k_p=±5um'], 'um is a length, and pilot_spring_stiffness is in N/m'),
         (['--yield', '1.5'], "--yield '1.5': expected a fraction in (0, 1]"),
         (['--samples', '100'], 'the Sobol sampler needs a power of two samples, not 100'),

@@ -59,7 +59,7 @@ UNDEFINED = 1e30  # objective value the optimiser sees where a measure does not 
 
 
 def items(texts):
-    """The comma-separated items of one or several option texts."""
+    """Return the comma-separated items of one or several option texts."""
     return [item.strip() for text in texts for item in text.split(',') if item.strip()]
 
 
@@ -88,7 +88,8 @@ def parse_design(texts, params, protocol='held-preset'):
         if bound.a < spec.minimum or bound.b > spec.maximum:
             raise ParameterError(
                 f'--design {text!r}: bounds {bound.a:g}:{bound.b:g} {spec.unit} leave the limits '
-                f'of {bound.name} ({spec.symbol}), [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}'
+                f'of {bound.name} ({spec.symbol}), [{spec.minimum:g}, {spec.maximum:g}] '
+                f'{spec.unit}'
             )
         if bound.name == 'pilot_spring_preload' and protocol == 'held-preset':
             raise ParameterError(
@@ -110,7 +111,7 @@ class Objective:
     sense: str
 
     def signed(self, measures):
-        """The value the optimiser minimises (None where the measure does not exist)."""
+        """Return the value the optimiser minimises (None where the measure does not exist)."""
         value = measures.get(self.measure)
         if value is None:
             return None
@@ -150,7 +151,7 @@ def parse_tolerances(texts, params, design):
         distribution = parse_variation(text, params)
         if distribution.name in designed and not follows_nominal(text):
             raise ParameterError(
-                f'--tolerance {text!r}: a designed parameter\'s tolerance must follow its value: '
+                f"--tolerance {text!r}: a designed parameter's tolerance must follow its value: "
                 '±X%, ±Xum (or mm), ~N(S%) or ~N(S)'
             )
         names.append(distribution.name)
@@ -161,7 +162,7 @@ def parse_tolerances(texts, params, design):
 
 
 def exact_text(limit):
-    """A tolerances.Limit as text that parses back to the same value (str() rounds it)."""
+    """Write a tolerances.Limit as text that parses back to its value (str() rounds it)."""
     return f'{limit.measure}{limit.operator}{limit.value!r}'
 
 
@@ -207,11 +208,11 @@ class RobustProblem:
         return self
 
     def values(self, unit):
-        """The design {name: value} at a point of the unit cube of the bounds."""
+        """Return the design {name: value} at a point of the unit cube of the bounds."""
         return {b.name: float(b.values(u)) for b, u in zip(self.design, unit)}
 
     def case(self, index, label, design, confirming=False):
-        """The runner case of one design (robust_yield); confirming: more samples, rows kept."""
+        """Return the runner case of a design; confirming: more samples, every row kept."""
         return {
             'index': index,
             'label': label,
@@ -231,7 +232,7 @@ class RobustProblem:
         }
 
     def nominal_ok(self, row):
-        """Whether a row's nominal valve was set, meets the specification and has the objectives."""
+        """Tell whether a row's nominal valve was set, meets the spec and has the objectives."""
         nominal = row.get('nominal')
         return (
             row['error'] is None
@@ -240,11 +241,11 @@ class RobustProblem:
         )
 
     def feasible(self, row):
-        """Whether a candidate meets everything asked: a nominal valve in spec, the yield."""
+        """Tell whether a candidate meets everything asked: a nominal valve in spec, the yield."""
         return self.nominal_ok(row) and row['yield'] >= self.required_yield
 
     def scores(self, row):
-        """(objective values to minimise, constraint values <= 0 when met) for pymoo."""
+        """Return (objective values to minimise, constraint values <= 0 when met) for pymoo."""
         measures = (row.get('nominal') or {}).get('measures', {})
         values = [o.signed(measures) for o in self.objectives]
         return (
@@ -253,7 +254,7 @@ class RobustProblem:
         )
 
     def baselines(self):
-        """[(label, design)]: the valve of the parameter file, and it with Table 2's changes."""
+        """Return [(label, design)]: the parameter file's valve, and it with Table 2's changes."""
         table2 = scaled(self.params, TABLE2_CHANGES)
         return [
             ('reference', {}),
@@ -320,7 +321,7 @@ def search(problem, backend, folder, population, generations, resume=False,
 
 
 def pareto_front(points):
-    """Indices of the points (rows of values to minimise) that no other point dominates."""
+    """Return the indices of the points (rows to minimise) that no other point dominates."""
     points = np.asarray(points, dtype=float).reshape(len(points), -1)
     return [
         i for i, point in enumerate(points)
@@ -329,7 +330,7 @@ def pareto_front(points):
 
 
 def pareto_set(problem, records):
-    """[(generation, row)] of the feasible candidates no other feasible one dominates."""
+    """Return [(generation, row)] of the feasible candidates no other feasible one dominates."""
     feasible = [record for record in records if problem.feasible(record[1])]
     front = pareto_front([problem.scores(row)[0] for _, row in feasible])
     return sorted((feasible[i] for i in front), key=lambda record: problem.scores(record[1])[0])
@@ -338,7 +339,7 @@ def pareto_set(problem, records):
 def confirm(problem, designs, backend, folder, resume=False, evaluate=evaluate_candidates,
             stream=sys.stderr, batch_size=1):
     """
-    Rows of designs [(label, design)] under problem.confirm_samples fresh samples, rows kept.
+    Return the rows of designs [(label, design)] under confirm_samples fresh samples.
 
     One study of the runner in folder/confirm_<fingerprint>.jsonl: a resumed run with
     the same designs reads it, other designs make another file.
@@ -358,7 +359,7 @@ def confirm(problem, designs, backend, folder, resume=False, evaluate=evaluate_c
 
 def choose(problem, rows):
     """
-    Index in rows of the design closest to the ideal point among those meeting the yield.
+    Return the index in rows of the design meeting the yield closest to the ideal point.
 
     Each objective is scaled to [0, 1] over those rows (0 its best value); the chosen
     row has the smallest Euclidean norm. None if no row meets the yield.
@@ -375,7 +376,7 @@ def choose(problem, rows):
 def outcome_of(problem, records, backend, folder, resume, evaluate=evaluate_candidates,
                stream=sys.stderr, batch_size=1):
     """
-    The Pareto set confirmed beside the baselines: a dict for the report.
+    Confirm the Pareto set beside the baselines; return a dict for the report.
 
     pareto: [(generation, search row, confirmation row)]; baselines: {label:
     confirmation row}; chosen: index in pareto or None.

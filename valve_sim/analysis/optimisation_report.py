@@ -31,7 +31,7 @@ from valve_sim.core.parameters import NODE_NAME, PARAMETERS
 
 
 def parameter_file_text(problem, design, title):
-    """The ROS 2 parameter file of a design: every parameter, the preset, the step size."""
+    """Return the ROS 2 parameter file of a design: every parameter, the preset, the step."""
     values = {**problem.params, **design}
     lines = [
         f'# {title}',
@@ -53,12 +53,12 @@ def parameter_file_text(problem, design, title):
 
 
 def design_name(row):
-    """File-name stem of a design row: pareto_<candidate index>, or its baseline label."""
+    """Return the file-name stem of a design row: pareto_<candidate index>, or its label."""
     return row['label'].replace('candidate ', 'pareto_')
 
 
 def yield_entry(row):
-    """{samples, passed, fraction, ci95} of a row, or None."""
+    """Return {samples, passed, fraction, ci95} of a row, or None."""
     if row is None:
         return None
     return {'samples': row['samples'], 'passed': row['passed'], 'fraction': row['yield'],
@@ -66,7 +66,7 @@ def yield_entry(row):
 
 
 def design_entry(problem, row, confirmed=None, generation=None):
-    """JSON-ready statement of one design: values, nominal measures, yields, failures."""
+    """Return a JSON-ready statement of a design: values, nominal measures, yields, failures."""
     nominal = row.get('nominal') or {}
     final = confirmed or row
     return {
@@ -87,7 +87,7 @@ def design_entry(problem, row, confirmed=None, generation=None):
 
 
 def problem_statement(problem, population, generations):
-    """JSON-ready statement of the problem and the budget."""
+    """Return a JSON-ready statement of the problem and the budget."""
     return {
         'design': [{**bound.describe(), 'distribution': 'bounds'} for bound in problem.design],
         'objectives': [{'measure': o.measure, 'sense': o.sense} for o in problem.objectives],
@@ -112,7 +112,7 @@ def problem_statement(problem, population, generations):
 
 
 def comparison(chosen, table2):
-    """{measure: {chosen, table2, change_percent}} of two rows' nominal measures."""
+    """Return {measure: {chosen, table2, change_percent}} of two rows' nominal measures."""
     result = {}
     for name in MEASURE_NAMES:
         a, b = chosen['nominal']['measures'][name], table2['nominal']['measures'][name]
@@ -164,7 +164,7 @@ def write_outputs(out, problem, outcome, records, population, generations):
 
 
 def write_csv(path, problem, pareto):
-    """One line per Pareto design: values, nominal measures, decay, both yields."""
+    """Write one line per Pareto design: values, nominal measures, decay, both yields."""
     names = [bound.name for bound in problem.design]
     header = ['label', 'generation', *names, *MEASURE_NAMES, 'nominal_decay_rate',
               'search_samples', 'search_yield', 'search_ci95_low', 'search_ci95_high',

@@ -45,7 +45,6 @@ with its Clopper-Pearson interval (tolerances.yield_interval).
 
 from valve_sim.analysis.measures import WINDOW
 from valve_sim.analysis.study_cases import preset_protocol, sample_cases
-from valve_sim.analysis.study_runner import evaluate_batch
 from valve_sim.analysis.tolerances import (
     draw,
     parse_limits,
@@ -73,7 +72,7 @@ def nominal_valve(case):
 
 
 def decay_rate(params, row, scenario):
-    """Slowest decay rate [1/s] of a run's valve as it was set (its preload), or None."""
+    """Return the slowest decay rate [1/s] of a run's valve as it was set, or None."""
     if row['error'] is not None:
         return None
     from valve_sim.core.linear import slowest_decay_rate
@@ -88,25 +87,25 @@ def decay_rate(params, row, scenario):
 
 
 def decays(row, min_decay_rate):
-    """Whether a run's valve (a runner row with its decay_rate) meets min_decay_rate (or None)."""
+    """Tell whether a run's valve (a row with its decay_rate) meets min_decay_rate (or None)."""
     return min_decay_rate is None or (
         row['decay_rate'] is not None and row['decay_rate'] >= min_decay_rate
     )
 
 
 def valve_passes(row, limits, min_decay_rate):
-    """Whether a run's valve meets every limit and the decay rate."""
+    """Tell whether a run's valve meets every limit and the decay rate."""
     return passes(row, limits) and decays(row, min_decay_rate)
 
 
 def evaluate_candidates(cases):
-    """Rows of candidate cases, in their order (the work unit of a backend)."""
+    """Return the rows of candidate cases, in their order (the work unit of a backend)."""
     return [evaluate_candidate(case) for case in cases]
 
 
 def evaluate_candidate(case):
     """
-    The row of one candidate: its nominal measures, the yield and its interval.
+    Return the row of one candidate: its nominal measures, the yield and its interval.
 
     row: index, label, design, error (the nominal valve could not be set: then no
     sample runs), preset_pressure (the sampled valves'), nominal (the runner's row of
@@ -129,6 +128,8 @@ def evaluate_candidate(case):
     values = draw(distributions, case['samples'], case['seed'], case['sampler'])
     cases = sample_cases(nominal, names, values, preset, case['step_size'])
     cases.append({**cases[0], 'index': len(cases), 'params': nominal})
+    from valve_sim.analysis.study_runner import evaluate_batch  # numba: on the worker
+
     runs = evaluate_batch(cases)
     rate = case['min_decay_rate']
     for run, valve in zip(runs, cases):

@@ -35,16 +35,6 @@ from pathlib import Path
 import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.optimisation import (
-    exact_text,
-    outcome_of,
-    parse_design,
-    parse_fraction,
-    parse_objectives,
-    parse_tolerances,
-    RobustProblem,
-    search,
-)
 from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
@@ -57,6 +47,9 @@ from valve_sim.commands.study_backend import (
 )
 from valve_sim.core.errors import StudyError
 from valve_sim.core.parameters import ParameterError
+
+# The optimiser and the model (pymoo, numba, scipy) are imported in the functions that run
+# them, so that `valve-sim optimise --help` stays quick.
 
 
 def decay_rate_value(text):
@@ -92,7 +85,7 @@ def add_arguments(parser):
                         help='required share of valves meeting the limits (default 0.99; '
                         '99%% works too)')
     parser.add_argument('--min-decay-rate', type=decay_rate_value, default=MIN_DECAY_RATE,
-                        metavar='R', help='every valve\'s slowest linear mode must decay at R '
+                        metavar='R', help="every valve's slowest linear mode must decay at R "
                         f'[1/s] at 5 and 20 L/min (default {MIN_DECAY_RATE:g}: 95 %% within the '
                         '1 s window); off: no such requirement')
     parser.add_argument('--samples', type=int, default=256, metavar='N',
@@ -114,7 +107,16 @@ def add_arguments(parser):
 
 
 def problem_from(args):
-    """Return (RobustProblem, parameters, the protocol's statement) from the options."""
+    """Return (RobustProblem, the protocol's statement) from the options."""
+    from valve_sim.analysis.optimisation import (
+        exact_text,
+        parse_design,
+        parse_fraction,
+        parse_objectives,
+        parse_tolerances,
+        RobustProblem,
+    )
+
     params, settings = load_from_arguments(args)
     design = parse_design(args.design, params, args.protocol)
     if args.population < 2 or args.generations < 1:
@@ -142,7 +144,7 @@ def problem_from(args):
 
 
 def print_outcome(problem, summary):
-    """The Pareto set, then the chosen design against Table 2, measure by measure."""
+    """Print the Pareto set, then the chosen design against Table 2, measure by measure."""
     names = [bound.name for bound in problem.design]
     objectives = [o.measure for o in problem.objectives]
     print(f"{summary['candidates_evaluated']} candidates, {summary['candidates_feasible']} "
@@ -183,13 +185,16 @@ def _yield_text(result):
 
 
 def run(args):
+    from valve_sim.analysis.optimisation import outcome_of, search
     from valve_sim.analysis.optimisation_plots import plot_distributions, plot_pareto_front
     from valve_sim.analysis.optimisation_report import write_outputs
 
     try:
         import pymoo  # noqa: F401  (is it installed?)
     except ImportError:
-        raise StudyError("optimise needs pymoo, which is not installed: pip install 'pymoo>=0.6.2'")
+        raise StudyError(
+            "optimise needs pymoo, which is not installed: pip install 'pymoo>=0.6.2'"
+        )
     problem, protocol = problem_from(args)
     out = make_folder(Path(args.out))
     runs = args.population * args.generations * (problem.samples + 1)
