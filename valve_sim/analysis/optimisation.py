@@ -113,9 +113,7 @@ class Objective:
     def signed(self, measures):
         """Return the value the optimiser minimises (None where the measure does not exist)."""
         value = measures.get(self.measure)
-        if value is None:
-            return None
-        return value if self.sense == 'minimise' else -value
+        return None if value is None else value if self.sense == 'minimise' else -value
 
 
 def parse_objectives(minimise, maximise):
@@ -299,13 +297,8 @@ def search(problem, backend, folder, population, generations, resume=False,
             for i, x in enumerate(offspring.get('X'))
         ]
         path = folder / f'generation_{generation:03d}.jsonl'
-        try:
-            rows, computed = run_cases(cases, path, backend, resume, batch_size, evaluate,
-                                       progress_stream=None, progress=progress)
-        except BaseException:
-            _say(stream, f'optimise: stopped in generation {generation}; every finished '
-                 f'candidate is saved in {folder}: --resume continues from there')
-            raise
+        rows, computed = _run(cases, path, backend, resume, batch_size, evaluate, progress,
+                              f'in generation {generation}')
         on_file += len(cases) - computed
         rows = [rows[case['index']] for case in cases]
         objectives, constraints = zip(*(problem.scores(row) for row in rows))
@@ -347,13 +340,8 @@ def confirm(problem, designs, backend, folder, resume=False, evaluate=evaluate_c
     cases = [problem.case(i, label, design, True) for i, (label, design) in enumerate(designs)]
     path = Path(folder) / f'confirm_{fingerprint(cases)}.jsonl'
     progress = Progress('optimise: confirming', len(cases), 0, stream, unit='designs')
-    try:
-        rows, _ = run_cases(cases, path, backend, resume, batch_size, evaluate,
-                            progress_stream=None, progress=progress)
-    except BaseException:
-        _say(stream, f'optimise: stopped while confirming; the confirmed designs are saved in '
-             f'{path}: --resume continues from there')
-        raise
+    rows, _ = _run(cases, path, backend, resume, batch_size, evaluate, progress,
+                   'while confirming')
     return [rows[case['index']] for case in cases]
 
 
@@ -391,6 +379,17 @@ def outcome_of(problem, records, backend, folder, resume, evaluate=evaluate_cand
     baselines = {label: row for (label, _), row in zip(designs[len(front):], rows[len(front):])}
     return {'pareto': pareto, 'baselines': baselines,
             'chosen': choose(problem, [confirmed for _, _, confirmed in pareto])}
+
+
+def _run(cases, path, backend, resume, batch_size, evaluate, progress, when):
+    """run_cases() with progress; an interruption says where the finished work is."""
+    try:
+        return run_cases(cases, path, backend, resume, batch_size, evaluate,
+                         progress_stream=None, progress=progress)
+    except BaseException:
+        _say(progress.stream, f'optimise: stopped {when}; every finished candidate is saved in '
+             f'{path.parent}: --resume continues from there')
+        raise
 
 
 def _say(stream, text):
