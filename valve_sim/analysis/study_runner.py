@@ -217,10 +217,11 @@ class Progress:
         self.last = now
         rate = (self.done - self.resumed) / max(now - self.start, 1e-9)
         left = (self.total - self.done) / rate if rate > 0 else float('inf')
+        pace = f'{rate:.1f} {self.unit}/s' if rate >= 1.0 else f'{60.0 * rate:.1f} {self.unit}/min'
         _say(
             self.stream,
             f'{self.label}: {self.done}/{self.total} {self.unit} '
-            f'({100.0 * self.done / self.total:.0f} %), {rate:.1f} {self.unit}/s, '
+            f'({100.0 * self.done / self.total:.0f} %), {pace}, '
             f'elapsed {_duration(now - self.start)}, '
             f'ETA {_duration(left)}',
         )
