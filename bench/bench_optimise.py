@@ -125,6 +125,9 @@ def main():
     try:
         cases = [problem.case(i, f'bench {i}', {}) for i in range(cores)]
         with tempfile.TemporaryDirectory() as folder:
+            warm = [{**case, 'samples': 16} for case in cases]  # each worker loads the kernels
+            run_cases(warm, Path(folder) / 'w.jsonl', backend, batch_size=1,
+                      evaluate=evaluate_candidates, progress_stream=None)
             wall, _, _ = timed(lambda: run_cases(cases, Path(folder) / 'r.jsonl', backend,
                                                  batch_size=1, evaluate=evaluate_candidates,
                                                  progress_stream=None))
@@ -163,11 +166,12 @@ def main():
     print(f'{cores} candidates on {cores} Dask workers: {wall:.1f} s '
           f"({result['generation_rate_runs_per_s']:.0f} runs/s) = "
           f"{result['generation_vs_single_x_cores']:.2f} x the single-run rate x cores")
+    projected = ', '.join(f'{w} workers {t:.0f} s' for w, t in result['projection_s'].items())
     print(f'worked answer, {args.generations} generations of {POPULATION} x '
           f'{args.scaling_samples} valves: 1 worker {scaling[1]:.0f} s, 2 workers '
-          f"{scaling[2]:.0f} s (speed-up {result['scaling_speedup_2']:.2f}); fitted start "
-          f'{start:.0f} s + {candidate:.2f} s a candidate; projected '
-          + ', '.join(f'{w} workers {t:.0f} s' for w, t in result['projection_s'].items()))
+          f"{scaling[2]:.0f} s (speed-up {result['scaling_speedup_2']:.2f}); "
+          + (f'fitted start {start:.0f} s + {candidate:.2f} s a candidate; projected {projected}'
+             if candidate > 0 else 'no gain from the second worker: no projection (busy cores?)'))
     print(f"load average {result['load_start']:.1f} at the start, {result['load_end']:.1f} at "
           'the end')
     if args.json:
