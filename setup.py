@@ -41,7 +41,7 @@ ROS_WHEELS = [
     'ros-jazzy-ament-index-python',
 ]
 # No rosdep keys exist for these: on a ROS install they are pip installs (README).
-STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib']
+STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib', 'pymoo>=0.6.2,<0.7']
 FOXGLOVE_DEPENDENCIES = ['foxglove-sdk']
 # ament_flake8 checks for these plugins; colcon builds the package in test_colcon.
 TEST_DEPENDENCIES = [

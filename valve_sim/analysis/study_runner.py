@@ -199,10 +199,15 @@ def default_batch_size(count, workers):
 class Progress:
     """Progress and ETA on stderr, at most one line every `interval` seconds."""
 
-    def __init__(self, label, total, done, stream=sys.stderr, interval=2.0):
+    def __init__(self, label, total, done, stream=sys.stderr, interval=2.0, unit='runs'):
         self.label, self.total, self.resumed = label, total, done
-        self.done, self.stream, self.interval = done, stream, interval
+        self.done, self.stream, self.interval, self.unit = done, stream, interval, unit
         self.start = self.last = time.monotonic()
+
+    def skip(self, count):
+        """Count items found done on file: they do not count in the rate."""
+        self.done += count
+        self.resumed += count
 
     def advance(self, count):
         self.done += count
@@ -212,10 +217,12 @@ class Progress:
         self.last = now
         rate = (self.done - self.resumed) / max(now - self.start, 1e-9)
         left = (self.total - self.done) / rate if rate > 0 else float('inf')
+        pace = f'{rate:.1f} {self.unit}/s' if rate >= 1.0 else f'{60.0 * rate:.1f} {self.unit}/min'
         _say(
             self.stream,
-            f'{self.label}: {self.done}/{self.total} runs ({100.0 * self.done / self.total:.0f} %)'
-            f', {rate:.1f} runs/s, elapsed {_duration(now - self.start)}, '
+            f'{self.label}: {self.done}/{self.total} {self.unit} '
+            f'({100.0 * self.done / self.total:.0f} %), {pace}, '
+            f'elapsed {_duration(now - self.start)}, '
             f'ETA {_duration(left)}',
         )
 
@@ -243,6 +250,7 @@ def run_cases(
     evaluate=evaluate_batch,
     label='study',
     progress_stream=sys.stderr,
+    progress=None,
 ):
     """
     Evaluate every case once, streaming rows to results_path; return (rows, computed).
@@ -251,7 +259,8 @@ def run_cases(
     (the rest came from the file with resume=True). Without resume an existing file
     is replaced. An interruption (Ctrl-C, a failed batch) leaves every finished row
     on file and raises; resume=True then evaluates only the missing indices.
-    Progress goes to progress_stream (None: silent).
+    Progress goes to progress_stream (None: silent), or to progress, a Progress that
+    spans more than this call (the rows on file are skipped in it).
     """
     indices = [case['index'] for case in cases]
     if len(set(indices)) != len(indices):
@@ -271,7 +280,10 @@ def run_cases(
     else:
         results_path.parent.mkdir(parents=True, exist_ok=True)
         results_path.write_text(json.dumps({'study': study, 'cases': len(cases)}) + '\n')
-    progress = Progress(label, len(cases), len(rows), progress_stream)
+    if progress is None:
+        progress = Progress(label, len(cases), len(rows), progress_stream)
+    else:
+        progress.skip(len(rows))
     size = batch_size or default_batch_size(len(missing), backend.workers)
     computed = 0
     with open(results_path, 'a') as stream:

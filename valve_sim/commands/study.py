@@ -47,14 +47,18 @@ import sys
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
-from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
+from valve_sim.analysis.study_cases import (
+    DEFAULT_PROTOCOL,
+    protocol_preset,
+    PROTOCOLS,
+    study_cases,
+)
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
     open_backend,
-    protocol_preset,
 )
 from valve_sim.core.parameters import scaled
 

@@ -43,13 +43,6 @@ def add_protocol_arguments(parser):
                         const='frozen-preload', help='same as --protocol frozen-preload')
 
 
-def protocol_preset(protocol, preset_pressure):
-    """Return the preset a case of this protocol is set to: preset_pressure, or None (frozen)."""
-    if protocol not in PROTOCOLS:
-        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
-    return preset_pressure if protocol == 'held-preset' else None
-
-
 def add_runner_arguments(parser):
     """--scheduler, --workers, --batch-size and --resume."""
     parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',

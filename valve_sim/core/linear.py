@@ -53,3 +53,17 @@ def oscillatory_modes(params, inlet_flow):
     eigenvalues = np.linalg.eigvals(jacobian(params, state, inlet_flow))
     modes = [(abs(e.imag) / (2 * np.pi), -e.real / abs(e)) for e in eigenvalues if e.imag > 1e-6]
     return sorted(modes)
+
+
+def slowest_decay_rate(params, inlet_flows):
+    """
+    Return the slowest decay rate -Re(lambda) [1/s] of the linear modes at the steady states.
+
+    Every eigenvalue of the Jacobian at the steady state of each inlet flow [m^3/s]
+    counts, oscillatory or not; negative: a mode that grows (the valve is unstable).
+    Raises SteadyStateError where a steady state cannot be found.
+    """
+    return min(
+        float(np.min(-np.linalg.eigvals(jacobian(params, steady_state(params, flow), flow)).real))
+        for flow in inlet_flows
+    )

@@ -572,8 +572,9 @@ def read_parameter_file(path, node_name=NODE_NAME):
     """
     Read the parameters of one node from a ROS 2 parameter file.
 
-    Accepts the node's own section or the wildcard '/**'; returns the raw dict of
-    ros__parameters (values unvalidated) or raises ParameterError.
+    Accepts the node's own section, the wildcard '/**', or '/**/' + node_name (the
+    node in any namespace); returns the raw dict of ros__parameters (values
+    unvalidated) or raises ParameterError.
     """
     path = Path(path)
     try:
@@ -584,7 +585,7 @@ def read_parameter_file(path, node_name=NODE_NAME):
         raise ParameterError(f'parameter file {path} is not valid YAML: {error}') from error
     if not isinstance(document, dict):
         raise ParameterError(f"parameter file {path} must map node names to 'ros__parameters'")
-    for key in (node_name, '/' + node_name, '/**'):
+    for key in (node_name, '/' + node_name, '/**/' + node_name, '/**'):
         section = document.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
             return dict(section['ros__parameters'])
