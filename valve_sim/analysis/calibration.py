@@ -241,8 +241,13 @@ class MeasuresTarget:
 
 
 def noise_level(signal, count):
-    """Robust standard deviation [signal unit] of white noise on the first count samples."""
+    """
+    Robust standard deviation [signal unit] of white noise on the first count samples.
+
+    Differences with a non-finite end (a sample not recorded) are left out.
+    """
     differences = np.diff(np.asarray(signal[:count], dtype=float))
+    differences = differences[np.isfinite(differences)]
     if len(differences) < 2:
         return 0.0
     return float(1.4826 * np.median(np.abs(differences - np.median(differences))) / math.sqrt(2))
@@ -254,12 +259,15 @@ class RecordingTarget:
 
     main_valve may be None (a rig without a position sensor) or hold NaN where not
     recorded. inlet_flow[i] is the flow over the interval ending at time[i].
+    step_times [s]: steps located between two samples (a coarse flowmeter's, see
+    measures.locate_step); the model's flow changes there, inside the interval of the
+    sample after it, which already carries the new flow.
     """
 
     kind = 'recording'
 
     def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6):
+                 step_threshold=1e-6, step_times=()):
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)
@@ -282,11 +290,15 @@ class RecordingTarget:
             )
         before = max(int(np.searchsorted(time, self.steps[0][0], side='right')), 2)
         self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
+        self._model_time, self._model_flow, self._rows = _with_steps(time, flow, step_times,
+                                                                     step_size)
         self.pressure_noise = max(noise_level(pressure, before), 1.0)  # [Pa] floor: 1 Pa
         self.position = None
         self.residual_names = ['supply_pressure'] * len(time)
         if main_valve is not None:
             position = np.asarray(main_valve, dtype=float)
+            if np.any(np.isinf(position)):
+                raise CalibrationError('the recorded main-valve position is infinite somewhere')
             if np.any(np.isfinite(position)):
                 self.position = position
                 self.position_noise = max(noise_level(position, before), 1e-9)  # [m]
@@ -295,7 +307,10 @@ class RecordingTarget:
 
     def model_output(self, params):
         """Model states (rows) at the recorded sample times."""
-        return simulate_recorded_flow(params, self.time, self.flow, self.step_size)
+        states = simulate_recorded_flow(
+            params, self._model_time, self._model_flow, self.step_size
+        )
+        return states[self._rows]
 
     def residuals(self, params):
         states = self.model_output(params)
@@ -308,6 +323,27 @@ class RecordingTarget:
     def covariance_scale(self, cost, count, fitted):
         """s^2: the residual variance, for noise levels that were only estimated."""
         return 2.0 * cost / max(count - fitted, 1)
+
+
+def _with_steps(time, flow, step_times, step_size):
+    """
+    Return (times, flows, rows): the samples with step_times [s] inserted, for the model.
+
+    An inserted time carries the flow of the sample before it (the flow until the
+    step); rows index the recorded samples among them. A step within a model step of
+    a sample needs no sample of its own.
+    """
+    inserted = sorted(
+        t for t in step_times
+        if time[0] < t < time[-1] and np.min(np.abs(time - t)) >= step_size
+    )
+    if not inserted:
+        return time, flow, np.arange(len(time))
+    at = np.searchsorted(time, inserted)
+    model_time = np.insert(time, at, inserted)
+    model_flow = np.insert(flow, at, flow[at - 1])
+    rows = np.flatnonzero(~np.isin(np.arange(len(model_time)), at + np.arange(len(at))))
+    return model_time, model_flow, rows
 
 
 # --- constraints and checks -----------------------------------------------------------------
@@ -522,6 +558,7 @@ class _Objective:
         self.progress, self.count, self.best = progress, 0, (math.inf, None)
         self.size = None
         self.label, self.last_report = '', 0.0
+        self.failure = None  # why the last failed evaluation failed
 
     def parameters(self, u):
         return apply_values(self.params, self.fitted, u * self.start, self.preset)
@@ -533,11 +570,13 @@ class _Objective:
             residual = np.concatenate(
                 [self.target.residuals(params), [c.penalty(params) for c in self.constraints]]
             )
-        except MODEL_ERRORS:
-            residual = None
+        except MODEL_ERRORS as error:
+            residual, self.failure = None, f'the model cannot run it: {error}'
         if self.size is None and residual is not None:
             self.size = len(residual)
-        if residual is None or not np.all(np.isfinite(residual)):
+        if residual is not None and not np.all(np.isfinite(residual)):
+            residual, self.failure = None, _non_finite(self.target, residual)
+        if residual is None:
             residual = np.full(self.size or 1, FAILED_RESIDUAL)
         cost = 0.5 * float(residual @ residual)
         if cost < self.best[0]:
@@ -549,6 +588,17 @@ class _Objective:
                 f'{self.label} evaluation {self.count}: cost {cost:.6g}, best {self.best[0]:.6g}'
             )
         return residual
+
+
+def _non_finite(target, residual):
+    """Say which residuals are not finite although the model ran: a problem of the data."""
+    names = sorted({name for name, value in zip(target.residual_names, residual)
+                    if not math.isfinite(value)})
+    return (
+        f'the residuals of {", ".join(names) or "the constraints"} are not finite although '
+        'the model ran: the target holds NaN or infinite values, or a noise level that is '
+        'not finite (a problem of the data, not of the model)'
+    )
 
 
 def _jacobian(objective, u, relative_step):
@@ -615,10 +665,12 @@ def calibrate(
         cost, u = objective.best
         return _interrupted(params, fitted, start, target, constraints, objective, u, cost, began)
     if np.all(base == FAILED_RESIDUAL):
-        raise CalibrationError(
-            'the model cannot run the target with the start values (no steady state or a '
-            'diverging run): check the parameter file and --params'
-        )
+        if objective.failure.startswith('the model'):
+            raise CalibrationError(
+                'the model cannot run the target with the start values (no steady state or a '
+                f'diverging run): check the parameter file and --params ({objective.failure})'
+            )
+        raise CalibrationError(f'the target cannot be compared: {objective.failure}')
     flat = [
         p
         for p, column in zip(fitted, jacobian.T)

@@ -35,6 +35,7 @@ from valve_sim.commands.options import (
     check_bag_arguments,
     flow_value,
     load_from_arguments,
+    namespace_name,
 )
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
@@ -81,8 +82,16 @@ def add_arguments(parser):
     parser.add_argument('--pressure-noise', type=float, default=0.0, metavar='PA',
                         help='with --rig-topics: Gaussian noise on the recorded pressure, '
                         'standard deviation [Pa]')
+    parser.add_argument('--flow-interval', type=float, metavar='S',
+                        help='with --rig-topics: sample interval of the flowmeter [s], a whole '
+                        'multiple of the record interval (default: the pressure interval, '
+                        '1 ms; e.g. 0.01 for a 100 Hz flowmeter)')
     add_options(parser, '--seed', help='seed of the --pressure-noise generator')
     add_options(parser, '--bag-folder', '--start-time')
+    parser.add_argument('--namespace', metavar='NS',
+                        help='the valve as valve_node in this namespace (e.g. /rig1): the '
+                        '--params sections that apply to it, and with --mcap its topics '
+                        'below it (default: the root namespace)')
 
 
 def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
@@ -94,6 +103,10 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
     """
     from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
+    if getattr(args, 'flow_interval', None) is not None and not (
+        getattr(args, 'rig_topics', None) and args.flow_interval > 0.0
+    ):
+        raise ParameterError('--flow-interval needs --rig-topics and a value > 0 s')
     start_ns = args.start_time
     if start_ns is None:
         start_ns = time.time_ns() // 1_000_000 * 1_000_000
@@ -114,6 +127,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
             publish_interval,
             start_time_ns=start_ns,
             folder=args.bag_folder,
+            flow_interval=args.flow_interval,
         )
         return
     write_simulation_bag(
@@ -124,6 +138,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
         start_time_ns=start_ns,
         folder=args.bag_folder,
         readings=readings,
+        namespace=namespace_name(getattr(args, 'namespace', None)),
     )
 
 

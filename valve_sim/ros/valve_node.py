@@ -118,6 +118,7 @@ from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThrea
 from valve_sim.ros.ros_parameters import (
     declare_double,
     integers_as_doubles,
+    log_parameter_files,
     undeclared_reason,
     value_problem,
 )
@@ -165,9 +166,10 @@ LIVE_NAMES = frozenset(VALVE_SPECS) | INJECTION_NAMES | {FAULT_SCHEDULE}  # retu
 class ReliefValveNode(Node):
     """The valve model on a timer at publish_rate, fed by inlet_flow, publishing its state."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, argv=(), **kwargs):
         self._inlet_subscription = None  # taken by the tick, left out of subscriptions
         super().__init__(NODE_NAME, **kwargs)
+        log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
         self.hardware_id = diagnostics.declare_hardware_id(self)
@@ -622,7 +624,8 @@ class ReliefValveNode(Node):
             topics, port, host, name=self.get_fully_qualified_name()
         )
         self.get_logger().info(
-            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
+            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics); '
+            f'layout {live_view.layout_path()}'
         )
 
     def _take_inputs(self, started_ns):
@@ -801,8 +804,8 @@ def parse_arguments(args):
     live_view.add_port_option(
         parser,
         'serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
-        f'(default port {live_view.DEFAULT_PORT}; 0: any free port). On a ROS install, run '
-        'foxglove_bridge instead',
+        f'(default port {live_view.DEFAULT_PORT}; 0: any free port); the layout to open: '
+        f'{live_view.layout_path()}. On a ROS install, run foxglove_bridge instead',
     )
     parser.add_argument(
         '--foxglove-host',
@@ -820,7 +823,7 @@ def main(args=None):
     options = parse_arguments(args)
     stop = spinning.init(args)
     try:
-        node = ReliefValveNode()
+        node = ReliefValveNode(sys.argv if args is None else args)
     except STARTUP_ERRORS as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {error}')
         rclpy.try_shutdown()
