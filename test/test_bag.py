@@ -30,7 +30,7 @@ from mcap_ros2.decoder import DecoderFactory
 import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.measures import FINAL_VALUE_MEASURES, MEASURE_NAMES, step_measures
 from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
@@ -157,13 +157,19 @@ def test_bag_decodes_with_rosbags(simulation_bag):
     assert qos[0].reliability.name == 'RELIABLE'
 
 
-def test_offline_analysis_of_simulation_bag(simulation_bag):
+def test_offline_analysis_of_simulation_bag(simulation_bag, waveforms):
     records = analyse(read_recording(simulation_bag))
     assert len(records) == 1
     step = records[0]
     assert step['t_step'] == pytest.approx(START_NS / 1e9 + 0.25) and step['direction'] == 1
-    assert step['P_1_percent'] == pytest.approx(3.2, abs=0.3)
     assert 'truncated' in step['details']['note']
+    # 0.35 s after the step p_s still swings: no final value, so no measure taken from it
+    assert step['details']['final_value_settled'] is False
+    for name in FINAL_VALUE_MEASURES:
+        assert step[name] is None and 'has not settled' in step['reasons'][name], name
+    offline = step_measures(waveforms.time, waveforms['supply_pressure'],
+                            waveforms['main_valve_displacement'], 0.25, window=0.35)
+    assert step['T_1_ms'] == pytest.approx(offline.values['T_1_ms'], abs=0.1)  # peaks: kept
 
 
 def test_sample_bag_analyses_to_its_json():
@@ -247,7 +253,7 @@ def test_topic_mapping_reads_a_rig_bag(waveforms, simulation_bag, tmp_path, caps
             assert rig_step[name] == pytest.approx(valve_step[name], rel=1e-9)
 
 
-def test_step_time_option_needs_no_flow(simulation_bag, capsys):
+def test_step_time_option_needs_no_flow(simulation_bag, waveforms, capsys):
     code, out, err = run_cli(
         capsys,
         'analyse',
@@ -259,7 +265,11 @@ def test_step_time_option_needs_no_flow(simulation_bag, capsys):
         '--json',
     )
     assert code == 0, err
-    assert json.loads(out)['steps'][0]['P_1_percent'] == pytest.approx(3.2, abs=0.3)
+    step = json.loads(out)['steps'][0]
+    offline = step_measures(waveforms.time, waveforms['supply_pressure'],
+                            waveforms['main_valve_displacement'], 0.25, window=0.35)
+    assert step['T_1_ms'] == pytest.approx(offline.values['T_1_ms'], abs=0.1)
+    assert step['P_1_percent'] is None  # the truncated window has no settled final value
 
 
 def chunked_bag(path, chunks=8, per_chunk=50):

@@ -58,6 +58,9 @@ import numpy as np
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
+# The measures taken relative to the settled final value p_inf (x_inf); T_1 and T_d are
+# times of peaks and need only the peaks inside the window.
+FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
 WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
 PRE_STEP_SPAN = 0.05  # [s] pressure before a bracketed step: its level and noise band
@@ -194,9 +197,45 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
     arrays; x may be None or NaN where not recorded (T_s then from p_s). direction:
     +1 for a rising inlet flow (overshoot peaks are maxima), -1 for a falling one
-    (they are minima; P_1 is then negative). window [s]:
-    normally WINDOW; a shorter one (a truncated recording) is reported in details.
+    (they are minima; P_1 is then negative). window [s]: normally WINDOW. Samples that
+    end before it (a truncated recording) are reported in details; there the measures
+    that need the final value (FINAL_VALUE_MEASURES) are undefined unless p_s has
+    settled in the last 50 ms (settled_at_the_end).
     """
+    measures = _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction,
+                              window)
+    details = measures.details
+    if 'p_inf' not in details or details['window_s'] >= window:
+        return measures
+    inside = (np.asarray(t) >= t_step) & (np.asarray(t) <= t_step + details['window_s'])
+    settled = settled_at_the_end(np.asarray(t)[inside], np.asarray(supply_pressure)[inside],
+                                 details['p_inf'])
+    details['final_value_settled'] = settled
+    if not settled:
+        reason = (
+            f'the window is truncated to {details["window_s"]:.3f} s (the recording ends) and '
+            f'p_s has not settled in its last {SETTLED_SPAN * 1e3:g} ms, so it has no final '
+            'value p_inf'
+        )
+        measures.values.update(dict.fromkeys(FINAL_VALUE_MEASURES))
+        measures.reasons.update(dict.fromkeys(FINAL_VALUE_MEASURES, reason))
+    return measures
+
+
+def settled_at_the_end(t, supply_pressure, p_inf):
+    """
+    Whether p_s [Pa] has settled by the end of its samples t [s] at p_inf [Pa].
+
+    Settled: over the last SETTLED_SPAN, |p_s - p_inf| stays within SETTLING_BAND of the
+    largest |p_s - p_inf| (5 % of the first overshoot, about, as T_s judges p_s).
+    """
+    deviation = np.abs(np.asarray(supply_pressure, dtype=float) - p_inf)
+    last = np.asarray(t) >= t[-1] - SETTLED_SPAN
+    return bool(np.max(deviation[last]) <= SETTLING_BAND * np.max(deviation))
+
+
+def _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction, window):
+    """The measures of step_measures(), p_inf taken from whatever window there is."""
     t = np.asarray(t, dtype=float)
     p = np.asarray(supply_pressure, dtype=float)
     x = np.full_like(t, np.nan) if main_valve_displacement is None else np.asarray(

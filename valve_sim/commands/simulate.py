@@ -26,6 +26,7 @@ sensor readings are what --mcap records on the pressure topics.
 import csv
 import json
 import math
+import sys
 import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -232,6 +233,7 @@ def run(args):
         faults,
         schedule,
         1.0 / settings['publish_rate'],
+        halt_on_overpressure=True,
     )
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
     measures = step_measures(
@@ -248,6 +250,21 @@ def run(args):
             + [f'fault schedule {args.faults or injection.get(FAULT_SCHEDULE)}'] * bool(schedule)
         )
         measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
+    if waveforms.halted:
+        halted_at, why = waveforms.halted
+        overpressure = (
+            f'OVERPRESSURE at t = {halted_at:.6f} s: {why} The model halts there, as '
+            'valve_node does: it holds its last good state to the end of the run, and '
+            f"supply_pressure is reported at burst_pressure = {params['burst_pressure']:g} Pa "
+            '(gauge), the limit it passed'
+        )
+        measures.values = dict.fromkeys(MEASURE_NAMES)
+        measures.reasons = dict.fromkeys(
+            MEASURE_NAMES,
+            f'the run halted at an overpressure at t = {halted_at:.6f} s '
+            '(details.overpressure; stderr)',
+        )
+        measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
@@ -278,4 +295,8 @@ def run(args):
             print(f'faults from the start: {faults.describe()}')
         for applied_at, changes in waveforms.events:
             print(f'at t = {applied_at:.6f} s: {changes}')
+    if waveforms.halted:
+        print(f'valve-sim simulate: {measures.details["overpressure"]["message"]}; the outputs '
+              'show it so', file=sys.stderr)
+        return 1
     return 0

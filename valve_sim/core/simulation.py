@@ -37,10 +37,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
+from valve_sim.core.errors import OverpressureError
 from valve_sim.core.integrator import advance, advance_lanes
 from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
-from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
+from valve_sim.core.model import coefficients, flows as model_flows, P_S, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario  # noqa: F401 (also offered here)
 from valve_sim.core.steady_state import steady_state, SteadyStateError
@@ -55,12 +56,15 @@ class Waveforms:
     Sampled run: time [s], states (rows of the 8 model states, SI), and inlet flow.
 
     inlet_flow [m^3/s] is the flow applied over the interval that ends at each sample.
+    halted: (time [s], reason) of an overpressure the run halted at (run_flows'
+    halt_on_overpressure), else None.
     """
 
     time: np.ndarray
     states: np.ndarray
     inlet_flow: np.ndarray
     events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
+    halted: tuple = None
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
@@ -161,6 +165,7 @@ def run_flows(
     faults=HEALTHY,
     schedule=(),
     tick_interval=1e-3,
+    halt_on_overpressure=False,
 ):
     """
     Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
@@ -171,26 +176,43 @@ def run_flows(
     time. Returns Waveforms sampled every record_interval [s]; their events list what
     was applied when (sensor settings included, for the sensor stage). Raises
     IntegrationError if the run diverges, SteadyStateError if the start fails,
-    ParameterError for a bad fault or tick interval.
+    ParameterError for a bad fault or tick interval. halt_on_overpressure: an
+    overpressure (OverpressureError) halts the run as it halts valve_node instead: the
+    last good state is held to the end, its supply pressure reported at burst_pressure
+    (what valve_node publishes), and Waveforms.halted says when and why.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     flows = np.ascontiguousarray(flows, dtype=float)
     state = steady_state(params, initial_flow, faults)
     check_schedule(params, flows)
     initial = state.copy()
-    records, events, start = [], [], 0
+    records, events, start, halted = [], [], 0, None
     events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
+
+    def run(stop):
+        """Advance from step start to stop; after an overpressure hold to the end."""
+        nonlocal halted
+        chunk = flows[start:stop]
+        c = coefficients(params, faults)
+        try:
+            return advance(state, chunk, c, step_size, record_every, start * step_size)
+        except OverpressureError as error:
+            if not halt_on_overpressure:
+                raise
+            done = error.steps_done  # the steps before the failing one, from the last good state
+            whole = done // record_every * record_every
+            good = advance(state, chunk[:whole], c, step_size, record_every, start * step_size)
+            advance(state, chunk[whole:done], c, step_size, 0, (start + whole) * step_size)
+            held = state.copy()
+            held[P_S] = params['burst_pressure']
+            rows = (len(flows) - start) // record_every - len(good)
+            halted = ((start + done + 1) * step_size, str(error))
+            return np.vstack([good, np.tile(held, (rows, 1))])
+
     for stop, changes in events_at:
-        records.append(
-            advance(
-                state,
-                flows[start:stop],
-                coefficients(params, faults),
-                step_size,
-                record_every,
-                start * step_size,
-            )
-        )
+        records.append(run(stop))
+        if halted:
+            break
         faults = apply_faults(state, faults, changes)
         if stop == 0:
             initial = state.copy()
@@ -198,20 +220,13 @@ def run_flows(
             records[-1][-1] = state  # the tick's sample shows the state after the event
         events.append((stop * step_size, changes))
         start = stop
-    records.append(
-        advance(
-            state,
-            flows[start:],
-            coefficients(params, faults),
-            step_size,
-            record_every,
-            start * step_size,
-        )
+    if not halted:
+        records.append(run(len(flows)))
+    waveforms = _waveforms(
+        initial, np.vstack(records), flows, record_every, step_size, initial_flow, events=events
     )
-    record = np.vstack(records)
-    return _waveforms(
-        initial, record, flows, record_every, step_size, initial_flow, events=events
-    )
+    waveforms.halted = halted
+    return waveforms
 
 
 def simulate(
@@ -222,12 +237,13 @@ def simulate(
     faults=HEALTHY,
     schedule=(),
     tick_interval=1e-3,
+    halt_on_overpressure=False,
 ):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
-    faults, schedule, tick_interval: as run_flows. Raises IntegrationError if the run
-    diverges, SteadyStateError if the start fails.
+    faults, schedule, tick_interval, halt_on_overpressure: as run_flows. Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails.
     """
     flows = step_flows(scenario, step_size)
     return run_flows(
@@ -239,6 +255,7 @@ def simulate(
         faults,
         schedule,
         tick_interval,
+        halt_on_overpressure,
     )
 
 

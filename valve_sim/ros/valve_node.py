@@ -125,6 +125,7 @@ from valve_sim.ros.ros_parameters import (
 
 
 STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
+FAULT_STATUS_TASK = 'faults'  # fault_status status '<node name>: faults'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
@@ -555,9 +556,20 @@ class ReliefValveNode(Node):
                 return
         self.model.halt(str(error))
         self.status.halted = str(error)
+        # After an overpressure p_s is published at the limit it passed, as a transducer
+        # at full scale reads, not at the last normal state (a relief valve that reads
+        # 7 MPa while it takes an impossible flow would mislead the bench).
+        saturated = self.model.params['burst_pressure']
+        self.status.saturated = saturated if isinstance(error, OverpressureError) else None
         self.get_logger().error(
-            'the model stops advancing and publishes its last good state until a reset, '
+            'the model stops advancing and holds its last good state until a reset, '
             'a new inlet flow or a parameter change'
+            + (
+                f'; supply_pressure is published at burst_pressure = {saturated:g} Pa (gauge), '
+                'the limit it passed, the other topics at their last values'
+                if self.status.saturated is not None
+                else ''
+            )
         )
 
     def _resume(self, cause):
@@ -566,6 +578,7 @@ class ReliefValveNode(Node):
             return
         self.model.resume()
         self.status.halted = None
+        self.status.saturated = None
         self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
@@ -593,18 +606,29 @@ class ReliefValveNode(Node):
             if time_ns is None
             else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
         )
-        name = self.get_fully_qualified_name()
-        self._fault_status.publish(self.injection.status_message(self.model.faults, stamp, name))
+        name = diagnostics.status_name(self, FAULT_STATUS_TASK)
+        self._fault_status.publish(
+            self.injection.status_message(self.model.faults, stamp, name, self.hardware_id)
+        )
 
     def _publish_state(self):
-        """Publish the state of the model time, all messages with the same stamp."""
+        """
+        Publish the state of the model time, all messages with the same stamp.
+
+        After an overpressure (saturated) the supply pressure is published at the limit
+        it passed, the rest of the held state as it is.
+        """
         ambient = self.settings['ambient_pressure']
+        state = self.model.state
+        if self.status.saturated is not None:
+            state = state.copy()
+            state[P_S] = self.status.saturated
         tick = self._tick_messages.fill(
             self.model.time_ns,
-            self.model.state,
+            state,
             self.applied_flow,
             ambient,
-            self.injection.readings(self.model.time_ns, self.model.state, ambient),
+            self.injection.readings(self.model.time_ns, state, ambient),
         )
         for topic, data in tick:
             self._tick_publishers[topic].publish(data)
@@ -647,6 +671,7 @@ class ReliefValveNode(Node):
             self.get_logger().warn(response.message)
             return response
         self.status.halted = None
+        self.status.saturated = None
         time_ns = self.model.time_ns or 0
         response.success = True
         response.message = (
@@ -741,6 +766,7 @@ class ReliefValveNode(Node):
             'faults_active': self.model.faults.describe(),
             'sensor_dropout': ', '.join(self.injection.sensors.dropped_topics()),
             'overpressure': self.injection.overpressure,
+            'supply_pressure_saturated_at': self.status.saturated,
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
             'receive_threads': self.receive_threads.describe(),
