@@ -349,3 +349,40 @@ def test_stream_reader_of_mcap_reads_a_cut_file(simulation_bag, tmp_path):
             for record in StreamReader(stream).records:
                 records.append(record)
     assert sum(type(r).__name__ == 'Message' for r in records) > 0
+
+
+def test_a_bag_recorded_in_a_namespace_needs_no_topic_options(waveforms, tmp_path, capsys):
+    """One valve under /rig1: analyse finds it, or --namespace names it; two need the option."""
+    bag = tmp_path / 'rig1.mcap'
+    write_simulation_bag(bag, waveforms, start_time_ns=START_NS, namespace='/rig1')
+    code, named, err = run_cli(capsys, 'analyse', bag, '--namespace', 'rig1', '--json')
+    assert code == 0, err
+    code, found, err = run_cli(capsys, 'analyse', bag, '--json')
+    assert code == 0 and 'under /rig1' in err
+    assert json.loads(found)['steps'] == json.loads(named)['steps'] != []
+    code, _, err = run_cli(capsys, 'analyse', bag, '--namespace', '/rig2')
+    assert code == 1 and 'no topic /rig2/supply_pressure' in err
+    two = tmp_path / 'two.mcap'
+    writer = BagWriter(two)
+    for namespace in ('/rig1', '/rig2'):
+        for topic, type_name in TOPIC_TYPES.items():
+            writer.add_topic(f'{namespace}/{topic}', type_name)
+    writer.close()
+    code, _, err = run_cli(capsys, 'analyse', two)
+    assert code == 1 and '2 namespaces: /rig1, /rig2; choose one with --namespace' in err
+
+
+def test_simulate_writes_and_reads_a_namespace(tmp_path, capsys):
+    """--namespace /rig1: the bag's topics below it, and the file's /rig1 section applies."""
+    params = tmp_path / 'rig1.yaml'
+    params.write_text('/rig1/relief_valve:\n  ros__parameters:\n    preset_pressure: 6.5e6\n')
+    bag = tmp_path / 'sim.mcap'
+    code, out, err = run_cli(capsys, 'simulate', '--namespace', '/rig1', '--params', params,
+                             '--end-time', '0.4', '--mcap', bag, '--json')
+    assert code == 0, err
+    assert json.loads(out)['details']['p_0'] == pytest.approx(6.5e6, rel=0.01)
+    with open(bag, 'rb') as stream:
+        topics = {c.topic for c in make_reader(stream).get_summary().channels.values()}
+    assert '/rig1/supply_pressure' in topics and '/supply_pressure' not in topics
+    code, _, err = run_cli(capsys, 'simulate', '--params', params, '--end-time', '0.4')
+    assert code == 1 and "'/rig1/relief_valve' (" in err and 'do not apply to /relief_valve' in err

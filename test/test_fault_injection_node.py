@@ -145,11 +145,13 @@ def test_a_schedule_gives_the_same_supply_pressure_live_as_offline(faulty, refer
 
 
 def test_active_faults_show_in_diagnostics_with_their_values(faulty):
+    """Each with its value and unit; a fraction has no unit (no stray '1')."""
     values = faulty.wait_for_diagnostics(lambda d: d['level'] >= 1, 'a WARN')
     for text in ('fault.damping_orifice_blockage = 0.1', 'fault.seat_leakage_diameter = 0.0002 m',
                  'fault.bearing_static_friction = 8 N', 'fault.main_valve_stuck',
                  'sensor.supply_pressure.bias = 1000'):
         assert text in values['message'], values['message']
+    assert 'fault.damping_orifice_blockage = 0.1 1' not in values['message']
     assert values['level'] == 1 and values['fault_schedule_events_pending'] == '0'
 
 
@@ -240,6 +242,9 @@ def test_the_bag_tells_when_each_fault_began(faulty):
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         for *_, array in reader.iter_decoded_messages(topics=[f'{NAMESPACE}/fault_status']):
             stamp = array.header.stamp.sec * 1_000_000_000 + array.header.stamp.nanosec
+            # named as /diagnostics names the valve's status: node name, no leading slash
+            assert array.status[0].name == 'relief_valve: faults'
+            assert array.status[0].hardware_id == f'{NAMESPACE}/relief_valve'
             for kv in array.status[0].values:
                 if kv.value not in ('0.0', 'false', '-1.0', '0'):
                     began.setdefault(kv.key, stamp - faulty.start_ns)

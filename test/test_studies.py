@@ -485,3 +485,27 @@ def test_limits():
     assert limit.holds({'P_1_percent': 4.0}) and not limit.holds({'P_1_percent': None})
     with pytest.raises(ParameterError, match="limit 'P_9<=4'"):
         parse_limits('P_9<=4')
+
+
+def test_the_dashboard_is_served_on_loopback_only_when_asked():
+    """--dashboard: Dask's dashboard on this machine at a free port, its address known."""
+    import psutil
+
+    def listening(process):
+        return {c.laddr for c in process.net_connections(kind='inet')
+                if c.status == psutil.CONN_LISTEN}
+
+    backend = DaskBackend(workers=1, dashboard='127.0.0.1:0')
+    try:
+        link = backend.start().dashboard_link
+        dashboard_port = int(link.split(':')[2].split('/')[0])
+        scheduler_port = int(backend.cluster.scheduler_address.rsplit(':', 1)[1])
+        here = {address for address in listening(psutil.Process())  # the scheduler's part
+                if address.port in (dashboard_port, scheduler_port)}
+        workers = set().union(*map(listening, psutil.Process().children(recursive=True)))
+    finally:
+        backend.close()
+    assert link.startswith('http://127.0.0.1:')
+    assert {address.port for address in here} == {dashboard_port, scheduler_port}
+    assert {ip for ip, _ in here | workers} == {'127.0.0.1'}
+    assert DaskBackend(workers=1).dashboard_link is None  # none unless asked

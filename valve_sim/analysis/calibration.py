@@ -81,6 +81,26 @@ class FitParameter:
     upper: float
     unit: str
     symbol: str
+    start: float = None  # the start value of a variable that is no model parameter
+
+
+STEP_TIME = 'step_time_'  # fitted step times: step_time_1, step_time_2, ...
+
+
+def step_time_parameters(target):
+    """
+    Return FitParameters of the step times a RecordingTarget located between flow samples.
+
+    Each starts at its located time and stays inside its bracket; fitting them with the
+    parameters makes the fit find where the steps lay, and its intervals include that
+    uncertainty.
+    """
+    return [
+        FitParameter(f'{STEP_TIME}{k}', low, high, 's', f't_step{k}', start)
+        for k, (start, (low, high)) in enumerate(
+            zip(getattr(target, 'step_times', ()), getattr(target, 'brackets', ())), start=1
+        )
+    ]
 
 
 def fit_parameters(names, bounds, params):
@@ -144,6 +164,8 @@ def apply_values(params, fitted, values, preset_pressure=None):
     """
     new = dict(params)
     for parameter, value in zip(fitted, values):
+        if parameter.name.startswith(STEP_TIME):
+            continue  # the target's (use_step_times), no parameter
         if parameter.name == PRESET_PRESSURE.name:
             preset_pressure = float(value)
         else:
@@ -259,15 +281,17 @@ class RecordingTarget:
 
     main_valve may be None (a rig without a position sensor) or hold NaN where not
     recorded. inlet_flow[i] is the flow over the interval ending at time[i].
-    step_times [s]: steps located between two samples (a coarse flowmeter's, see
-    measures.locate_step); the model's flow changes there, inside the interval of the
-    sample after it, which already carries the new flow.
+    step_times [s]: steps located between two flow samples (a flowmeter slower than the
+    pressure, see measures.locate_step), brackets [(first, last)] [s] those samples'
+    times: the recorded flow changes only at the sample at last, the model's at the step
+    time. Located times are uncertain: step_time_parameters() fits them along with the
+    parameters, inside their brackets.
     """
 
     kind = 'recording'
 
     def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6, step_times=()):
+                 step_threshold=1e-6, step_times=(), brackets=()):
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)
@@ -290,8 +314,8 @@ class RecordingTarget:
             )
         before = max(int(np.searchsorted(time, self.steps[0][0], side='right')), 2)
         self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
-        self._model_time, self._model_flow, self._rows = _with_steps(time, flow, step_times,
-                                                                     step_size)
+        self.step_times = list(step_times)  # located steps [s], fitted (step_time_parameters)
+        self.brackets = list(brackets)  # [(first, last)] [s]: where each step time can lie
         self.pressure_noise = max(noise_level(pressure, before), 1.0)  # [Pa] floor: 1 Pa
         self.position = None
         self.residual_names = ['supply_pressure'] * len(time)
@@ -307,10 +331,11 @@ class RecordingTarget:
 
     def model_output(self, params):
         """Model states (rows) at the recorded sample times."""
-        states = simulate_recorded_flow(
-            params, self._model_time, self._model_flow, self.step_size
-        )
-        return states[self._rows]
+        flow = self.flow.copy()
+        for t_step, (_, last) in zip(self.step_times, self.brackets):
+            after = min(int(np.searchsorted(self.time, last)), len(flow) - 1)
+            flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
+        return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
 
     def residuals(self, params):
         states = self.model_output(params)
@@ -323,27 +348,6 @@ class RecordingTarget:
     def covariance_scale(self, cost, count, fitted):
         """s^2: the residual variance, for noise levels that were only estimated."""
         return 2.0 * cost / max(count - fitted, 1)
-
-
-def _with_steps(time, flow, step_times, step_size):
-    """
-    Return (times, flows, rows): the samples with step_times [s] inserted, for the model.
-
-    An inserted time carries the flow of the sample before it (the flow until the
-    step); rows index the recorded samples among them. A step within a model step of
-    a sample needs no sample of its own.
-    """
-    inserted = sorted(
-        t for t in step_times
-        if time[0] < t < time[-1] and np.min(np.abs(time - t)) >= step_size
-    )
-    if not inserted:
-        return time, flow, np.arange(len(time))
-    at = np.searchsorted(time, inserted)
-    model_time = np.insert(time, at, inserted)
-    model_flow = np.insert(flow, at, flow[at - 1])
-    rows = np.flatnonzero(~np.isin(np.arange(len(model_time)), at + np.arange(len(at))))
-    return model_time, model_flow, rows
 
 
 # --- constraints and checks -----------------------------------------------------------------
@@ -537,6 +541,7 @@ class CalibrationResult:
     cost: float
     intervals: list = None  # [(low, high)] or None when not computed
     correlations: np.ndarray = None
+    uncertainty_note: str = None  # why there are no intervals or correlations
     flat: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     starts: list = field(default_factory=list)
@@ -563,8 +568,15 @@ class _Objective:
     def parameters(self, u):
         return apply_values(self.params, self.fitted, u * self.start, self.preset)
 
+    def use_step_times(self, u):
+        """Hand the fitted step times of u to the target."""
+        times = [v for p, v in zip(self.fitted, u * self.start) if p.name.startswith(STEP_TIME)]
+        if times:
+            self.target.step_times = times
+
     def __call__(self, u):
         self.count += 1
+        self.use_step_times(u)
         try:
             params = self.parameters(u)
             residual = np.concatenate(
@@ -653,7 +665,9 @@ def calibrate(
     model cannot run.
     """
     began = clock.monotonic()
-    start = np.array([_start_value(params, p.name) for p in fitted])
+    start = np.array(
+        [p.start if p.start is not None else _start_value(params, p.name) for p in fitted]
+    )
     objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
     objective.label = 'identifiability check:'
@@ -757,6 +771,7 @@ def calibrate(
         result.residuals = objective(u)
     else:
         residual, jacobian = _jacobian(objective, u, max(relative, 1e-6))
+        objective.use_step_times(u)  # the Jacobian moved them
         result.residuals = residual
         _uncertainty(result, target, jacobian, start)
     result.evaluations = objective.count
@@ -793,6 +808,13 @@ def _uncertainty(result, target, jacobian, start):
         result.flat = [p.name for p in result.fitted]
         return
     sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    if not np.all(sigma > 0.0):
+        result.uncertainty_note = (
+            'no intervals or correlations: the residual is zero (a perfect fit, as of a '
+            'noise-free recording of this very model), so the data tell nothing of their '
+            'noise, and an uncertainty computed from them would be zero'
+        )
+        return
     result.intervals = [
         (value - Z_95 * s * scale_, value + Z_95 * s * scale_)
         for value, s, scale_ in zip(result.values, sigma, start)

@@ -235,7 +235,7 @@ def settled_at_the_end(t, supply_pressure, p_inf):
 
 
 def _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction, window):
-    """The measures of step_measures(), p_inf taken from whatever window there is."""
+    """Compute step_measures() with p_inf from whatever window there is."""
     t = np.asarray(t, dtype=float)
     p = np.asarray(supply_pressure, dtype=float)
     x = np.full_like(t, np.nan) if main_valve_displacement is None else np.asarray(
@@ -247,7 +247,11 @@ def _step_measures(t, supply_pressure, main_valve_displacement, t_step, directio
         return StepMeasures(values, reasons)
     if not (t[0] <= t_step < t[-1]):
         reasons.update(
-            dict.fromkeys(MEASURE_NAMES, f'step time {t_step:.6f} s outside the samples')
+            dict.fromkeys(
+                MEASURE_NAMES,
+                f'step time {t_step:.6f} s ({t_step - t[0]:+.4f} s from the first sample) '
+                f'outside the samples ({t[-1] - t[0]:.4f} s long)',
+            )
         )
         return StepMeasures(values, reasons)
     end = min(t_step + window, t[-1])

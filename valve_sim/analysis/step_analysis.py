@@ -66,6 +66,7 @@ class StepAnalysis:
 
     def __init__(self, threshold=1e-6, merge_time=0.05, window=WINDOW):
         self.threshold, self.merge_time, self.window = threshold, merge_time, window
+        self.first_time = None  # [s] time of the first row fed: the recording's start
         self._restart()
 
     def _restart(self):
@@ -82,6 +83,7 @@ class StepAnalysis:
         flow_time [s]: when the flow sample inlet_flow was taken (None: at t).
         """
         records = []
+        self.first_time = t if self.first_time is None else self.first_time
         if self.rows and t <= self.rows[-1][0]:
             records = self.finish()  # time went back (a new run): close the open steps
         flow_time = t if flow_time is None else flow_time

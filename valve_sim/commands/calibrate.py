@@ -153,15 +153,16 @@ def _target(args, step_size, signal_map):
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
     recording = from_every_signal(recording, signal_map)
     main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
-    flow, step_times = located_steps(recording)
+    located = located_steps(recording)
     try:
         return RecordingTarget(
             recording.time - recording.time[0],
             recording.supply_pressure,
-            flow,
+            recording.inlet_flow,
             main_valve,
             step_size,
-            step_times=[t - recording.time[0] for t in step_times],
+            step_times=[t - recording.time[0] for t, _ in located],
+            brackets=[tuple(t - recording.time[0] for t in bracket) for _, bracket in located],
         )
     except CalibrationError as error:
         raise CalibrationError(f'{args.bag}: {error}') from None
@@ -169,21 +170,16 @@ def _target(args, step_size, signal_map):
 
 def located_steps(recording):
     """
-    Return (inlet flow, step times [s]) with the steps analyse locates between flow samples.
+    Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
 
-    A flowmeter slower than the pressure shows a step only at its next sample; analyse
-    locates it from the pressure (measures.locate_step). The samples between the located
-    step and that flow sample get the new flow, and the step times go to the model.
+    A flowmeter slower than the pressure shows a step only at its next sample (last);
+    analyse locates it from the pressure (measures.locate_step), and calibrate fits it.
     """
-    flow, times = recording.inlet_flow.copy(), []
-    for record in analyse(recording):
-        if record['details'].get('t_step_from') != 'supply_pressure':
-            continue
-        t_step, (_, first_new) = record['t_step'], record['details']['t_step_bracket']
-        new = min(int(np.searchsorted(recording.time, first_new)), len(flow) - 1)
-        flow[(recording.time > t_step) & (recording.time < first_new)] = flow[new]
-        times.append(t_step)
-    return flow, times
+    return [
+        (record['t_step'], tuple(record['details']['t_step_bracket']))
+        for record in analyse(recording)
+        if record['details'].get('t_step_from') == 'supply_pressure'
+    ]
 
 
 def from_every_signal(recording, signal_map):
@@ -235,6 +231,7 @@ def run(args):
         fit_parameters,
         ModesDecay,
         PilotFlowLimit,
+        step_time_parameters,
         StudyRelieves,
     )
 
@@ -247,6 +244,7 @@ def run(args):
     names = [name for name in args.fit.split(',') if name.strip()]
     fitted = fit_parameters(names, dict(args.bounds), params)
     target = _target(args, step_size, signal_map)
+    fitted += step_time_parameters(target)  # steps between coarse flow samples: fitted too
     constraints = []
     if args.max_pilot_flow is not None:
         constraints.append(PilotFlowLimit(args.max_pilot_flow, args.pilot_flow_at))
@@ -310,7 +308,7 @@ def write_parameter_file(path, result, settings, command):
     """calibrated.yaml: every model parameter and setting; fitted ones marked."""
     from valve_sim.core.steady_state import cracking_pressure
 
-    fitted = {p.name for p in result.fitted}
+    fitted = {p.name for p in result.fitted if p.unit != 's' or p.name in result.parameters}
     lines = [
         f'# Written by: {command}',
         f'# Fitted: {", ".join(sorted(fitted))}; '
@@ -365,6 +363,8 @@ def report_document(result, target, args, command):
         'interrupted': result.interrupted,
         'preset_pressure_Pa': cracking_pressure(result.parameters),
     }
+    if result.uncertainty_note:
+        document['uncertainty_note'] = result.uncertainty_note
     if target.kind == 'measures':
         measures, _ = target.model_output(result.parameters)
         document['measures'] = [
@@ -382,7 +382,9 @@ def report_document(result, target, args, command):
         pressure = result.residuals[:count] * target.pressure_noise
         document['recording'] = {
             'samples': count,
-            'steps_at_s': [float(step[0]) for step in target.steps],
+            'steps_at_s': [
+                float(t) for t in (target.step_times or [step[0] for step in target.steps])
+            ],
             'pressure_noise_estimate_Pa': target.pressure_noise,
             'pressure_residual_rms_Pa': float(np.sqrt(np.mean(pressure**2))),
             'main_valve_recorded': target.position is not None,
@@ -409,6 +411,8 @@ def report_text(report):
             f'{entry["name"] + " (" + entry["symbol"] + ")":<34}{entry["start"]:>13.6g}'
             f'{entry["value"]:>15.8g}   {shown} {entry["unit"]}{bound}'
         )
+    if report.get('uncertainty_note'):
+        lines.append(report['uncertainty_note'])
     if report['correlations'] and len(report['fitted']) > 1:
         lines.append('correlations: ' + '; '.join(
             f'{a["symbol"]}-{b["symbol"]} {report["correlations"][i][j]:+.3f}'

@@ -35,9 +35,9 @@ simulate(): there rounding errors grow before the step as they would on a rig.
 from dataclasses import dataclass, field
 
 import numpy as np
+from valve_sim.core.errors import OverpressureError
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
-from valve_sim.core.errors import OverpressureError
 from valve_sim.core.integrator import advance, advance_lanes
 from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
@@ -325,7 +325,7 @@ def simulate_batch(
     return results
 
 
-def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
+def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5, step_times=()):
     """
     Run the model driven by a sampled inlet flow; returns the 8 states at the sample times.
 
@@ -334,7 +334,11 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
     applied_inlet_flow; a flow meter averaging over its sample interval). The run
     starts at the exact steady state of inlet_flow[0] at time[0]. Sample intervals
     are rounded to whole steps (an error below step_size / 2 per sample, not
-    accumulated). Raises IntegrationError or SteadyStateError.
+    accumulated). step_times [s, on the time axis]: steps known to lie inside an
+    interval (located between coarse flow samples): there the flow is inlet_flow[i-1]
+    up to the step time and inlet_flow[i] after it, the RK4 step that holds it taking
+    the time-weighted mean (so the states move smoothly with a step time). Raises
+    IntegrationError or SteadyStateError.
     """
     time = np.asarray(time, dtype=float)
     inlet_flow = np.asarray(inlet_flow, dtype=float)
@@ -343,5 +347,15 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
     if len(time) < 2 or np.any(counts < 1):
         raise ValueError('sample times must increase by at least one step size')
     flows = np.repeat(inlet_flow[1:], counts)
+    for t_step in step_times:
+        i = int(np.searchsorted(time, t_step))  # the interval (time[i-1], time[i]] holding it
+        if not 0 < i < len(time):
+            continue
+        position = (t_step - time[0]) / step_size
+        k = min(max(int(position), ends[i - 1]), ends[i] - 1)  # the RK4 step holding it
+        before, after = inlet_flow[i - 1], inlet_flow[i]
+        flows[ends[i - 1]:k] = before
+        share = min(max(position - k, 0.0), 1.0)  # of step k still at the old flow
+        flows[k] = share * before + (1.0 - share) * after
     waveforms = run_flows(params, flows, step_size, step_size, float(inlet_flow[0]))
     return waveforms.states[ends]
