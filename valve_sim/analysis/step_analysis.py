@@ -160,9 +160,19 @@ class StepAnalysis:
 
 
 def _coarser_than_rows(bracket, t):
-    """Whether flow samples bracket (t_a, t_b) [s] are further apart than 1.5 row intervals."""
+    """
+    Whether flow samples bracket (t_a, t_b) [s] a stretch of pressure rows.
+
+    That is: they are further apart than 1.5 row intervals and rows lie between them
+    (a gap in a recording of valve_node, whose flow comes with every row, has none).
+    """
     near = t[(t >= bracket[0] - PRE_STEP_SPAN) & (t <= bracket[1])]
-    return len(near) > 2 and bracket[1] - bracket[0] > 1.5 * float(np.median(np.diff(near)))
+    inside = np.count_nonzero((near > bracket[0]) & (near < bracket[1]))
+    return (
+        inside > 0
+        and len(near) > 2
+        and bracket[1] - bracket[0] > 1.5 * float(np.median(np.diff(near)))
+    )
 
 
 class MeasuresFile:
