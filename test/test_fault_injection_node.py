@@ -24,15 +24,13 @@ began.
 
 import math
 import signal
-import subprocess
-import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from valve_harness import running_valve, TIMEOUT
+from valve_harness import Recorder, running_valve
 from valve_sim.core.fault_schedule import load_schedule
 from valve_sim.core.model import P_S
 from valve_sim.core.sensors import default_settings, read_waveforms
@@ -77,30 +75,13 @@ HEALTHY_SETTINGS = {
 }
 
 
-class Recorder:
-    """An analyser_node process recording into folder, in the valve's namespace."""
-
-    def __init__(self, folder):
-        self.folder = folder
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'valve_sim.ros.analyser_node', '--ros-args',
-             '-r', f'__ns:={NAMESPACE}', '-p', f'output_dir:={folder}'],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        )
-
-    def stop(self):
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-        return self.process.communicate(timeout=TIMEOUT)[0]
-
-
 @pytest.fixture(scope='module')
 def faulty(context, tmp_path_factory):
     """Start the node with the schedule and an analyser; anchor /clock; yield the probe."""
     folder = tmp_path_factory.mktemp('faulty')
     schedule = folder / 'schedule.yaml'
     schedule.write_text(SCHEDULE)
-    recorder = Recorder(folder)
+    recorder = Recorder(folder, NAMESPACE)
     try:
         with running_valve(context, folder / 'valve_node.log', '-p', f'fault_schedule:={schedule}',
                            namespace=NAMESPACE, use_sim_time=True,

@@ -42,7 +42,7 @@ import psutil
 import pytest
 from std_srvs.srv import Trigger
 from test_calibrate import valve_sim
-from valve_harness import running_valve, TIMEOUT
+from valve_harness import Recorder, running_valve, TIMEOUT
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters, scaled, STANDARD_ATMOSPHERE
@@ -94,25 +94,6 @@ def lockstep_step(probe, settle_ticks=50, window_ticks=1100):
     )
 
 
-class Recorder:
-    """An analyser_node process recording into folder, in namespace."""
-
-    def __init__(self, folder, namespace):
-        self.folder = folder
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'valve_sim.ros.analyser_node', '--ros-args',
-             '-r', f'__ns:={namespace}', '-p', f'output_dir:={folder}'],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        )
-
-    def stop(self):
-        """SIGINT; returns (exit code, log)."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-        log = self.process.communicate(timeout=TIMEOUT)[0]
-        return self.process.returncode, log
-
-
 def recording_everything(probe, namespace, topics):
     """Tick the node until the analyser's status shows messages of every topic recorded."""
     from diagnostic_msgs.msg import DiagnosticArray
@@ -156,8 +137,8 @@ def test_record_analyse_calibrate_and_run_the_calibrated_valve_in_a_namespace(
             step_to(probe, FINAL_FLOW)
             probe.run_until(probe.clock_ns + 1100 * PERIOD_NS)
     finally:
-        code, log = recorder.stop()
-    assert code == 0, log
+        log = recorder.stop(signal.SIGINT)
+    assert recorder.process.returncode == 0, log
     rig_log = (tmp_path / 'rig.log').read_text()
     assert f'parameter file {root_only}: no section applies to /rig1/relief_valve' in rig_log
     assert "'/relief_valve' (" in rig_log and 'do not apply to /rig1/relief_valve' in rig_log
