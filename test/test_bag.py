@@ -27,6 +27,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
@@ -386,3 +387,18 @@ def test_simulate_writes_and_reads_a_namespace(tmp_path, capsys):
     assert '/rig1/supply_pressure' in topics and '/supply_pressure' not in topics
     code, _, err = run_cli(capsys, 'simulate', '--params', params, '--end-time', '0.4')
     assert code == 1 and "'/rig1/relief_valve' (" in err and 'do not apply to /relief_valve' in err
+
+
+def test_simulate_writes_a_rig_bag_with_a_slower_flowmeter(tmp_path, capsys):
+    """--flow-interval: the flow topic every 10 ms, the pressure every 1 ms, in time order."""
+    bag = tmp_path / 'slow.mcap'
+    code, _, err = run_cli(capsys, 'simulate', '--end-time', '0.3', '--mcap', bag,
+                           '--rig-topics', '/rig/p,/rig/q', '--flow-interval', '0.01')
+    assert code == 0, err
+    times = {'/rig/p': [], '/rig/q': []}
+    for channel, _, message in BagReader(bag).messages():
+        times[channel.topic].append(message.log_time)
+    assert len(times['/rig/p']) == 301 and len(times['/rig/q']) == 31
+    assert set(np.diff(times['/rig/q'])) == {10_000_000}
+    code, _, err = run_cli(capsys, 'simulate', '--end-time', '0.3', '--flow-interval', '0.01')
+    assert code == 1 and '--flow-interval needs --rig-topics' in err

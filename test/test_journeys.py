@@ -53,6 +53,7 @@ from valve_sim.core.steady_state import steady_state
 pytestmark = [pytest.mark.timeout(600)]
 
 PERIOD_NS = 1_000_000  # lockstep: one tick a millisecond of /clock
+START_NS = 1_795_953_600_000_000_000  # 2026-11-29T12:00:00Z: a rig logger's epoch stamps
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE
 FINAL_FLOW = 20.0 * LITRE_PER_MINUTE
 NAMESPACE = '/rig1'
@@ -193,21 +194,33 @@ def test_a_rig_bag_with_a_slow_flowmeter_is_analysed_and_calibrated(reference, t
     The step lies between two flow samples and between two pressure samples (0.2537 s).
     """
     rig = scaled(reference, {'d_c': 6.0, 'k_p': -7.0})
-    settings = [item for name, value in rig.items()
-                if value != reference[name] for item in ('--set', f'{name}={value!r}')]
+    run = simulate(rig, Scenario(INITIAL_FLOW, FINAL_FLOW, 0.2537, 1.3), record_interval=1e-4)
+    truth = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'],
+                          0.2537).values
     topics = ('--topic-supply-pressure', '/rig/p', '--topic-inlet-flow', '/rig/q',
               '--clock', 'receive', '--ambient-pressure', '0')
 
     def rig_bag(path, noise):
-        truth = valve_sim('simulate', *settings, '--step-time', '0.2537', '--end-time', '1.3',
-                          '--set', 'ambient_pressure=0', '--json', '--mcap', path,
-                          '--rig-topics', '/rig/p,/rig/q', '--flow-interval', 1.0 / flow_hz,
-                          '--pressure-noise', noise, '--seed', '3')
-        return json.loads(truth.stdout)
+        """p_s [Pa gauge] every 1 ms (noise [Pa]), the flow every 1/flow_hz s, as a logger."""
+        from std_msgs.msg import Float64
+        from valve_sim.recording.bag import BagWriter
+
+        pressure_every, flow_every = 10, round(1e4 / flow_hz)  # in the run's 0.1 ms samples
+        noisy = run['supply_pressure'] + np.random.default_rng(3).normal(0, noise, len(run.time))
+        bag = BagWriter(path)
+        bag.add_topic('/rig/p', 'std_msgs/msg/Float64')
+        bag.add_topic('/rig/q', 'std_msgs/msg/Float64')
+        for k in range(0, len(run.time), pressure_every):
+            time_ns = START_NS + k * 100_000
+            bag.write_message('/rig/p', Float64(data=float(noisy[k])), time_ns, time_ns)
+            if k % flow_every == 0:
+                flow = Float64(data=float(run.inlet_flow[k]))
+                bag.write_message('/rig/q', flow, time_ns, time_ns)
+        bag.close()
 
     # analyse: the step located between the flow samples, the measures of the model's run
     clean = tmp_path / 'clean.mcap'
-    truth = rig_bag(clean, 0)
+    rig_bag(clean, 0.0)
     result = valve_sim('analyse', clean, *topics, '--json')
     (step,) = json.loads(result.stdout)['steps']
     first, last = step['details']['t_step_bracket']
@@ -223,7 +236,7 @@ def test_a_rig_bag_with_a_slow_flowmeter_is_analysed_and_calibrated(reference, t
 
     # calibrate on the noisy bag: both parameters within 5 %, inside their 95 % intervals
     noisy = tmp_path / 'noisy.mcap'
-    rig_bag(noisy, 1000)
+    rig_bag(noisy, 1000.0)
     out = tmp_path / 'calib'
     valve_sim('calibrate', '--bag', noisy, *topics, '--fit', 'd_c,k_p', '--quiet', '--out', out)
     report = json.loads((out / 'report.json').read_text())
@@ -256,9 +269,9 @@ def test_a_truncated_recording_is_repaired_and_its_short_window_gives_no_final_v
         pytest.fail('no cut left a window of 0.1-0.5 s')
     (step,) = steps
     assert 'truncated' in step['details']['note']
-    assert step['details']['final_value_settled'] is False
     for name in ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms'):
         assert step[name] is None and 'has not settled' in step['reasons'][name], name
+    assert step['details']['final_value_settled'] is False
     assert step['T_1_ms'] is not None and step['T_d_ms'] is not None  # peaks: inside it
     text = valve_sim('analyse', fixed).stdout
     assert 'P_o_percent: the window is truncated' in text

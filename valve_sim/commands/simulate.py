@@ -104,10 +104,6 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
     """
     from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
-    if getattr(args, 'flow_interval', None) is not None and not (
-        getattr(args, 'rig_topics', None) and args.flow_interval > 0.0
-    ):
-        raise ParameterError('--flow-interval needs --rig-topics and a value > 0 s')
     start_ns = args.start_time
     if start_ns is None:
         start_ns = time.time_ns() // 1_000_000 * 1_000_000
@@ -218,6 +214,10 @@ def run(args):
     from valve_sim.core.simulation import simulate
 
     check_bag_arguments(args)
+    if args.flow_interval is not None and not (
+        args.mcap and args.rig_topics and args.flow_interval > 0.0
+    ):
+        raise ParameterError('--flow-interval needs --mcap, --rig-topics and a value > 0 s')
     injection = {}
     params, settings = load_from_arguments(args, injection)
     faults, sensors, schedule = load_injection(args, injection)
