@@ -312,7 +312,8 @@ class RecordingTarget:
                 f'of {flow[0]:g} m^3/s over {time[-1] - time[0]:.3f} s, so the recording shows '
                 'no dynamics to fit (record a flow step)'
             )
-        before = max(int(np.searchsorted(time, self.steps[0][0], side='right')), 2)
+        first_step = min([self.steps[0][0], *step_times])  # a located one can come earlier
+        before = max(int(np.searchsorted(time, first_step, side='right')), 2)
         self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
         self.step_times = list(step_times)  # located steps [s], fitted (step_time_parameters)
         self.brackets = list(brackets)  # [(first, last)] [s]: where each step time can lie
