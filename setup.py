@@ -94,7 +94,6 @@ setup(
         'Virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',

@@ -256,3 +256,11 @@ def test_simulate_takes_faults_sensors_and_schedules_from_set_params_and_file(
     assert counts['/supply_pressure'] == 1251 and counts['/pilot_pressure'] == 1000  # dropout
     assert main(['study', '--out', str(tmp_path), '--set', 'fault.main_valve_stuck=true']) == 1
     assert 'valve_node and `valve-sim simulate` only' in capsys.readouterr().err
+
+
+def test_a_fault_is_described_with_its_unit_and_a_fraction_with_none():
+    faults = HEALTHY.changed({'fault.damping_orifice_blockage': 0.3,
+                              'fault.bearing_coulomb_friction': 5.0})
+    assert faults.describe() == (
+        'fault.bearing_coulomb_friction = 5 N, fault.damping_orifice_blockage = 0.3'
+    )

@@ -207,3 +207,19 @@ def test_lobes_on_arrays_equal_the_sample_loop():
         else:
             e, band = rng.normal(size=n).cumsum(), abs(rng.normal())
         assert _lobes(e, band) == _lobes_one_sample_at_a_time(e, band), (e, band)
+
+
+def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(reference):
+    """P_1 keeps the sign of p_1 - p_inf: below p_inf for a step down (docs/measures.md)."""
+    from pathlib import Path
+
+    from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+
+    run = simulate(reference, Scenario(20 * LITRE_PER_MINUTE, 5 * LITRE_PER_MINUTE, 0.1, 1.2),
+                   record_interval=1e-4)
+    down = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'], 0.1,
+                         direction=-1)
+    assert down.values['P_1_percent'] < 0.0 and down.values['P_o_percent'] < 0.0
+    assert down.values['T_1_ms'] > 0.0 and down.values['r_d'] > 0.0
+    docs = Path(__file__).resolve().parents[1] / 'docs' / 'measures.md'
+    assert 'for a step down P_1 is negative' in ' '.join(docs.read_text().split())

@@ -120,7 +120,7 @@ def test_parameter_files_like_ros_writes_them(tmp_path):
         ('- just\n- a list\n', 'must map node names'),
         (
             'other_node:\n  ros__parameters:\n    main_valve_mass: 1.0\n',
-            "no 'relief_valve: ros__parameters:'",
+            'no section that applies to /relief_valve',
         ),
         ('relief_valve:\n  ros__parameters:\n    step_size: 1.0\n', 'step_size'),
         ('relief_valve:\n  ros__parameters:\n    colour: blue\n', "unknown parameter 'colour'"),

@@ -81,6 +81,26 @@ class FitParameter:
     upper: float
     unit: str
     symbol: str
+    start: float = None  # the start value of a variable that is no model parameter
+
+
+STEP_TIME = 'step_time_'  # fitted step times: step_time_1, step_time_2, ...
+
+
+def step_time_parameters(target):
+    """
+    Return FitParameters of the step times a RecordingTarget located between flow samples.
+
+    Each starts at its located time and stays inside its bracket; fitting them with the
+    parameters makes the fit find where the steps lay, and its intervals include that
+    uncertainty.
+    """
+    return [
+        FitParameter(f'{STEP_TIME}{k}', low, high, 's', f't_step{k}', start)
+        for k, (start, (low, high)) in enumerate(
+            zip(getattr(target, 'step_times', ()), getattr(target, 'brackets', ())), start=1
+        )
+    ]
 
 
 def fit_parameters(names, bounds, params):
@@ -144,6 +164,8 @@ def apply_values(params, fitted, values, preset_pressure=None):
     """
     new = dict(params)
     for parameter, value in zip(fitted, values):
+        if parameter.name.startswith(STEP_TIME):
+            continue  # the target's (use_step_times), no parameter
         if parameter.name == PRESET_PRESSURE.name:
             preset_pressure = float(value)
         else:
@@ -241,8 +263,13 @@ class MeasuresTarget:
 
 
 def noise_level(signal, count):
-    """Robust standard deviation [signal unit] of white noise on the first count samples."""
+    """
+    Robust standard deviation [signal unit] of white noise on the first count samples.
+
+    Differences with a non-finite end (a sample not recorded) are left out.
+    """
     differences = np.diff(np.asarray(signal[:count], dtype=float))
+    differences = differences[np.isfinite(differences)]
     if len(differences) < 2:
         return 0.0
     return float(1.4826 * np.median(np.abs(differences - np.median(differences))) / math.sqrt(2))
@@ -254,12 +281,17 @@ class RecordingTarget:
 
     main_valve may be None (a rig without a position sensor) or hold NaN where not
     recorded. inlet_flow[i] is the flow over the interval ending at time[i].
+    step_times [s]: steps located between two flow samples (a flowmeter slower than the
+    pressure, see measures.locate_step), brackets [(first, last)] [s] those samples'
+    times: the recorded flow changes only at the sample at last, the model's at the step
+    time. Located times are uncertain: step_time_parameters() fits them along with the
+    parameters, inside their brackets.
     """
 
     kind = 'recording'
 
     def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6):
+                 step_threshold=1e-6, step_times=(), brackets=()):
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)
@@ -280,13 +312,18 @@ class RecordingTarget:
                 f'of {flow[0]:g} m^3/s over {time[-1] - time[0]:.3f} s, so the recording shows '
                 'no dynamics to fit (record a flow step)'
             )
-        before = max(int(np.searchsorted(time, self.steps[0][0], side='right')), 2)
+        first_step = min([self.steps[0][0], *step_times])  # a located one can come earlier
+        before = max(int(np.searchsorted(time, first_step, side='right')), 2)
         self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
+        self.step_times = list(step_times)  # located steps [s], fitted (step_time_parameters)
+        self.brackets = list(brackets)  # [(first, last)] [s]: where each step time can lie
         self.pressure_noise = max(noise_level(pressure, before), 1.0)  # [Pa] floor: 1 Pa
         self.position = None
         self.residual_names = ['supply_pressure'] * len(time)
         if main_valve is not None:
             position = np.asarray(main_valve, dtype=float)
+            if np.any(np.isinf(position)):
+                raise CalibrationError('the recorded main-valve position is infinite somewhere')
             if np.any(np.isfinite(position)):
                 self.position = position
                 self.position_noise = max(noise_level(position, before), 1e-9)  # [m]
@@ -295,7 +332,11 @@ class RecordingTarget:
 
     def model_output(self, params):
         """Model states (rows) at the recorded sample times."""
-        return simulate_recorded_flow(params, self.time, self.flow, self.step_size)
+        flow = self.flow.copy()
+        for t_step, (_, last) in zip(self.step_times, self.brackets):
+            after = min(int(np.searchsorted(self.time, last)), len(flow) - 1)
+            flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
+        return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
 
     def residuals(self, params):
         states = self.model_output(params)
@@ -501,6 +542,7 @@ class CalibrationResult:
     cost: float
     intervals: list = None  # [(low, high)] or None when not computed
     correlations: np.ndarray = None
+    uncertainty_note: str = None  # why there are no intervals or correlations
     flat: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     starts: list = field(default_factory=list)
@@ -522,22 +564,32 @@ class _Objective:
         self.progress, self.count, self.best = progress, 0, (math.inf, None)
         self.size = None
         self.label, self.last_report = '', 0.0
+        self.failure = None  # why the last failed evaluation failed
 
     def parameters(self, u):
         return apply_values(self.params, self.fitted, u * self.start, self.preset)
 
+    def use_step_times(self, u):
+        """Hand the fitted step times of u to the target."""
+        times = [v for p, v in zip(self.fitted, u * self.start) if p.name.startswith(STEP_TIME)]
+        if times:
+            self.target.step_times = times
+
     def __call__(self, u):
         self.count += 1
+        self.use_step_times(u)
         try:
             params = self.parameters(u)
             residual = np.concatenate(
                 [self.target.residuals(params), [c.penalty(params) for c in self.constraints]]
             )
-        except MODEL_ERRORS:
-            residual = None
+        except MODEL_ERRORS as error:
+            residual, self.failure = None, f'the model cannot run it: {error}'
         if self.size is None and residual is not None:
             self.size = len(residual)
-        if residual is None or not np.all(np.isfinite(residual)):
+        if residual is not None and not np.all(np.isfinite(residual)):
+            residual, self.failure = None, _non_finite(self.target, residual)
+        if residual is None:
             residual = np.full(self.size or 1, FAILED_RESIDUAL)
         cost = 0.5 * float(residual @ residual)
         if cost < self.best[0]:
@@ -549,6 +601,17 @@ class _Objective:
                 f'{self.label} evaluation {self.count}: cost {cost:.6g}, best {self.best[0]:.6g}'
             )
         return residual
+
+
+def _non_finite(target, residual):
+    """Say which residuals are not finite although the model ran: a problem of the data."""
+    names = sorted({name for name, value in zip(target.residual_names, residual)
+                    if not math.isfinite(value)})
+    return (
+        f'the residuals of {", ".join(names) or "the constraints"} are not finite although '
+        'the model ran: the target holds NaN or infinite values, or a noise level that is '
+        'not finite (a problem of the data, not of the model)'
+    )
 
 
 def _jacobian(objective, u, relative_step):
@@ -603,7 +666,9 @@ def calibrate(
     model cannot run.
     """
     began = clock.monotonic()
-    start = np.array([_start_value(params, p.name) for p in fitted])
+    start = np.array(
+        [p.start if p.start is not None else _start_value(params, p.name) for p in fitted]
+    )
     objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
     objective.label = 'identifiability check:'
@@ -615,10 +680,12 @@ def calibrate(
         cost, u = objective.best
         return _interrupted(params, fitted, start, target, constraints, objective, u, cost, began)
     if np.all(base == FAILED_RESIDUAL):
-        raise CalibrationError(
-            'the model cannot run the target with the start values (no steady state or a '
-            'diverging run): check the parameter file and --params'
-        )
+        if objective.failure.startswith('the model'):
+            raise CalibrationError(
+                'the model cannot run the target with the start values (no steady state or a '
+                f'diverging run): check the parameter file and --params ({objective.failure})'
+            )
+        raise CalibrationError(f'the target cannot be compared: {objective.failure}')
     flat = [
         p
         for p, column in zip(fitted, jacobian.T)
@@ -705,6 +772,7 @@ def calibrate(
         result.residuals = objective(u)
     else:
         residual, jacobian = _jacobian(objective, u, max(relative, 1e-6))
+        objective.use_step_times(u)  # the Jacobian moved them
         result.residuals = residual
         _uncertainty(result, target, jacobian, start)
     result.evaluations = objective.count
@@ -741,6 +809,13 @@ def _uncertainty(result, target, jacobian, start):
         result.flat = [p.name for p in result.fitted]
         return
     sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    if not np.all(sigma > 0.0):
+        result.uncertainty_note = (
+            'no intervals or correlations: the residual is zero (a perfect fit, as of a '
+            'noise-free recording of this very model), so the data tell nothing of their '
+            'noise, and an uncertainty computed from them would be zero'
+        )
+        return
     result.intervals = [
         (value - Z_95 * s * scale_, value + Z_95 * s * scale_)
         for value, s, scale_ in zip(result.values, sigma, start)

@@ -57,6 +57,7 @@ from valve_sim.core.steady_state import cracking_pressure, preset_preload
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
 TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
 MAX_BATCH = 64
+LOOPBACK = '127.0.0.1'  # where every part of a local cluster listens
 
 
 def evaluate_case(case):
@@ -353,10 +354,17 @@ class DaskBackend:
     machine (default: one per core), started when the first batch is submitted, so
     that a resumed study with nothing missing starts none. A task whose worker dies
     is rescheduled by Dask; `retries` re-runs a task that raised.
+
+    The local cluster listens on the loopback interface only (scheduler, workers,
+    nannies, and the scheduler's HTTP routes on a free port): its pages show the
+    workers' details, and nothing of it is for the network. dashboard: also serve
+    Dask's dashboard there, at HOST:PORT ('127.0.0.1:0': this machine, a free port;
+    '0.0.0.0:8787' only when the network is meant to see it); its address is
+    dashboard_link once started.
     """
 
-    def __init__(self, address=None, workers=None, retries=3):
-        self.retries = retries
+    def __init__(self, address=None, workers=None, retries=3, dashboard=None):
+        self.retries, self.dashboard = retries, dashboard
         self.cluster = self._client = None
         if address:
             from distributed import Client
@@ -393,11 +401,21 @@ class DaskBackend:
                 n_workers=self.workers,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=':0',
+                host=LOOPBACK,
+                dashboard_address=self.dashboard,
+                # without a dashboard the scheduler still serves health and metrics routes
+                scheduler_kwargs={'dashboard_address': self.dashboard or f'{LOOPBACK}:0'},
                 silence_logs=logging.ERROR,
             )
             self._client = Client(self.cluster)
         return self
+
+    @property
+    def dashboard_link(self):
+        """Return the address of Dask's dashboard, or None without one (or before start)."""
+        if self._client is None or (self.cluster is not None and not self.dashboard):
+            return None
+        return self._client.dashboard_link
 
     def run(self, evaluate, batches):
         if not batches:

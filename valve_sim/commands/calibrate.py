@@ -37,7 +37,14 @@ import shlex
 import sys
 
 import numpy as np
-from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
+from valve_sim.analysis.signals import ROLE
+from valve_sim.commands.analyse import (
+    add_signal_arguments,
+    analyse,
+    read_recording,
+    Recording,
+    signal_map_from,
+)
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments
 from valve_sim.core.errors import InputFileError
@@ -128,7 +135,7 @@ def add_arguments(parser):
     add_signal_arguments(parser)
 
 
-def _target(args, step_size):
+def _target(args, step_size, signal_map):
     from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
 
     if args.target_measures:
@@ -141,10 +148,12 @@ def _target(args, step_size):
         except json.JSONDecodeError as error:
             raise InputFileError(f'{args.target_measures} is not valid JSON: {error}') from error
         return MeasuresTarget.from_document(document, step_size)
-    recording = read_recording(args.bag, signal_map_from(args))
+    recording = read_recording(args.bag, signal_map)
     if recording.problem:
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
+    recording = from_every_signal(recording, signal_map)
     main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
+    located = located_steps(recording)
     try:
         return RecordingTarget(
             recording.time - recording.time[0],
@@ -152,9 +161,66 @@ def _target(args, step_size):
             recording.inlet_flow,
             main_valve,
             step_size,
+            step_times=[t - recording.time[0] for t, _ in located],
+            brackets=[tuple(t - recording.time[0] for t in bracket) for _, bracket in located],
         )
     except CalibrationError as error:
         raise CalibrationError(f'{args.bag}: {error}') from None
+
+
+def located_steps(recording):
+    """
+    Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
+
+    A flowmeter slower than the pressure shows a step only at its next sample (last);
+    analyse locates it from the pressure (measures.locate_step), and calibrate fits it.
+    """
+    return [
+        (record['t_step'], tuple(record['details']['t_step_bracket']))
+        for record in analyse(recording)
+        if record['details'].get('t_step_from') == 'supply_pressure'
+    ]
+
+
+def from_every_signal(recording, signal_map):
+    """
+    Return the recording from its first row where every mapped signal it holds has a value.
+
+    A recorder subscribes topic by topic (analyser_node as rosbag2), so its first rows
+    can lack a signal (the main valve, NaN there). Those rows are dropped, and stderr
+    says so; the main valve counts only if the bag holds it at all.
+    """
+    present = {'supply_pressure': recording.supply_pressure, 'inlet_flow': recording.inlet_flow}
+    if np.any(np.isfinite(recording.main_valve)):
+        present['main_valve'] = recording.main_valve
+    known = np.logical_and.reduce([np.isfinite(values) for values in present.values()])
+    first = int(np.argmax(known)) if known.any() else len(known)
+    if first == 0:
+        return recording
+    if first == len(known):
+        from valve_sim.analysis.calibration import CalibrationError
+
+        raise CalibrationError('no sample of the recording has every mapped signal')
+    late = ', '.join(
+        f'{ROLE[role].meaning.split(" [")[0]} ({signal_map.topics[role]})'
+        for role, values in present.items()
+        if not np.isfinite(values[0])
+    )
+    print(
+        f'valve-sim calibrate: note: the recording starts at its first sample, but {late} '
+        f'begins {recording.time[first] - recording.time[0]:.3f} s later: fitting from there '
+        f'(the first {first} samples dropped)',
+        file=sys.stderr,
+    )
+    return Recording(
+        recording.time[first:],
+        recording.supply_pressure[first:],
+        recording.main_valve[first:],
+        recording.pilot_poppet[first:],
+        recording.inlet_flow[first:],
+        recording.problem,
+        None if recording.inlet_flow_time is None else recording.inlet_flow_time[first:],
+    )
 
 
 def run(args):
@@ -165,17 +231,20 @@ def run(args):
         fit_parameters,
         ModesDecay,
         PilotFlowLimit,
+        step_time_parameters,
         StudyRelieves,
     )
 
-    params, settings = load_from_arguments(args)
+    signal_map = signal_map_from(args, 'calibrate') if args.bag else None
+    params, settings = load_from_arguments(args)  # in the bag's namespace, if any
     preset = args.preset_pressure or None
     if args.starts < 1 or not (0.0 <= args.spread <= 2.0) or not args.tolerance > 0.0:
         raise CalibrationError('need --starts >= 1, 0 <= --spread <= 2 and --tolerance > 0')
     step_size = settings['step_size']
     names = [name for name in args.fit.split(',') if name.strip()]
     fitted = fit_parameters(names, dict(args.bounds), params)
-    target = _target(args, step_size)
+    target = _target(args, step_size, signal_map)
+    fitted += step_time_parameters(target)  # steps between coarse flow samples: fitted too
     constraints = []
     if args.max_pilot_flow is not None:
         constraints.append(PilotFlowLimit(args.max_pilot_flow, args.pilot_flow_at))
@@ -239,13 +308,14 @@ def write_parameter_file(path, result, settings, command):
     """calibrated.yaml: every model parameter and setting; fitted ones marked."""
     from valve_sim.core.steady_state import cracking_pressure
 
-    fitted = {p.name for p in result.fitted}
+    fitted = {p.name for p in result.fitted if p.unit != 's' or p.name in result.parameters}
     lines = [
         f'# Written by: {command}',
         f'# Fitted: {", ".join(sorted(fitted))}; '
         f'main-valve cracking pressure (preset_pressure) '
         f'{yaml_number(cracking_pressure(result.parameters))} Pa.',
-        f'{NODE_NAME}:',
+        f"# '/**/{NODE_NAME}:' applies to valve_node in any namespace (and to valve-sim).",
+        f'/**/{NODE_NAME}:',
         '  ros__parameters:',
     ]
     for name, value in result.parameters.items():
@@ -293,6 +363,8 @@ def report_document(result, target, args, command):
         'interrupted': result.interrupted,
         'preset_pressure_Pa': cracking_pressure(result.parameters),
     }
+    if result.uncertainty_note:
+        document['uncertainty_note'] = result.uncertainty_note
     if target.kind == 'measures':
         measures, _ = target.model_output(result.parameters)
         document['measures'] = [
@@ -310,7 +382,9 @@ def report_document(result, target, args, command):
         pressure = result.residuals[:count] * target.pressure_noise
         document['recording'] = {
             'samples': count,
-            'steps_at_s': [float(step[0]) for step in target.steps],
+            'steps_at_s': [
+                float(t) for t in (target.step_times or [step[0] for step in target.steps])
+            ],
             'pressure_noise_estimate_Pa': target.pressure_noise,
             'pressure_residual_rms_Pa': float(np.sqrt(np.mean(pressure**2))),
             'main_valve_recorded': target.position is not None,
@@ -337,6 +411,8 @@ def report_text(report):
             f'{entry["name"] + " (" + entry["symbol"] + ")":<34}{entry["start"]:>13.6g}'
             f'{entry["value"]:>15.8g}   {shown} {entry["unit"]}{bound}'
         )
+    if report.get('uncertainty_note'):
+        lines.append(report['uncertainty_note'])
     if report['correlations'] and len(report['fitted']) > 1:
         lines.append('correlations: ' + '; '.join(
             f'{a["symbol"]}-{b["symbol"]} {report["correlations"][i][j]:+.3f}'

@@ -90,7 +90,7 @@ def operating_point(params, inlet_flow):
 
 
 def report(point):
-    """Print one operating_point() for people: pressures in MPa, openings in um, flows in L/min."""
+    """Print one operating_point() for people: pressures in MPa, openings in µm, flows in L/min."""
     pressure, opening, flow = point['pressures'], point['openings'], point['flows']
     main, poppet = point['main_valve_forces'], point['poppet_forces']
     litres = {name: value / LITRE_PER_MINUTE for name, value in flow.items()}
@@ -104,7 +104,7 @@ def report(point):
         f'p_c {pressure["poppet_chamber"] / 1e6:.4f}'
     )
     print(
-        f'  openings [um]    x {opening["main_valve"] * 1e6:.2f}  '
+        f'  openings [µm]    x {opening["main_valve"] * 1e6:.2f}  '
         f'(first throttle x + h = {opening["first_throttle"] * 1e6:.2f})'
         f'  y {opening["poppet"] * 1e6:.2f}'
     )

@@ -26,6 +26,7 @@ sensor readings are what --mcap records on the pressure topics.
 import csv
 import json
 import math
+import sys
 import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -35,6 +36,7 @@ from valve_sim.commands.options import (
     check_bag_arguments,
     flow_value,
     load_from_arguments,
+    namespace_name,
 )
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
@@ -81,8 +83,16 @@ def add_arguments(parser):
     parser.add_argument('--pressure-noise', type=float, default=0.0, metavar='PA',
                         help='with --rig-topics: Gaussian noise on the recorded pressure, '
                         'standard deviation [Pa]')
+    parser.add_argument('--flow-interval', type=float, metavar='S',
+                        help='with --rig-topics: sample interval of the flowmeter [s], a whole '
+                        'multiple of the record interval (default: the pressure interval, '
+                        '1 ms; e.g. 0.01 for a 100 Hz flowmeter)')
     add_options(parser, '--seed', help='seed of the --pressure-noise generator')
     add_options(parser, '--bag-folder', '--start-time')
+    parser.add_argument('--namespace', metavar='NS',
+                        help='the valve as valve_node in this namespace (e.g. /rig1): the '
+                        '--params sections that apply to it, and with --mcap its topics '
+                        'below it (default: the root namespace)')
 
 
 def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
@@ -114,6 +124,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
             publish_interval,
             start_time_ns=start_ns,
             folder=args.bag_folder,
+            flow_interval=args.flow_interval,
         )
         return
     write_simulation_bag(
@@ -124,6 +135,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
         start_time_ns=start_ns,
         folder=args.bag_folder,
         readings=readings,
+        namespace=namespace_name(getattr(args, 'namespace', None)),
     )
 
 
@@ -202,6 +214,10 @@ def run(args):
     from valve_sim.core.simulation import simulate
 
     check_bag_arguments(args)
+    if args.flow_interval is not None and not (
+        args.mcap and args.rig_topics and args.flow_interval > 0.0
+    ):
+        raise ParameterError('--flow-interval needs --mcap, --rig-topics and a value > 0 s')
     injection = {}
     params, settings = load_from_arguments(args, injection)
     faults, sensors, schedule = load_injection(args, injection)
@@ -217,6 +233,7 @@ def run(args):
         faults,
         schedule,
         1.0 / settings['publish_rate'],
+        halt_on_overpressure=True,
     )
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
     measures = step_measures(
@@ -233,6 +250,21 @@ def run(args):
             + [f'fault schedule {args.faults or injection.get(FAULT_SCHEDULE)}'] * bool(schedule)
         )
         measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
+    if waveforms.halted:
+        halted_at, why = waveforms.halted
+        overpressure = (
+            f'OVERPRESSURE at t = {halted_at:.6f} s: {why} The model halts there, as '
+            'valve_node does: it holds its last good state to the end of the run, and '
+            f"supply_pressure is reported at burst_pressure = {params['burst_pressure']:g} Pa "
+            '(gauge), the limit it passed'
+        )
+        measures.values = dict.fromkeys(MEASURE_NAMES)
+        measures.reasons = dict.fromkeys(
+            MEASURE_NAMES,
+            f'the run halted at an overpressure at t = {halted_at:.6f} s '
+            '(details.overpressure; stderr)',
+        )
+        measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
@@ -263,4 +295,8 @@ def run(args):
             print(f'faults from the start: {faults.describe()}')
         for applied_at, changes in waveforms.events:
             print(f'at t = {applied_at:.6f} s: {changes}')
+    if waveforms.halted:
+        print(f'valve-sim simulate: {measures.details["overpressure"]["message"]}; the outputs '
+              'show it so', file=sys.stderr)
+        return 1
     return 0

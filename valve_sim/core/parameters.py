@@ -28,6 +28,12 @@ from pathlib import Path
 import re
 import sys
 
+from valve_sim.core.parameter_sections import (
+    describe_not_applied,
+    node_fqn,
+    parameters_for_node,
+    SectionError,
+)
 import yaml
 
 
@@ -528,32 +534,38 @@ def validate(params):
 
 
 def config_path(filename):
+    """Return the path of a file shipped in config/ (shipped_file), or raise ParameterError."""
+    return shipped_file('config', filename)
+
+
+def shipped_file(folder, filename):
     """
-    Return the path of a file shipped in config/, or raise ParameterError naming where it looked.
+    Return the path of a file shipped in folder/ (config, foxglove), or raise ParameterError.
 
     Looked for, in this order: the package's share directory as ament_index knows it
     (a colcon install, once its setup file is sourced: AMENT_PREFIX_PATH); the
     share directory of the prefix this module is installed in (a colcon or pip
     install used without sourcing); the source tree (a clone, or an editable install).
+    The error names every place it looked.
     """
     candidates = []
     try:
         from ament_index_python.packages import get_package_share_directory
 
-        candidates.append(Path(get_package_share_directory(PACKAGE)) / 'config' / filename)
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / folder / filename)
     except (ImportError, LookupError, OSError, ValueError):
         pass  # no ament_index, no AMENT_PREFIX_PATH, or valve_sim not in it: the fallbacks
     here = Path(__file__).resolve()
     candidates += [
-        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / 'config' / filename,
-        Path(sys.prefix) / 'share' / PACKAGE / 'config' / filename,
-        here.parents[2] / 'config' / filename,  # source tree
+        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / folder / filename,
+        Path(sys.prefix) / 'share' / PACKAGE / folder / filename,
+        here.parents[2] / folder / filename,  # source tree
     ]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
     raise ParameterError(
-        f"config file '{filename}' not found in: {', '.join(str(c) for c in candidates)}"
+        f"{folder} file '{filename}' not found in: {', '.join(str(c) for c in candidates)}"
     )
 
 
@@ -568,28 +580,39 @@ _RosYamlLoader.add_implicit_resolver(
 )
 
 
-def read_parameter_file(path, node_name=NODE_NAME):
-    """
-    Read the parameters of one node from a ROS 2 parameter file.
-
-    Accepts the node's own section, the wildcard '/**', or '/**/' + node_name (the
-    node in any namespace); returns the raw dict of ros__parameters (values
-    unvalidated) or raises ParameterError.
-    """
+def parameter_document(path):
+    """Return the parsed YAML of a ROS 2 parameter file, or raise ParameterError."""
     path = Path(path)
     try:
-        document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
+        return yaml.load(path.read_text(), Loader=_RosYamlLoader)
     except OSError as error:
         raise ParameterError(f'cannot read parameter file {path}: {error.strerror}') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'parameter file {path} is not valid YAML: {error}') from error
-    if not isinstance(document, dict):
-        raise ParameterError(f"parameter file {path} must map node names to 'ros__parameters'")
-    for key in (node_name, '/' + node_name, '/**/' + node_name, '/**'):
-        section = document.get(key)
-        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
-            return dict(section['ros__parameters'])
-    raise ParameterError(f"parameter file {path} has no '{node_name}: ros__parameters:' section")
+
+
+def read_parameter_file(path, namespace=''):
+    """
+    Read what a ROS 2 parameter file sets for valve_node in namespace ('' is the root).
+
+    Every section that rcl would apply to the node (valve_sim.core.parameter_sections:
+    '/**', '/**/relief_valve', '/<namespace>/relief_valve', and 'relief_valve' in the
+    root namespace) is merged in rcl's order; returns {dotted name: value}, values
+    unvalidated. Raises ParameterError if the file cannot be read or no section applies
+    (naming the sections meant for the node that apply elsewhere).
+    """
+    fqn = node_fqn(namespace, NODE_NAME)
+    try:
+        sections = parameters_for_node([(str(path), parameter_document(path))], fqn)
+    except SectionError as error:
+        raise ParameterError(f'parameter file {error}') from None
+    if not sections.applied:
+        raise ParameterError(
+            f'parameter file {path} has no section that applies to {fqn} '
+            f"('/**/{NODE_NAME}: ros__parameters:' applies in any namespace)"
+            + (f'; {describe_not_applied(sections, fqn)}' if sections.not_applied else '')
+        )
+    return sections.parameters
 
 
 # Parameters of fault injection (valve_sim.core.faults, valve_sim.core.sensors): prefixes
@@ -598,32 +621,22 @@ INJECTION_PREFIXES = ('fault.', 'sensor.')
 FAULT_SCHEDULE = 'fault_schedule'
 
 
-def flattened(raw, prefix=''):
-    """Nested mappings of a parameter file as dotted names, as ROS 2 reads them."""
-    flat = {}
-    for key, value in raw.items():
-        if isinstance(value, dict):
-            flat.update(flattened(value, f'{prefix}{key}.'))
-        else:
-            flat[f'{prefix}{key}'] = value
-    return flat
-
-
-def load_parameters(path=None, overrides=None, injection=None):
+def load_parameters(path=None, overrides=None, injection=None, namespace=''):
     """
     Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
     path: a ROS 2 parameter file that sets some or all parameters (like a second
-    --params-file for the node); the rest keep their reference values. Run-time
+    --params-file for the node), its sections applied as they apply to valve_node in
+    namespace (read_parameter_file); the rest keep their reference values. Run-time
     settings in either file (SETTINGS: step_size, publish_rate, ...) are checked
     and returned separately; any other key is an error. overrides (name or paper
     symbol -> value) are applied last. Fault and sensor settings (fault.*, sensor.*,
     fault_schedule) go into the dict injection, unchecked; without one they are an
     error (the command does not use them). Returns (params, settings).
     """
-    raw = flattened(read_parameter_file(config_path('reference.yaml')))
+    raw = read_parameter_file(config_path('reference.yaml'))
     if path is not None:
-        raw.update(flattened(read_parameter_file(path)))
+        raw.update(read_parameter_file(path, namespace))
     raw.update(overrides or {})
     for name in [n for n in raw if n.startswith(INJECTION_PREFIXES) or n == FAULT_SCHEDULE]:
         if injection is None:
