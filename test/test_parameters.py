@@ -18,7 +18,7 @@ import math
 
 import pytest
 from valve_sim.analysis.paper import TABLE2_CHANGES
-from valve_sim.core.bearing import REFERENCE_BEARING, reference_bearing_fit
+from valve_sim.core.bearing import reference_bearing_fit
 from valve_sim.core.parameters import (
     config_path,
     load_parameters,
@@ -52,17 +52,12 @@ def test_table2_file_is_the_reference_with_the_papers_changes(reference):
 
 
 def test_bearing_coefficients_are_the_fit_of_the_documented_bearing(reference):
-    k1, k2, k3, lam, error = reference_bearing_fit(
-        reference['bearing_discharge_coefficient'],
-        reference['fluid_density'],
-        reference['fluid_viscosity'],
-    )
+    k1, k2, k3, lam, error = reference_bearing_fit(reference)
     assert (
         reference['bearing_coefficient_1'],
         reference['bearing_coefficient_2'],
         reference['bearing_coefficient_3'],
-    ) == pytest.approx((k1, k2, k3), abs=1e-4)
-    assert reference['bearing_orifice_diameter'] == REFERENCE_BEARING['orifice_diameter']
+    ) == pytest.approx((k1, k2, k3), rel=1e-9)
     assert error < 0.02 and 0.5 < lam < 2.0
 
 

@@ -24,8 +24,12 @@ One implementation for the paper's Figure 5 and for a rig's own valve:
   residual = (model - recorded) / noise, the noise of each signal estimated from
   its sample-to-sample scatter before the first step.
 Constraints add residuals that are zero while they hold (PilotFlowLimit,
-ModesDecay); checks (StudyRelieves) are too costly for every evaluation and
-judge each start's result. scipy.optimize.least_squares (trust region reflective,
+ModesDecay, CaseRelieves, and the design rules LandsInsideBore and
+MainSpringRange); checks (StudyRelieves) are too costly for every evaluation and
+judge each start's result. Ties make a parameter follow a fitted one (d_v = d_s,
+a balanced pilot poppet); fitting the bearing orifice d_b re-derives the bearing
+coefficients K_1..K_3 from it (core.bearing).
+scipy.optimize.least_squares (trust region reflective,
 bounds) runs from several starts; the best start that meets every constraint and
 check wins. Approximate 95 % intervals and correlations come from the Jacobian at
 the result: covariance s^2 (J^T J)^-1, s^2 = residual variance for a recording,
@@ -41,6 +45,7 @@ from scipy.optimize import least_squares
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures, WINDOW
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
+from valve_sim.core.bearing import with_bearing_fit
 from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.linear import oscillatory_modes
 from valve_sim.core.model import coefficients, flows, X
@@ -64,7 +69,11 @@ from valve_sim.core.steady_state import (
 MODEL_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 FAILED_RESIDUAL = 1e3  # every residual of a parameter set the model cannot run
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
+# Penalties turn on this far (relative) inside their limits: a least-squares optimum sits a
+# hair beyond where a penalty starts, and that hair must not cross the limit itself.
+PENALTY_MARGIN = 1e-3
 FLAT_CHANGE = 1e-9  # relative residual change below which a parameter is flat
+RANK_TOLERANCE = 1e-6  # singular values of the Jacobian below this (relative) count as 0
 Z_95 = 1.959964  # two-sided 95 % quantile of the normal distribution
 
 
@@ -136,11 +145,44 @@ def _start_value(params, name):
     return cracking_pressure(params) if name == PRESET_PRESSURE.name else params[name]
 
 
-def apply_values(params, fitted, values, preset_pressure=None):
+# Parameters the bearing coefficients K_1..K_3 are fitted from (core.bearing): fitting
+# one of them re-derives the coefficients, so Eq. (12) stays the fit of the bearing.
+BEARING_INPUTS = (
+    'bearing_orifice_diameter',
+    'bearing_discharge_coefficient',
+    'fluid_density',
+    'fluid_viscosity',
+)
+
+
+def fit_ties(pairs, fitted):
+    """
+    Return {tied name: name it follows} from [(NAME, OTHER)] (ROS names or symbols).
+
+    A tied parameter takes the value of the other at every evaluation (d_v = d_s:
+    the pilot poppet balanced against the poppet chamber). Raises CalibrationError
+    when a tied parameter is fitted itself, tied twice, or follows itself.
+    """
+    fitted_names = {p.name for p in fitted}
+    ties = {}
+    for tied, source in pairs:
+        tied, source = resolve_name(tied.strip()), resolve_name(source.strip())
+        if tied in fitted_names or tied in ties or tied == source:
+            raise CalibrationError(
+                f'--tie {tied}={source}: a tied parameter must not be fitted, tied twice '
+                'or tied to itself'
+            )
+        ties[tied] = source
+    return ties
+
+
+def apply_values(params, fitted, values, preset_pressure=None, ties=None):
     """
     Return validated params with the fitted values set.
 
-    preset_pressure [Pa], if given (or fitted), re-solves the pilot spring preload last.
+    ties {tied: source} copy the source's value; a fitted or tied bearing input
+    (BEARING_INPUTS) re-derives K_1..K_3. preset_pressure [Pa], if given (or
+    fitted), re-solves the pilot spring preload last.
     """
     new = dict(params)
     for parameter, value in zip(fitted, values):
@@ -148,6 +190,11 @@ def apply_values(params, fitted, values, preset_pressure=None):
             preset_pressure = float(value)
         else:
             new[parameter.name] = float(value)
+    for tied, source in (ties or {}).items():
+        new[tied] = new[source]
+    changed = {p.name for p in fitted} | set(ties or {})
+    if changed & set(BEARING_INPUTS):
+        new = with_bearing_fit(new)
     new = validate(new)
     if preset_pressure is not None:
         new = with_preset_pressure(new, preset_pressure)
@@ -332,8 +379,9 @@ class PilotFlowLimit:
         return float(flows(steady_state(params, self.at_flow), coefficients(params))[5])
 
     def penalty(self, params):
-        """0 while it holds; 1 per 1 % above the limit."""
-        return max(0.0, self.value(params) / self.maximum - 1.0) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % above the limit."""
+        limit = self.maximum * (1.0 - PENALTY_MARGIN)
+        return max(0.0, self.value(params) / limit - 1.0) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -341,6 +389,88 @@ class PilotFlowLimit:
             'constraint': self.name,
             'value': f'{value / LITRE_PER_MINUTE:.4f} L/min',
             'satisfied': value <= self.maximum * (1 + 1e-6),
+        }
+
+
+def _outside(value, low, high):
+    """How far value lies outside [low, high], relative to the bound it passes [-]."""
+    return max(0.0, low / value - 1.0 if value > 0.0 else math.inf, value / high - 1.0)
+
+
+@dataclass(frozen=True)
+class LandsInsideBore:
+    """
+    Both throttle lands lie inside the guide bore: D_1, D_2 <= d_p - 2 margin.
+
+    margin [m]: the radial wall between the bore and a land's outer edge (docs/model.md).
+    """
+
+    margin: float  # [m]
+
+    @property
+    def name(self):
+        return f'lands inside the bore: D_1, D_2 <= d_p - 2 x {self.margin * 1e3:g} mm'
+
+    def value(self, params):
+        """How far the outer land edge reaches beyond d_p - 2 margin [m] (<= 0 holds)."""
+        limit = params['main_valve_back_diameter'] - 2.0 * self.margin
+        return max(
+            params['first_throttle_outer_diameter'], params['second_throttle_outer_diameter']
+        ) - limit
+
+    def penalty(self, params):
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % of the margin beyond."""
+        return max(0.0, self.value(params) / self.margin + PENALTY_MARGIN) * 100.0
+
+    def status(self, params):
+        value = self.value(params)
+        return {
+            'constraint': self.name,
+            'value': f'outer land edge {-value * 1e3:.3f} mm inside that limit',
+            'satisfied': bool(value <= 0.0),
+        }
+
+
+@dataclass(frozen=True)
+class MainSpringRange:
+    """
+    The main spring is a soft one: rate k_m and preload force k_m x_0 within ranges.
+
+    rate: (low, high) [N/m]; preload: (low, high) [N] (docs/model.md).
+    """
+
+    rate: tuple
+    preload: tuple
+
+    @property
+    def name(self):
+        return (
+            f'main spring: k_m in [{self.rate[0] / 1e3:g}, {self.rate[1] / 1e3:g}] N/mm, '
+            f'preload k_m x_0 in [{self.preload[0]:g}, {self.preload[1]:g}] N'
+        )
+
+    @staticmethod
+    def values(params):
+        """Return (rate [N/m], preload force [N])."""
+        rate = params['main_spring_stiffness']
+        return rate, rate * params['main_spring_preload']
+
+    def penalty(self, params):
+        """0 while both hold (with PENALTY_MARGIN); 1 per 1 % outside a range."""
+        rate, preload = self.values(params)
+        low, high = 1.0 + PENALTY_MARGIN, 1.0 - PENALTY_MARGIN
+        return 100.0 * math.hypot(
+            _outside(rate, self.rate[0] * low, self.rate[1] * high),
+            _outside(preload, self.preload[0] * low, self.preload[1] * high),
+        )
+
+    def status(self, params):
+        rate, preload = self.values(params)
+        return {
+            'constraint': self.name,
+            'value': f'k_m {rate / 1e3:.4g} N/mm, preload {preload:.4g} N',
+            'satisfied': bool(self.rate[0] <= rate <= self.rate[1]
+                              and self.preload[0] <= preload <= self.preload[1]),
         }
 
 
@@ -374,7 +504,8 @@ class ModesDecay:
         return min(rates)
 
     def penalty(self, params):
-        return max(0.0, 1.0 - self.value(params) / self.rate) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % below the rate."""
+        return max(0.0, 1.0 - self.value(params) / (self.rate * (1.0 + PENALTY_MARGIN))) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -507,6 +638,8 @@ class CalibrationResult:
     evaluations: int = 0
     wall_time: float = 0.0
     interrupted: bool = False
+    ties: dict = field(default_factory=dict)
+    rank: int = None  # combinations of the fitted parameters the target determines
 
     @property
     def satisfied(self):
@@ -516,15 +649,16 @@ class CalibrationResult:
 class _Objective:
     """Residuals of normalised values u = value / start; remembers the best evaluation."""
 
-    def __init__(self, params, fitted, start, target, constraints, preset, progress):
+    def __init__(self, params, fitted, start, target, constraints, preset, progress, ties=None):
         self.params, self.fitted, self.start = params, fitted, np.asarray(start, dtype=float)
+        self.ties = ties or {}
         self.target, self.constraints, self.preset = target, constraints, preset
         self.progress, self.count, self.best = progress, 0, (math.inf, None)
         self.size = None
         self.label, self.last_report = '', 0.0
 
     def parameters(self, u):
-        return apply_values(self.params, self.fitted, u * self.start, self.preset)
+        return apply_values(self.params, self.fitted, u * self.start, self.preset, self.ties)
 
     def __call__(self, u):
         self.count += 1
@@ -589,6 +723,7 @@ def calibrate(
     diff_step=None,
     max_evaluations=2000,
     progress=None,
+    ties=None,
 ):
     """
     Fit the FitParameters to target from several starts; returns a CalibrationResult.
@@ -597,14 +732,17 @@ def calibrate(
     constraints: residual-adding constraints; checks: judged per start after its fit;
     preset_pressure [Pa]: held during the fit (the preload re-solved) unless fitted;
     starts: number of starts (the first is params itself), spread: log-normal
-    standard deviation of the others, seed: their generator's seed. Ctrl-C ends the
+    standard deviation of the others, seed: their generator's seed; ties: {tied: fitted
+    parameter it follows} (fit_ties). Ctrl-C ends the
     fit: the result is then the best evaluation so far, marked interrupted.
     Raises CalibrationError for a flat (not identifiable) parameter or a start the
     model cannot run.
     """
     began = clock.monotonic()
     start = np.array([_start_value(params, p.name) for p in fitted])
-    objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
+    objective = _Objective(
+        params, fitted, start, target, constraints, preset_pressure, progress, ties
+    )
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
     objective.label = 'identifiability check:'
     try:
@@ -700,6 +838,7 @@ def calibrate(
         constraints=best['checks'],
         starts=[{k: v for k, v in run.items() if k != 'u'} for run in runs],
         interrupted=interrupted,
+        ties=dict(ties or {}),
     )
     if interrupted:
         result.residuals = objective(u)
@@ -731,8 +870,18 @@ def _interrupted(params, fitted, start, target, constraints, objective, u, cost,
 
 
 def _uncertainty(result, target, jacobian, start):
-    """Approximate 95 % intervals and correlations from the Jacobian (normalised units)."""
+    """
+    Approximate 95 % intervals and correlations from the Jacobian (normalised units).
+
+    None of either when the Jacobian's rank (singular values above RANK_TOLERANCE of
+    the largest) is below the number of fitted parameters: the target then pins only
+    result.rank combinations of them (more parameters than measures), not each value.
+    """
     count, fitted = len(result.residuals), len(result.fitted)
+    singular = np.linalg.svd(jacobian, compute_uv=False)
+    result.rank = int(np.sum(singular > RANK_TOLERANCE * singular[0])) if singular[0] > 0 else 0
+    if result.rank < fitted:
+        return
     scale = target.covariance_scale(result.cost, count, fitted)
     information = jacobian.T @ jacobian
     try:

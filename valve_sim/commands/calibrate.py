@@ -62,6 +62,45 @@ def bounds_value(text):
         raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
 
 
+def range_value(text):
+    """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
+    from argparse import ArgumentTypeError
+
+    low, colon, high = text.partition(':')
+    try:
+        if not colon:
+            raise ValueError
+        low, high = float(low), float(high)
+    except ValueError:
+        raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
+    if not 0.0 < low < high < float('inf'):
+        raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
+    return low, high
+
+
+def tie_value(text):
+    """'d_v=d_s' -> ('d_v', 'd_s') for --tie."""
+    from argparse import ArgumentTypeError
+
+    tied, separator, source = text.partition('=')
+    if not separator or not tied.strip() or not source.strip():
+        raise ArgumentTypeError(f'expected NAME=OTHER, got {text!r}')
+    return tied.strip(), source.strip()
+
+
+def positive_length(text):
+    """Parse a length [m] > 0 for --land-margin."""
+    from argparse import ArgumentTypeError
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < 0.1:
+        raise ArgumentTypeError(f'expected a length in m, 0 < M < 0.1, got {text!r}')
+    return value
+
+
 def case_value(text):
     """'d_c=-20,k_p=10' -> {'d_c': -20.0, 'k_p': 10.0} for --relieves."""
     from argparse import ArgumentTypeError
@@ -112,6 +151,18 @@ def add_arguments(parser):
                         help="constraint: this case of the paper's study (preset held; e.g. "
                         'd_c=-20) ends its step test relieving through the main stage; '
                         'repeatable')
+    parser.add_argument('--land-margin', type=positive_length, metavar='M',
+                        help='constraint: both throttle lands inside the guide bore, '
+                        'D_1, D_2 <= d_p - 2 M (M in m, e.g. 1e-3)')
+    parser.add_argument('--main-spring-rate', type=range_value, metavar='LO:HI',
+                        help='constraint: main spring rate k_m within LO:HI N/m (e.g. 1e3:10e3)')
+    parser.add_argument('--main-spring-preload', type=range_value, metavar='LO:HI',
+                        help='constraint: main spring preload force k_m x_0 within LO:HI N '
+                        '(e.g. 20:100)')
+    parser.add_argument('--tie', type=tie_value, action='append', default=[],
+                        metavar='NAME=OTHER',
+                        help='NAME takes the value of the fitted OTHER at every evaluation '
+                        '(e.g. d_v=d_s: a balanced pilot poppet); repeatable')
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
@@ -163,6 +214,9 @@ def run(args):
         CalibrationError,
         CaseRelieves,
         fit_parameters,
+        fit_ties,
+        LandsInsideBore,
+        MainSpringRange,
         ModesDecay,
         PilotFlowLimit,
         StudyRelieves,
@@ -175,6 +229,7 @@ def run(args):
     step_size = settings['step_size']
     names = [name for name in args.fit.split(',') if name.strip()]
     fitted = fit_parameters(names, dict(args.bounds), params)
+    ties = fit_ties(args.tie, fitted)
     target = _target(args, step_size)
     constraints = []
     if args.max_pilot_flow is not None:
@@ -182,6 +237,11 @@ def run(args):
     if args.table2_decays:
         constraints.append(ModesDecay())
     constraints += [CaseRelieves(changes) for changes in args.relieves]
+    if args.land_margin is not None:
+        constraints.append(LandsInsideBore(args.land_margin))
+    if args.main_spring_rate or args.main_spring_preload:
+        constraints.append(MainSpringRange(args.main_spring_rate or (0.0, math.inf),
+                                           args.main_spring_preload or (0.0, math.inf)))
     checks = [StudyRelieves()] if args.study_relieves else []
     progress = None if args.quiet else lambda line: print(line, file=sys.stderr, flush=True)
     if progress:
@@ -202,6 +262,7 @@ def run(args):
         seed=args.seed,
         tolerance=args.tolerance,
         progress=progress,
+        ties=ties,
     )
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
@@ -236,10 +297,16 @@ def yaml_number(value):
 
 
 def write_parameter_file(path, result, settings, command):
-    """calibrated.yaml: every model parameter and setting; fitted ones marked."""
+    """calibrated.yaml: every model parameter and setting; fitted and derived ones marked."""
+    from valve_sim.analysis.calibration import BEARING_INPUTS
+    from valve_sim.core.bearing import COEFFICIENTS
     from valve_sim.core.steady_state import cracking_pressure
 
     fitted = {p.name for p in result.fitted}
+    marks = dict.fromkeys(fitted, '   # fitted')
+    marks.update({tied: f'   # = {source} (tied)' for tied, source in result.ties.items()})
+    if (fitted | set(result.ties)) & set(BEARING_INPUTS):
+        marks.update(dict.fromkeys(COEFFICIENTS, '   # fit of the bearing (core.bearing)'))
     lines = [
         f'# Written by: {command}',
         f'# Fitted: {", ".join(sorted(fitted))}; '
@@ -249,8 +316,7 @@ def write_parameter_file(path, result, settings, command):
         '  ros__parameters:',
     ]
     for name, value in result.parameters.items():
-        mark = '   # fitted' if name in fitted else ''
-        lines.append(f'    {name}: {yaml_number(value)}{mark}')
+        lines.append(f'    {name}: {yaml_number(value)}{marks.get(name, "")}')
     for name, value in settings.items():
         lines.append(f'    {name}: {yaml_number(value)}')
     path.write_text('\n'.join(lines) + '\n')
@@ -285,6 +351,7 @@ def report_document(result, target, args, command):
         'correlations': None
         if result.correlations is None
         else np.round(result.correlations, 4).tolist(),
+        'determined_combinations': result.rank,
         'cost': result.cost,
         'constraints': result.constraints,
         'starts': result.starts,
@@ -336,6 +403,12 @@ def report_text(report):
         lines.append(
             f'{entry["name"] + " (" + entry["symbol"] + ")":<34}{entry["start"]:>13.6g}'
             f'{entry["value"]:>15.8g}   {shown} {entry["unit"]}{bound}'
+        )
+    rank = report.get('determined_combinations')
+    if rank is not None and rank < len(report['fitted']):
+        lines.append(
+            f'no intervals: the target determines {rank} combinations of the '
+            f'{len(report["fitted"])} fitted parameters, not each of them'
         )
     if report['correlations'] and len(report['fitted']) > 1:
         lines.append('correlations: ' + '; '.join(
