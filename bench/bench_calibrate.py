@@ -43,7 +43,7 @@ RIG = ['--topic-supply-pressure', '/rig/inlet_pressure', '--topic-inlet-flow', '
 REFERENCE_ARGS = (
     '--params config/calibration/figure5_start.yaml --preset-pressure 7MPa '
     '--target-measures config/calibration/figure5.json --fit d_p,D_1,d_1,D_2,d_2,h,k_m,d_b,d_s '
-    '--tie d_v=d_s --max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 '
+    '--tie d_v=0.98*d_s --max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 '
     '--land-margin 1e-3 --main-spring-rate 1e3:5e3 --main-spring-preload 20:100 '
     '--study-relieves --tolerance 1e-4'
 ).split()

@@ -26,8 +26,8 @@ One implementation for the paper's Figure 5 and for a rig's own valve:
 Constraints add residuals that are zero while they hold (PilotFlowLimit,
 ModesDecay, CaseRelieves, and the design rules LandsInsideBore and
 MainSpringRange); checks (StudyRelieves) are too costly for every evaluation and
-judge each start's result. Ties make a parameter follow a fitted one (d_v = d_s,
-a balanced pilot poppet); fitting the bearing orifice d_b re-derives the bearing
+judge each start's result. Ties make a parameter follow a fitted one (d_v = 0.98 d_s,
+the pilot seat a little under the rod); fitting the bearing orifice d_b re-derives the bearing
 coefficients K_1..K_3 from it (core.bearing).
 scipy.optimize.least_squares (trust region reflective,
 bounds) runs from several starts; the best start that meets every constraint and
@@ -47,7 +47,7 @@ from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
 from valve_sim.core.bearing import with_bearing_fit
 from valve_sim.core.integrator import IntegrationError
-from valve_sim.core.linear import oscillatory_modes
+from valve_sim.core.linear import modes
 from valve_sim.core.model import coefficients, flows, X
 from valve_sim.core.parameters import (
     check_value,
@@ -155,32 +155,36 @@ BEARING_INPUTS = (
 )
 
 
-def fit_ties(pairs, fitted):
+def fit_ties(ties, fitted):
     """
-    Return {tied name: name it follows} from [(NAME, OTHER)] (ROS names or symbols).
+    Return {tied name: (name it follows, factor)} from [(NAME, FACTOR, OTHER)].
 
-    A tied parameter takes the value of the other at every evaluation (d_v = d_s:
-    the pilot poppet balanced against the poppet chamber). Raises CalibrationError
-    when a tied parameter is fitted itself, tied twice, or follows itself.
+    Names are ROS names or symbols. A tied parameter takes FACTOR times the value of
+    the other at every evaluation (d_v = 0.98 d_s: the pilot seat a little under the
+    rod). Raises CalibrationError when a tied parameter is fitted itself, tied twice,
+    follows itself, or the factor is not a positive number.
     """
     fitted_names = {p.name for p in fitted}
-    ties = {}
-    for tied, source in pairs:
+    checked = {}
+    for tied, factor, source in ties:
         tied, source = resolve_name(tied.strip()), resolve_name(source.strip())
-        if tied in fitted_names or tied in ties or tied == source:
+        if tied in fitted_names or tied in checked or tied == source:
             raise CalibrationError(
                 f'--tie {tied}={source}: a tied parameter must not be fitted, tied twice '
                 'or tied to itself'
             )
-        ties[tied] = source
-    return ties
+        if not (math.isfinite(factor) and factor > 0.0):
+            raise CalibrationError(f'--tie {tied}: the factor must be > 0, got {factor!r}')
+        checked[tied] = (source, float(factor))
+    return checked
 
 
 def apply_values(params, fitted, values, preset_pressure=None, ties=None):
     """
     Return validated params with the fitted values set.
 
-    ties {tied: source} copy the source's value; a fitted or tied bearing input
+    ties {tied: (source, factor)} set factor times the source's value; a fitted or tied
+    bearing input
     (BEARING_INPUTS) re-derives K_1..K_3. preset_pressure [Pa], if given (or
     fitted), re-solves the pilot spring preload last.
     """
@@ -190,8 +194,8 @@ def apply_values(params, fitted, values, preset_pressure=None, ties=None):
             preset_pressure = float(value)
         else:
             new[parameter.name] = float(value)
-    for tied, source in (ties or {}).items():
-        new[tied] = new[source]
+    for tied, (source, factor) in (ties or {}).items():
+        new[tied] = factor * new[source]
     changed = {p.name for p in fitted} | set(ties or {})
     if changed & set(BEARING_INPUTS):
         new = with_bearing_fit(new)
@@ -479,8 +483,9 @@ class ModesDecay:
     """
     Every linear mode of a case decays by e^-3 (95 %) within the measures' window.
 
-    decay rate zeta * omega >= 3 / WINDOW at the initial and final flows of the
-    paper's test; the case is the parameter set scaled by changes with the preset held.
+    decay rate -Re lambda >= 3 / WINDOW, oscillatory or not, at the initial and final
+    flows of the paper's test; the case is the parameter set scaled by changes with the
+    preset held.
     A stability requirement, not a margin: a mode slower than this rings through
     the whole window of the measures.
     """
@@ -494,12 +499,12 @@ class ModesDecay:
         return f'{self.label}: every mode decays by 95 % within {WINDOW:g} s'
 
     def value(self, params):
-        """Slowest decay rate zeta * omega [1/s] over the modes at both flows."""
+        """Slowest decay rate -Re lambda [1/s] over every mode at both flows."""
         case = case_parameters(params, self.changes, 'held-preset', cracking_pressure(params))
         rates = [
-            zeta * 2.0 * math.pi * frequency
+            mode.decay_rate
             for flow in (REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow)
-            for frequency, zeta in oscillatory_modes(case, flow)
+            for mode in modes(case, flow)
         ]
         return min(rates)
 
@@ -732,8 +737,8 @@ def calibrate(
     constraints: residual-adding constraints; checks: judged per start after its fit;
     preset_pressure [Pa]: held during the fit (the preload re-solved) unless fitted;
     starts: number of starts (the first is params itself), spread: log-normal
-    standard deviation of the others, seed: their generator's seed; ties: {tied: fitted
-    parameter it follows} (fit_ties). Ctrl-C ends the
+    standard deviation of the others, seed: their generator's seed; ties: {tied: (fitted
+    parameter it follows, factor)} (fit_ties). Ctrl-C ends the
     fit: the result is then the best evaluation so far, marked interrupted.
     Raises CalibrationError for a flat (not identifiable) parameter or a start the
     model cannot run.

@@ -79,13 +79,19 @@ def range_value(text):
 
 
 def tie_value(text):
-    """'d_v=d_s' -> ('d_v', 'd_s') for --tie."""
+    """'d_v=0.98*d_s' -> ('d_v', 0.98, 'd_s') and 'd_v=d_s' -> ('d_v', 1.0, 'd_s') for --tie."""
     from argparse import ArgumentTypeError
 
-    tied, separator, source = text.partition('=')
-    if not separator or not tied.strip() or not source.strip():
-        raise ArgumentTypeError(f'expected NAME=OTHER, got {text!r}')
-    return tied.strip(), source.strip()
+    tied, separator, rule = text.partition('=')
+    factor, star, source = rule.rpartition('*')
+    try:
+        if not separator or not tied.strip() or not source.strip():
+            raise ValueError
+        return tied.strip(), float(factor) if star else 1.0, source.strip()
+    except ValueError:
+        raise ArgumentTypeError(
+            f'expected NAME=OTHER or NAME=FACTOR*OTHER, got {text!r}'
+        ) from None
 
 
 def positive_length(text):
@@ -160,9 +166,10 @@ def add_arguments(parser):
                         help='constraint: main spring preload force k_m x_0 within LO:HI N '
                         '(e.g. 20:100)')
     parser.add_argument('--tie', type=tie_value, action='append', default=[],
-                        metavar='NAME=OTHER',
-                        help='NAME takes the value of the fitted OTHER at every evaluation '
-                        '(e.g. d_v=d_s: a balanced pilot poppet); repeatable')
+                        metavar='NAME=[FACTOR*]OTHER',
+                        help='NAME takes FACTOR (default 1) times the value of the fitted OTHER '
+                        'at every evaluation (e.g. d_v=0.98*d_s: the pilot seat 2 %% under '
+                        'the rod); repeatable')
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
@@ -304,7 +311,10 @@ def write_parameter_file(path, result, settings, command):
 
     fitted = {p.name for p in result.fitted}
     marks = dict.fromkeys(fitted, '   # fitted')
-    marks.update({tied: f'   # = {source} (tied)' for tied, source in result.ties.items()})
+    marks.update({
+        tied: f'   # = {factor:g} {source} (tied)'
+        for tied, (source, factor) in result.ties.items()
+    })
     if (fitted | set(result.ties)) & set(BEARING_INPUTS):
         marks.update(dict.fromkeys(COEFFICIENTS, '   # fit of the bearing (core.bearing)'))
     lines = [
