@@ -247,7 +247,7 @@ class ReliefValveNode(Node):
         # rclpy drops an undeclared override silently: say so for a retired parameter that
         # a parameter file (an older calibrated.yaml) still sets.
         for name in filter(retired_reason, self._parameter_overrides):
-            self.get_logger().warning(f'ignoring {name} from the parameter file: '
+            self.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
                                       f'{retired_reason(name)}')
         values = {
             spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
