@@ -66,12 +66,9 @@ def range_value(text):
     """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
     from argparse import ArgumentTypeError
 
-    low, colon, high = text.partition(':')
     try:
-        if not colon:
-            raise ValueError
-        low, high = float(low), float(high)
-    except ValueError:
+        _, (low, high) = bounds_value(f'range={text}')
+    except ArgumentTypeError:
         raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
     if not 0.0 < low < high < float('inf'):
         raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
@@ -105,6 +102,17 @@ def positive_length(text):
     if not 0.0 < value < 0.1:
         raise ArgumentTypeError(f'expected a length in m, 0 < M < 0.1, got {text!r}')
     return value
+
+
+# The design rules of a main stage as real valves are built (docs/model.md), as constraints.
+DESIGN_RULES = (
+    ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
+     'bore, D_1, D_2 <= d_p - 2 M (M in m, e.g. 1e-3)'),
+    ('--main-spring-rate', range_value, 'LO:HI',
+     'constraint: main spring rate k_m within LO:HI N/m (e.g. 1e3:5e3)'),
+    ('--main-spring-preload', range_value, 'LO:HI',
+     'constraint: main spring preload force k_m x_0 within LO:HI N (e.g. 20:100)'),
+)
 
 
 def case_value(text):
@@ -157,14 +165,8 @@ def add_arguments(parser):
                         help="constraint: this case of the paper's study (preset held; e.g. "
                         'd_c=-20) ends its step test relieving through the main stage; '
                         'repeatable')
-    parser.add_argument('--land-margin', type=positive_length, metavar='M',
-                        help='constraint: both throttle lands inside the guide bore, '
-                        'D_1, D_2 <= d_p - 2 M (M in m, e.g. 1e-3)')
-    parser.add_argument('--main-spring-rate', type=range_value, metavar='LO:HI',
-                        help='constraint: main spring rate k_m within LO:HI N/m (e.g. 1e3:10e3)')
-    parser.add_argument('--main-spring-preload', type=range_value, metavar='LO:HI',
-                        help='constraint: main spring preload force k_m x_0 within LO:HI N '
-                        '(e.g. 20:100)')
+    for flag, kind, metavar, text in DESIGN_RULES:
+        parser.add_argument(flag, type=kind, metavar=metavar, help=text)
     parser.add_argument('--tie', type=tie_value, action='append', default=[],
                         metavar='NAME=[FACTOR*]OTHER',
                         help='NAME takes FACTOR (default 1) times the value of the fitted OTHER '
