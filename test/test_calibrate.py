@@ -45,8 +45,10 @@ RIG = ('--topic-supply-pressure', '/rig/inlet_pressure', '--topic-inlet-flow', '
 # The derivation of config/reference.yaml, as docs/model.md states it (without --out).
 REFERENCE_COMMAND = (
     'valve-sim calibrate --params config/calibration/figure5_start.yaml --preset-pressure 7MPa '
-    '--target-measures config/calibration/figure5.json --fit d_p,k_m,d_s,h '
-    '--max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 --study-relieves'
+    '--target-measures config/calibration/figure5.json --fit d_p,D_1,d_1,D_2,d_2,h,k_m,d_b,d_s '
+    '--tie d_v=0.98*d_s --max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 '
+    '--land-margin 1e-3 --main-spring-rate 1e3:5e3 --main-spring-preload 20:100 '
+    '--study-relieves --tolerance 1e-4'
 )
 
 
@@ -216,3 +218,33 @@ def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
     assert 'no intervals or correlations: the residual is zero' in result.stdout
     report = json.loads((tmp_path / 'out' / 'report.json').read_text())
     assert report['correlations'] is None and 'interval_95' not in report['fitted'][0]
+
+
+def test_the_design_rules_and_ties_as_the_fit_uses_them():
+    from valve_sim.analysis.calibration import (
+        apply_values, CalibrationError, fit_parameters, fit_ties, LandsInsideBore,
+        MainSpringRange,
+    )
+    from valve_sim.core.bearing import reference_bearing_fit
+
+    reference, _ = load_parameters()
+    lands, spring = LandsInsideBore(1e-3), MainSpringRange((1e3, 5e3), (20.0, 100.0))
+    assert lands.penalty(reference) == 0.0 and lands.status(reference)['satisfied']
+    # k_m ends a hair past where its penalty starts (0.1 % inside the limit): inside the limit.
+    assert spring.penalty(reference) < 1e-3 and spring.status(reference)['satisfied']
+    bore = reference['main_valve_back_diameter']
+    rim = dict(reference, first_throttle_outer_diameter=bore - 1e-3)
+    assert lands.penalty(rim) == pytest.approx(100.0 + 0.1)  # 1 mm past the limit: 100 % of m
+    assert not lands.status(rim)['satisfied']
+    stiff = dict(reference, main_spring_stiffness=86e3)  # the old main spring
+    assert spring.penalty(stiff) > 1000.0 and not spring.status(stiff)['satisfied']
+    fitted = fit_parameters(['d_s', 'd_b'], {}, reference)
+    ties = fit_ties([('d_v', 0.98, 'd_s')], fitted)
+    moved = apply_values(reference, fitted, [4.0e-3, 0.5e-3], ties=ties)
+    assert moved['pilot_seat_diameter'] == pytest.approx(0.98 * 4.0e-3, rel=1e-15)
+    k1, k2, k3, _, _ = reference_bearing_fit(moved)  # d_b fitted: K_1..K_3 follow it
+    assert (moved['bearing_coefficient_1'], moved['bearing_coefficient_2'],
+            moved['bearing_coefficient_3']) == (k1, k2, k3)
+    for bad in ([('d_s', 1.0, 'd_v')], [('d_v', 1.0, 'd_v')], [('d_v', -1.0, 'd_s')]):
+        with pytest.raises(CalibrationError):
+            fit_ties(bad, fitted)

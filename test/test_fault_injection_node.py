@@ -44,6 +44,8 @@ AMBIENT = 101325.0  # [Pa]
 INITIAL_FLOW = 5.0 * LITRE_PER_MINUTE
 PERIOD_NS = 1_000_000
 NAMESPACE = '/faulty'
+# The weakening is small (2 %): a larger one lowers the preset enough that the soft-spring
+# main stage rings shut before 0.12 s, and the stuck valve must freeze while it moves.
 SCHEDULE = """
 events:
   - t: 0.0205
@@ -54,7 +56,7 @@ events:
     set: {fault.bearing_coulomb_friction: 5.0, fault.bearing_static_friction: 8.0}
   - t: 0.08
     set:
-      fault.pilot_spring_weakening: 0.1
+      fault.pilot_spring_weakening: 0.02
       sensor.supply_pressure.bias: 1000.0
       sensor.supply_pressure.resolution: 10.0
       sensor.supply_pressure.bandwidth: 300.0

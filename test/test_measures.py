@@ -21,6 +21,7 @@ import pytest
 from valve_sim.analysis.measures import (
     _lobes,
     detect_steps,
+    envelope_decay_rate,
     MEASURE_NAMES,
     step_measures,
     StepDetector,
@@ -81,6 +82,34 @@ def test_known_answers_at_10_khz_and_1_khz(rate):
     assert result.values['r_d'] == pytest.approx(want['r_d'], abs=2e-3)
     assert result.values['P_o_percent'] == pytest.approx(want['P_o_percent'], rel=2e-3)
     assert result.values['T_s_ms'] == pytest.approx(want['T_s_ms'], abs=1e3 / rate + 0.5)
+
+
+@pytest.mark.parametrize('rate', [1e4, 1e3])
+def test_envelope_decay_rate_is_the_decay_of_the_swings(rate):
+    t, p, _ = synthetic(rate, ripple=300.0)
+    decay, reason = envelope_decay_rate(t, p, None, T_STEP)  # from p_s (no x)
+    assert reason is None and decay == pytest.approx(SIGMA, rel=0.01)
+    ringing_x = X_INF + 1e-5 * np.exp(-SIGMA * (t - T_STEP)) * np.cos(OMEGA * (t - T_STEP))
+    decay, reason = envelope_decay_rate(t, p, np.where(t < T_STEP, X0, ringing_x), T_STEP)
+    assert reason is None and decay == pytest.approx(SIGMA, rel=0.01)  # from x, where recorded
+
+
+def test_settling_time_steps_by_half_periods_where_the_envelope_decay_moves_smoothly():
+    """Docs/measures.md: a 1 % slower decay moves T_s by 0 or by ~T_d / 2; sigma by ~1 %."""
+    t = np.arange(0.0, T_STEP + 1.0, 1e-4)
+    tau = np.clip(t - T_STEP, 0.0, None)
+    settling, decays = [], []
+    for sigma in np.linspace(6.0, 6.6, 13):
+        x = X_INF - (X_INF - X0) * np.exp(-sigma * tau) * np.cos(OMEGA * tau)
+        p = P0 + DELTA * (tau > 0) + AMPLITUDE * np.exp(-sigma * tau) * np.sin(OMEGA * tau)
+        settling.append(step_measures(t, p, x, T_STEP).values['T_s_ms'])
+        decays.append(envelope_decay_rate(t, p, x, T_STEP)[0])
+    half_period = math.pi / OMEGA * 1e3  # [ms]
+    steps = np.diff(settling)
+    assert np.all((np.abs(steps) < 0.1 * half_period)
+                  | (np.abs(np.abs(steps) - half_period) < 0.2 * half_period))
+    assert np.any(np.abs(steps) > 0.5 * half_period)  # it did step
+    assert np.array(decays) == pytest.approx(np.linspace(6.0, 6.6, 13), rel=0.01)
 
 
 def test_pilot_ripple_is_not_taken_for_a_peak():

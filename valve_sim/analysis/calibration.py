@@ -24,8 +24,12 @@ One implementation for the paper's Figure 5 and for a rig's own valve:
   residual = (model - recorded) / noise, the noise of each signal estimated from
   its sample-to-sample scatter before the first step.
 Constraints add residuals that are zero while they hold (PilotFlowLimit,
-ModesDecay); checks (StudyRelieves) are too costly for every evaluation and
-judge each start's result. scipy.optimize.least_squares (trust region reflective,
+ModesDecay, CaseRelieves, and the design rules LandsInsideBore and
+MainSpringRange); checks (StudyRelieves) are too costly for every evaluation and
+judge each start's result. Ties make a parameter follow a fitted one (d_v = 0.98 d_s,
+the pilot seat a little under the rod); fitting the bearing orifice d_b re-derives the bearing
+coefficients K_1..K_3 from it (core.bearing).
+scipy.optimize.least_squares (trust region reflective,
 bounds) runs from several starts; the best start that meets every constraint and
 check wins. Approximate 95 % intervals and correlations come from the Jacobian at
 the result: covariance s^2 (J^T J)^-1, s^2 = residual variance for a recording,
@@ -41,8 +45,9 @@ from scipy.optimize import least_squares
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures, WINDOW
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
+from valve_sim.core.bearing import with_bearing_fit
 from valve_sim.core.integrator import IntegrationError
-from valve_sim.core.linear import oscillatory_modes
+from valve_sim.core.linear import modes
 from valve_sim.core.model import coefficients, flows, X
 from valve_sim.core.parameters import (
     check_value,
@@ -64,7 +69,11 @@ from valve_sim.core.steady_state import (
 MODEL_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 FAILED_RESIDUAL = 1e3  # every residual of a parameter set the model cannot run
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
+# Penalties turn on this far (relative) inside their limits: a least-squares optimum sits a
+# hair beyond where a penalty starts, and that hair must not cross the limit itself.
+PENALTY_MARGIN = 1e-3
 FLAT_CHANGE = 1e-9  # relative residual change below which a parameter is flat
+RANK_TOLERANCE = 1e-6  # singular values of the Jacobian below this (relative) count as 0
 Z_95 = 1.959964  # two-sided 95 % quantile of the normal distribution
 
 
@@ -156,11 +165,48 @@ def _start_value(params, name):
     return cracking_pressure(params) if name == PRESET_PRESSURE.name else params[name]
 
 
-def apply_values(params, fitted, values, preset_pressure=None):
+# Parameters the bearing coefficients K_1..K_3 are fitted from (core.bearing): fitting
+# one of them re-derives the coefficients, so Eq. (12) stays the fit of the bearing.
+BEARING_INPUTS = (
+    'bearing_orifice_diameter',
+    'bearing_discharge_coefficient',
+    'fluid_density',
+    'fluid_viscosity',
+)
+
+
+def fit_ties(ties, fitted):
+    """
+    Return {tied name: (name it follows, factor)} from [(NAME, FACTOR, OTHER)].
+
+    Names are ROS names or symbols. A tied parameter takes FACTOR times the value of
+    the other at every evaluation (d_v = 0.98 d_s: the pilot seat a little under the
+    rod). Raises CalibrationError when a tied parameter is fitted itself, tied twice,
+    follows itself, or the factor is not a positive number.
+    """
+    fitted_names = {p.name for p in fitted}
+    checked = {}
+    for tied, factor, source in ties:
+        tied, source = resolve_name(tied.strip()), resolve_name(source.strip())
+        if tied in fitted_names or tied in checked or tied == source:
+            raise CalibrationError(
+                f'--tie {tied}={source}: a tied parameter must not be fitted, tied twice '
+                'or tied to itself'
+            )
+        if not (math.isfinite(factor) and factor > 0.0):
+            raise CalibrationError(f'--tie {tied}: the factor must be > 0, got {factor!r}')
+        checked[tied] = (source, float(factor))
+    return checked
+
+
+def apply_values(params, fitted, values, preset_pressure=None, ties=None):
     """
     Return validated params with the fitted values set.
 
-    preset_pressure [Pa], if given (or fitted), re-solves the pilot spring preload last.
+    ties {tied: (source, factor)} set factor times the source's value; a fitted or tied
+    bearing input
+    (BEARING_INPUTS) re-derives K_1..K_3. preset_pressure [Pa], if given (or
+    fitted), re-solves the pilot spring preload last.
     """
     new = dict(params)
     for parameter, value in zip(fitted, values):
@@ -170,6 +216,11 @@ def apply_values(params, fitted, values, preset_pressure=None):
             preset_pressure = float(value)
         else:
             new[parameter.name] = float(value)
+    for tied, (source, factor) in (ties or {}).items():
+        new[tied] = factor * new[source]
+    changed = {p.name for p in fitted} | set(ties or {})
+    if changed & set(BEARING_INPUTS):
+        new = with_bearing_fit(new)
     new = validate(new)
     if preset_pressure is not None:
         new = with_preset_pressure(new, preset_pressure)
@@ -373,8 +424,9 @@ class PilotFlowLimit:
         return float(flows(steady_state(params, self.at_flow), coefficients(params))[5])
 
     def penalty(self, params):
-        """0 while it holds; 1 per 1 % above the limit."""
-        return max(0.0, self.value(params) / self.maximum - 1.0) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % above the limit."""
+        limit = self.maximum * (1.0 - PENALTY_MARGIN)
+        return max(0.0, self.value(params) / limit - 1.0) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -385,13 +437,96 @@ class PilotFlowLimit:
         }
 
 
+def _outside(value, low, high):
+    """How far value lies outside [low, high], relative to the bound it passes [-]."""
+    return max(0.0, low / value - 1.0 if value > 0.0 else math.inf, value / high - 1.0)
+
+
+@dataclass(frozen=True)
+class LandsInsideBore:
+    """
+    Both throttle lands lie inside the guide bore: D_1, D_2 <= d_p - 2 margin.
+
+    margin [m]: the radial wall between the bore and a land's outer edge (docs/model.md).
+    """
+
+    margin: float  # [m]
+
+    @property
+    def name(self):
+        return f'lands inside the bore: D_1, D_2 <= d_p - 2 x {self.margin * 1e3:g} mm'
+
+    def value(self, params):
+        """How far the outer land edge reaches beyond d_p - 2 margin [m] (<= 0 holds)."""
+        limit = params['main_valve_back_diameter'] - 2.0 * self.margin
+        return max(
+            params['first_throttle_outer_diameter'], params['second_throttle_outer_diameter']
+        ) - limit
+
+    def penalty(self, params):
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % of the margin beyond."""
+        return max(0.0, self.value(params) / self.margin + PENALTY_MARGIN) * 100.0
+
+    def status(self, params):
+        value = self.value(params)
+        return {
+            'constraint': self.name,
+            'value': f'outer land edge {-value * 1e3:.3f} mm inside that limit',
+            'satisfied': bool(value <= 0.0),
+        }
+
+
+@dataclass(frozen=True)
+class MainSpringRange:
+    """
+    The main spring is a soft one: rate k_m and preload force k_m x_0 within ranges.
+
+    rate: (low, high) [N/m]; preload: (low, high) [N] (docs/model.md).
+    """
+
+    rate: tuple
+    preload: tuple
+
+    @property
+    def name(self):
+        return (
+            f'main spring: k_m in [{self.rate[0] / 1e3:g}, {self.rate[1] / 1e3:g}] N/mm, '
+            f'preload k_m x_0 in [{self.preload[0]:g}, {self.preload[1]:g}] N'
+        )
+
+    @staticmethod
+    def values(params):
+        """Return (rate [N/m], preload force [N])."""
+        rate = params['main_spring_stiffness']
+        return rate, rate * params['main_spring_preload']
+
+    def penalty(self, params):
+        """0 while both hold (with PENALTY_MARGIN); 1 per 1 % outside a range."""
+        rate, preload = self.values(params)
+        low, high = 1.0 + PENALTY_MARGIN, 1.0 - PENALTY_MARGIN
+        return 100.0 * math.hypot(
+            _outside(rate, self.rate[0] * low, self.rate[1] * high),
+            _outside(preload, self.preload[0] * low, self.preload[1] * high),
+        )
+
+    def status(self, params):
+        rate, preload = self.values(params)
+        return {
+            'constraint': self.name,
+            'value': f'k_m {rate / 1e3:.4g} N/mm, preload {preload:.4g} N',
+            'satisfied': bool(self.rate[0] <= rate <= self.rate[1]
+                              and self.preload[0] <= preload <= self.preload[1]),
+        }
+
+
 @dataclass(frozen=True)
 class ModesDecay:
     """
     Every linear mode of a case decays by e^-3 (95 %) within the measures' window.
 
-    decay rate zeta * omega >= 3 / WINDOW at the initial and final flows of the
-    paper's test; the case is the parameter set scaled by changes with the preset held.
+    decay rate -Re lambda >= 3 / WINDOW, oscillatory or not, at the initial and final
+    flows of the paper's test; the case is the parameter set scaled by changes with the
+    preset held.
     A stability requirement, not a margin: a mode slower than this rings through
     the whole window of the measures.
     """
@@ -405,17 +540,18 @@ class ModesDecay:
         return f'{self.label}: every mode decays by 95 % within {WINDOW:g} s'
 
     def value(self, params):
-        """Slowest decay rate zeta * omega [1/s] over the modes at both flows."""
+        """Slowest decay rate -Re lambda [1/s] over every mode at both flows."""
         case = case_parameters(params, self.changes, 'held-preset', cracking_pressure(params))
         rates = [
-            zeta * 2.0 * math.pi * frequency
+            mode.decay_rate
             for flow in (REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow)
-            for frequency, zeta in oscillatory_modes(case, flow)
+            for mode in modes(case, flow)
         ]
         return min(rates)
 
     def penalty(self, params):
-        return max(0.0, 1.0 - self.value(params) / self.rate) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % below the rate."""
+        return max(0.0, 1.0 - self.value(params) / (self.rate * (1.0 + PENALTY_MARGIN))) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -549,6 +685,8 @@ class CalibrationResult:
     evaluations: int = 0
     wall_time: float = 0.0
     interrupted: bool = False
+    ties: dict = field(default_factory=dict)
+    rank: int = None  # combinations of the fitted parameters the target determines
 
     @property
     def satisfied(self):
@@ -558,8 +696,9 @@ class CalibrationResult:
 class _Objective:
     """Residuals of normalised values u = value / start; remembers the best evaluation."""
 
-    def __init__(self, params, fitted, start, target, constraints, preset, progress):
+    def __init__(self, params, fitted, start, target, constraints, preset, progress, ties=None):
         self.params, self.fitted, self.start = params, fitted, np.asarray(start, dtype=float)
+        self.ties = ties or {}
         self.target, self.constraints, self.preset = target, constraints, preset
         self.progress, self.count, self.best = progress, 0, (math.inf, None)
         self.size = None
@@ -567,7 +706,7 @@ class _Objective:
         self.failure = None  # why the last failed evaluation failed
 
     def parameters(self, u):
-        return apply_values(self.params, self.fitted, u * self.start, self.preset)
+        return apply_values(self.params, self.fitted, u * self.start, self.preset, self.ties)
 
     def use_step_times(self, u):
         """Hand the fitted step times of u to the target."""
@@ -652,6 +791,7 @@ def calibrate(
     diff_step=None,
     max_evaluations=2000,
     progress=None,
+    ties=None,
 ):
     """
     Fit the FitParameters to target from several starts; returns a CalibrationResult.
@@ -660,7 +800,8 @@ def calibrate(
     constraints: residual-adding constraints; checks: judged per start after its fit;
     preset_pressure [Pa]: held during the fit (the preload re-solved) unless fitted;
     starts: number of starts (the first is params itself), spread: log-normal
-    standard deviation of the others, seed: their generator's seed. Ctrl-C ends the
+    standard deviation of the others, seed: their generator's seed; ties: {tied: (fitted
+    parameter it follows, factor)} (fit_ties). Ctrl-C ends the
     fit: the result is then the best evaluation so far, marked interrupted.
     Raises CalibrationError for a flat (not identifiable) parameter or a start the
     model cannot run.
@@ -669,7 +810,9 @@ def calibrate(
     start = np.array(
         [p.start if p.start is not None else _start_value(params, p.name) for p in fitted]
     )
-    objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
+    objective = _Objective(
+        params, fitted, start, target, constraints, preset_pressure, progress, ties
+    )
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
     objective.label = 'identifiability check:'
     try:
@@ -767,6 +910,7 @@ def calibrate(
         constraints=best['checks'],
         starts=[{k: v for k, v in run.items() if k != 'u'} for run in runs],
         interrupted=interrupted,
+        ties=dict(ties or {}),
     )
     if interrupted:
         result.residuals = objective(u)
@@ -799,8 +943,22 @@ def _interrupted(params, fitted, start, target, constraints, objective, u, cost,
 
 
 def _uncertainty(result, target, jacobian, start):
-    """Approximate 95 % intervals and correlations from the Jacobian (normalised units)."""
+    """
+    Approximate 95 % intervals and correlations from the Jacobian (normalised units).
+
+    None of either when the Jacobian's rank (singular values above RANK_TOLERANCE of
+    the largest) is below the number of fitted parameters: the target then pins only
+    result.rank combinations of them (more parameters than measures), not each value.
+    """
     count, fitted = len(result.residuals), len(result.fitted)
+    singular = np.linalg.svd(jacobian, compute_uv=False)
+    result.rank = int(np.sum(singular > RANK_TOLERANCE * singular[0])) if singular[0] > 0 else 0
+    if result.rank < fitted:
+        result.uncertainty_note = (
+            f'no intervals: the target determines {result.rank} combinations of the '
+            f'{fitted} fitted parameters, not each of them'
+        )
+        return
     scale = target.covariance_scale(result.cost, count, fitted)
     information = jacobian.T @ jacobian
     try:

@@ -49,6 +49,11 @@ Ripple much smaller than the band cannot start or end a lobe. The extreme's
 time and value are refined by a least-squares parabola through the lobe
 samples within PEAK_FIT_DEPTH of the extreme, which makes the result nearly
 independent of the sample rate (1 kHz from the node, 10 kHz offline).
+
+A companion to T_s, not one of the six: envelope_decay_rate(), the decay rate of
+the oscillation's envelope, fitted to all its swings. T_s moves in steps of about
+half a period (a swing just inside or just outside the band); the decay rate moves
+continuously with the parameters (docs/measures.md).
 """
 
 from dataclasses import dataclass, field
@@ -61,6 +66,7 @@ MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_m
 # The measures taken relative to the settled final value p_inf (x_inf); T_1 and T_d are
 # times of peaks and need only the peaks inside the window.
 FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
+ENVELOPE_DECAY = 'envelope_decay_per_s'  # T_s's continuous companion (docs/measures.md)
 WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
 PRE_STEP_SPAN = 0.05  # [s] pressure before a bracketed step: its level and noise band
@@ -344,6 +350,44 @@ def _step_measures(t, supply_pressure, main_valve_displacement, t_step, directio
     values['T_d_ms'] = (t_2 - t_1) * 1e3
     details.update(t_2=t_2, p_2=p_inf + direction * e_2)
     return StepMeasures(values, reasons, details)
+
+
+def envelope_decay_rate(t, supply_pressure, main_valve_displacement, t_step, window=WINDOW):
+    """
+    Return (sigma [1/s], None) or (None, reason): the decay rate of the oscillation's envelope.
+
+    The signal is the one T_s is taken from: x where recorded in the window, else p_s.
+    Its deviation e from the settled value (the mean of the window's last 50 ms) swings
+    about zero; every swing that reaches PEAK_BAND of the first overshoot is a lobe (as
+    for the overshoot peaks), of either sign, and its extreme (t_k, |e_k|) is refined by
+    a parabola. sigma is minus the slope of the weighted least-squares line through
+    (t_k, ln |e_k|), weights |e_k| / |e_1| - PEAK_BAND: a swing that grows into the fit
+    or leaves it comes in with weight zero, so sigma has no steps. For a damped
+    oscillation A exp(-sigma t) cos(omega t + phi) the line is exact. Needs three swings.
+    """
+    t = np.asarray(t, dtype=float)
+    x = None if main_valve_displacement is None else np.asarray(main_valve_displacement, float)
+    end = min(t_step + window, t[-1])
+    inside = (t >= t_step) & (t <= end)
+    use_x = x is not None and bool(np.all(np.isfinite(x[inside])))
+    tw = t[inside]
+    signal = (x if use_x else np.asarray(supply_pressure, dtype=float))[inside]
+    settled = tw >= end - SETTLED_SPAN
+    if len(tw) < 3 or not settled.any():
+        return None, 'no settled value in the window'
+    e = signal - float(np.mean(signal[settled]))
+    first = float(np.max(e))
+    extremes = []
+    for sign in (1.0, -1.0):
+        for start, stop in _lobes(sign * e, PEAK_BAND * first) if first > 0.0 else []:
+            if start + int(np.argmax(sign * e[start:stop])) < len(e) - 1:
+                extremes.append(_refined_extreme(tw, sign * e, start, stop))
+    if len(extremes) < 3:
+        return None, 'fewer than three swings of the oscillation inside the window'
+    times, sizes = np.array(extremes).T
+    weights = np.clip(sizes / np.max(sizes) - PEAK_BAND, 0.0, None)
+    slope, _ = np.polyfit(times, np.log(sizes), 1, w=np.sqrt(weights))
+    return float(-slope), None
 
 
 def _set_settling_time(values, reasons, settling):

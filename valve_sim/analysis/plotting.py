@@ -24,7 +24,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
-from valve_sim.analysis.measures import MEASURE_NAMES  # noqa: E402
+from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
 
 
 MEASURE_LABELS = {
@@ -114,6 +114,7 @@ def plot_sensitivity(path, symbol, series, title):
     """
     figure, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
     percents = sorted(series)
+    _envelope_beside_settling_time(axes.flat[MEASURE_NAMES.index('T_s_ms')], series, percents)
     for axis, name in zip(axes.flat, MEASURE_NAMES):
         points = [(p, series[p][name]) for p in percents if series[p][name] is not None]
         if points:
@@ -134,6 +135,18 @@ def plot_sensitivity(path, symbol, series, title):
     figure.suptitle(f'{title}: effect of {symbol}')
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def _envelope_beside_settling_time(axis, series, percents):
+    """On T_s's panel, its continuous companion: the envelope's decay rate, right axis."""
+    points = [(p, series[p].get(ENVELOPE_DECAY)) for p in percents]
+    points = [(p, value) for p, value in points if value is not None]
+    if not points:
+        return
+    twin = axis.twinx()
+    twin.plot(*zip(*points), 's--', color='tab:orange', markersize=4)
+    twin.set_ylabel('envelope decay rate [1/s]', color='tab:orange', fontsize=8)
+    twin.tick_params(axis='y', colors='tab:orange', labelsize=8)
 
 
 def plot_poppet_waveforms(path, waveforms, t_step):

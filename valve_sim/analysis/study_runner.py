@@ -47,7 +47,12 @@ from pathlib import Path
 import sys
 import time
 
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.measures import (
+    ENVELOPE_DECAY,
+    envelope_decay_rate,
+    MEASURE_NAMES,
+    step_measures,
+)
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
@@ -110,7 +115,11 @@ def _failed(row, error):
 
 
 def _measured(case, row, waveforms):
-    """Complete the row of a run: initial state, the six measures and reasons, waveforms."""
+    """
+    Complete the row of a run: initial state, the six measures and reasons, waveforms.
+
+    A case with 'envelope' set gets the envelope's decay rate too (ENVELOPE_DECAY).
+    """
     scenario = case['scenario']
     row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
     row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
@@ -129,6 +138,16 @@ def _measured(case, row, waveforms):
         reasons=measures['reasons'],
         error=None,
     )
+    if case.get('envelope'):  # T_s's continuous companion, for the study (docs/measures.md)
+        decay, reason = envelope_decay_rate(
+            waveforms.time,
+            waveforms['supply_pressure'],
+            waveforms['main_valve_displacement'],
+            scenario.step_time,
+        )
+        row['measures'][ENVELOPE_DECAY] = decay
+        if reason:
+            row['reasons'][ENVELOPE_DECAY] = reason
     if case.get('record'):
         row['waveforms'] = {
             'time': waveforms.time.tolist(),

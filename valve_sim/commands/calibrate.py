@@ -69,6 +69,59 @@ def bounds_value(text):
         raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
 
 
+def range_value(text):
+    """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
+    from argparse import ArgumentTypeError
+
+    try:
+        _, (low, high) = bounds_value(f'range={text}')
+    except ArgumentTypeError:
+        raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
+    if not 0.0 < low < high < float('inf'):
+        raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
+    return low, high
+
+
+def tie_value(text):
+    """'d_v=0.98*d_s' -> ('d_v', 0.98, 'd_s') and 'd_v=d_s' -> ('d_v', 1.0, 'd_s') for --tie."""
+    from argparse import ArgumentTypeError
+
+    tied, separator, rule = text.partition('=')
+    factor, star, source = rule.rpartition('*')
+    try:
+        if not separator or not tied.strip() or not source.strip():
+            raise ValueError
+        return tied.strip(), float(factor) if star else 1.0, source.strip()
+    except ValueError:
+        raise ArgumentTypeError(
+            f'expected NAME=OTHER or NAME=FACTOR*OTHER, got {text!r}'
+        ) from None
+
+
+def positive_length(text):
+    """Parse a length [m] > 0 for --land-margin."""
+    from argparse import ArgumentTypeError
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < 0.1:
+        raise ArgumentTypeError(f'expected a length in m, 0 < M < 0.1, got {text!r}')
+    return value
+
+
+# The design rules of a main stage as real valves are built (docs/model.md), as constraints.
+DESIGN_RULES = (
+    ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
+     'bore, D_1, D_2 <= d_p - 2 M (M in m, e.g. 1e-3)'),
+    ('--main-spring-rate', range_value, 'LO:HI',
+     'constraint: main spring rate k_m within LO:HI N/m (e.g. 1e3:5e3)'),
+    ('--main-spring-preload', range_value, 'LO:HI',
+     'constraint: main spring preload force k_m x_0 within LO:HI N (e.g. 20:100)'),
+)
+
+
 def case_value(text):
     """'d_c=-20,k_p=10' -> {'d_c': -20.0, 'k_p': 10.0} for --relieves."""
     from argparse import ArgumentTypeError
@@ -119,6 +172,13 @@ def add_arguments(parser):
                         help="constraint: this case of the paper's study (preset held; e.g. "
                         'd_c=-20) ends its step test relieving through the main stage; '
                         'repeatable')
+    for flag, kind, metavar, text in DESIGN_RULES:
+        parser.add_argument(flag, type=kind, metavar=metavar, help=text)
+    parser.add_argument('--tie', type=tie_value, action='append', default=[],
+                        metavar='NAME=[FACTOR*]OTHER',
+                        help='NAME takes FACTOR (default 1) times the value of the fitted OTHER '
+                        'at every evaluation (e.g. d_v=0.98*d_s: the pilot seat 2 %% under '
+                        'the rod); repeatable')
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
@@ -229,6 +289,9 @@ def run(args):
         CalibrationError,
         CaseRelieves,
         fit_parameters,
+        fit_ties,
+        LandsInsideBore,
+        MainSpringRange,
         ModesDecay,
         PilotFlowLimit,
         step_time_parameters,
@@ -243,6 +306,7 @@ def run(args):
     step_size = settings['step_size']
     names = [name for name in args.fit.split(',') if name.strip()]
     fitted = fit_parameters(names, dict(args.bounds), params)
+    ties = fit_ties(args.tie, fitted)
     target = _target(args, step_size, signal_map)
     fitted += step_time_parameters(target)  # steps between coarse flow samples: fitted too
     constraints = []
@@ -251,6 +315,11 @@ def run(args):
     if args.table2_decays:
         constraints.append(ModesDecay())
     constraints += [CaseRelieves(changes) for changes in args.relieves]
+    if args.land_margin is not None:
+        constraints.append(LandsInsideBore(args.land_margin))
+    if args.main_spring_rate or args.main_spring_preload:
+        constraints.append(MainSpringRange(args.main_spring_rate or (0.0, math.inf),
+                                           args.main_spring_preload or (0.0, math.inf)))
     checks = [StudyRelieves()] if args.study_relieves else []
     progress = None if args.quiet else lambda line: print(line, file=sys.stderr, flush=True)
     if progress:
@@ -271,6 +340,7 @@ def run(args):
         seed=args.seed,
         tolerance=args.tolerance,
         progress=progress,
+        ties=ties,
     )
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
@@ -305,10 +375,19 @@ def yaml_number(value):
 
 
 def write_parameter_file(path, result, settings, command):
-    """calibrated.yaml: every model parameter and setting; fitted ones marked."""
+    """calibrated.yaml: every model parameter and setting; fitted and derived ones marked."""
+    from valve_sim.analysis.calibration import BEARING_INPUTS
+    from valve_sim.core.bearing import COEFFICIENTS
     from valve_sim.core.steady_state import cracking_pressure
 
     fitted = {p.name for p in result.fitted if p.unit != 's' or p.name in result.parameters}
+    marks = dict.fromkeys(fitted, '   # fitted')
+    marks.update({
+        tied: f'   # = {factor:g} {source} (tied)'
+        for tied, (source, factor) in result.ties.items()
+    })
+    if (fitted | set(result.ties)) & set(BEARING_INPUTS):
+        marks.update(dict.fromkeys(COEFFICIENTS, '   # fit of the bearing (core.bearing)'))
     lines = [
         f'# Written by: {command}',
         f'# Fitted: {", ".join(sorted(fitted))}; '
@@ -319,8 +398,7 @@ def write_parameter_file(path, result, settings, command):
         '  ros__parameters:',
     ]
     for name, value in result.parameters.items():
-        mark = '   # fitted' if name in fitted else ''
-        lines.append(f'    {name}: {yaml_number(value)}{mark}')
+        lines.append(f'    {name}: {yaml_number(value)}{marks.get(name, "")}')
     for name, value in settings.items():
         lines.append(f'    {name}: {yaml_number(value)}')
     path.write_text('\n'.join(lines) + '\n')
@@ -355,6 +433,7 @@ def report_document(result, target, args, command):
         'correlations': None
         if result.correlations is None
         else np.round(result.correlations, 4).tolist(),
+        'determined_combinations': result.rank,
         'cost': result.cost,
         'constraints': result.constraints,
         'starts': result.starts,

@@ -23,6 +23,7 @@ No ROS imports here: the node turns these specs into ParameterDescriptors.
 """
 
 from dataclasses import dataclass
+import logging
 import math
 from pathlib import Path
 import re
@@ -192,15 +193,6 @@ PARAMETERS = (
         1e-4,
         0.2,
         'main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)',
-        OURS,
-    ),
-    ParameterSpec(
-        'swept_inner_diameter',
-        'd_i',
-        'm',
-        0.0,
-        0.2,
-        'inner diameter of the supply-side swept annulus (A_m1 = pi/4 (d_p^2 - d_i^2))',
         OURS,
     ),
     ParameterSpec(
@@ -456,14 +448,34 @@ SETTING_SPECS = {spec.name: spec for spec in SETTINGS}
 SYMBOLS = {spec.symbol: spec.name for spec in PARAMETERS}
 
 # Pairs (larger, smaller) that must hold strictly: a land's outer diameter exceeds
-# its inner one, and the lands and the swept annulus lie inside the valve face.
+# its inner one, and the lands lie inside the valve face.
 ORDERED_PAIRS = (
     ('first_throttle_outer_diameter', 'first_throttle_inner_diameter'),
     ('second_throttle_outer_diameter', 'second_throttle_inner_diameter'),
-    ('main_valve_back_diameter', 'swept_inner_diameter'),
     ('main_valve_back_diameter', 'first_throttle_outer_diameter'),
     ('main_valve_back_diameter', 'second_throttle_outer_diameter'),
 )
+
+
+# Parameters that no longer exist, by name and symbol, and why. A parameter file that
+# still sets one (an older calibrated.yaml) is read with it ignored and a warning logged;
+# naming one anywhere else (--set, a live change) is an error that says why.
+RETIRED = {
+    'swept_inner_diameter': (
+        'the swept area A_m1 of Eq. (1) is now the supply force area alpha_s, derived from '
+        'd_p, D_1 and d_1 (docs/model.md, "Areas: what pushes, what sweeps")'
+    ),
+}
+RETIRED_SYMBOLS = {'d_i': 'swept_inner_diameter'}
+log = logging.getLogger(__name__)
+
+
+def retired_reason(name):
+    """Say why name (ROS name or symbol) is no parameter any more; None if it is not retired."""
+    name = RETIRED_SYMBOLS.get(name, name)
+    if name in RETIRED:
+        return f"parameter '{name}' no longer exists: {RETIRED[name]}"
+    return None
 
 
 def resolve_name(name):
@@ -472,7 +484,17 @@ def resolve_name(name):
         return name
     if name in SYMBOLS:
         return SYMBOLS[name]
+    reason = retired_reason(name)
+    if reason:
+        raise ParameterError(reason)
     raise ParameterError(f"unknown parameter '{name}'; known: {', '.join(SPECS)}")
+
+
+def without_retired(raw, source):
+    """Drop from raw the retired parameters a file sets, each with a logged warning."""
+    for name in [n for n in raw if retired_reason(n)]:
+        log.warning(f'{source}: ignoring {name} = {raw.pop(name)!r}: {retired_reason(name)}')
+    return raw
 
 
 def check_value(name, value):
@@ -629,14 +651,15 @@ def load_parameters(path=None, overrides=None, injection=None, namespace=''):
     --params-file for the node), its sections applied as they apply to valve_node in
     namespace (read_parameter_file); the rest keep their reference values. Run-time
     settings in either file (SETTINGS: step_size, publish_rate, ...) are checked
-    and returned separately; any other key is an error. overrides (name or paper
+    and returned separately; a retired parameter (RETIRED) in the file is ignored with a
+    logged warning; any other key is an error. overrides (name or paper
     symbol -> value) are applied last. Fault and sensor settings (fault.*, sensor.*,
     fault_schedule) go into the dict injection, unchecked; without one they are an
     error (the command does not use them). Returns (params, settings).
     """
     raw = read_parameter_file(config_path('reference.yaml'))
     if path is not None:
-        raw.update(read_parameter_file(path, namespace))
+        raw.update(without_retired(read_parameter_file(path, namespace), path))
     raw.update(overrides or {})
     for name in [n for n in raw if n.startswith(INJECTION_PREFIXES) or n == FAULT_SCHEDULE]:
         if injection is None:

@@ -84,6 +84,7 @@ from valve_sim.core.parameters import (
     ParameterError,
     PARAMETERS,
     PRESET_PRESSURE,
+    retired_reason,
     SETTING_SPECS,
     SETTINGS,
     SPECS,
@@ -246,6 +247,11 @@ class ReliefValveNode(Node):
         """
         reference, reference_settings = load_parameters()
         defaults = {**reference, **reference_settings}
+        # rclpy drops an undeclared override silently: say so for a retired parameter that
+        # a parameter file (an older calibrated.yaml) still sets.
+        for name in filter(retired_reason, self._parameter_overrides):
+            self.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
+                                      f'{retired_reason(name)}')
         values = {
             spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
             for spec in PARAMETERS + SETTINGS
@@ -313,7 +319,7 @@ class ReliefValveNode(Node):
             if p.name in VALVE_SPECS
             else None
             if self.has_parameter(p.name)
-            else undeclared_reason(p.name, VALVE_SPECS)
+            else retired_reason(p.name) or undeclared_reason(p.name, VALVE_SPECS)
             for p in parameter_list
         )
         reason = next(filter(None, problems), None)
