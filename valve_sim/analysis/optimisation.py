@@ -315,6 +315,8 @@ def search(problem, backend, folder, population, generations, resume=False,
 
 def pareto_front(points):
     """Return the indices of the points (rows to minimise) that no other point dominates."""
+    if not len(points):
+        return []
     points = np.asarray(points, dtype=float).reshape(len(points), -1)
     return [
         i for i, point in enumerate(points)

@@ -158,6 +158,10 @@ def print_outcome(problem, summary):
         mark = ' *' if entry['chosen'] else ''
         print(f"{entry['label']:<15}" + ''.join(f'{v:>14.5g}' for v in cells)
               + f'{_yield_text(result):>28}{mark}')
+    if not summary['pareto']:
+        print('no candidate meets the limits and the required yield: loosen --limits or '
+              '--yield, or widen --design')
+        return
     if summary['chosen'] is None:
         print('no Pareto design meets the required yield on confirmation')
         return
@@ -222,4 +226,4 @@ def run(args):
         ])
     print_outcome(problem, summary)
     print(f'wrote {out}/pareto.csv, {out}/pareto.json, {out}/params/ and figures')
-    return 0
+    return 0 if summary['chosen'] is not None else 1
