@@ -26,7 +26,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from valve_sim.core.fault_schedule import load_schedule, Schedule
-from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
+from valve_sim.core.faults import (
+    at_supply_limit,
+    FAULT_DOUBLE_SPECS,
+    FAULT_NAMES,
+    FAULT_SWITCH_SPECS,
+    HEALTHY,
+)
 from valve_sim.core.model import P_C, P_S
 from valve_sim.core.parameters import FAULT_SCHEDULE
 from valve_sim.core.sensors import (
@@ -48,7 +54,6 @@ FAULT_STATUS_QOS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
-OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
 
 
 def declare_fault_parameters(node):
@@ -140,7 +145,7 @@ class FaultInjection:
 
     def at_supply_limit(self, state, limit):
         """Return whether p_s [Pa gauge] of state has reached the supply's limit [Pa]."""
-        return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= state[P_S])
+        return at_supply_limit(state[P_S], limit)
 
     def status_message(self, faults, stamp, name, hardware_id):
         """
