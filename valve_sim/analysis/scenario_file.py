@@ -126,6 +126,10 @@ def read_document(path):
         return yaml.load(Path(path).read_text(), Loader=_RosYamlLoader)
     except OSError as error:
         raise InputFileError(f'cannot read scenario {path}: {error.strerror}') from error
+    except yaml.MarkedYAMLError as error:  # one line: the problem and where
+        mark = error.problem_mark
+        raise InputFileError(f'scenario {path} is not valid YAML: {error.problem} at line '
+                             f'{mark.line + 1}, column {mark.column + 1}') from error
     except (yaml.YAMLError, UnicodeDecodeError) as error:
         raise InputFileError(f'scenario {path} is not valid YAML: {error}') from error
 

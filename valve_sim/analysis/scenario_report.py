@@ -17,8 +17,8 @@ A bench scenario's verdict: report.txt, report.json, junit.xml and scenario.png.
 
 Each expectation's limit is one check with what was measured (valve_sim.analysis.
 expectations.Check). The JUnit file has one test case per check (a failure with the
-measured value for one that does not hold; one error case for a run that could not
-complete), so any CI shows the result. The figure draws p_s, the valve positions and
+measured value for one that does not hold, the measured value as its system-out for
+one that holds; one error case for a run that could not complete), so any CI shows the result. The figure draws p_s, the valve positions and
 the inlet flow over the run, the events and the limits of the checks that bound a
 signal.
 """
@@ -100,6 +100,9 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
             failure = ElementTree.SubElement(
                 case, 'failure', message=f'measured {check.shown}, expected {check.limit}')
             failure.text = check.detail
+        else:  # CI shows it beside the case: what a passing check measured
+            ElementTree.SubElement(case, 'system-out').text = (
+                f'measured {check.shown}, expected {check.limit} ({check.detail})')
     if error is not None:
         case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
                                       name='run', time=f'{wall_s:.3f}')
