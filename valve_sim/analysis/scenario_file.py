@@ -43,7 +43,12 @@ from pathlib import Path
 import numpy as np
 from valve_sim.analysis.expectations import parse_expectations
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.fault_schedule import check_change, parse_schedule, tick_index
+from valve_sim.core.fault_schedule import (
+    check_change,
+    FaultEvent,
+    parse_schedule,
+    tick_index,
+)
 from valve_sim.core.input_profile import parse_profile, ProfileError
 from valve_sim.core.parameters import (
     _RosYamlLoader,
@@ -216,6 +221,27 @@ def _parameter_value(name, value, key):
     return value
 
 
+def ros_name(name):
+    """Return valve_node's name of a parameter given by ROS name or paper symbol."""
+    if name.startswith(INJECTION_PREFIXES) or name in SETTING_SPECS or (
+            name == PRESET_PRESSURE.name):
+        return name
+    return resolve_name(name)
+
+
+def start_parameter(name, value, key):
+    """Return (ROS name, value) of a parameter valve_node starts with; ProfileError at key."""
+    try:
+        return ros_name(name), _parameter_value(name, value, key)
+    except ParameterError as error:
+        raise ProfileError(key, str(error)) from None
+
+
+def live_change(name, value):
+    """Return (ROS name, checked value) of a change while valve_node runs; ParameterError."""
+    return ros_name(name), _event_value(name, value)
+
+
 def _valve(document, folder):
     """(params_file, {ROS name: value}, params, settings) of the 'valve' section, checked."""
     if not isinstance(document, dict):
@@ -229,15 +255,8 @@ def _valve(document, folder):
     given = document.get('parameters') or {}
     if not isinstance(given, dict):
         raise ProfileError('valve.parameters', 'expected a mapping of parameter names to values')
-    parameters = {}
-    for name, value in given.items():
-        key = f'valve.parameters.{name}'
-        try:
-            ros_name = name if name.startswith(INJECTION_PREFIXES) or name in SETTING_SPECS or (
-                name == PRESET_PRESSURE.name) else resolve_name(name)
-            parameters[ros_name] = _parameter_value(name, value, key)
-        except ParameterError as error:
-            raise ProfileError(key, str(error)) from None
+    parameters = dict(start_parameter(name, value, f'valve.parameters.{name}')
+                      for name, value in given.items())
     injection = {}
     try:
         params, settings = load_parameters(params_file, dict(parameters), injection)
@@ -254,8 +273,7 @@ def _event_value(name, value):
         return check_change(name, value)
     if name in FIXED:
         raise ParameterError(f"'{name}' cannot change while a scenario runs: {FIXED[name]}")
-    known = name in SETTING_SPECS or name == PRESET_PRESSURE.name
-    key_name = name if known else resolve_name(name)
+    key_name = ros_name(name)
     try:
         return check_value(key_name, _parameter_value(key_name, value, name))
     except ProfileError as error:
@@ -266,12 +284,10 @@ def _events(items, path):
     if not isinstance(items, list):
         raise ProfileError('events', 'expected a list of {t: TIME, set: {NAME: VALUE}}')
     events = parse_schedule({'events': items}, 'events', check=_event_value)
-    for event in events:  # paper symbols to ROS names, as valve_node's services take them
-        for name in list(event.changes):
-            if not (name.startswith(INJECTION_PREFIXES) or name in SETTING_SPECS
-                    or name == PRESET_PRESSURE.name or name in SPECS):
-                event.changes[resolve_name(name)] = event.changes.pop(name)
-    return events
+    # paper symbols to ROS names, as valve_node's services take them
+    return [FaultEvent(event.time_ns, {ros_name(name): value
+                                       for name, value in event.changes.items()})
+            for event in events]
 
 
 def _check_inputs(scenario, max_inlet_flow):
