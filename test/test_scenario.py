@@ -245,3 +245,46 @@ def test_scenario_check_says_the_problem_in_one_line_and_exits_1(tmp_path):
 def test_the_shipped_examples_check(name):
     scenario = load_scenario(EXAMPLES / f'{name}.yaml')
     assert scenario.name == name and scenario.expectations
+
+
+def test_input_profiles_sample_steps_ramps_sines_and_a_csv_column(tmp_path):
+    """Each kind at the start of the ticks it acts on; a recorded column interpolated."""
+    from valve_sim.core.input_profile import parse_profile
+    from valve_sim.core.quantities import FLOW
+
+    (tmp_path / 'rig.csv').write_text('t,q\n0,10\n0.1,20\n0.2,30\n')
+    profile = parse_profile(
+        {'initial': '6 L/min', 'changes': [
+            {'at': 0.1, 'step': '12 L/min'},
+            {'at': 0.2, 'ramp': '24 L/min', 'over': 0.1},
+            {'at': 0.4, 'sine': {'amplitude': '6 L/min', 'frequency': 5}, 'over': 0.1},
+            {'at': 0.6, 'series': {'csv': 'rig.csv', 'time': 't', 'value': 'q',
+                                   'unit': 'L/min'}}]},
+        'inputs.inlet_flow', FLOW, tmp_path)
+    times = [0.0, 0.099, 0.1, 0.25, 0.3, 0.45, 0.55, 0.65, 0.9]
+    litres = profile.sample(times) * 60000
+    assert litres == pytest.approx([6, 6, 12, 18, 24, 30, 24, 15, 30])
+
+
+def test_expectations_judge_a_series_with_what_they_measured():
+    """never_below, steady with its window, a step by number that is not there, no_alarm."""
+    import numpy as np
+    from valve_sim.analysis.expectations import evaluate, parse_expectations
+    from valve_sim.analysis.tick_series import TickSeries
+
+    rows = {1_000_000 * k: {'supply_pressure': 7e6 + (1e5 if k >= 100 else 0.0),
+                            'main_valve': 1e-5, 'inlet_flow': 1e-4 if k < 100 else 2e-4}
+            for k in range(201)}
+    series = TickSeries.from_rows(rows)
+    checks = evaluate(parse_expectations([
+        {'never_below': {'signal': 'supply_pressure', 'value': '7 MPa'}},
+        {'never_below': {'signal': 'supply_pressure', 'value': '7.05 MPa', 'to': 0.1}},
+        {'steady': {'signal': 'supply_pressure', 'flow': 2e-4, 'min': '7.09 MPa',
+                    'max': '7.11 MPa', 'window': 0.05}},
+        {'steady': {'signal': 'supply_pressure', 'flow': 3e-4, 'max': '8 MPa'}},
+        {'measures': {'step': 2, 'T_s_ms': {'max': 500}}},
+        {'no_alarm': {}},
+    ]), series, np.zeros(len(series)))
+    assert [check.passed for check in checks] == [True, False, True, False, False, True]
+    assert checks[1].measured == 7e6 and checks[2].measured == pytest.approx(7.1e6)
+    assert 'never' in checks[3].detail and 'no such step' in checks[4].detail
