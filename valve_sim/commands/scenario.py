@@ -16,14 +16,16 @@
 Bench tests as files: run a scenario on valve_node in lockstep and judge it, or check one.
 
 `valve-sim scenario run FILE.yaml` starts valve_node and analyser_node over DDS (in
-ROS_DOMAIN_ID if set, else a domain of its own), drives /clock tick by tick as fast as
-the nodes go (--rate: at most that many times real time), feeds the scenario's inputs
+ROS_DOMAIN_ID if set, else a domain of its own; with --wait-topic in the environment's
+domain as it is, where the user's other nodes run), drives /clock tick by tick as fast
+as the nodes go (--rate: at most that many times real time), feeds the scenario's inputs
 and events, and judges its expectations on the recording. Into --out it writes the bag,
 report.txt, report.json, scenario.png, junit.xml and both nodes' logs; it exits 0 only
 if every expectation holds. `valve-sim scenario check FILE.yaml` reads and checks a file
 without running it. The file format: docs/scenarios.md.
 """
 
+import os
 from pathlib import Path
 import time
 
@@ -94,7 +96,11 @@ def run(args):
     stamp = time.strftime('%Y%m%d-%H%M%S')
     folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{scenario.name}_{stamp}'
     folder = make_folder(folder).resolve()
-    progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
+    if args.wait_topic:  # the user's nodes are in the environment's domain: join them
+        domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')
+    else:
+        domain = claim_domain()
+    progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={domain}')
     record, paths = run_and_report(scenario, folder, args.rate, args.wait_topic, args.junit,
                                    progress)
     print()

@@ -45,6 +45,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
+from valve_sim.core.errors import IncompleteRunError
 from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
@@ -64,7 +65,7 @@ QUEUE_DEPTH = 1000
 RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class LateInputError(RuntimeError):
+class LateInputError(IncompleteRunError):
     """A tick applied another inlet flow than the one published before it."""
 
 
@@ -87,7 +88,8 @@ class WaitTopic:
         self.topic = topic
         self.stamped = bool(fields) and fields[0] == ('header', 'std_msgs/Header')
         self.latest_ns, self.count, self.count_before = None, 0, 0
-        node.create_subscription(message_type, topic, self._on_message, RELIABLE, raw=True)
+        self.subscription = node.create_subscription(message_type, topic, self._on_message,
+                                                     RELIABLE, raw=True)
 
     def _on_message(self, data):
         self.count += 1
@@ -132,13 +134,13 @@ class Lockstep:
         self.clock_ns = None  # last /clock published
         self.flow = None  # last flow published [m^3/s]: what the next tick applies
         self._paced_from = None  # (wall time, clock) pacing starts from
-        self.node.create_subscription(JointState, HANDSHAKE, self._on_handshake, RELIABLE,
-                                      raw=True)
+        self.subscriptions = [self.node.create_subscription(
+            JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True)]
         for topic in record_topics:
             if topic != HANDSHAKE:
-                self.node.create_subscription(
+                self.subscriptions.append(self.node.create_subscription(
                     message_class(TOPIC_TYPES[topic]), topic,
-                    lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True)
+                    lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True))
         self.on_state = on_state if HANDSHAKE in record_topics else None
 
     def _on_handshake(self, data):
@@ -154,11 +156,15 @@ class Lockstep:
         """
         Wait until the valve hears /clock and inlet_flow and its services answer.
 
-        Also until each wait topic has a publisher (its type is taken from the graph).
+        Also until each wait topic has a publisher (its type is taken from the graph), and
+        until each subscription here is matched with its publisher: a state published
+        before that would be lost, and the lockstep would wait for it in vain.
         """
         self.spin_until(lambda: self.clock.get_subscription_count() > 0
                         and self.inlet.get_subscription_count() > 0,
                         'valve_node subscribing /clock and inlet_flow', timeout)
+        self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subscriptions),
+                        'valve_node publishing its states to this driver', timeout)
         if not self.parameters.wait_for_services(timeout_sec=timeout):
             raise TimeoutError(f'no parameter services of valve_node within {timeout:g} s')
         for topic in wait_topics:
@@ -166,7 +172,10 @@ class Lockstep:
             self.spin_until(lambda: self.node.count_publishers(name) > 0,
                             f'a publisher of the wait topic {name}', timeout)
             types = dict(self.node.get_topic_names_and_types())[name]
-            self.wait_topics.append(WaitTopic(self.node, name, types[0]))
+            topic = WaitTopic(self.node, name, types[0])
+            self.spin_until(lambda: topic.subscription.get_publisher_count() > 0,
+                            f'the wait topic {name} matched', timeout)
+            self.wait_topics.append(topic)
 
     def start(self, start_ns=START_NS, period_ns=1_000_000):
         """
