@@ -39,7 +39,6 @@ import json
 import os
 from pathlib import Path
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -161,8 +160,8 @@ def main():
             walls['lockstep'].append(lockstep_run(scenario, valve, folder / 'lockstep',
                                                   'valve_node'))
             walls['scenario'].append(scenario_run(scenario, folder / 'scenario'))
-            print(f'run {repeat + 1}: ' + ', '.join(f'{kind} {values[-1]:.3f} s'
-                                                  for kind, values in walls.items()), flush=True)
+            runs = ', '.join(f'{kind} {values[-1]:.3f} s' for kind, values in walls.items())
+            print(f'run {repeat + 1}: {runs}', flush=True)
     results = {kind: summary(values, scenario) for kind, values in walls.items()}
     tick = {kind: result['per_tick_ms'] for kind, result in results.items()}
     results['split_per_tick_ms'] = {

@@ -18,9 +18,9 @@ A bench scenario's verdict: report.txt, report.json, junit.xml and scenario.png.
 Each expectation's limit is one check with what was measured (valve_sim.analysis.
 expectations.Check). The JUnit file has one test case per check (a failure with the
 measured value for one that does not hold, the measured value as its system-out for
-one that holds; one error case for a run that could not complete), so any CI shows the result. The figure draws p_s, the valve positions and
-the inlet flow over the run, the events and the limits of the checks that bound a
-signal.
+one that holds; one error case for a run that could not complete), so any CI shows
+the result. The figure draws p_s, the valve positions and the inlet flow over the
+run, the events and the limits of the checks that bound a signal.
 """
 
 from datetime import datetime, timezone

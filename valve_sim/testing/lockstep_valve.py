@@ -108,12 +108,12 @@ class LockstepValve:
 
     @property
     def time(self):
-        """Model time [s] since the first state (t = 0)."""
+        """Return the model time [s] since the first state (t = 0)."""
         return (self._driver.time_ns - START_NS) / NS_PER_S
 
     @property
     def period(self):
-        """The tick period [s] (valve_node's publish_rate)."""
+        """Return the tick period [s] (valve_node's publish_rate)."""
         return self._driver.period_ns / NS_PER_S
 
     def advance(self, seconds):
@@ -145,7 +145,7 @@ class LockstepValve:
         self._driver.set_parameters(resolved)
 
     def inject(self, fault, value=True):
-        """Set a fault (docs/faults.md), e.g. inject('main_valve_stuck') or a fraction."""
+        """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
@@ -155,12 +155,12 @@ class LockstepValve:
 
     @property
     def state(self):
-        """The latest state: {signal: value} of tick_series.SIGNALS (SI, gauge pressures)."""
+        """Return the latest state: {signal: value} of tick_series.SIGNALS (SI, gauge [Pa])."""
         return dict(self._latest)
 
     @property
     def series(self):
-        """Every state so far as a TickSeries (time [s] from the first state)."""
+        """Return every state so far as a TickSeries (time [s] from the first state)."""
         return TickSeries.from_rows(self._rows, START_NS)
 
     def measures(self, at=None):

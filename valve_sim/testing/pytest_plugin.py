@@ -37,7 +37,7 @@ def pytest_configure(config):
 
 @pytest.fixture
 def lockstep_valve(request, tmp_path):
-    """A valve_node in lockstep for one test (valve_sim.testing.LockstepValve); stopped after."""
+    """Start a valve_node in lockstep for one test (a LockstepValve); stop it after."""
     from valve_sim.testing.lockstep_valve import LockstepValve
 
     mark = request.node.get_closest_marker('lockstep_valve')
