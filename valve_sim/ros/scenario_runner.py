@@ -19,8 +19,10 @@ run_scenario() starts both nodes (valve_node on use_sim_time with the scenario's
 parameters, analyser_node recording into the output folder), waits until the analyser
 records every topic of the valve, and drives the valve tick by tick (Lockstep): the
 inlet flow of each tick published before it, each event's parameter changes applied
-after the state of the tick it falls on. Then it stops both nodes with SIGINT, reads
-the bag the analyser closed, checks that it holds every state of the run, and judges
+after the state of the tick it falls on. Then it waits until the analyser reports
+(on /diagnostics) that it has recorded every state, since in lockstep the valve runs
+ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
+analyser closed, checks that it holds every state of the run, and judges
 the expectations on it (valve_sim.analysis.expectations). The outputs are written by
 valve_sim.analysis.scenario_report.
 """
@@ -45,6 +47,7 @@ READY_TIMEOUT = 180.0  # [s] start-up (a cold kernel compile on a loaded machine
 ANALYSER_QUEUE_DEPTH = 100_000
 FLOW_REPUBLISH = 0.02  # [s] of model time: the flow is published again so, as a bench does
 PROGRESS_INTERVAL = 2.0  # [s] of wall time between progress lines
+DRAIN_TIMEOUT = 120.0  # [s] for analyser_node to record the states still on their way
 
 
 @dataclass
@@ -87,24 +90,27 @@ def start_nodes(scenario, folder):
         analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient})
 
 
-def _analyser_recording(driver, processes):
-    """Spin until analyser_node reports that it records every topic of RECORDED."""
-    from diagnostic_msgs.msg import DiagnosticArray
+class AnalyserStatus:
+    """analyser_node's latest recording status on /diagnostics, heard by the driver's node."""
 
-    recording = set()
-    wanted = {driver.node.resolve_topic_name(topic) for topic in RECORDED}
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
 
-    def on_status(array):
+        self.values = {}
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_status, 10)
+
+    def _on_status(self, array):
         for status in array.status:
             if status.name == f'{ANALYSER}: {RECORDING_TASK}':
-                recording.update(pair.key[len('qos '):] for pair in status.values
-                                 if pair.key.startswith('qos '))
+                self.values = {pair.key: pair.value for pair in status.values}
 
-    subscription = driver.node.create_subscription(DiagnosticArray, '/diagnostics', on_status,
-                                                   10)
-    driver.spin_until(lambda: wanted <= recording, 'analyser_node recording every topic',
-                      READY_TIMEOUT)
-    driver.node.destroy_subscription(subscription)
+    def recording(self, topics):
+        """Whether the analyser records each of topics (full names)."""
+        return all(f'qos {topic}' in self.values for topic in topics)
+
+    def recorded(self, topics, count):
+        """Whether the analyser has recorded at least count messages of each of topics."""
+        return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
 
 def drive(scenario, driver, progress):
@@ -170,10 +176,20 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         driver.connect(wait_topics, READY_TIMEOUT)
-        _analyser_recording(driver, processes)
+        status = AnalyserStatus(driver.node)
+        driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
+                                                       RECORDED)),
+                          'analyser_node recording every topic', READY_TIMEOUT)
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress)
+        # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
+        # lose the states still on their way. Its status (once a second) says when it has all.
+        progress('waiting for analyser_node to record every state')
+        driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
+                                                      TICK_TOPICS), scenario.ticks + 1),
+                          f'analyser_node recording all {scenario.ticks + 1} states',
+                          DRAIN_TIMEOUT)
     finally:
         if driver is not None:
             driver.close()
