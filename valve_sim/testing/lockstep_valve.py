@@ -31,9 +31,10 @@ this claims (valve_sim.ros.isolation): a node of the test that talks to the valv
 from contextlib import contextmanager
 from pathlib import Path
 import tempfile
+import time
 
 from valve_sim.analysis.scenario_file import live_change, start_parameter
-from valve_sim.analysis.tick_series import TickSeries
+from valve_sim.analysis.tick_series import SIGNALS, TickSeries
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
 from valve_sim.core.input_profile import ProfileError
@@ -49,6 +50,7 @@ from valve_sim.ros.scenario_runner import ros_value
 
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
+STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
 
 
 class LockstepValve:
@@ -93,6 +95,7 @@ class LockstepValve:
             self._driver.connect(timeout=START_TIMEOUT)
             self._driver.set_flow(flow)
             self._driver.start(START_NS)
+            self._await_row(START_NS)
         except BaseException:
             self.close()
             raise
@@ -123,7 +126,19 @@ class LockstepValve:
             raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
         for _ in range(ticks):
             self._driver.tick()
+        self._await_row(self._driver.time_ns)
         return self.time
+
+    def _await_row(self, time_ns):
+        """
+        Spin until every topic's message of the tick at time_ns has come (or STRAGGLER_WAIT).
+
+        The handshake is the last topic published, but topics may arrive out of order;
+        a pressure sensor in dropout publishes nothing, hence the bound.
+        """
+        deadline = time.monotonic() + STRAGGLER_WAIT
+        while len(self._rows.get(time_ns, ())) < len(SIGNALS) and time.monotonic() < deadline:
+            self._driver.executor.spin_once(timeout_sec=0.01)
 
     def set_flow(self, flow):
         """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
