@@ -115,7 +115,7 @@ def test_the_same_scenario_twice_records_the_same_messages_bit_for_bit(stuck_val
 
 
 def test_a_failing_expectation_fails_the_run_and_its_junit_case(tmp_path, valve_node_kernels):
-    """The paper's step with two expectations it cannot meet: exit 1, those two fail in JUnit."""
+    """The paper's step with two expectations it cannot meet, at half speed: exit 1, 2 failures."""
     scenario = tmp_path / 'paper_step_too_strict.yaml'
     scenario.write_text((EXAMPLES / 'paper_step.yaml').read_text()
                         + '  - never_above: {signal: supply_pressure, value: 7.1 MPa}\n'
@@ -123,7 +123,7 @@ def test_a_failing_expectation_fails_the_run_and_its_junit_case(tmp_path, valve_
     junit = tmp_path / 'ci' / 'scenario.xml'
     junit.parent.mkdir()
     completed = scenario_command('run', str(scenario), '--out', str(tmp_path / 'out'),
-                                 '--junit', str(junit), cwd=tmp_path)
+                                 '--junit', str(junit), '--rate', '0.5', cwd=tmp_path)
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert 'FAILED, 10 of 12 checks hold' in completed.stdout
     assert not (tmp_path / 'out' / 'junit.xml').exists()  # --junit put it elsewhere
@@ -135,6 +135,7 @@ def test_a_failing_expectation_fails_the_run_and_its_junit_case(tmp_path, valve_
     assert failures['overpressure alarm within 0.5 s after 0.25 s'].startswith('measured none')
     report = json.loads((tmp_path / 'out' / 'report.json').read_text())
     assert report['passed'] is False
+    assert report['run']['real_time_factor'] <= 0.5 * 1.001  # --rate 0.5: half speed at most
     ceiling_name = 'supply_pressure never above 7.1 MPa (the whole run)'
     peak = next(c for c in report['checks'] if c['name'] == ceiling_name)
     assert peak['measured'] > 7.1e6 and not peak['passed']  # SI in JSON, gauge [Pa]
