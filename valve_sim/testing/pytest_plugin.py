@@ -15,7 +15,9 @@
 """
 The pytest fixture `lockstep_valve`: a LockstepValve per test, its log in the test's tmp_path.
 
-In a conftest.py:  pytest_plugins = ['valve_sim.testing.pytest_plugin']
+In the root conftest.py of a suite:  pytest_plugins = ['valve_sim.testing.pytest_plugin']
+(in a test module it works too, but pytest reads the module's marks before it loads
+the plugin, and warns that the mark is unknown).
 
     @pytest.mark.lockstep_valve(parameters={'supply_pressure_limit': '21 MPa'})
     def test_relief(lockstep_valve):
