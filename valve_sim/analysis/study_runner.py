@@ -49,6 +49,14 @@ import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
+from valve_sim.core.input_files import (
+    InputFileError,
+    json_lines,
+    parse_json,
+    shown,
+    STUDY_RESULTS,
+    STUDY_ROW,
+)
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
@@ -57,6 +65,15 @@ from valve_sim.core.steady_state import cracking_pressure, preset_preload
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
 TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
 MAX_BATCH = 64
+
+
+# The numbers a row may hold besides its measures (evaluate_batch, _measured).
+NUMBER_KEYS = (
+    'pilot_spring_preload',
+    'cracking_pressure',
+    'initial_supply_pressure',
+    'initial_main_valve_displacement',
+)
 
 
 def evaluate_case(case):
@@ -154,29 +171,71 @@ def read_results(path, study):
 
     A missing file gives {}; a file of another study raises StudyError. Every row
     ends with a newline: a torn last line (the process died while writing it) is
-    not a row, and drop_torn_tail() removes it before new rows are appended.
+    not a row, and drop_torn_tail() removes it before new rows are appended. The file
+    is read once, within input_files' limits (STUDY_RESULTS, each line STUDY_ROW), and
+    every row is checked (check_row): a damaged one is a StudyError naming its line.
     """
     path = Path(path)
-    if not path.exists():
+    if not os.path.lexists(path):
         return {}
-    lines = path.read_text().split('\n')[:-1]
-    try:
-        header = json.loads(lines[0]) if lines else {}
-    except json.JSONDecodeError:
-        header = {}
-    if header.get('study') != study:
+    lines = json_lines(path, STUDY_RESULTS, STUDY_ROW)
+    header = {}
+    for number, text in lines:
+        try:
+            header = parse_json(text, STUDY_ROW, f'{path}, line {number},')
+        except InputFileError:
+            pass
+        break
+    if not isinstance(header, dict) or header.get('study') != study:
         raise StudyError(
             f'{path} holds results of a different study (other parameters, samples or '
             'seed); give another --out or run without --resume to start afresh'
         )
     rows = {}
-    for number, line in enumerate(lines[1:], 2):
+    for number, text in lines:
+        where = f'{path}, line {number}'
         try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            raise StudyError(f'{path}, line {number}: not a JSON row') from None
+            row = parse_json(text, STUDY_ROW, where)
+            check_row(row)
+        except (InputFileError, ValueError) as error:
+            raise StudyError(
+                f'{where}: not a row of this study ({error}); delete that line to compute '
+                'the run again, or run without --resume to start afresh'
+            ) from None
         rows.setdefault(row['index'], row)
     return rows
+
+
+def check_row(row):
+    """Raise ValueError naming the key unless row is a results row as evaluate_batch makes it."""
+    if not isinstance(row, dict):
+        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+    index = row.get('index')
+    if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+        raise ValueError(f"key 'index' must be an integer >= 0, got {shown(index)}")
+    measures = row.get('measures')
+    if not isinstance(measures, dict) or set(measures) != set(MEASURE_NAMES):
+        raise ValueError(f"key 'measures' must map {', '.join(MEASURE_NAMES)} to numbers or null")
+    for name, value in measures.items():
+        if value is not None and not _number(value):
+            raise ValueError(f"key 'measures.{name}' must be a number or null, got {shown(value)}")
+    reasons = row.get('reasons')
+    if not isinstance(reasons, dict) or not all(isinstance(r, str) for r in reasons.values()):
+        raise ValueError(f"key 'reasons' must map measure names to text, got {shown(reasons)}")
+    if row.get('error') is not None and not isinstance(row['error'], str):
+        raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+    for key in NUMBER_KEYS:
+        if key in row and not _number(row[key]):
+            raise ValueError(f"key '{key}' must be a number, got {shown(row[key])}")
+    waveforms = row.get('waveforms', {'time': []})
+    if not isinstance(waveforms, dict) or not all(
+        isinstance(trace, list) and all(map(_number, trace)) for trace in waveforms.values()
+    ):
+        raise ValueError("key 'waveforms' must map names to lists of numbers")
+
+
+def _number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def drop_torn_tail(path):

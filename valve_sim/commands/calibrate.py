@@ -40,7 +40,7 @@ import numpy as np
 from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import read_json, TARGET_MEASURES
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -85,7 +85,8 @@ def add_arguments(parser):
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument('--target-measures', metavar='FILE.json',
                         help='the six measures to fit: '
-                        '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}')
+                        '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...} (JSON, '
+                        f'{TARGET_MEASURES.limits()})')
     target.add_argument('--bag', metavar='BAG',
                         help='a recorded step to fit: an .mcap file or a rosbag2 bag folder '
                         '(topics mapped as in analyse)')
@@ -132,15 +133,11 @@ def _target(args, step_size):
     from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
 
     if args.target_measures:
+        document = read_json(args.target_measures, TARGET_MEASURES)
         try:
-            document = json.loads(Path(args.target_measures).read_text())
-        except OSError as error:
-            raise InputFileError(
-                f'cannot read {args.target_measures}: {error.strerror}'
-            ) from error
-        except json.JSONDecodeError as error:
-            raise InputFileError(f'{args.target_measures} is not valid JSON: {error}') from error
-        return MeasuresTarget.from_document(document, step_size)
+            return MeasuresTarget.from_document(document, step_size)
+        except CalibrationError as error:
+            raise CalibrationError(f'{args.target_measures}: {error}') from None
     recording = read_recording(args.bag, signal_map_from(args))
     if recording.problem:
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)

@@ -28,20 +28,23 @@ use_sim_time), offline from the start of the run. An event takes effect at the
 first tick at or after its time (tick_index): valve_node and `valve-sim simulate
 --faults` apply it there, after the model has reached that tick and before the
 tick's sample is published, so one file gives the same response offline and live.
+
+A schedule file is read once (input_files.FAULT_SCHEDULE: a regular file of at most
+1 MiB) and holds at most MAX_EVENTS events; load_schedule() returns the checked events,
+which are what is applied.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 
-from valve_sim.core.errors import InputFileError
 from valve_sim.core.faults import check_fault, FAULT_NAMES
+from valve_sim.core.input_files import FAULT_SCHEDULE, open_regular, read_yaml, shown
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
-import yaml
 
 
 NS_PER_S = 1_000_000_000
 MAX_TIME = 1e6  # [s] latest event time accepted (11.6 days)
+MAX_EVENTS = 10_000  # events of one schedule: 10 a second for over 16 minutes
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,7 @@ def check_change(name, value):
     if name in SENSOR_NAMES:
         return check_sensor(name, value)
     raise ParameterError(
-        f"'{name}' is neither a fault (fault.*) nor a sensor setting (sensor.*) parameter"
+        f'{shown(name)} is neither a fault (fault.*) nor a sensor setting (sensor.*) parameter'
     )
 
 
@@ -67,6 +70,11 @@ def parse_schedule(document, source='schedule'):
     """Events of a parsed schedule document, sorted by time (stable); raises ParameterError."""
     if not isinstance(document, dict) or not isinstance(document.get('events'), list):
         raise ParameterError(f"{source}: expected a mapping with a list 'events'")
+    if len(document['events']) > MAX_EVENTS:
+        raise ParameterError(
+            f"{source}: 'events' lists {len(document['events'])} events, more than the "
+            f'{MAX_EVENTS} a schedule may hold'
+        )
     events = []
     for index, event in enumerate(document['events']):
         where = f'{source}: event {index + 1}'
@@ -74,7 +82,9 @@ def parse_schedule(document, source='schedule'):
             raise ParameterError(f"{where}: expected exactly the keys 't' and 'set'")
         t = event['t']
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not 0.0 <= t <= MAX_TIME:
-            raise ParameterError(f'{where}: t must be a time in [0, {MAX_TIME:g}] s, got {t!r}')
+            raise ParameterError(
+                f'{where}: t must be a time in [0, {MAX_TIME:g}] s, got {shown(t)}'
+            )
         if not isinstance(event['set'], dict) or not event['set']:
             raise ParameterError(f"{where}: 'set' must map parameter names to values")
         try:
@@ -85,16 +95,26 @@ def parse_schedule(document, source='schedule'):
     return sorted(events, key=lambda e: e.time_ns)
 
 
-def load_schedule(path):
-    """Read and check a fault schedule file; raises InputFileError or ParameterError."""
-    path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except OSError as error:
-        raise InputFileError(f'cannot read fault schedule {path}: {error.strerror}') from error
-    except yaml.YAMLError as error:
-        raise InputFileError(f'fault schedule {path} is not valid YAML: {error}') from error
-    return parse_schedule(document, str(path))
+def open_schedule(path):
+    """
+    Open a fault schedule file without reading it: a regular file within its size limit.
+
+    Never blocks (a FIFO is refused, not waited on); raises InputFileError.
+    """
+    return open_regular(path, FAULT_SCHEDULE)
+
+
+def load_schedule(path, stream=None):
+    """
+    Read a fault schedule file once and return its checked events.
+
+    stream: the file as open_schedule(path) opened it (else it is opened here). Raises
+    InputFileError (the file: not readable, not a regular file, too large, not YAML
+    within input_files' limits) or ParameterError (its content, naming the event and
+    the parameter).
+    """
+    document = read_yaml(path, FAULT_SCHEDULE, stream)
+    return parse_schedule(document, f'fault schedule {path}')
 
 
 def tick_index(time_ns, tick_ns):

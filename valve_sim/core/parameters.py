@@ -25,10 +25,9 @@ No ROS imports here: the node turns these specs into ParameterDescriptors.
 from dataclasses import dataclass
 import math
 from pathlib import Path
-import re
 import sys
 
-import yaml
+from valve_sim.core.input_files import InputFileError, PARAMETER_FILE, read_yaml, shown
 
 
 PACKAGE = 'valve_sim'
@@ -478,9 +477,9 @@ def check_value(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, "
-            f'got {value!r}'
+            f'got {shown(value)}'
         )
-    value = float(value)
+    value = float(value) if abs(value) <= sys.float_info.max else math.inf
     if not math.isfinite(value):
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) must be finite, got {value}"
@@ -557,31 +556,18 @@ def config_path(filename):
     )
 
 
-class _RosYamlLoader(yaml.SafeLoader):
-    """SafeLoader that reads 1e-3 and 2.2e9 as floats, as ROS 2 parameter files do (YAML 1.2)."""
-
-
-_RosYamlLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$'),
-    list('-+0123456789.'),
-)
-
-
 def read_parameter_file(path, node_name=NODE_NAME):
     """
     Read the parameters of one node from a ROS 2 parameter file.
 
     Accepts the node's own section or the wildcard '/**'; returns the raw dict of
-    ros__parameters (values unvalidated) or raises ParameterError.
+    ros__parameters (values unvalidated) or raises ParameterError. The file is read
+    once, within the limits of input_files.PARAMETER_FILE.
     """
-    path = Path(path)
     try:
-        document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
-    except OSError as error:
-        raise ParameterError(f'cannot read parameter file {path}: {error.strerror}') from error
-    except yaml.YAMLError as error:
-        raise ParameterError(f'parameter file {path} is not valid YAML: {error}') from error
+        document = read_yaml(path, PARAMETER_FILE)
+    except InputFileError as error:
+        raise ParameterError(str(error)) from None
     if not isinstance(document, dict):
         raise ParameterError(f"parameter file {path} must map node names to 'ros__parameters'")
     for key in (node_name, '/' + node_name, '/**'):

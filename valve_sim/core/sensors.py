@@ -38,6 +38,7 @@ import math
 
 import numpy as np
 from valve_sim.core.faults import checked_number, SwitchSpec
+from valve_sim.core.input_files import shown
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 from valve_sim.core.parameters import ParameterError, ParameterSpec
@@ -151,11 +152,15 @@ def check_sensor(name, value):
     """Return value checked for the sensor parameter name; raise ParameterError naming it."""
     if name in SENSOR_SWITCH_SPECS:
         if not isinstance(value, bool):
-            raise ParameterError(f"sensor parameter '{name}' must be true or false, got {value!r}")
+            raise ParameterError(
+                f"sensor parameter '{name}' must be true or false, got {shown(value)}"
+            )
         return value
     if name == NOISE_SEED.name:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ParameterError(f"sensor parameter '{name}' must be an integer, got {value!r}")
+            raise ParameterError(
+                f"sensor parameter '{name}' must be an integer, got {shown(value)}"
+            )
         if not NOISE_SEED.minimum <= value <= NOISE_SEED.maximum:
             raise ParameterError(
                 f"sensor parameter '{name}' = {value} is outside [0, {NOISE_SEED.maximum}]"
@@ -309,6 +314,10 @@ class SensorStage:
             self._out,
         )
         return self._out.tolist()
+
+    def rebase(self, shift_ns):
+        """Move the time of the last sample by shift_ns [ns]: the clock jumped (new time base)."""
+        self._memory[:, TIME] += shift_ns
 
     def describe_faults(self):
         """Names of the sensor faults and non-ideal settings in effect, for diagnostics."""

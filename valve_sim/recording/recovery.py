@@ -39,9 +39,8 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import BAG_RECORD, InputFileError, parse_yaml
 from valve_sim.recording import rosbag2_metadata
-import yaml
 
 
 MAGIC = b'\x89MCAP0\r\n'
@@ -377,8 +376,8 @@ class _Copy:
 def _profiles(text):
     """Return the offered QoS profiles of a channel's metadata (YAML), [] if none is readable."""
     try:
-        profiles = yaml.safe_load(text)
-    except yaml.YAMLError:
+        profiles = parse_yaml(text, BAG_RECORD, 'offered_qos_profiles')
+    except InputFileError:
         return []
     return profiles if isinstance(profiles, list) else []
 
@@ -386,8 +385,10 @@ def _profiles(text):
 def _custom_data(metadata):
     """custom_data of a rosbag2 Metadata record's serialized BagMetadata, or None."""
     try:
-        bag = yaml.safe_load(metadata.get(rosbag2_metadata.RECORD_KEY, ''))
-    except yaml.YAMLError:
+        bag = parse_yaml(
+            metadata.get(rosbag2_metadata.RECORD_KEY, ''), BAG_RECORD, rosbag2_metadata.RECORD_KEY
+        )
+    except InputFileError:
         return None
     custom_data = bag.get('custom_data') if isinstance(bag, dict) else None
     return custom_data if isinstance(custom_data, dict) else None
