@@ -98,18 +98,26 @@ def test_a_file_cut_anywhere_is_truncated_and_repaired_to_what_it_holds(tmp_path
 
 
 def test_analyse_says_truncated_and_where_for_a_file_cut_before_its_first_chunk(tmp_path):
-    """The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap."""
+    """
+    The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap.
+
+    analyse reads the file as repair does (recovery.Scan): what the chunk cut short
+    holds, with the warning that says where the file ends; the repaired copy gives the
+    same analysis.
+    """
     cut = tmp_path / 't.mcap'
     cut.write_bytes(REFERENCE_BAG.read_bytes()[:449000])
-    result = valve_sim('analyse', cut)
-    assert result.returncode == 1
-    assert 'truncated' in result.stderr and 'ends at byte 449000' in result.stderr, result.stderr
-    assert 'valve-sim repair' in result.stderr and 'Traceback' not in result.stderr
+    analysed = valve_sim('analyse', cut)
+    assert analysed.returncode == 0, analysed.stderr
+    assert 'truncated' in analysed.stderr and 'ends at byte 449000' in analysed.stderr
+    assert 'valve-sim repair' in analysed.stderr and 'Traceback' not in analysed.stderr
     result = valve_sim('repair', cut)
     assert result.returncode == 0, result.stderr
     kept = rosbags_messages(tmp_path / 't.repaired.mcap')
     assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
     assert sorted(kept) == sorted(messages_in_order(REFERENCE_BAG)[: len(kept)])
+    repaired = valve_sim('analyse', tmp_path / 't.repaired.mcap')
+    assert repaired.stdout == analysed.stdout and repaired.stderr == ''
 
 
 def test_a_complete_file_is_copied_whole_and_never_overwritten(tmp_path):

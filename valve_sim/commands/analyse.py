@@ -100,6 +100,12 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED):
                 rows.extend(joiner.add(role, time_ns, value))
         found.update(channel.topic for channel in reader.channels.values())
         problems += [reader.problem] if reader.problem else []
+        problems += [
+            f'{file}: {extractor.non_finite} value(s) on {extractor.topic} are not finite '
+            '(inf or NaN) and were left out'
+            for extractor, _ in extractors.values()
+            if extractor.non_finite
+        ]
     rows.extend(joiner.finish())
     for role in required:
         if signal_map.topics[role] not in found and reader.problem:

@@ -31,13 +31,26 @@ tick's sample is published, so one file gives the same response offline and live
 
 A schedule file is read once (input_files.FAULT_SCHEDULE: a regular file of at most
 1 MiB) and holds at most MAX_EVENTS events; load_schedule() returns the checked events,
-which are what is applied.
+which are what is applied. Run as `python -m valve_sim.core.fault_schedule FD PATH`, this
+module checks the file open on descriptor FD in a process of its own (memory limited to
+CHECK_MEMORY) and prints its events as JSON lines (event_lines): valve_node's way to read a
+schedule set live, so that parsing it never holds the node's interpreter.
 """
 
 from dataclasses import dataclass
+import json
+import os
+import resource
+import sys
 
 from valve_sim.core.faults import check_fault, FAULT_NAMES
-from valve_sim.core.input_files import FAULT_SCHEDULE, open_regular, read_yaml, shown
+from valve_sim.core.input_files import (
+    FAULT_SCHEDULE,
+    InputFileError,
+    open_regular,
+    read_yaml,
+    shown,
+)
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
 
@@ -45,6 +58,7 @@ from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
 NS_PER_S = 1_000_000_000
 MAX_TIME = 1e6  # [s] latest event time accepted (11.6 days)
 MAX_EVENTS = 10_000  # events of one schedule: 10 a second for over 16 minutes
+CHECK_MEMORY = 2 * 1024**3  # [bytes] address space of the process that checks a file
 
 
 @dataclass(frozen=True)
@@ -117,6 +131,36 @@ def load_schedule(path, stream=None):
     return parse_schedule(document, f'fault schedule {path}')
 
 
+def event_lines(events):
+    """Yield each event as one line of JSON: [time_ns, {name: value}]."""
+    for event in events:
+        yield json.dumps([event.time_ns, event.changes]) + '\n'
+
+
+def event_from_line(line):
+    """Return the FaultEvent of one line of event_lines()."""
+    time_ns, changes = json.loads(line)
+    return FaultEvent(time_ns, changes)
+
+
+def main(argv=None):
+    """
+    Check the schedule open on descriptor FD (argv: FD PATH); print the outcome as JSON lines.
+
+    The first line is {"events": N} followed by N event lines, or {"error": message}.
+    """
+    descriptor, path = (sys.argv[1:] if argv is None else argv)[:2]
+    resource.setrlimit(resource.RLIMIT_AS, (CHECK_MEMORY, CHECK_MEMORY))
+    try:
+        events = load_schedule(path, os.fdopen(int(descriptor), 'rb'))
+    except (InputFileError, ParameterError, MemoryError, RecursionError) as error:
+        print(json.dumps({'error': str(error) or type(error).__name__}))
+        return 1
+    sys.stdout.write(json.dumps({'events': len(events)}) + '\n')
+    sys.stdout.writelines(event_lines(events))
+    return 0
+
+
 def tick_index(time_ns, tick_ns):
     """Index of the first tick at or after time_ns, ticks every tick_ns from 0 [ns]."""
     return -(-time_ns // tick_ns)
@@ -139,3 +183,7 @@ class Schedule:
 
     def pending(self):
         return len(self.events) - self._next
+
+
+if __name__ == '__main__':
+    sys.exit(main())

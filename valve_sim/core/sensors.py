@@ -23,15 +23,20 @@ the absolute pressure u [Pa] of each published sample:
   bias        Pa   added offset
   noise_std   Pa   Gaussian noise, standard deviation (seeded: sensor.noise_seed)
   resolution  Pa   quantisation step, round to the nearest multiple; 0: none
-  range_min   Pa   lower end of the measuring range (absolute, >= 0): output saturates there
-  range_max   Pa   upper end of the measuring range (absolute); 0: no upper limit
   stuck       bool output frozen (sensor fault)
   stuck_at    Pa   the frozen value (absolute); negative: the last output before sticking
+  range_min   Pa   lower end of the measuring range (absolute, >= 0): output saturates there
+  range_max   Pa   upper end of the measuring range (absolute); 0: no upper limit
   dropout     bool nothing published (sensor fault)
 
 The defaults are an ideal transducer: the output is the model's pressure, never below
 0 Pa absolute (the model has no cavitation; below vacuum it publishes 0 Pa). The
-numbers run in one compiled kernel (sense) for the four topics.
+numbers run in one compiled kernel (sense) for the four topics. Whatever the settings,
+a reading is finite and within the range, in every mode (a stuck sensor too): a
+resolution is 0 or at least MIN_RESOLUTION (a finer step overflows the division), and a
+reading that is still not finite is replaced by the model's pressure. Without
+range_max a bias (or noise) can take a reading beyond burst_pressure, as a miscalibrated
+transducer reads beyond what the valve holds.
 """
 
 import math
@@ -48,6 +53,7 @@ PREFIX = 'sensor.'
 PRESSURE_NAMES = STATE_NAMES[P_S:P_C + 1]
 OURS = 'our transducer model, see docs/faults.md'
 NOISE_BLOCK = 1024  # standard normal draws taken from the generator at a time
+MIN_RESOLUTION = 1e-3  # [Pa] finest quantisation step; 1e-320 made every reading +inf
 SETTING_DOUBLES = (
     ParameterSpec(
         'bandwidth', 'f_c', 'Hz', 0.0, 1e6, 'first-order lag bandwidth; 0: no lag', OURS
@@ -57,7 +63,13 @@ SETTING_DOUBLES = (
         'noise_std', 'sigma', 'Pa', 0.0, 1e8, 'standard deviation of Gaussian noise', OURS
     ),
     ParameterSpec(
-        'resolution', 'q', 'Pa', 0.0, 1e8, 'quantisation step of the reading; 0: none', OURS
+        'resolution',
+        'q',
+        'Pa',
+        0.0,
+        1e8,
+        'quantisation step of the reading; 0: none, else at least 1e-3 Pa',
+        OURS,
     ),
     ParameterSpec(
         'range_min',
@@ -173,7 +185,13 @@ def check_sensor(name, value):
             f"{', '.join(PRESSURE_NAMES)} and setting in "
             f"{', '.join(DEFAULTS)}, and {NOISE_SEED.name}"
         )
-    return checked_number(spec, value, 'sensor parameter')
+    value = checked_number(spec, value, 'sensor parameter')
+    if name.endswith('.resolution') and 0.0 < value < MIN_RESOLUTION:
+        raise ParameterError(
+            f"sensor parameter '{name}' (q) = {value:g} Pa must be 0 (none) or at least "
+            f'{MIN_RESOLUTION:g} Pa'
+        )
+    return value
 
 
 def checked_settings(settings, changes):
@@ -228,14 +246,16 @@ def sense(pressures, time_ns, settings, memory, noise, out):
             state[NOISE_USED] += 1.0
         if row[RESOLUTION] > 0.0:
             value = np.round(value / row[RESOLUTION]) * row[RESOLUTION]
-        value = max(value, row[RANGE_MIN])
-        if row[RANGE_MAX] > 0.0:
-            value = min(value, row[RANGE_MAX])
         if row[STUCK] > 0.0:
             if row[STUCK_AT] >= 0.0:
                 value = row[STUCK_AT]
             elif state[OUTPUT] == state[OUTPUT]:  # not nan: there was a reading before
                 value = state[OUTPUT]
+        if value - value != 0.0:  # not finite: never published; the model's pressure is
+            value = pressures[i]
+        value = max(value, row[RANGE_MIN])
+        if row[RANGE_MAX] > 0.0:
+            value = min(value, row[RANGE_MAX])
         state[OUTPUT] = value
         out[i] = math.nan if row[DROPOUT] > 0.0 else value
 

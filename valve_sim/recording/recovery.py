@@ -29,6 +29,7 @@ writes the new folder's metadata.yaml, as `ros2 bag reindex` does.
 
 from dataclasses import dataclass
 from io import BytesIO
+import os
 from pathlib import Path
 import struct
 import zlib
@@ -36,16 +37,35 @@ import zlib
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.records import (
+    Attachment,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    Header,
+    Message,
+    Metadata,
+    Schema,
+)
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
-from valve_sim.core.input_files import BAG_RECORD, InputFileError, parse_yaml
+from valve_sim.core.input_files import (
+    BAG_RECORD,
+    InputFileError,
+    MCAP_FILE,
+    open_regular,
+    parse_yaml,
+)
+from valve_sim.core.output_files import replacing
 from valve_sim.recording import rosbag2_metadata
 
 
 MAGIC = b'\x89MCAP0\r\n'
 RECORD_HEADER = struct.Struct('<BQ')  # opcode, content length
 CHUNK_FIXED = struct.Struct('<QQQI')  # message start and end time, uncompressed size and crc
+FOOTER = struct.Struct('<QQI')  # summary start, summary offset start, summary crc
+RESYNC_BLOCK = 1024 * 1024  # [bytes] read at a time looking for the next intact chunk
+MAX_RESYNC_CHUNK = 256 * 1024 * 1024  # [bytes] a candidate chunk longer is not read
 CHUNK_SIZE = 768 * 1024  # [bytes] chunks of the repaired file: rosbag2's default
 NAMES = {opcode.value: opcode.name.lower() for opcode in Opcode}
 READERS = {
@@ -55,7 +75,7 @@ READERS = {
     Opcode.METADATA: Metadata.read,
     Opcode.ATTACHMENT: Attachment.read,
 }
-RECORD_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, EOFError)
+RECORD_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, EOFError, OverflowError)
 
 
 def _read(opcode, content):
@@ -68,14 +88,22 @@ def _read(opcode, content):
 
 class Scan:
     """
-    The records of an MCAP file in file order, read up to where it is damaged.
+    The records of an MCAP file in file order, read past damage wherever it can be.
 
     Iterate records() once: Header, Schema, Channel, Message, Metadata and Attachment
     records, those inside chunks included. Afterwards damage is None for a
-    complete file, or says where it is truncated or corrupt; complete_chunks,
-    partial_chunk_messages (from a chunk cut short) and corrupt_chunks (failed their
-    CRC, left out) count what was read; truncated says whether the damage is a
-    missing end (a recording that was not closed) rather than corrupt bytes.
+    complete file, or says where it is first truncated or corrupt; complete_chunks,
+    partial_chunk_messages (from a chunk cut short), corrupt_chunks (failed their CRC,
+    left out) and skipped (byte ranges passed over) count what was read; truncated
+    says whether the damage is a missing end (a recording that was not closed) rather
+    than corrupt bytes.
+
+    A file with its footer is complete in length: a record that runs past the end of
+    its data is corrupt (a damaged length field), not truncated; so is one that runs
+    past the end of a file without footer when an intact chunk follows it. After corrupt bytes
+    the scan resynchronises: on the next chunk of the summary's chunk index (its
+    schemas and channels first), or else on the next record that is an intact chunk
+    (its CRC checked); holes of a sparse file are skipped without being read.
     """
 
     def __init__(self, path):
@@ -85,16 +113,15 @@ class Scan:
         self.complete_chunks = 0
         self.partial_chunk_messages = 0
         self.corrupt_chunks = 0
-        try:
-            self._file = open(self.path, 'rb')
-        except OSError as error:
-            raise InputFileError(f'cannot read {self.path}: {error.strerror}') from error
-        self.size = self.path.stat().st_size
+        self.skipped = []  # (start, end) byte ranges passed over after corrupt bytes
+        self._file = open_regular(self.path, MCAP_FILE)
+        self.size = os.fstat(self._file.fileno()).st_size
         if self._file.read(len(MAGIC)) != MAGIC:
             self._file.close()
             raise InputFileError(
                 f'{self.path} is not an MCAP file' + ('' if self.size else ' (it is empty)')
             )
+        self.data_end, self._summary_start = self._footer()
 
     def records(self):
         """Yield the records in file order."""
@@ -113,8 +140,24 @@ class Scan:
             self.damage = f'{self.path} {damage}'
             self.truncated = damage.startswith('is truncated')
 
+    def _footer(self):
+        """Return (end of the data, summary start) of a file with its footer, else (size, 0)."""
+        footer_at = self.size - len(MAGIC) - RECORD_HEADER.size - FOOTER.size
+        if footer_at < len(MAGIC):
+            return self.size, 0
+        self._file.seek(footer_at)
+        tail = self._file.read()
+        self._file.seek(len(MAGIC))
+        opcode, length = RECORD_HEADER.unpack_from(tail)
+        if opcode != Opcode.FOOTER or length != FOOTER.size or not tail.endswith(MAGIC):
+            return self.size, 0
+        summary_start = FOOTER.unpack_from(tail, RECORD_HEADER.size)[0]
+        if len(MAGIC) < summary_start <= footer_at:
+            return summary_start, summary_start
+        return footer_at, 0
+
     def _next(self, file, offset):
-        """Read the record at offset: (next offset, [records]) or None at the end or damage."""
+        """Read the record at offset: (next offset, [records]) or None at the end."""
         header = file.read(RECORD_HEADER.size)
         if len(header) < RECORD_HEADER.size:
             self._say(f'is truncated: it ends at byte {self.size} inside a record header')
@@ -123,7 +166,21 @@ class Scan:
         name, end = NAMES.get(opcode), offset + RECORD_HEADER.size + length
         if name is None:
             self._say(f'is corrupt at byte {offset}: no MCAP record starts there')
-            return None
+            return self._resync(file, offset)
+        limit = self.data_end if offset < self.data_end else self.size
+        if end > limit and limit < self.size:
+            self._say(
+                f'is corrupt at byte {offset}: its {name} record says it is {length} bytes '
+                f'long, past the end of the data at byte {limit} (the file has its footer)'
+            )
+            return self._resync(file, offset)
+        if end > self.size and self._next_intact_chunk(file, offset):
+            self._say(
+                f'is corrupt at byte {offset}: its {name} record says it is {length} bytes '
+                f'long, past the end of the file at byte {self.size}, but intact chunks follow'
+            )
+            return self._resync(file, offset)
+        file.seek(offset + RECORD_HEADER.size)
         if end > self.size:
             self._say(
                 f'is truncated: it ends at byte {self.size} inside a {name} record that starts '
@@ -150,7 +207,7 @@ class Scan:
             return end, [_read(opcode, content)]
         except RECORD_ERRORS as error:
             self._say(f'is corrupt at byte {offset} (a {name} record): {error}')
-            return None
+            return self._resync(file, offset)
 
     def _chunk(self, content, offset):
         chunk = Chunk.read(ReadDataStream(BytesIO(content)))
@@ -194,6 +251,81 @@ class Scan:
                     break
         return records
 
+    # --- past corrupt bytes ---------------------------------------------------------------
+
+    def _resync(self, file, offset):
+        """After corrupt bytes at offset: (next offset, [records]) to go on from, or None."""
+        found = self._next_indexed_chunk(file, offset) or self._next_intact_chunk(file, offset)
+        if found is None:
+            self.skipped.append((offset, self.data_end))
+            return None
+        self.skipped.append((offset, found[0]))
+        file.seek(found[0])
+        return found
+
+    def _next_indexed_chunk(self, file, offset):
+        """(offset of the first indexed chunk after offset, the summary's schemas and channels)."""
+        if not self._summary_start:
+            return None
+        file.seek(self._summary_start)
+        summary = file.read(self._summary_end() - self._summary_start)
+        records, chunks, start = [], [], 0
+        while start + RECORD_HEADER.size <= len(summary):
+            opcode, length = RECORD_HEADER.unpack_from(summary, start)
+            content = summary[start + RECORD_HEADER.size:start + RECORD_HEADER.size + length]
+            start += RECORD_HEADER.size + length
+            try:
+                if opcode == Opcode.CHUNK_INDEX:
+                    chunks.append(ChunkIndex.read(ReadDataStream(BytesIO(content))))
+                elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+                    records.append(_read(opcode, content))
+            except RECORD_ERRORS:
+                return None  # the summary is damaged too
+        after = [c.chunk_start_offset for c in chunks if c.chunk_start_offset > offset]
+        return (min(after), records) if after else None
+
+    def _summary_end(self):
+        """Return the byte where the summary section ends (the footer record's start)."""
+        return self.size - len(MAGIC) - RECORD_HEADER.size - FOOTER.size
+
+    def _next_intact_chunk(self, file, offset):
+        """(offset of the next chunk record after offset whose CRC checks, []), or None."""
+        descriptor, position = file.fileno(), offset + 1
+        while position < self.data_end:
+            raw = os.lseek(descriptor, 0, os.SEEK_CUR)  # where the buffered file left it
+            try:
+                position = os.lseek(descriptor, position, os.SEEK_DATA)  # past a sparse hole
+            except OSError:  # ENXIO: nothing but a hole up to the end
+                return None
+            finally:
+                os.lseek(descriptor, raw, os.SEEK_SET)
+            block = os.pread(descriptor, min(RESYNC_BLOCK, self.data_end - position), position)
+            at = block.find(bytes([Opcode.CHUNK]))
+            while at >= 0:
+                if self._chunk_at(file, position + at):
+                    return position + at, []
+                at = block.find(bytes([Opcode.CHUNK]), at + 1)
+            position += max(len(block), 1)
+        return None
+
+    def _chunk_at(self, file, offset):
+        """Return whether an intact chunk record (uncompressed, CRC checked) starts at offset."""
+        file.seek(offset)
+        header = file.read(RECORD_HEADER.size)
+        if len(header) < RECORD_HEADER.size:
+            return False
+        length = RECORD_HEADER.unpack(header)[1]
+        if not CHUNK_FIXED.size + 12 <= length <= min(MAX_RESYNC_CHUNK, self.data_end - offset):
+            return False
+        try:
+            chunk = Chunk.read(ReadDataStream(BytesIO(file.read(length))))
+            stream, size = get_chunk_data_stream(chunk)
+            return bool(chunk.uncompressed_crc) and zlib.crc32(stream.read(size)) == (
+                chunk.uncompressed_crc
+            )
+        except (*RECORD_ERRORS, LookupError, MemoryError):
+            return False
+
 
 def diagnose(path):
     """
@@ -228,6 +360,7 @@ class RepairReport:
     start_ns: int
     end_ns: int
     custom_data: dict = None
+    skipped: tuple = ()  # (start, end) byte ranges of the source passed over as corrupt
 
     @property
     def messages(self):
@@ -241,19 +374,24 @@ class RepairReport:
             if self.partial_chunk_messages
             else ''
         )
+        passed = ', '.join(f'{start}-{end}' for start, end in self.skipped)
+        resynchronised = f'; passed over corrupt bytes {passed}' if passed else ''
         return (
-            f'{self.damage or f"{self.source} was complete"}\n'
+            f'{self.damage or f"{self.source} was complete"}{resynchronised}\n'
             f'kept {self.messages} messages ({topics or "no topics"}) from '
             f'{self.complete_chunks} complete chunk(s){partial}; wrote {self.target}'
         )
 
 
-def repair(source, target):
+def repair(source, target, explicit=False):
     """
     Write everything source still holds into target as a complete MCAP file.
 
-    Returns a RepairReport. Raises InputFileError for a file that is not MCAP or has
-    no header, or when target is source (a repair never overwrites what it reads).
+    The copy is written to a temporary file renamed to target when complete
+    (output_files.replacing): explicit says the user named target (a link there is
+    followed); else a link at target is replaced, never followed. Returns a
+    RepairReport. Raises InputFileError for a file that is not MCAP or has no header,
+    or when target is source (a repair never overwrites what it reads).
     """
     source, target = Path(source), Path(target)
     if target.exists() and target.resolve() == source.resolve():
@@ -264,16 +402,15 @@ def repair(source, target):
     if not isinstance(header, Header):
         raise InputFileError(f'{scan.damage or source}: no MCAP header, nothing to recover')
     try:
-        stream = open(target, 'wb')
+        with replacing(target, 'wb', explicit) as stream:
+            writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+            writer.start(profile=header.profile, library=header.library)
+            copied = _Copy(writer)
+            for record in records:
+                copied.add(record)
+            writer.finish()
     except OSError as error:
         raise InputFileError(f'cannot write {target}: {error.strerror}') from error
-    with stream:
-        writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
-        writer.start(profile=header.profile, library=header.library)
-        copied = _Copy(writer)
-        for record in records:
-            copied.add(record)
-        writer.finish()
     return RepairReport(
         source,
         target,
@@ -284,6 +421,7 @@ def repair(source, target):
         [tuple(topic_metadata) for topic_metadata in copied.topics.values()],
         *copied.log_times,
         copied.custom_data,
+        tuple(scan.skipped),
     )
 
 
@@ -292,7 +430,8 @@ def repair_folder(source, target):
     Repair every MCAP file of the bag folder source into the new folder target.
 
     Writes target/metadata.yaml for the repaired files, as `ros2 bag reindex` does.
-    Returns the RepairReports, one per file in the bag's order.
+    Returns the RepairReports, one per file in the bag's order. Each file is written
+    whole or not at all (repair()); links inside target are replaced, not followed.
     """
     target = Path(target)
     files = rosbag2_metadata.bag_files(source)

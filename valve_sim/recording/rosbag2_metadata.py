@@ -29,6 +29,7 @@ from pathlib import Path
 import re
 
 from valve_sim.core.input_files import BAG_METADATA, InputFileError, read_yaml, shown
+from valve_sim.core.output_files import write_text
 import yaml
 
 
@@ -162,8 +163,8 @@ def dump(data):
 
 
 def write_metadata_file(folder, metadata):
-    """Write folder/metadata.yaml as rosbag2_storage::MetadataIo::write_metadata does."""
-    (Path(folder) / METADATA_FILE).write_text(dump({TOP_KEY: metadata}) + '\n')
+    """Write folder/metadata.yaml as rosbag2_storage::MetadataIo::write_metadata does (whole)."""
+    write_text(Path(folder) / METADATA_FILE, dump({TOP_KEY: metadata}) + '\n')
 
 
 def read_metadata_file(folder):

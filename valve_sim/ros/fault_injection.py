@@ -29,13 +29,24 @@ checked is what is applied).
 """
 
 from concurrent.futures import ThreadPoolExecutor
+import json
+import os
+from pathlib import Path
+import subprocess
 import sys
+import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from valve_sim.core.fault_schedule import load_schedule, open_schedule, Schedule
+from valve_sim.core.fault_schedule import (
+    event_from_line,
+    load_schedule,
+    open_schedule,
+    Schedule,
+)
 from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
+from valve_sim.core.input_files import InputFileError
 from valve_sim.core.model import P_C, P_S
 from valve_sim.core.parameters import FAULT_SCHEDULE
 from valve_sim.core.sensors import (
@@ -58,6 +69,7 @@ FAULT_STATUS_QOS = QoSProfile(
 )
 INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
 OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
+PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the folder holding valve_sim
 
 
 def declare_fault_parameters(node):
@@ -214,16 +226,18 @@ class FaultInjection:
 
 class ScheduleLoader:
     """
-    Reads and checks fault schedule files on a thread of its own, one at a time.
+    Reads and checks fault schedule files in a process of their own, one at a time.
 
     opened(path) opens the file (InputFileError at once for one that cannot be a
-    schedule); start() hands it to the thread; take() returns, once, the result of the
-    load: (path, events) or (path, the error's text), else None while it runs.
+    schedule); start() hands it to a child process (python -m
+    valve_sim.core.fault_schedule), which reads, parses and checks it, and a thread of
+    the loader takes its events line by line; take() returns, once, the result:
+    (path, events) or (path, the error's text), else None while it runs. Parsing in
+    the node's own interpreter, even on another thread, held the tick up to 160 ms
+    (C parsing and garbage collection hold the GIL).
     """
 
-    # [s] the interpreter's thread switch interval while a file is parsed: the tick's
-    # thread waits at most this for the GIL (Python's default, 5 ms, is 5 ticks at 1 kHz)
-    SWITCH_INTERVAL = 0.0002
+    TIMEOUT = 60.0  # [s] a check that takes longer is stopped and refused
 
     def __init__(self):
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='fault_schedule')
@@ -235,7 +249,7 @@ class ScheduleLoader:
         return open_schedule(path)
 
     def start(self, path, stream):
-        """Read and check the opened schedule path on the loader's thread."""
+        """Read and check the opened schedule path in a child process."""
         self.loading = path
         self._future = self._pool.submit(self._load, path, stream)
 
@@ -251,12 +265,37 @@ class ScheduleLoader:
         self._pool.shutdown(wait=False, cancel_futures=True)
 
     def _load(self, path, stream):
-        interval = sys.getswitchinterval()
-        sys.setswitchinterval(self.SWITCH_INTERVAL)
+        """Run the check in a child process; return the events or raise with its message."""
+        with stream:
+            descriptor = stream.fileno()
+            process = subprocess.Popen(
+                [sys.executable, '-m', 'valve_sim.core.fault_schedule', str(descriptor), path],
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                pass_fds=(descriptor,),
+                env={**os.environ, 'PYTHONPATH': os.pathsep.join(filter(None, (
+                    PACKAGE_ROOT, os.environ.get('PYTHONPATH')
+                )))},
+            )
+        watchdog = threading.Timer(self.TIMEOUT, process.kill)
+        watchdog.start()
         try:
-            return load_schedule(path, stream)
+            with process.stdout:
+                outcome = json.loads(process.stdout.readline() or '{}')
+                if 'events' not in outcome:
+                    raise InputFileError(outcome.get('error') or (
+                        f'fault schedule {path}: the check ended without an answer (stopped '
+                        f'after {self.TIMEOUT:g} s, or out of memory)'
+                    ))
+                events = [event_from_line(line) for line in process.stdout]
         finally:
-            sys.setswitchinterval(interval)
+            watchdog.cancel()
+            process.kill()
+            process.wait()
+        if len(events) != outcome['events']:
+            raise InputFileError(f'fault schedule {path}: the check ended early')
+        return events
 
 
 def _text(value):
