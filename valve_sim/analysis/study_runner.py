@@ -57,6 +57,7 @@ from valve_sim.core.input_files import (
     STUDY_RESULTS,
     STUDY_ROW,
 )
+from valve_sim.core.output_files import append_to, finite, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
@@ -317,6 +318,11 @@ def run_cases(
         raise ValueError('case indices must be unique')
     study = fingerprint(cases)
     results_path = Path(results_path)
+    if results_path.is_symlink():
+        raise StudyError(
+            f'{results_path} is a symbolic link: valve-sim does not write a results file '
+            'through a link; remove it or give another --out'
+        )
     rows = read_results(results_path, study) if resume else {}
     rows = {index: row for index, row in rows.items() if index in set(indices)}
     missing = [case for case in cases if case['index'] not in rows]
@@ -329,17 +335,17 @@ def run_cases(
         drop_torn_tail(results_path)
     else:
         results_path.parent.mkdir(parents=True, exist_ok=True)
-        results_path.write_text(json.dumps({'study': study, 'cases': len(cases)}) + '\n')
+        write_text(results_path, json.dumps({'study': study, 'cases': len(cases)}) + '\n')
     progress = Progress(label, len(cases), len(rows), progress_stream)
     size = batch_size or default_batch_size(len(missing), backend.workers)
     computed = 0
-    with open(results_path, 'a') as stream:
+    with append_to(results_path) as stream:
         try:
             for batch_rows in backend.run(evaluate, batches_of(missing, size)):
                 fresh = [row for row in batch_rows if row['index'] not in rows]
                 for row in fresh:
                     rows[row['index']] = row
-                    stream.write(json.dumps(row) + '\n')
+                    stream.write(json.dumps(finite(row)) + '\n')
                 stream.flush()
                 computed += len(fresh)
                 progress.advance(len(fresh))

@@ -30,7 +30,6 @@ bounds from their specs or --bounds NAME=LO:HI. Writes into --out:
 Ctrl-C stops the fit and writes the best result so far (exit code 130).
 """
 
-import json
 import math
 from pathlib import Path
 import shlex
@@ -39,8 +38,9 @@ import sys
 import numpy as np
 from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, flow_value, load_from_arguments
+from valve_sim.commands.options import add_options, flow_value, load_from_arguments, number
 from valve_sim.core.input_files import read_json, TARGET_MEASURES
+from valve_sim.core.output_files import json_text, write_text
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -116,13 +116,16 @@ def add_arguments(parser):
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
-    parser.add_argument('--starts', type=int, default=3, metavar='N',
+    parser.add_argument('--starts', type=number('a count', '', 1, 1000, integer=True),
+                        default=3, metavar='N',
                         help='optimiser starts (default 3)')
-    parser.add_argument('--spread', type=float, default=0.1, metavar='S',
+    parser.add_argument('--spread', type=number('a spread', '', 0.0, 2.0), default=0.1,
+                        metavar='S',
                         help='log-normal spread of the starts after the first (default 0.1, '
                         'about 10 %%)')
     add_options(parser, '--seed', help='seed of the starts')
-    parser.add_argument('--tolerance', type=float, default=1e-10, metavar='TOL',
+    parser.add_argument('--tolerance', type=number('a tolerance', '', 0.0, 1.0, low_open=True),
+                        default=1e-10, metavar='TOL',
                         help='ftol = xtol = gtol of least_squares (default 1e-10)')
     add_options(parser, '--step-size')
     parser.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
@@ -204,9 +207,9 @@ def run(args):
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_parameter_file(out / 'calibrated.yaml', result, settings, command)
     report = report_document(result, target, args, command)
-    (out / 'report.json').write_text(json.dumps(report, indent=2) + '\n')
+    write_text(out / 'report.json', json_text(report) + '\n')
     text = report_text(report)
-    (out / 'report.txt').write_text(text)
+    write_text(out / 'report.txt', text)
     plot_fit(out / 'fit.png', result, target)
     print(text, end='')
     print(f'wrote {out}/calibrated.yaml, report.json, report.txt and fit.png')
@@ -250,7 +253,7 @@ def write_parameter_file(path, result, settings, command):
         lines.append(f'    {name}: {yaml_number(value)}{mark}')
     for name, value in settings.items():
         lines.append(f'    {name}: {yaml_number(value)}')
-    path.write_text('\n'.join(lines) + '\n')
+    write_text(path, '\n'.join(lines) + '\n')
 
 
 def report_document(result, target, args, command):

@@ -20,9 +20,9 @@ The numbers behind docs/model.md's force and flow balances and stability margins
 docs/model.md ("operating-point --json"), all SI.
 """
 
-import json
 
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments
+from valve_sim.core.output_files import json_text
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
@@ -139,7 +139,7 @@ def run(args):
             'cracking_pressure': cracking_pressure(params),
             'operating_points': [operating_point(params, q) for q in inlet_flows],
         }
-        print(json.dumps(document, indent=2))
+        print(json_text(document))
         return 0
     print(f'main valve cracking pressure: {cracking_pressure(params) / 1e6:.4f} MPa')
     for inlet_flow in inlet_flows:

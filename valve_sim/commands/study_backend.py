@@ -21,16 +21,53 @@ DIR/results.jsonl; --resume completes an interrupted study.
 
 --protocol (analysis.study_cases.PROTOCOLS): held-preset sets every case's valve
 to the preset before its test, frozen-preload keeps the preload of the parameter file.
+
+Sizes are bounded before anything is allocated or started: a study of more than
+MAX_RUNS runs, or one whose runs would not fit in the memory available here
+(BYTES_PER_RUN each, in this process), is refused, as is a local cluster of more than
+WORKERS_PER_CORE workers per core or more than the memory holds (BYTES_PER_WORKER each).
 """
 
 import os
 import sys
 
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
+from valve_sim.commands.options import number
 from valve_sim.core.errors import StudyError
+from valve_sim.core.input_files import size_text
 
 
 PIP_INSTALL = "pip install 'dask[distributed]' SALib"
+MAX_RUNS = 1_000_000
+# [bytes] memory of one run in the client: its case and its row, about 2 KiB measured
+# (tracemalloc, 10,000 tolerance cases and rows), doubled for the results on their way
+BYTES_PER_RUN = 4096
+WORKERS_PER_CORE = 4
+BYTES_PER_WORKER = 256 * 1024 * 1024  # [bytes] a Dask worker process with the model loaded
+CORES = os.cpu_count() or 1
+
+
+def available_memory():
+    """Return the memory available to a new allocation here [bytes] (MemAvailable)."""
+    try:
+        with open('/proc/meminfo') as stream:
+            for line in stream:
+                if line.startswith('MemAvailable:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return os.sysconf('SC_AVPHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
+
+
+def check_runs(runs, what):
+    """Raise StudyError unless runs (what: the option that asks for them) fit the limits."""
+    need, available = runs * BYTES_PER_RUN, available_memory()
+    if runs > MAX_RUNS or need > available:
+        raise StudyError(
+            f'{what} asks for {runs:,} runs, which would need about {size_text(need)} of '
+            f'memory here ({size_text(BYTES_PER_RUN)} a run); the limit is {MAX_RUNS:,} runs '
+            f'and what fits in the {size_text(available)} available'
+        )
 
 
 def add_protocol_arguments(parser):
@@ -55,9 +92,13 @@ def add_runner_arguments(parser):
     parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
                         help='address of a running Dask scheduler (default: a local cluster '
                         'on this machine)')
-    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1, metavar='N',
-                        help='worker processes of the local cluster (default: all cores)')
-    parser.add_argument('--batch-size', type=int, metavar='N',
+    parser.add_argument('--workers', type=number('a worker count', '', 1, 10**9, integer=True),
+                        default=CORES, metavar='N',
+                        help='worker processes of the local cluster (default: all cores; at '
+                        f'most {WORKERS_PER_CORE} per core, {size_text(BYTES_PER_WORKER)} '
+                        'of memory each)')
+    parser.add_argument('--batch-size', metavar='N',
+                        type=number('a batch size', '', 1, MAX_RUNS, integer=True),
                         help='runs per task (default: about 8 tasks per worker, at most 64 runs)')
     parser.add_argument('--resume', action='store_true',
                         help='keep the runs already in DIR/results.jsonl and compute only the '
@@ -72,8 +113,7 @@ def open_backend(args, command, pool_fallback=False):
     """
     from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
 
-    if args.workers < 1 or (args.batch_size is not None and args.batch_size < 1):
-        raise StudyError('--workers and --batch-size must be at least 1')
+    check_workers(args.workers)
     try:
         import distributed  # noqa: F401  (is it installed?)
     except ImportError:
@@ -89,3 +129,16 @@ def open_backend(args, command, pool_fallback=False):
     where = args.scheduler or 'a local cluster'
     print(f'{command}: {backend.workers} Dask workers on {where}', file=sys.stderr)
     return backend
+
+
+def check_workers(workers):
+    """Raise StudyError unless a local cluster of workers processes fits this machine."""
+    limit = WORKERS_PER_CORE * CORES
+    need, available = workers * BYTES_PER_WORKER, available_memory()
+    if workers > limit or need > available:
+        raise StudyError(
+            f'--workers {workers}: a local cluster of {workers:,} worker processes would need '
+            f'about {size_text(need)} of memory ({size_text(BYTES_PER_WORKER)} each); the limit '
+            f'here is {limit} ({WORKERS_PER_CORE} per core) and what fits in the '
+            f'{size_text(available)} available'
+        )

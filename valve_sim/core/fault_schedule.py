@@ -47,6 +47,7 @@ from valve_sim.core.faults import check_fault, FAULT_NAMES
 from valve_sim.core.input_files import (
     FAULT_SCHEDULE,
     InputFileError,
+    MAX_EVENTS,
     open_regular,
     read_yaml,
     shown,
@@ -57,7 +58,6 @@ from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
 
 NS_PER_S = 1_000_000_000
 MAX_TIME = 1e6  # [s] latest event time accepted (11.6 days)
-MAX_EVENTS = 10_000  # events of one schedule: 10 a second for over 16 minutes
 CHECK_MEMORY = 2 * 1024**3  # [bytes] address space of the process that checks a file
 
 

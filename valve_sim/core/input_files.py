@@ -80,6 +80,7 @@ class FileKind:
 
 PARAMETER_FILE = FileKind('parameter file', 1 * MiB)
 FAULT_SCHEDULE = FileKind('fault schedule', 1 * MiB, 200_000)
+MAX_EVENTS = 10_000  # events of one fault schedule: 10 a second for over 16 minutes
 TARGET_MEASURES = FileKind('target measures file', 64 * 1024, 10_000)
 BAG_METADATA = FileKind('rosbag2 metadata file', 4 * MiB, 500_000)
 BAG_RECORD = FileKind('metadata record', 4 * MiB, 500_000)  # YAML inside an MCAP file

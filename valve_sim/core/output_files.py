@@ -57,19 +57,24 @@ def replacing(path, mode='w', explicit=False, **options):
     path = Path(os.path.realpath(path) if explicit else os.path.abspath(path))
     if path.is_dir() and not path.is_symlink():
         raise IsADirectoryError(21, 'is a directory, not a file', str(path))
-    descriptor, temporary = tempfile.mkstemp(
-        prefix=f'.{path.name}.', suffix='.part', dir=path.parent
-    )
+    try:
+        descriptor, temporary = tempfile.mkstemp(
+            prefix=f'.{path.name}.', suffix='.part', dir=path.parent
+        )
+    except OSError as error:  # named as the file the user knows
+        raise OSError(error.errno, error.strerror, str(path)) from None
     try:
         with os.fdopen(descriptor, mode, **options) as stream:
             yield stream
         os.chmod(temporary, FILE_MODE)
         os.replace(temporary, path)
-    except BaseException:
+    except BaseException as error:
         try:
             os.unlink(temporary)
         except OSError:
             pass
+        if isinstance(error, OSError) and error.filename == temporary:
+            raise OSError(error.errno, error.strerror, str(path)) from None
         raise
 
 

@@ -43,6 +43,7 @@ import sys
 from mcap.records import Channel, Message, Schema
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.output_files import create_new
 from valve_sim.recording import rosbag2_metadata
 from valve_sim.recording.recovery import Scan
 import yaml
@@ -178,18 +179,20 @@ class BagWriter:
     add_topic() once per topic, then write() serialized messages. path is the file,
     or with folder=True the bag folder (it must not exist yet, as for rosbag2);
     self.path is then the MCAP file in it. custom_data: {str: str} for the metadata.
+    new=True: path is a name the writer chose, not the user: nothing may be there yet,
+    not even a symbolic link (never followed).
     """
 
-    def __init__(self, path, chunk_size=CHUNK_SIZE, folder=False, custom_data=None):
+    def __init__(self, path, chunk_size=CHUNK_SIZE, folder=False, custom_data=None, new=False):
         self.folder = Path(path) if folder else None
         self.path = self.folder / f'{self.folder.name}_0.mcap' if folder else Path(path)
         try:
             if folder:
                 self.folder.mkdir(parents=True, exist_ok=False)
-            self._file = open(self.path, 'wb')
+            self._file = create_new(self.path) if new or folder else open(self.path, 'wb')
         except FileExistsError as error:
             raise InputFileError(
-                f'bag folder {self.folder} already exists; rosbag2 does not overwrite a bag'
+                f'{self.folder or self.path} already exists; rosbag2 does not overwrite a bag'
             ) from error
         except OSError as error:
             raise InputFileError(f'cannot write {self.path}: {error.strerror}') from error

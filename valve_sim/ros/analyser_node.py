@@ -63,6 +63,7 @@ publishes) the open steps on what it has, and closes the file.
 
 import argparse
 from dataclasses import dataclass
+import os
 from pathlib import Path
 import sys
 import textwrap
@@ -330,6 +331,7 @@ class ValveAnalyser(Node):
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
             folder=settings['bag_folder'],
             custom_data={'recorded_by': 'valve_sim analyser_node ' + self.hardware_id},
+            new=True,
         )
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
@@ -416,7 +418,7 @@ class ValveAnalyser(Node):
             ) from error
         stem, suffix = time.strftime('valve_%Y%m%d-%H%M%S'), '' if bag_folder else '.mcap'
         path, k = folder / f'{stem}{suffix}', 1
-        while path.exists():
+        while os.path.lexists(path):
             k += 1
             path = folder / f'{stem}_{k}{suffix}'
         return path
