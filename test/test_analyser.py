@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
@@ -42,6 +42,17 @@ import yaml
 
 
 TIMEOUT = 60.0  # [s] for anything that waits on another process
+# A publisher of diagnostic_msgs/KeyValue on supply_pressure, until killed.
+ROGUE_PUBLISHER = """
+import rclpy, time
+from diagnostic_msgs.msg import KeyValue
+rclpy.init()
+node = rclpy.create_node('rogue')
+publisher = node.create_publisher(KeyValue, 'supply_pressure', 10)
+while True:
+    publisher.publish(KeyValue(key='rogue', value='x'))
+    time.sleep(0.01)
+"""
 
 
 @contextmanager
@@ -237,3 +248,102 @@ def test_a_best_effort_publisher_is_recorded_and_its_qos_reported(node, tmp_path
     assert 'recording /inlet_flow (std_msgs/msg/Float64) with QoS best_effort/volatile' in log
     bag = next(tmp_path.glob('*.mcap'))
     assert sum(1 for _ in BagReader(bag).messages({'/inlet_flow'})) > 0
+
+
+def test_a_rogue_type_on_an_analysed_topic_does_not_stop_its_recording(node, tmp_path):
+    """
+    A publisher of another type on supply_pressure, whose type name sorts first.
+
+    The analyser records the FluidPressure the analysis reads (rosbag2 would record
+    neither), raises WARN naming the other type, and the bag holds the pressure.
+    """
+    from sensor_msgs.msg import FluidPressure
+    from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
+
+    statuses = []
+    subscription = node.create_subscription(
+        DiagnosticArray,
+        '/diagnostics',
+        lambda array: statuses.extend(
+            s for s in array.status if s.name == f'{NODE_NAME}: {RECORDING_TASK}'
+        ),
+        10,
+    )
+    # Another process: one participant cannot hold two types on a topic.
+    rogue = subprocess.Popen([sys.executable, '-c', ROGUE_PUBLISHER])
+    pressure = node.create_publisher(FluidPressure, 'supply_pressure', 10)
+    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    sent = 0
+
+    def warned():
+        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
+        return 'diagnostic_msgs/msg/KeyValue' in values.get('other types on /supply_pressure', '')
+
+    try:
+        with running_analyser(tmp_path) as analyser:
+            deadline = time.monotonic() + TIMEOUT
+            while not (warned() and sent > 200):
+                assert time.monotonic() < deadline, f'no warning: {statuses[-1:]}'
+                pressure.publish(FluidPressure(fluid_pressure=7.1e6))
+                sent += 1
+                executor.spin_once(timeout_sec=0.01)
+            level = statuses[-1].level
+            analyser.send_signal(signal.SIGINT)
+            log = analyser.communicate(timeout=TIMEOUT)[0]
+    finally:
+        rogue.kill()
+        rogue.wait()
+        executor.remove_node(node)
+        node.destroy_publisher(pressure)
+        node.destroy_subscription(subscription)
+    assert analyser.returncode == 0, log
+    assert level == DiagnosticStatus.WARN
+    bag = next(tmp_path.glob('*.mcap'))
+    recorded = [s.name for _, s, _ in BagReader(bag).messages({'/supply_pressure'})]
+    assert len(recorded) > 100 and set(recorded) == {'sensor_msgs/msg/FluidPressure'}
+
+
+@pytest.mark.parametrize('sec, nanosec', [(-3, 0), (2**31 - 1, 4_000_000_000)])
+def test_a_clock_the_analyser_cannot_represent_is_ignored_and_the_bag_closed(
+    node, tmp_path, sec, nanosec
+):
+    """A /clock of negative seconds or past 2^31 s: ignored, counted, the bag closed on SIGINT."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    from valve_sim.recording.recovery import diagnose
+    from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
+
+    statuses = []
+    subscription = node.create_subscription(
+        DiagnosticArray,
+        '/diagnostics',
+        lambda array: statuses.extend(
+            s for s in array.status if s.name == f'{NODE_NAME}: {RECORDING_TASK}'
+        ),
+        10,
+    )
+    clock = node.create_publisher(Clock, '/clock', 10)
+    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+
+    def refused():
+        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
+        return int(values.get('refused /clock messages', 0)) > 0
+
+    try:
+        with running_analyser(tmp_path, 'use_sim_time:=true') as analyser:
+            deadline = time.monotonic() + TIMEOUT
+            while not refused():
+                assert analyser.poll() is None, analyser.communicate()[0]
+                assert time.monotonic() < deadline, f'not counted: {statuses[-1:]}'
+                clock.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
+                executor.spin_once(timeout_sec=0.05)
+            analyser.send_signal(signal.SIGINT)
+            log = analyser.communicate(timeout=TIMEOUT)[0]
+    finally:
+        executor.remove_node(node)
+        node.destroy_publisher(clock)
+        node.destroy_subscription(subscription)
+    assert analyser.returncode == 0 and 'Traceback' not in log, log
+    assert diagnose(next(tmp_path.glob('*.mcap'))).damage is None, 'closed, with its footer'

@@ -242,10 +242,11 @@ def parse_yaml(text, kind, source):
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         at = f'line {mark.line + 1}, column {mark.column + 1}: ' if mark else ''
-        problem = ' '.join(filter(None, (error.context, error.problem)))
+        problem = ' '.join(' '.join(filter(None, (error.context, error.problem))).split())
         raise InputFileError(f'{where} is not valid YAML: {at}{problem}') from None
-    except yaml.YAMLError as error:
-        raise InputFileError(f'{where} is not valid YAML: {error}') from None
+    except yaml.YAMLError as error:  # one line: the reader's message spans two
+        problem = ' '.join(str(error).split())
+        raise InputFileError(f'{where} is not valid YAML: {problem}') from None
     except (ValueError, OverflowError) as error:  # a scalar the constructor cannot build
         if isinstance(error, InputFileError):
             raise

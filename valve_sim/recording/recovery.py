@@ -66,6 +66,7 @@ CHUNK_FIXED = struct.Struct('<QQQI')  # message start and end time, uncompressed
 FOOTER = struct.Struct('<QQI')  # summary start, summary offset start, summary crc
 RESYNC_BLOCK = 1024 * 1024  # [bytes] read at a time looking for the next intact chunk
 MAX_RESYNC_CHUNK = 256 * 1024 * 1024  # [bytes] a candidate chunk longer is not read
+MAX_COMPRESSION_NAME = 64  # [bytes] 'zstd', 'lz4' or '': a longer name is damage
 CHUNK_SIZE = 768 * 1024  # [bytes] chunks of the repaired file: rosbag2's default
 NAMES = {opcode.value: opcode.name.lower() for opcode in Opcode}
 READERS = {
@@ -168,6 +169,15 @@ class Scan:
             self._say(f'is corrupt at byte {offset}: no MCAP record starts there')
             return self._resync(file, offset)
         limit = self.data_end if offset < self.data_end else self.size
+        if opcode == Opcode.CHUNK:
+            true_length = self._chunk_length(file, offset, limit)
+            if true_length is not None and true_length != length:
+                self._say(
+                    f'is corrupt at byte {offset}: its chunk record says it is {length} bytes '
+                    f'long, its content {true_length} (a damaged length field, read past)'
+                )
+                length, end = true_length, offset + RECORD_HEADER.size + true_length
+            file.seek(offset + RECORD_HEADER.size)
         if end > limit and limit < self.size:
             self._say(
                 f'is corrupt at byte {offset}: its {name} record says it is {length} bytes '
@@ -250,6 +260,27 @@ class Scan:
                     self._say(f'is corrupt inside the chunk at byte {offset}: {error}')
                     break
         return records
+
+    def _chunk_length(self, file, offset, limit):
+        """
+        Return the length a chunk record at offset has by its content, or None.
+
+        A chunk's content says its own length (fixed fields, compression name, records
+        length, records), which must end by limit: a damaged length field is read past.
+        """
+        file.seek(offset + RECORD_HEADER.size + CHUNK_FIXED.size)
+        head = file.read(4)
+        if len(head) < 4:
+            return None
+        (name_length,) = struct.unpack('<I', head)
+        if name_length > MAX_COMPRESSION_NAME:
+            return None
+        file.seek(name_length, os.SEEK_CUR)
+        tail = file.read(8)
+        if len(tail) < 8:
+            return None
+        length = CHUNK_FIXED.size + 4 + name_length + 8 + struct.unpack('<Q', tail)[0]
+        return length if offset + RECORD_HEADER.size + length <= limit else None
 
     # --- past corrupt bytes ---------------------------------------------------------------
 

@@ -73,6 +73,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.callback_groups import CallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -349,9 +350,11 @@ class ValveAnalyser(Node):
             DiagnosticArray, 'step_measures', MEASURES_QOS
         )
         self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_timer(DISCOVERY_PERIOD, self._discover)
-        self.create_timer(settings['drain_period'], self.drain)
-        self.create_timer(1.0, self._publish_status)
+        # On the steady clock: recording must not stop while a simulation's /clock pauses.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(DISCOVERY_PERIOD, self._discover, clock=steady)
+        self.create_timer(settings['drain_period'], self.drain, clock=steady)
+        self.create_timer(1.0, self._publish_status, clock=steady)
         self.get_logger().info(f'recording {", ".join(self.wanted)} to {self.bag.path}')
 
     def _declare_parameters(self):
