@@ -367,6 +367,7 @@ def test_a_clock_jump_back_starts_a_new_time_base_for_the_roll_back_window(sim_v
     assert int(report['clock_jumps_back']) == jumps + 1
     assert probe.get_parameters('preset_pressure')['preset_pressure'] == pytest.approx(6.5e6)
     assert 'rolled back' not in Path(log).read_text().split('clock jumped back')[-1]
+    take_flow(probe, FLOW)  # a flow the next restore's max_inlet_flow accepts
 
 
 def test_the_schedule_check_process_answers_in_one_line():

@@ -74,6 +74,12 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import (
+    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
+    MAX_ALIASES,
+    MAX_DEPTH,
+    MAX_EVENTS,
+)
 from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
@@ -873,7 +879,15 @@ STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFil
 def parse_arguments(args):
     """valve_node's own command line (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
-        prog='valve_node', description='The virtual relief valve as a ROS 2 node.'
+        prog='valve_node',
+        description='The virtual relief valve as a ROS 2 node.',
+        epilog=(
+            f'fault_schedule: a regular file of {FAULT_SCHEDULE_FILE.limits()} and at most '
+            f'{MAX_EVENTS:,} events (YAML, UTF-8, at most {MAX_ALIASES} aliases, '
+            f'{MAX_DEPTH} levels deep), read in a process of its own when set live; a '
+            '/clock before 0 s or at or past 2^31 s is ignored and counted. '
+            'docs/valve_node.md, "Files it reads, and other hostile input".'
+        ),
     )
     parser.add_argument(
         '--executor',
