@@ -28,7 +28,6 @@ folder gets the bag, its measures JSON, figure5.png and the two nodes' logs. Exi
 one line saying what is missing if any measure, the bag or the figure is.
 """
 
-import json
 import math
 from pathlib import Path
 import re
