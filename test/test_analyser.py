@@ -211,53 +211,28 @@ def test_a_best_effort_publisher_is_recorded_and_its_qos_reported(node, tmp_path
     """As rosbag2 does: a SensorDataQoS (best-effort) topic is subscribed best effort."""
     from rclpy.qos import qos_profile_sensor_data
     from std_msgs.msg import Float64
-    from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
 
-    recording_status = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its default name
-    statuses = []
-    subscription = node.create_subscription(
-        DiagnosticArray,
-        '/diagnostics',
-        lambda array: statuses.extend(s for s in array.status if s.name == recording_status),
-        10,
+    code, log, _ = record_while(
+        node,
+        tmp_path,
+        node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data),
+        Float64(data=1e-4),
+        lambda values: values.get('qos /inlet_flow') == 'best_effort/volatile'
+        and int(values.get('messages /inlet_flow', 0)) > 0,
     )
-    publisher = node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
-    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-
-    def recorded():
-        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
-        return values.get('qos /inlet_flow') == 'best_effort/volatile' and int(
-            values.get('messages /inlet_flow', 0)
-        ) > 0
-
-    try:
-        with running_analyser(tmp_path) as analyser:
-            deadline = time.monotonic() + TIMEOUT
-            while not recorded():
-                assert time.monotonic() < deadline, f'not recorded best effort: {statuses[-1:]}'
-                publisher.publish(Float64(data=1e-4))
-                executor.spin_once(timeout_sec=0.05)
-            analyser.send_signal(signal.SIGINT)
-            log = analyser.communicate(timeout=TIMEOUT)[0]
-    finally:
-        executor.remove_node(node)
-        node.destroy_publisher(publisher)
-        node.destroy_subscription(subscription)
-    assert analyser.returncode == 0, log
+    assert code == 0, log
     assert 'recording /inlet_flow (std_msgs/msg/Float64) with QoS best_effort/volatile' in log
     bag = next(tmp_path.glob('*.mcap'))
     assert sum(1 for _ in BagReader(bag).messages({'/inlet_flow'})) > 0
 
 
-def test_a_rogue_type_on_an_analysed_topic_does_not_stop_its_recording(node, tmp_path):
+def record_while(node, folder, publisher, message, done, *parameters):
     """
-    A publisher of another type on supply_pressure, whose type name sorts first.
+    Run an analyser into folder, publishing message on publisher until done(last status).
 
-    The analyser records the FluidPressure the analysis reads (rosbag2 would record
-    neither), raises WARN naming the other type, and the bag holds the pressure.
+    done gets the latest recording status's values ({} before one came). Returns
+    (exit code after SIGINT, its log, that status).
     """
-    from sensor_msgs.msg import FluidPressure
     from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
 
     statuses = []
@@ -269,36 +244,55 @@ def test_a_rogue_type_on_an_analysed_topic_does_not_stop_its_recording(node, tmp
         ),
         10,
     )
-    # Another process: one participant cannot hold two types on a topic.
-    rogue = subprocess.Popen([sys.executable, '-c', ROGUE_PUBLISHER])
-    pressure = node.create_publisher(FluidPressure, 'supply_pressure', 10)
     executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
-    sent = 0
 
-    def warned():
-        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
-        return 'diagnostic_msgs/msg/KeyValue' in values.get('other types on /supply_pressure', '')
+    def latest():
+        return {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
 
     try:
-        with running_analyser(tmp_path) as analyser:
+        with running_analyser(folder, *parameters) as analyser:
             deadline = time.monotonic() + TIMEOUT
-            while not (warned() and sent > 200):
-                assert time.monotonic() < deadline, f'no warning: {statuses[-1:]}'
-                pressure.publish(FluidPressure(fluid_pressure=7.1e6))
-                sent += 1
+            while not done(latest()):
+                assert analyser.poll() is None, analyser.communicate()[0]
+                assert time.monotonic() < deadline, f'timed out, last status: {statuses[-1:]}'
+                publisher.publish(message)
                 executor.spin_once(timeout_sec=0.01)
-            level = statuses[-1].level
+            status = statuses[-1]
             analyser.send_signal(signal.SIGINT)
             log = analyser.communicate(timeout=TIMEOUT)[0]
     finally:
+        executor.remove_node(node)
+        node.destroy_publisher(publisher)
+        node.destroy_subscription(subscription)
+    return analyser.returncode, log, status
+
+
+def test_a_rogue_type_on_an_analysed_topic_does_not_stop_its_recording(node, tmp_path):
+    """
+    A publisher of another type on supply_pressure, whose type name sorts first.
+
+    The analyser records the FluidPressure the analysis reads (rosbag2 would record
+    neither), raises WARN naming the other type, and the bag holds the pressure.
+    """
+    from sensor_msgs.msg import FluidPressure
+
+    # Another process: one participant cannot hold two types on a topic.
+    rogue = subprocess.Popen([sys.executable, '-c', ROGUE_PUBLISHER])
+    try:
+        code, log, status = record_while(
+            node,
+            tmp_path,
+            node.create_publisher(FluidPressure, 'supply_pressure', 10),
+            FluidPressure(fluid_pressure=7.1e6),
+            lambda values: 'diagnostic_msgs/msg/KeyValue'
+            in values.get('other types on /supply_pressure', '')
+            and int(values.get('messages /supply_pressure', 0)) > 100,
+        )
+    finally:
         rogue.kill()
         rogue.wait()
-        executor.remove_node(node)
-        node.destroy_publisher(pressure)
-        node.destroy_subscription(subscription)
-    assert analyser.returncode == 0, log
-    assert level == DiagnosticStatus.WARN
+    assert code == 0 and status.level == DiagnosticStatus.WARN, log
     bag = next(tmp_path.glob('*.mcap'))
     recorded = [s.name for _, s, _ in BagReader(bag).messages({'/supply_pressure'})]
     assert len(recorded) > 100 and set(recorded) == {'sensor_msgs/msg/FluidPressure'}
@@ -312,38 +306,14 @@ def test_a_clock_the_analyser_cannot_represent_is_ignored_and_the_bag_closed(
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
     from valve_sim.recording.recovery import diagnose
-    from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
 
-    statuses = []
-    subscription = node.create_subscription(
-        DiagnosticArray,
-        '/diagnostics',
-        lambda array: statuses.extend(
-            s for s in array.status if s.name == f'{NODE_NAME}: {RECORDING_TASK}'
-        ),
-        10,
+    code, log, _ = record_while(
+        node,
+        tmp_path,
+        node.create_publisher(Clock, '/clock', 10),
+        Clock(clock=Time(sec=sec, nanosec=nanosec)),
+        lambda values: int(values.get('refused /clock messages', 0)) > 0,
+        'use_sim_time:=true',
     )
-    clock = node.create_publisher(Clock, '/clock', 10)
-    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-
-    def refused():
-        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
-        return int(values.get('refused /clock messages', 0)) > 0
-
-    try:
-        with running_analyser(tmp_path, 'use_sim_time:=true') as analyser:
-            deadline = time.monotonic() + TIMEOUT
-            while not refused():
-                assert analyser.poll() is None, analyser.communicate()[0]
-                assert time.monotonic() < deadline, f'not counted: {statuses[-1:]}'
-                clock.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-                executor.spin_once(timeout_sec=0.05)
-            analyser.send_signal(signal.SIGINT)
-            log = analyser.communicate(timeout=TIMEOUT)[0]
-    finally:
-        executor.remove_node(node)
-        node.destroy_publisher(clock)
-        node.destroy_subscription(subscription)
-    assert analyser.returncode == 0 and 'Traceback' not in log, log
+    assert code == 0 and 'Traceback' not in log, log
     assert diagnose(next(tmp_path.glob('*.mcap'))).damage is None, 'closed, with its footer'

@@ -61,12 +61,17 @@ def available_memory():
 
 def check_runs(runs, what):
     """Raise StudyError unless runs (what: the option that asks for them) fit the limits."""
-    need, available = runs * BYTES_PER_RUN, available_memory()
-    if runs > MAX_RUNS or need > available:
+    check_fits(what, runs, 'runs', MAX_RUNS, BYTES_PER_RUN)
+
+
+def check_fits(what, count, things, limit, each):
+    """Raise StudyError unless count things, each bytes, are within limit and the memory."""
+    need, available = count * each, available_memory()
+    if count > limit or need > available:
         raise StudyError(
-            f'{what} asks for {runs:,} runs, which would need about {size_text(need)} of '
-            f'memory here ({size_text(BYTES_PER_RUN)} a run); the limit is {MAX_RUNS:,} runs '
-            f'and what fits in the {size_text(available)} available'
+            f'{what} asks for {count:,} {things}, which would need about {size_text(need)} '
+            f'of memory here ({size_text(each)} each); the limit is {limit:,} {things} and '
+            f'what fits in the {size_text(available)} available'
         )
 
 
@@ -133,12 +138,5 @@ def open_backend(args, command, pool_fallback=False):
 
 def check_workers(workers):
     """Raise StudyError unless a local cluster of workers processes fits this machine."""
-    limit = WORKERS_PER_CORE * CORES
-    need, available = workers * BYTES_PER_WORKER, available_memory()
-    if workers > limit or need > available:
-        raise StudyError(
-            f'--workers {workers}: a local cluster of {workers:,} worker processes would need '
-            f'about {size_text(need)} of memory ({size_text(BYTES_PER_WORKER)} each); the limit '
-            f'here is {limit} ({WORKERS_PER_CORE} per core) and what fits in the '
-            f'{size_text(available)} available'
-        )
+    limit = WORKERS_PER_CORE * CORES  # WORKERS_PER_CORE a core
+    check_fits(f'--workers {workers}', workers, 'worker processes', limit, BYTES_PER_WORKER)
