@@ -123,17 +123,26 @@ class Scan:
                 f'{self.path} is not an MCAP file' + ('' if self.size else ' (it is empty)')
             )
         self.data_end, self._summary_start = self._footer()
+        self._summary_records = None  # ([schemas, channels], [chunk offsets]) of the summary
 
     def records(self):
-        """Yield the records in file order."""
+        """
+        Yield the records in file order.
+
+        A file with its summary yields the summary's schemas and channels right after
+        its header, so that the messages of every intact chunk have theirs, even when
+        the chunk that held them is damaged.
+        """
         with self._file as file:
-            offset = len(MAGIC)
+            offset, summary = len(MAGIC), self._summary(file)[0]
             while offset < self.size:
                 found = self._next(file, offset)
                 if found is None:
                     return
                 offset, records = found
                 yield from records
+                yield from summary
+                summary = ()
             self._say(f'is truncated: it ends at byte {self.size} without a footer')
 
     def _say(self, damage):
@@ -295,11 +304,25 @@ class Scan:
         return found
 
     def _next_indexed_chunk(self, file, offset):
-        """(offset of the first indexed chunk after offset, the summary's schemas and channels)."""
+        """(offset of the first indexed chunk after offset, []), or None."""
+        after = [start for start in self._summary(file)[1] if start > offset]
+        return (min(after), []) if after else None
+
+    def _summary(self, file):
+        """
+        Return ([schemas and channels], [chunk offsets]) of the summary section.
+
+        Empty without a summary, or with a damaged one; read once.
+        """
+        if self._summary_records is not None:
+            return self._summary_records
+        self._summary_records = [], []
         if not self._summary_start:
-            return None
+            return self._summary_records
+        position = file.tell()
         file.seek(self._summary_start)
         summary = file.read(self._summary_end() - self._summary_start)
+        file.seek(position)
         records, chunks, start = [], [], 0
         while start + RECORD_HEADER.size <= len(summary):
             opcode, length = RECORD_HEADER.unpack_from(summary, start)
@@ -307,13 +330,14 @@ class Scan:
             start += RECORD_HEADER.size + length
             try:
                 if opcode == Opcode.CHUNK_INDEX:
-                    chunks.append(ChunkIndex.read(ReadDataStream(BytesIO(content))))
+                    index = ChunkIndex.read(ReadDataStream(BytesIO(content)))
+                    chunks.append(index.chunk_start_offset)
                 elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
                     records.append(_read(opcode, content))
             except RECORD_ERRORS:
-                return None  # the summary is damaged too
-        after = [c.chunk_start_offset for c in chunks if c.chunk_start_offset > offset]
-        return (min(after), records) if after else None
+                return self._summary_records  # the summary is damaged too
+        self._summary_records = records, chunks
+        return self._summary_records
 
     def _summary_end(self):
         """Return the byte where the summary section ends (the footer record's start)."""
