@@ -97,7 +97,7 @@ def add_runner_arguments(parser):
     parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
                         help='address of a running Dask scheduler (default: a local cluster '
                         'on this machine)')
-    parser.add_argument('--workers', type=number('a worker count', '', 1, 10**9, integer=True),
+    parser.add_argument('--workers', type=number('a worker count', '', 1, 10**6, integer=True),
                         default=CORES, metavar='N',
                         help='worker processes of the local cluster (default: all cores; at '
                         f'most {WORKERS_PER_CORE} per core, {size_text(BYTES_PER_WORKER)} '

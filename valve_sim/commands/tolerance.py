@@ -65,7 +65,7 @@ from valve_sim.core.parameters import SPECS
 def add_study_arguments(parser, samples_help):
     """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
     add_options(parser, '--params', '--set', '--preset-pressure', '--out')
-    parser.add_argument('--samples', type=number('a sample count', '', 1, 2**62, integer=True),
+    parser.add_argument('--samples', type=number('a sample count', '', 1, 10**12, integer=True),
                         default=256, metavar='N',
                         help=f'{samples_help}; at most {MAX_RUNS:,} runs in all')
     add_options(parser, '--seed', help='seed of the sampler (default 0)')
