@@ -41,7 +41,7 @@ ROS_WHEELS = [
     'ros-jazzy-ament-index-python',
 ]
 # No rosdep keys exist for these: on a ROS install they are pip installs (README).
-STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib']
+STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib', 'pymoo>=0.6.2,<0.7']
 FOXGLOVE_DEPENDENCIES = ['foxglove-sdk']
 # ament_flake8 checks for these plugins; colcon builds the package in test_colcon.
 TEST_DEPENDENCIES = [
@@ -94,7 +94,6 @@ setup(
         'Virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',

@@ -19,10 +19,13 @@ Launch valve_node and analyser_node together (launch_ros).
     ros2 launch valve_sim valve_sim.launch.py namespace:=rig1 use_sim_time:=true \
         params_file:=/path/to/my_valve.yaml output_dir:=/data/recordings
 
-params_file is handed to valve_node as its --params-file, after the packaged
-config/reference.yaml (the node's defaults). Its section must name the node as it
-runs: `relief_valve:` without a namespace, `/rig1/relief_valve:` or `/**/relief_valve:`
-with one. output_dir is where analyser_node writes its MCAP recordings and measures.
+params_file is handed to valve_node as its --params-file (default: the packaged
+config/reference.yaml; the node's defaults are the reference valve in any case). rcl
+applies a section that names the node as it runs: `/**/relief_valve:` (what
+`valve-sim calibrate` writes) in any namespace, `/rig1/relief_valve:` in /rig1,
+`relief_valve:` only without a namespace; valve_node logs which sections it applied
+and warns of one meant for it that does not apply. output_dir is where
+analyser_node writes its MCAP recordings and measures.
 """
 
 import os

@@ -20,6 +20,7 @@ A simulated step published at 1 kHz, recorded, measured live and offline.
 
 from contextlib import contextmanager
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -32,12 +33,18 @@ from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 import pytest
 import rclpy
+from rclpy.parameter import Parameter
 from valve_harness import flushed
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.recording.bag import BagReader, message_definition
 from valve_sim.recording.replay import Replay
-from valve_sim.ros.analyser_node import measures_from_message, MEASURES_QOS
+from valve_sim.ros.analyser_node import (
+    measures_from_message,
+    MEASURES_QOS,
+    parameter_names,
+    ValveAnalyser,
+)
 import yaml
 
 
@@ -142,6 +149,10 @@ def test_live_measures_equal_offline_analysis(recording):
     assert records == analyse(read_recording(recording['bag']))
     published = measures_from_message(recording['messages'][0])
     assert published == {name: records[0][name] for name in MEASURE_NAMES}
+    # the step's time on the bag's axis (the epoch) and from the recording's first sample
+    message = recording['messages'][0].status[0].message
+    assert re.match(r'step up at t = \d+\.\d{6} s \(\d\.\d{4} s after the first sample\): ',
+                    message), message
 
 
 def test_recording_decodes_with_mcap_ros2_and_rosbags(recording):
@@ -317,3 +328,21 @@ def test_a_clock_the_analyser_cannot_represent_is_ignored_and_the_bag_closed(
     )
     assert code == 0 and 'Traceback' not in log, log
     assert diagnose(next(tmp_path.glob('*.mcap'))).damage is None, 'closed, with its footer'
+
+
+def test_help_lists_every_parameter_the_node_declares(context, tmp_path):
+    """Derived from the tables the node declares: --help and the launch file's check agree."""
+    node = ValveAnalyser(
+        context=context, parameter_overrides=[Parameter('output_dir', value=str(tmp_path))]
+    )
+    try:
+        declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
+    finally:
+        node.close()
+        node.destroy_node()
+    assert declared == set(parameter_names())
+    shown = subprocess.run([sys.executable, '-m', 'valve_sim.ros.analyser_node', '--help'],
+                           capture_output=True, text=True, timeout=TIMEOUT).stdout
+    listed = ' '.join(shown.split('ROS parameters', 1)[1].split())
+    for name in declared:
+        assert re.search(rf'\b{name}\b', listed), name

@@ -27,10 +27,11 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
@@ -158,13 +159,19 @@ def test_bag_decodes_with_rosbags(simulation_bag):
     assert qos[0].reliability.name == 'RELIABLE'
 
 
-def test_offline_analysis_of_simulation_bag(simulation_bag):
+def test_offline_analysis_of_simulation_bag(simulation_bag, waveforms):
     records = analyse(read_recording(simulation_bag))
     assert len(records) == 1
     step = records[0]
     assert step['t_step'] == pytest.approx(START_NS / 1e9 + 0.25) and step['direction'] == 1
-    assert step['P_1_percent'] == pytest.approx(3.2, abs=0.3)
     assert 'truncated' in step['details']['note']
+    # 0.35 s after the step p_s still swings: no final value, so no measure taken from it
+    assert step['details']['final_value_settled'] is False
+    for name in ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms'):  # taken from p_inf, x_inf
+        assert step[name] is None and 'has not settled' in step['reasons'][name], name
+    offline = step_measures(waveforms.time, waveforms['supply_pressure'],
+                            waveforms['main_valve_displacement'], 0.25, window=0.35)
+    assert step['T_1_ms'] == pytest.approx(offline.values['T_1_ms'], abs=0.1)  # peaks: kept
 
 
 def test_sample_bag_analyses_to_its_json():
@@ -187,7 +194,8 @@ def test_sample_bag_analyses_to_its_json():
 def test_analyse_prints_table_and_plots(tmp_path, capsys):
     code, out, err = run_cli(capsys, 'analyse', SAMPLE_BAG, '--plot', tmp_path / 'figure.png')
     assert code == 0, err
-    assert 'step 1: up at' in out and 'T_s_ms' in out and 'paper' in out
+    assert 'step 1: up at' in out and 'T_s_ms' in out and '(0.2500 s after the first' in out
+    assert 'paper' not in out  # a bag does not say which valve it recorded: no paper column
     assert (tmp_path / 'figure.png').stat().st_size > 10_000
 
 
@@ -247,7 +255,7 @@ def test_topic_mapping_reads_a_rig_bag(waveforms, simulation_bag, tmp_path, caps
             assert rig_step[name] == pytest.approx(valve_step[name], rel=1e-9)
 
 
-def test_step_time_option_needs_no_flow(simulation_bag, capsys):
+def test_step_time_option_needs_no_flow(simulation_bag, waveforms, capsys):
     code, out, err = run_cli(
         capsys,
         'analyse',
@@ -259,7 +267,11 @@ def test_step_time_option_needs_no_flow(simulation_bag, capsys):
         '--json',
     )
     assert code == 0, err
-    assert json.loads(out)['steps'][0]['P_1_percent'] == pytest.approx(3.2, abs=0.3)
+    step = json.loads(out)['steps'][0]
+    offline = step_measures(waveforms.time, waveforms['supply_pressure'],
+                            waveforms['main_valve_displacement'], 0.25, window=0.35)
+    assert step['T_1_ms'] == pytest.approx(offline.values['T_1_ms'], abs=0.1)
+    assert step['P_1_percent'] is None  # the truncated window has no settled final value
 
 
 def chunked_bag(path, chunks=8, per_chunk=50):
@@ -341,3 +353,55 @@ def test_stream_reader_of_mcap_reads_a_cut_file(simulation_bag, tmp_path):
             for record in StreamReader(stream).records:
                 records.append(record)
     assert sum(type(r).__name__ == 'Message' for r in records) > 0
+
+
+def test_a_bag_recorded_in_a_namespace_needs_no_topic_options(waveforms, tmp_path, capsys):
+    """One valve under /rig1: analyse finds it, or --namespace names it; two need the option."""
+    bag = tmp_path / 'rig1.mcap'
+    write_simulation_bag(bag, waveforms, start_time_ns=START_NS, namespace='/rig1')
+    code, named, err = run_cli(capsys, 'analyse', bag, '--namespace', 'rig1', '--json')
+    assert code == 0, err
+    code, found, err = run_cli(capsys, 'analyse', bag, '--json')
+    assert code == 0 and 'under /rig1' in err
+    assert json.loads(found)['steps'] == json.loads(named)['steps'] != []
+    code, _, err = run_cli(capsys, 'analyse', bag, '--namespace', '/rig2')
+    assert code == 1 and 'no topic /rig2/supply_pressure' in err
+    two = tmp_path / 'two.mcap'
+    writer = BagWriter(two)
+    for namespace in ('/rig1', '/rig2'):
+        for topic, type_name in TOPIC_TYPES.items():
+            writer.add_topic(f'{namespace}/{topic}', type_name)
+    writer.close()
+    code, _, err = run_cli(capsys, 'analyse', two)
+    assert code == 1 and '2 namespaces: /rig1, /rig2; choose one with --namespace' in err
+
+
+def test_simulate_writes_and_reads_a_namespace(tmp_path, capsys):
+    """--namespace /rig1: the bag's topics below it, and the file's /rig1 section applies."""
+    params = tmp_path / 'rig1.yaml'
+    params.write_text('/rig1/relief_valve:\n  ros__parameters:\n    preset_pressure: 6.5e6\n')
+    bag = tmp_path / 'sim.mcap'
+    code, out, err = run_cli(capsys, 'simulate', '--namespace', '/rig1', '--params', params,
+                             '--end-time', '0.4', '--mcap', bag, '--json')
+    assert code == 0, err
+    assert json.loads(out)['details']['p_0'] == pytest.approx(6.5e6, rel=0.01)
+    with open(bag, 'rb') as stream:
+        topics = {c.topic for c in make_reader(stream).get_summary().channels.values()}
+    assert '/rig1/supply_pressure' in topics and '/supply_pressure' not in topics
+    code, _, err = run_cli(capsys, 'simulate', '--params', params, '--end-time', '0.4')
+    assert code == 1 and "'/rig1/relief_valve' (" in err and 'do not apply to /relief_valve' in err
+
+
+def test_simulate_writes_a_rig_bag_with_a_slower_flowmeter(tmp_path, capsys):
+    """--flow-interval: the flow topic every 10 ms, the pressure every 1 ms, in time order."""
+    bag = tmp_path / 'slow.mcap'
+    code, _, err = run_cli(capsys, 'simulate', '--end-time', '0.3', '--mcap', bag,
+                           '--rig-topics', '/rig/p,/rig/q', '--flow-interval', '0.01')
+    assert code == 0, err
+    times = {'/rig/p': [], '/rig/q': []}
+    for channel, _, message in BagReader(bag).messages():
+        times[channel.topic].append(message.log_time)
+    assert len(times['/rig/p']) == 301 and len(times['/rig/q']) == 31
+    assert set(np.diff(times['/rig/q'])) == {10_000_000}
+    code, _, err = run_cli(capsys, 'simulate', '--end-time', '0.3', '--flow-interval', '0.01')
+    assert code == 1 and '--flow-interval needs --mcap, --rig-topics' in err

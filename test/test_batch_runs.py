@@ -91,11 +91,11 @@ def test_batch_skips_the_steady_lead_without_changing_the_measures(reference):
     simulate_batch against simulate() on the paper's step.
 
     Stable starts (lead held, not integrated): the same samples, states within
-    rounding, measures equal to 1e-9. An unstable start (d_c +40 %) is integrated
-    as simulate() does it: bit-identical.
+    rounding, measures equal to 1e-9. An unstable start (d_c +60 %: its pilot mode
+    grows at 5 L/min) is integrated as simulate() does it: bit-identical.
     """
     scenario = Scenario(end_time=0.45)  # the paper's step, shorter (the window is truncated)
-    variants = [reference, scaled(reference, {'m_m': 20}), scaled(reference, {'d_c': 40})]
+    variants = [reference, scaled(reference, {'m_m': 20}), scaled(reference, {'d_c': 60})]
     batch = simulate_batch(variants, scenario, lanes=2)
     for params, fast in zip(variants, batch):
         full = simulate(params, scenario)

@@ -15,6 +15,7 @@
 """valve-sim calibrate and analyse on what a rig records; the reference derivation re-run."""
 
 import json
+import math
 from pathlib import Path
 import re
 import signal
@@ -24,9 +25,17 @@ import time
 
 from figure5 import outside_tolerance, TOLERANCES
 import pytest
+from valve_sim.analysis.calibration import (
+    calibrate,
+    CalibrationError,
+    fit_parameters,
+    RecordingTarget,
+)
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.core.parameters import config_path, load_parameters, read_parameter_file
+from valve_sim.core.parameters import config_path, load_parameters, read_parameter_file, scaled
+from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.recording.bag import BagReader, BagWriter
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,8 +45,10 @@ RIG = ('--topic-supply-pressure', '/rig/inlet_pressure', '--topic-inlet-flow', '
 # The derivation of config/reference.yaml, as docs/model.md states it (without --out).
 REFERENCE_COMMAND = (
     'valve-sim calibrate --params config/calibration/figure5_start.yaml --preset-pressure 7MPa '
-    '--target-measures config/calibration/figure5.json --fit d_p,k_m,d_s,h '
-    '--max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 --study-relieves'
+    '--target-measures config/calibration/figure5.json --fit d_p,D_1,d_1,D_2,d_2,h,k_m,d_b,d_s '
+    '--tie d_v=0.98*d_s --max-pilot-flow 1.2L/min --table2-decays --relieves d_c=-20 '
+    '--land-margin 1e-3 --main-spring-rate 1e3:5e3 --main-spring-preload 20:100 '
+    '--study-relieves --tolerance 1e-4'
 )
 
 
@@ -74,6 +85,7 @@ def test_analyse_gives_the_six_measures_of_a_bag_without_the_main_valve(rig_bag)
     assert all(step[name] is not None for name in MEASURE_NAMES)
     text = valve_sim('analyse', rig_bag, *RIG).stdout
     assert 'T_s_ms: from the supply pressure' in text
+    assert 'paper' not in text  # another valve, T_s from p_s: no paper column beside it
     refused = valve_sim('analyse', rig_bag, check=False)  # default topics: not in this bag
     assert refused.returncode == 1 and '--topic-supply-pressure' in refused.stderr
 
@@ -151,3 +163,88 @@ def test_the_documented_command_rederives_the_reference_geometry(tmp_path):
     report = json.loads((tmp_path / 'report.json').read_text())
     assert all(status['satisfied'] for status in report['constraints']), result.stdout
     assert outside_tolerance({m['name']: m['model'] for m in report['measures']}) == {}
+
+
+def late_joint_states(source, target, late_ns):
+    """Copy a bag, its joint_states beginning late_ns after the rest (a recorder's start)."""
+    reader, writer, first = BagReader(source), BagWriter(target), None
+    try:
+        for channel, schema, message in reader.messages():
+            first = message.log_time if first is None else first
+            if channel.topic not in writer.channels:
+                writer.add_topic(channel.topic, schema.name)
+            if channel.topic != '/joint_states' or message.log_time >= first + late_ns:
+                writer.write(writer.channels[channel.topic], message.data, message.log_time,
+                             message.publish_time)
+    finally:
+        writer.close()
+
+
+def test_calibrate_fits_a_recording_whose_signals_begin_one_by_one(reference, tmp_path):
+    """As analyser_node records: it subscribes topic by topic, joint_states 40 ms late."""
+    rig = scaled(reference, {'d_c': 5.0})
+    full, late = tmp_path / 'full.mcap', tmp_path / 'late.mcap'
+    valve_sim('simulate', '--set', f'd_c={rig["damping_orifice_diameter"]!r}', '--mcap', full,
+              '--end-time', '0.8', '--start-time', '2026-11-29T12:00:00Z')
+    late_joint_states(full, late, 40_000_000)
+    result = valve_sim('calibrate', '--bag', late, '--fit', 'd_c', '--starts', '1', '--quiet',
+                       '--out', tmp_path / 'out')
+    assert re.search(r'main-valve displacement x \(/joint_states\) begins 0\.04\d s later: '
+                     r'fitting from there \(the first 4\d samples dropped\)', result.stderr)
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report['recording']['main_valve_recorded'] is True
+    (fitted,) = report['fitted']
+    assert fitted['value'] == pytest.approx(rig['damping_orifice_diameter'], rel=1e-4)
+
+
+def test_a_data_problem_is_not_reported_as_a_model_problem(reference):
+    run = simulate(reference, Scenario(step_time=0.1, end_time=0.3), record_interval=1e-3)
+    target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
+                             run['main_valve_displacement'])
+    target.position_noise = math.nan  # a noise level the data could not give
+    with pytest.raises(CalibrationError, match='a problem of the data') as refused:
+        calibrate(reference, fit_parameters(['d_c'], {}, reference), target, starts=1)
+    assert 'main_valve' in str(refused.value) and 'model cannot' not in str(refused.value)
+
+
+def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
+    """A noise-free rig bag of the reference valve, fitted from the reference: residual 0."""
+    bag = tmp_path / 'clean.mcap'
+    valve_sim('simulate', '--end-time', '0.6', '--mcap', bag, '--rig-topics',
+              '/rig/inlet_pressure,/rig/flowmeter', '--start-time', '2026-11-29T12:00:00Z')
+    result = valve_sim('calibrate', '--bag', bag, *RIG, '--fit', 'd_c,k_p', '--starts', '1',
+                       '--quiet', '--out', tmp_path / 'out')
+    assert 'nan' not in result.stdout.lower()
+    assert 'no intervals or correlations: the residual is zero' in result.stdout
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report['correlations'] is None and 'interval_95' not in report['fitted'][0]
+
+
+def test_the_design_rules_and_ties_as_the_fit_uses_them():
+    from valve_sim.analysis.calibration import (
+        apply_values, CalibrationError, fit_parameters, fit_ties, LandsInsideBore,
+        MainSpringRange,
+    )
+    from valve_sim.core.bearing import reference_bearing_fit
+
+    reference, _ = load_parameters()
+    lands, spring = LandsInsideBore(1e-3), MainSpringRange((1e3, 5e3), (20.0, 100.0))
+    assert lands.penalty(reference) == 0.0 and lands.status(reference)['satisfied']
+    # k_m ends a hair past where its penalty starts (0.1 % inside the limit): inside the limit.
+    assert spring.penalty(reference) < 1e-3 and spring.status(reference)['satisfied']
+    bore = reference['main_valve_back_diameter']
+    rim = dict(reference, first_throttle_outer_diameter=bore - 1e-3)
+    assert lands.penalty(rim) == pytest.approx(100.0 + 0.1)  # 1 mm past the limit: 100 % of m
+    assert not lands.status(rim)['satisfied']
+    stiff = dict(reference, main_spring_stiffness=86e3)  # the old main spring
+    assert spring.penalty(stiff) > 1000.0 and not spring.status(stiff)['satisfied']
+    fitted = fit_parameters(['d_s', 'd_b'], {}, reference)
+    ties = fit_ties([('d_v', 0.98, 'd_s')], fitted)
+    moved = apply_values(reference, fitted, [4.0e-3, 0.5e-3], ties=ties)
+    assert moved['pilot_seat_diameter'] == pytest.approx(0.98 * 4.0e-3, rel=1e-15)
+    k1, k2, k3, _, _ = reference_bearing_fit(moved)  # d_b fitted: K_1..K_3 follow it
+    assert (moved['bearing_coefficient_1'], moved['bearing_coefficient_2'],
+            moved['bearing_coefficient_3']) == (k1, k2, k3)
+    for bad in ([('d_s', 1.0, 'd_v')], [('d_v', 1.0, 'd_v')], [('d_v', -1.0, 'd_s')]):
+        with pytest.raises(CalibrationError):
+            fit_ties(bad, fitted)

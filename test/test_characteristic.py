@@ -81,7 +81,12 @@ def test_bad_input_is_named():
 
 
 def test_ramp_cracking_equals_the_steady_state_solver(reference):
-    """On a 10 s ramp each way, cracking (1 % main-stage flow) is the solver's within 0.2 %."""
+    """
+    On a 10 s ramp each way, cracking (1 % main-stage flow) is the solver's within 0.2 %.
+
+    From the pressure-flow curve alone (a rig's method) within 0.3 %: the curve bends
+    into its override line over the first L/min after cracking (docs/characteristic.md).
+    """
     _, _, marks = ramp_test(reference, RATED, RATED, 10.0, 0.5, 1e-5, 1e-3)
     steady = steady_marks(reference, RATED, RATED)
     ramp = marks['main_stage_flow']
@@ -91,7 +96,7 @@ def test_ramp_cracking_equals_the_steady_state_solver(reference):
     assert ramp.reseat_pressure == pytest.approx(steady['cracking_pressure'], rel=2e-3)
     assert steady['lift_off_pressure'] < steady['cracking_pressure'] < steady['rated_pressure']
     curve = marks['pressure_flow_curve']
-    assert curve.cracking_pressure == pytest.approx(steady['cracking_pressure'], rel=2e-3)
+    assert curve.cracking_pressure == pytest.approx(steady['cracking_pressure'], rel=3e-3)
 
 
 def test_command_and_bag_analysis_agree(tmp_path, capsys, reference):

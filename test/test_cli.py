@@ -118,18 +118,21 @@ def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_pat
         for name in MEASURE_NAMES:  # every case relieves and has all six measures
             assert row[name] != '', (case, name, row['reasons'])
         assert float(row['initial_main_valve_displacement_m']) > 0.0, case  # main stage open
+        assert float(row['envelope_decay_per_s']) > 0.0, case  # T_s's companion
         # The preset held: the case cracks at it, and p_s before the step reads the preset
         # plus the override from cracking to 5 L/min.
         assert float(row['cracking_pressure_Pa']) == pytest.approx(preset, rel=1e-6), case
         assert preset < float(row['initial_supply_pressure_Pa']) < 1.01 * preset, case
     k_p_rows = [row for row in rows if row['parameter'] == 'k_p']
     initial = [float(row['initial_supply_pressure_Pa']) for row in k_p_rows]
-    assert max(initial) - min(initial) < 1e-3 * preset  # frozen, k_p +-20 % moves it ~ +-20 %
+    # Only the override from cracking to 5 L/min moves with k_p (0.13 %); a frozen preload
+    # would move p_s by about +-20 %.
+    assert max(initial) - min(initial) < 5e-3 * preset
     k_p_preloads = [float(row['pilot_spring_preload_m']) for row in k_p_rows]
     assert k_p_preloads == sorted(k_p_preloads, reverse=True)  # stiffer spring, less preload
     with open(tmp_path / 'table3.csv') as stream:
         table3 = list(csv.DictReader(stream))
-    assert [row['measure'] for row in table3] == list(MEASURE_NAMES)
+    assert [row['measure'] for row in table3] == [*MEASURE_NAMES, 'envelope_decay_per_s']
     assert list(table3[0]) == [
         'measure',
         'table1',
@@ -148,7 +151,8 @@ def test_frozen_preload_protocol_lets_the_preset_move_with_the_spring(reference)
     frozen = run_case(reference, {'k_p': 20}, 1e-5, 'frozen-preload')['case']
     assert frozen['protocol'] == 'frozen-preload' and held['protocol'] == 'held-preset'
     assert frozen['pilot_spring_preload_m'] == reference['pilot_spring_preload']
-    assert held['initial_supply_pressure_Pa'] == pytest.approx(7e6, rel=1e-3)
+    # p_s before the step: the preset plus the override from cracking to 5 L/min (0.3 %).
+    assert held['initial_supply_pressure_Pa'] == pytest.approx(7e6, rel=5e-3)
     assert frozen['initial_supply_pressure_Pa'] > 1.15 * held['initial_supply_pressure_Pa']
 
 

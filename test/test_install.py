@@ -242,3 +242,23 @@ def test_license_and_rosdep_keys():
     assert keys and sorted(set(keys)) == sorted(keys), 'no key twice'
     unchecked = [key for key in keys if key not in ROSDEP_KEYS]
     assert unchecked == [], f'rosdep keys not checked against rosdistro: {unchecked}'
+
+
+def test_setup_py_passes_setuptools_no_option_it_warns_about():
+    """tests_require: deprecated, and each pip install warned of it (three times)."""
+    tree = ast.parse((REPO / 'setup.py').read_text())
+    (setup_call,) = [keywords for keywords, _ in launch_calls(tree, 'setup')]
+    assert 'tests_require' not in setup_call and 'test_suite' not in setup_call
+
+
+def test_valve_node_help_names_the_layout_file_this_install_has(install, tmp_path):
+    """--foxglove's help gives the path of the layout where this installation keeps it."""
+    result = subprocess.run(
+        [str(install / 'lib' / 'valve_sim' / 'valve_node'), '--help'],
+        env=sourced(install), cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    shown = result.stdout.split('the layout to open:', 1)[1].split('. On a ROS', 1)[0]
+    path = Path(''.join(shown.split()))  # argparse wraps it; it holds no space here
+    assert path.is_file() and path.name == 'valve_layout.json'
+    assert install in path.parents  # the install space's own copy, not the source tree's

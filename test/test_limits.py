@@ -14,6 +14,10 @@
 
 """Physical limits: absurd flows and states refused, tiny flows ordinary, overpressure apart."""
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from valve_sim.core.integrator import (
@@ -127,3 +131,23 @@ def test_lanes_split_the_same_steps_as_one_valve_alone(reference):
     for lane, start in enumerate(starts):
         alone = advance(start.copy(), flows, c, 1e-5, record_every=100)
         assert np.array_equal(records[lane], alone)
+
+
+def test_simulate_reports_an_overpressure_as_valve_node_publishes_it(reference, tmp_path):
+    """1 m^3/s into the valve: the run halts, p_s at burst_pressure from then on, exit 1."""
+    csv_path = tmp_path / 'run.csv'
+    done = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'simulate', '--set',
+         'max_inlet_flow=10.0', '--final-flow', '1', '--csv', str(csv_path), '--json'],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert done.returncode == 1 and 'OVERPRESSURE at t = ' in done.stderr, done.stderr
+    assert 'Traceback' not in done.stderr
+    measures = json.loads(done.stdout)
+    assert all(measures[name] is None for name in measures['reasons'])
+    tripped = measures['details']['overpressure']['t']
+    rows = np.loadtxt(csv_path, delimiter=',', skiprows=1)
+    after = rows[rows[:, 0] >= tripped]
+    assert np.all(after[:, 2] == reference['burst_pressure'])  # p_s: the limit it passed
+    assert np.all(after[:, 3:] == after[0, 3:])  # the rest: the last good state, held
+    assert np.all(rows[rows[:, 0] < tripped, 2] < reference['burst_pressure'])

@@ -21,6 +21,7 @@ import pytest
 from valve_sim.analysis.measures import (
     _lobes,
     detect_steps,
+    envelope_decay_rate,
     MEASURE_NAMES,
     step_measures,
     StepDetector,
@@ -81,6 +82,34 @@ def test_known_answers_at_10_khz_and_1_khz(rate):
     assert result.values['r_d'] == pytest.approx(want['r_d'], abs=2e-3)
     assert result.values['P_o_percent'] == pytest.approx(want['P_o_percent'], rel=2e-3)
     assert result.values['T_s_ms'] == pytest.approx(want['T_s_ms'], abs=1e3 / rate + 0.5)
+
+
+@pytest.mark.parametrize('rate', [1e4, 1e3])
+def test_envelope_decay_rate_is_the_decay_of_the_swings(rate):
+    t, p, _ = synthetic(rate, ripple=300.0)
+    decay, reason = envelope_decay_rate(t, p, None, T_STEP)  # from p_s (no x)
+    assert reason is None and decay == pytest.approx(SIGMA, rel=0.01)
+    ringing_x = X_INF + 1e-5 * np.exp(-SIGMA * (t - T_STEP)) * np.cos(OMEGA * (t - T_STEP))
+    decay, reason = envelope_decay_rate(t, p, np.where(t < T_STEP, X0, ringing_x), T_STEP)
+    assert reason is None and decay == pytest.approx(SIGMA, rel=0.01)  # from x, where recorded
+
+
+def test_settling_time_steps_by_half_periods_where_the_envelope_decay_moves_smoothly():
+    """Docs/measures.md: a 1 % slower decay moves T_s by 0 or by ~T_d / 2; sigma by ~1 %."""
+    t = np.arange(0.0, T_STEP + 1.0, 1e-4)
+    tau = np.clip(t - T_STEP, 0.0, None)
+    settling, decays = [], []
+    for sigma in np.linspace(6.0, 6.6, 13):
+        x = X_INF - (X_INF - X0) * np.exp(-sigma * tau) * np.cos(OMEGA * tau)
+        p = P0 + DELTA * (tau > 0) + AMPLITUDE * np.exp(-sigma * tau) * np.sin(OMEGA * tau)
+        settling.append(step_measures(t, p, x, T_STEP).values['T_s_ms'])
+        decays.append(envelope_decay_rate(t, p, x, T_STEP)[0])
+    half_period = math.pi / OMEGA * 1e3  # [ms]
+    steps = np.diff(settling)
+    assert np.all((np.abs(steps) < 0.1 * half_period)
+                  | (np.abs(np.abs(steps) - half_period) < 0.2 * half_period))
+    assert np.any(np.abs(steps) > 0.5 * half_period)  # it did step
+    assert np.array(decays) == pytest.approx(np.linspace(6.0, 6.6, 13), rel=0.01)
 
 
 def test_pilot_ripple_is_not_taken_for_a_peak():
@@ -207,3 +236,19 @@ def test_lobes_on_arrays_equal_the_sample_loop():
         else:
             e, band = rng.normal(size=n).cumsum(), abs(rng.normal())
         assert _lobes(e, band) == _lobes_one_sample_at_a_time(e, band), (e, band)
+
+
+def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(reference):
+    """P_1 keeps the sign of p_1 - p_inf: below p_inf for a step down (docs/measures.md)."""
+    from pathlib import Path
+
+    from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+
+    run = simulate(reference, Scenario(20 * LITRE_PER_MINUTE, 5 * LITRE_PER_MINUTE, 0.1, 1.2),
+                   record_interval=1e-4)
+    down = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'], 0.1,
+                         direction=-1)
+    assert down.values['P_1_percent'] < 0.0 and down.values['P_o_percent'] < 0.0
+    assert down.values['T_1_ms'] > 0.0 and down.values['r_d'] > 0.0
+    docs = Path(__file__).resolve().parents[1] / 'docs' / 'measures.md'
+    assert 'for a step down P_1 is negative' in ' '.join(docs.read_text().split())

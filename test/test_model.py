@@ -25,6 +25,7 @@ from valve_sim.core.model import (
     net_forces,
     P_C,
     P_M,
+    P_P,
     P_S,
     state_derivative,
     X,
@@ -112,6 +113,55 @@ def test_steady_state_is_exact_no_start_up_transient(params, flow_lpm):
     assert np.max(np.abs(record[:, X] - start[X])) < 1e-6 * max(start[X], 1e-6)
 
 
+def swept_areas(c, velocity):
+    """Return the net area [m^2] by which a velocity (X_DOT, Y_DOT) takes chamber volume."""
+    if velocity == X_DOT:
+        return c.supply_force_area + c.intermediate_force_area - c.back_area
+    return c.rod_area + c.poppet_chamber_area
+
+
+def chamber_inflows(state, c, volumes, beta):
+    """Net inflow of each chamber s, m, p, c [m^3/s] (V / beta dp/dt)."""
+    return volumes / beta * state_derivative(state, 0.0, c)[P_S:P_C + 1]
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_each_chamber_sweeps_the_area_its_pressure_pushes_on(params, seed):
+    """
+    Swept area == force area, chamber by chamber, for the main valve and the poppet.
+
+    dq_i/dv = -dF/dp_i for every chamber i and valve velocity v: the volume a valve's
+    motion takes from a chamber is the area that chamber's pressure pushes it with, so
+    the pressures' work on the valves is the work the chambers give up. Checked on the
+    reference and on geometries varied at random (an unbalanced pilot poppet included),
+    with the poppet on its seat (no flow force).
+    """
+    rng = np.random.default_rng(seed)
+    varied = dict(params)
+    if seed:
+        for name in ('main_valve_back_diameter', 'first_throttle_inner_diameter',
+                     'second_throttle_outer_diameter', 'sensing_rod_diameter',
+                     'pilot_seat_diameter'):
+            varied[name] *= rng.uniform(0.85, 1.15)
+    c = coefficients(validate(varied))
+    volumes = np.array([varied[k] for k in ('supply_volume', 'intermediate_volume',
+                                            'pilot_volume', 'poppet_chamber_volume')])
+    beta = varied['bulk_modulus']
+    state = np.array([7e6, 5e6, 3e6, 2e6, 1e-4, 0.0, 0.0, 0.0])
+    for velocity, force in ((X_DOT, 0), (Y_DOT, 1)):
+        moving = state.copy()
+        moving[velocity] = 1e-3
+        swept = (chamber_inflows(moving, c, volumes, beta)
+                 - chamber_inflows(state, c, volumes, beta)) / 1e-3
+        for chamber in (P_S, P_M, P_P, P_C):
+            pushed = state.copy()
+            pushed[chamber] += 1e5
+            area = (net_forces(pushed, c)[force] - net_forces(state, c)[force]) / 1e5
+            assert swept[chamber] == pytest.approx(-area, rel=1e-9, abs=1e-15), (velocity, chamber)
+    assert c.poppet_chamber_area == pytest.approx(
+        np.pi / 4 * (varied['pilot_seat_diameter'] ** 2 - varied['sensing_rod_diameter'] ** 2))
+
+
 def test_volume_conservation_identity(params):
     """
     Sum of V/beta dp/dt over the chambers equals inflow - outflow - net displacement.
@@ -145,7 +195,7 @@ def test_volume_conservation_identity(params):
         rates = state_derivative(state, q_in, c)
         stored = np.sum(volumes / params['bulk_modulus'] * rates[P_S:P_C + 1])
         _, q_m2, _, _, _, q_p = flows(state, c)
-        displaced = (c.swept_area - c.back_area) * state[X_DOT] + c.rod_area * state[Y_DOT]
+        displaced = swept_areas(c, X_DOT) * state[X_DOT] + swept_areas(c, Y_DOT) * state[Y_DOT]
         assert stored == pytest.approx(q_in - q_m2 - q_p - displaced, rel=1e-9, abs=1e-15)
 
 
@@ -174,7 +224,7 @@ def test_volume_is_conserved_over_a_step_response(params):
     stored = np.sum(
         volumes / params['bulk_modulus'] * (state[P_S:P_C + 1] - start[P_S:P_C + 1])
     )
-    displaced = (c.swept_area - c.back_area) * (state[X] - start[X]) + c.rod_area * (
+    displaced = swept_areas(c, X_DOT) * (state[X] - start[X]) + swept_areas(c, Y_DOT) * (
         state[Y] - start[Y]
     )
     inflow = flows_in.sum() * step
@@ -258,7 +308,10 @@ def test_ramp_from_closed_valve_and_back_down(params):
     assert np.all(np.isfinite(state))
     assert state[X] == 0.0  # the main valve is back on its seat
     assert 0.0 <= state[Y] < 1e-6  # the poppet closes asymptotically ...
-    pilot_cracking = params['pilot_spring_stiffness'] * params['pilot_spring_preload'] / c.rod_area
+    # With no flow every chamber is at p_s: the rod and the poppet chamber's net area,
+    # A_s + A_c = A_v, carry the pilot spring's preload.
+    pilot_cracking = (params['pilot_spring_stiffness'] * params['pilot_spring_preload']
+                      / (c.rod_area + c.poppet_chamber_area))
     assert state[P_S] == pytest.approx(
         pilot_cracking, rel=1e-2
     )  # ... as p_s falls to its cracking pressure
@@ -293,8 +346,9 @@ def test_a_valve_without_a_cracking_point_is_refused_with_its_reason(params):
     assert steady_state(narrow, 1 * LITRE_PER_MINUTE)[X] == 0.0
     with pytest.raises(SteadyStateError, match='exceeds burst_pressure'):
         steady_state(narrow, 5 * LITRE_PER_MINUTE)
-    # A main spring 12x stiffer: the poppet reaches its stop before the main valve lifts.
-    stiff = validate({**params, 'main_spring_stiffness': 1e6})
+    # A main spring of 300 N/mm, 60x the soft one: the poppet reaches its stop before the
+    # main valve lifts.
+    stiff = validate({**params, 'main_spring_stiffness': 3e5})
     with pytest.raises(SteadyStateError, match='beyond its stroke y_max = 0.001 m: it reaches '
                        'its end stop before the main valve lifts off'):
         cracking_pressure(stiff)

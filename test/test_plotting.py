@@ -27,6 +27,7 @@ import re
 from matplotlib.figure import Figure
 import numpy as np
 import pytest
+from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.plotting import plot_step_response
 from valve_sim.commands.analyse import PLOT_LEAD, plot_steps, read_recording
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
@@ -121,3 +122,49 @@ def test_the_figure_of_a_recorded_step_counts_time_from_the_first_sample(saved, 
     drawn = figure.axes[0].get_lines()[0].get_xdata()
     assert drawn[0] >= 0.0 and drawn[-1] < 2.0
     assert figure.axes[-1].get_xlabel() == 'time [s]'
+
+
+def test_the_fit_figure_shows_the_recording_above_the_model(reference, saved, tmp_path):
+    """fit.png: recorded samples as dots drawn over the model's line, the step zoomed."""
+    from valve_sim.analysis.calibration import RecordingTarget
+    from valve_sim.analysis.plotting import plot_recording_fit
+
+    run = simulate(reference, Scenario(step_time=0.1, end_time=0.5), record_interval=1e-3)
+    target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
+                             run['main_valve_displacement'])
+    plot_recording_fit(tmp_path / 'fit.png', target, run.states)
+    (figure,) = saved
+    zoomed, whole = figure.axes[0], figure.axes[1]
+    for axis in (zoomed, whole, figure.axes[3]):
+        model, recorded = axis.get_lines()
+        assert recorded.get_label() == 'recorded' and recorded.get_linestyle() == 'None'
+        assert recorded.get_zorder() > model.get_zorder()
+    assert zoomed.get_lines()[0].get_xdata().max() <= 0.1 + 0.2 + 1e-9  # the first step
+    assert figure.axes[3].get_ylabel() == 'main valve x [µm]'
+
+
+def test_tolerance_figures_show_readable_units_and_limits_beside_their_lines(saved, tmp_path):
+    from valve_sim.analysis.study_plots import plot_measures_against
+    from valve_sim.analysis.tolerances import parse_limits
+
+    values = np.array([0.98e-3, 1.0e-3, 1.02e-3])  # d_c [m]
+    rows = [{'measures': {name: 1.0 + k for name in MEASURE_NAMES}, 'error': None,
+             'reasons': {}} for k in range(3)]
+    plot_measures_against(tmp_path / 'vs.png', 'damping_orifice_diameter', 'm', values, rows,
+                          parse_limits('P_1_percent<=2.5'))
+    (figure,) = saved
+    axis = figure.axes[MEASURE_NAMES.index('P_1_percent')]
+    assert axis.get_xlabel() == 'damping_orifice_diameter [mm]'
+    np.testing.assert_allclose(sorted(axis.get_lines()[0].get_xdata()), [0.98, 1.0])
+    (label,) = axis.texts
+    assert label.get_text() == 'P_1_percent<=2.5' and label.xyann == (0, 3)  # above the line
+
+
+@pytest.mark.parametrize('unit, values, expected', [
+    ('m', [2.1e-5], (1e6, 'µm')), ('m', [1e-3], (1e3, 'mm')), ('N/m', [158000.0], (1e-3, 'N/mm')),
+    ('kg', [0.065], (1e3, 'g')), ('1', [0.5], (1.0, '1')),
+])
+def test_parameters_are_shown_in_the_unit_a_person_reads(unit, values, expected):
+    from valve_sim.analysis.study_plots import display_unit
+
+    assert display_unit(unit, np.array(values)) == expected

@@ -485,3 +485,31 @@ def test_limits():
     assert limit.holds({'P_1_percent': 4.0}) and not limit.holds({'P_1_percent': None})
     with pytest.raises(ParameterError, match="limit 'P_9<=4'"):
         parse_limits('P_9<=4')
+
+
+def test_the_dashboard_is_served_on_loopback_only_when_asked():
+    """--dashboard: Dask's dashboard on this machine at a free port, its address known."""
+    import psutil
+
+    def listening(process):
+        return {c.laddr for c in process.net_connections(kind='inet')
+                if c.status == psutil.CONN_LISTEN}
+
+    def port(address):
+        return int(address.rsplit(':', 1)[1].split('/')[0])
+
+    backend = DaskBackend(workers=1, dashboard='127.0.0.1:0')
+    try:
+        link = backend.start().dashboard_link
+        nannies = list(backend.cluster.workers.values())
+        ours = {port(link), port(backend.cluster.scheduler_address)}  # in this process
+        ours |= {port(nanny.address) for nanny in nannies}
+        here = {a for a in listening(psutil.Process()) if a.port in ours}
+        workers = [psutil.Process(nanny.process.pid) for nanny in nannies]  # the cluster's
+        there = set().union(*map(listening, workers))  # (other tests run clusters too)
+    finally:
+        backend.close()
+    assert link.startswith('http://127.0.0.1:')
+    assert {a.port for a in here} == ours and there
+    assert {ip for ip, _ in here | there} == {'127.0.0.1'}
+    assert DaskBackend(workers=1).dashboard_link is None  # none unless asked

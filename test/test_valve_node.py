@@ -67,11 +67,20 @@ def reference_settings():
 
 
 @pytest.fixture(scope='module')
-def valve_process(context, tmp_path_factory):
-    """Run the wall-clock node with a connected probe; yield (process, probe)."""
-    log = tmp_path_factory.mktemp('valve_node') / 'valve_node.log'
-    with running_valve(context, log) as (process, probe):
-        yield process, probe
+def valve_log(tmp_path_factory):
+    """Return the path of the wall-clock node's log."""
+    return tmp_path_factory.mktemp('valve_node') / 'valve_node.log'
+
+
+@pytest.fixture(scope='module')
+def valve_process(context, valve_log):
+    """
+    Run the wall-clock node with a connected probe; yield (process, probe).
+
+    Its overrides set the retired swept_inner_diameter, as an older calibrated.yaml does.
+    """
+    with running_valve(context, valve_log, '-p', 'swept_inner_diameter:=0.0208') as running:
+        yield running
 
 
 @pytest.fixture(scope='module')
@@ -359,6 +368,16 @@ def test_an_undeclared_name_is_refused_with_the_declared_name_meant(valve):
     assert "'m_m'" in symbol.reason and "'main_valve_mass'" in symbol.reason, symbol.reason
     (typo,) = valve.set_parameters(main_valve_mas=0.07)
     assert not typo.successful and "did you mean 'main_valve_mass'" in typo.reason, typo.reason
+
+
+def test_the_retired_swept_inner_diameter_is_ignored_with_a_warning_and_refused_live(
+    valve, valve_log
+):
+    log = valve_log.read_text()
+    assert 'ignoring swept_inner_diameter (a parameter file or -p sets it)' in log
+    assert 'A_m1 of Eq. (1) is now the supply force area alpha_s' in log
+    (result,) = valve.set_parameters(swept_inner_diameter=0.0208)
+    assert not result.successful and 'no longer exists' in result.reason, result.reason
 
 
 def test_inconsistent_geometry_set_atomically_is_rejected_as_a_whole(valve, reference):

@@ -93,6 +93,24 @@ def flushed(bag, topics=None):
     return sum(1 for _ in BagReader(bag).messages(topics)) if bag.stat().st_size else 0
 
 
+class Recorder:
+    """An analyser_node process recording into folder, in namespace."""
+
+    def __init__(self, folder, namespace):
+        self.folder = folder
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'valve_sim.ros.analyser_node', '--ros-args',
+             '-r', f'__ns:={namespace}', '-p', f'output_dir:={folder}'],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )
+
+    def stop(self, sig=signal.SIGTERM):
+        """End the recording with sig; returns the analyser's log (exit code: process)."""
+        if self.process.poll() is None:
+            self.process.send_signal(sig)
+        return self.process.communicate(timeout=TIMEOUT)[0]
+
+
 def stop_node(process, sig=signal.SIGINT):
     """Send sig and return the exit code (kills after TIMEOUT)."""
     if process.poll() is None:

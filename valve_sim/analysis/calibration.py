@@ -24,8 +24,12 @@ One implementation for the paper's Figure 5 and for a rig's own valve:
   residual = (model - recorded) / noise, the noise of each signal estimated from
   its sample-to-sample scatter before the first step.
 Constraints add residuals that are zero while they hold (PilotFlowLimit,
-ModesDecay); checks (StudyRelieves) are too costly for every evaluation and
-judge each start's result. scipy.optimize.least_squares (trust region reflective,
+ModesDecay, CaseRelieves, and the design rules LandsInsideBore and
+MainSpringRange); checks (StudyRelieves) are too costly for every evaluation and
+judge each start's result. Ties make a parameter follow a fitted one (d_v = 0.98 d_s,
+the pilot seat a little under the rod); fitting the bearing orifice d_b re-derives the bearing
+coefficients K_1..K_3 from it (core.bearing).
+scipy.optimize.least_squares (trust region reflective,
 bounds) runs from several starts; the best start that meets every constraint and
 check wins. Approximate 95 % intervals and correlations come from the Jacobian at
 the result: covariance s^2 (J^T J)^-1, s^2 = residual variance for a recording,
@@ -41,9 +45,10 @@ from scipy.optimize import least_squares
 from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures, WINDOW
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
+from valve_sim.core.bearing import with_bearing_fit
 from valve_sim.core.input_files import shown
 from valve_sim.core.integrator import IntegrationError
-from valve_sim.core.linear import oscillatory_modes
+from valve_sim.core.linear import modes
 from valve_sim.core.model import coefficients, flows, X
 from valve_sim.core.parameters import (
     check_value,
@@ -65,7 +70,11 @@ from valve_sim.core.steady_state import (
 MODEL_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 FAILED_RESIDUAL = 1e3  # every residual of a parameter set the model cannot run
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
+# Penalties turn on this far (relative) inside their limits: a least-squares optimum sits a
+# hair beyond where a penalty starts, and that hair must not cross the limit itself.
+PENALTY_MARGIN = 1e-3
 FLAT_CHANGE = 1e-9  # relative residual change below which a parameter is flat
+RANK_TOLERANCE = 1e-6  # singular values of the Jacobian below this (relative) count as 0
 Z_95 = 1.959964  # two-sided 95 % quantile of the normal distribution
 
 
@@ -82,6 +91,26 @@ class FitParameter:
     upper: float
     unit: str
     symbol: str
+    start: float = None  # the start value of a variable that is no model parameter
+
+
+STEP_TIME = 'step_time_'  # fitted step times: step_time_1, step_time_2, ...
+
+
+def step_time_parameters(target):
+    """
+    Return FitParameters of the step times a RecordingTarget located between flow samples.
+
+    Each starts at its located time and stays inside its bracket; fitting them with the
+    parameters makes the fit find where the steps lay, and its intervals include that
+    uncertainty.
+    """
+    return [
+        FitParameter(f'{STEP_TIME}{k}', low, high, 's', f't_step{k}', start)
+        for k, (start, (low, high)) in enumerate(
+            zip(getattr(target, 'step_times', ()), getattr(target, 'brackets', ())), start=1
+        )
+    ]
 
 
 def fit_parameters(names, bounds, params):
@@ -137,18 +166,62 @@ def _start_value(params, name):
     return cracking_pressure(params) if name == PRESET_PRESSURE.name else params[name]
 
 
-def apply_values(params, fitted, values, preset_pressure=None):
+# Parameters the bearing coefficients K_1..K_3 are fitted from (core.bearing): fitting
+# one of them re-derives the coefficients, so Eq. (12) stays the fit of the bearing.
+BEARING_INPUTS = (
+    'bearing_orifice_diameter',
+    'bearing_discharge_coefficient',
+    'fluid_density',
+    'fluid_viscosity',
+)
+
+
+def fit_ties(ties, fitted):
+    """
+    Return {tied name: (name it follows, factor)} from [(NAME, FACTOR, OTHER)].
+
+    Names are ROS names or symbols. A tied parameter takes FACTOR times the value of
+    the other at every evaluation (d_v = 0.98 d_s: the pilot seat a little under the
+    rod). Raises CalibrationError when a tied parameter is fitted itself, tied twice,
+    follows itself, or the factor is not a positive number.
+    """
+    fitted_names = {p.name for p in fitted}
+    checked = {}
+    for tied, factor, source in ties:
+        tied, source = resolve_name(tied.strip()), resolve_name(source.strip())
+        if tied in fitted_names or tied in checked or tied == source:
+            raise CalibrationError(
+                f'--tie {tied}={source}: a tied parameter must not be fitted, tied twice '
+                'or tied to itself'
+            )
+        if not (math.isfinite(factor) and factor > 0.0):
+            raise CalibrationError(f'--tie {tied}: the factor must be > 0, got {factor!r}')
+        checked[tied] = (source, float(factor))
+    return checked
+
+
+def apply_values(params, fitted, values, preset_pressure=None, ties=None):
     """
     Return validated params with the fitted values set.
 
-    preset_pressure [Pa], if given (or fitted), re-solves the pilot spring preload last.
+    ties {tied: (source, factor)} set factor times the source's value; a fitted or tied
+    bearing input
+    (BEARING_INPUTS) re-derives K_1..K_3. preset_pressure [Pa], if given (or
+    fitted), re-solves the pilot spring preload last.
     """
     new = dict(params)
     for parameter, value in zip(fitted, values):
+        if parameter.name.startswith(STEP_TIME):
+            continue  # the target's (use_step_times), no parameter
         if parameter.name == PRESET_PRESSURE.name:
             preset_pressure = float(value)
         else:
             new[parameter.name] = float(value)
+    for tied, (source, factor) in (ties or {}).items():
+        new[tied] = factor * new[source]
+    changed = {p.name for p in fitted} | set(ties or {})
+    if changed & set(BEARING_INPUTS):
+        new = with_bearing_fit(new)
     new = validate(new)
     if preset_pressure is not None:
         new = with_preset_pressure(new, preset_pressure)
@@ -243,8 +316,13 @@ class MeasuresTarget:
 
 
 def noise_level(signal, count):
-    """Robust standard deviation [signal unit] of white noise on the first count samples."""
+    """
+    Robust standard deviation [signal unit] of white noise on the first count samples.
+
+    Differences with a non-finite end (a sample not recorded) are left out.
+    """
     differences = np.diff(np.asarray(signal[:count], dtype=float))
+    differences = differences[np.isfinite(differences)]
     if len(differences) < 2:
         return 0.0
     return float(1.4826 * np.median(np.abs(differences - np.median(differences))) / math.sqrt(2))
@@ -256,12 +334,17 @@ class RecordingTarget:
 
     main_valve may be None (a rig without a position sensor) or hold NaN where not
     recorded. inlet_flow[i] is the flow over the interval ending at time[i].
+    step_times [s]: steps located between two flow samples (a flowmeter slower than the
+    pressure, see measures.locate_step), brackets [(first, last)] [s] those samples'
+    times: the recorded flow changes only at the sample at last, the model's at the step
+    time. Located times are uncertain: step_time_parameters() fits them along with the
+    parameters, inside their brackets.
     """
 
     kind = 'recording'
 
     def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6):
+                 step_threshold=1e-6, step_times=(), brackets=()):
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)
@@ -282,13 +365,18 @@ class RecordingTarget:
                 f'of {flow[0]:g} m^3/s over {time[-1] - time[0]:.3f} s, so the recording shows '
                 'no dynamics to fit (record a flow step)'
             )
-        before = max(int(np.searchsorted(time, self.steps[0][0], side='right')), 2)
+        first_step = min([self.steps[0][0], *step_times])  # a located one can come earlier
+        before = max(int(np.searchsorted(time, first_step, side='right')), 2)
         self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
+        self.step_times = list(step_times)  # located steps [s], fitted (step_time_parameters)
+        self.brackets = list(brackets)  # [(first, last)] [s]: where each step time can lie
         self.pressure_noise = max(noise_level(pressure, before), 1.0)  # [Pa] floor: 1 Pa
         self.position = None
         self.residual_names = ['supply_pressure'] * len(time)
         if main_valve is not None:
             position = np.asarray(main_valve, dtype=float)
+            if np.any(np.isinf(position)):
+                raise CalibrationError('the recorded main-valve position is infinite somewhere')
             if np.any(np.isfinite(position)):
                 self.position = position
                 self.position_noise = max(noise_level(position, before), 1e-9)  # [m]
@@ -297,7 +385,11 @@ class RecordingTarget:
 
     def model_output(self, params):
         """Model states (rows) at the recorded sample times."""
-        return simulate_recorded_flow(params, self.time, self.flow, self.step_size)
+        flow = self.flow.copy()
+        for t_step, (_, last) in zip(self.step_times, self.brackets):
+            after = min(int(np.searchsorted(self.time, last)), len(flow) - 1)
+            flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
+        return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
 
     def residuals(self, params):
         states = self.model_output(params)
@@ -334,8 +426,9 @@ class PilotFlowLimit:
         return float(flows(steady_state(params, self.at_flow), coefficients(params))[5])
 
     def penalty(self, params):
-        """0 while it holds; 1 per 1 % above the limit."""
-        return max(0.0, self.value(params) / self.maximum - 1.0) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % above the limit."""
+        limit = self.maximum * (1.0 - PENALTY_MARGIN)
+        return max(0.0, self.value(params) / limit - 1.0) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -346,13 +439,96 @@ class PilotFlowLimit:
         }
 
 
+def _outside(value, low, high):
+    """How far value lies outside [low, high], relative to the bound it passes [-]."""
+    return max(0.0, low / value - 1.0 if value > 0.0 else math.inf, value / high - 1.0)
+
+
+@dataclass(frozen=True)
+class LandsInsideBore:
+    """
+    Both throttle lands lie inside the guide bore: D_1, D_2 <= d_p - 2 margin.
+
+    margin [m]: the radial wall between the bore and a land's outer edge (docs/model.md).
+    """
+
+    margin: float  # [m]
+
+    @property
+    def name(self):
+        return f'lands inside the bore: D_1, D_2 <= d_p - 2 x {self.margin * 1e3:g} mm'
+
+    def value(self, params):
+        """How far the outer land edge reaches beyond d_p - 2 margin [m] (<= 0 holds)."""
+        limit = params['main_valve_back_diameter'] - 2.0 * self.margin
+        return max(
+            params['first_throttle_outer_diameter'], params['second_throttle_outer_diameter']
+        ) - limit
+
+    def penalty(self, params):
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % of the margin beyond."""
+        return max(0.0, self.value(params) / self.margin + PENALTY_MARGIN) * 100.0
+
+    def status(self, params):
+        value = self.value(params)
+        return {
+            'constraint': self.name,
+            'value': f'outer land edge {-value * 1e3:.3f} mm inside that limit',
+            'satisfied': bool(value <= 0.0),
+        }
+
+
+@dataclass(frozen=True)
+class MainSpringRange:
+    """
+    The main spring is a soft one: rate k_m and preload force k_m x_0 within ranges.
+
+    rate: (low, high) [N/m]; preload: (low, high) [N] (docs/model.md).
+    """
+
+    rate: tuple
+    preload: tuple
+
+    @property
+    def name(self):
+        return (
+            f'main spring: k_m in [{self.rate[0] / 1e3:g}, {self.rate[1] / 1e3:g}] N/mm, '
+            f'preload k_m x_0 in [{self.preload[0]:g}, {self.preload[1]:g}] N'
+        )
+
+    @staticmethod
+    def values(params):
+        """Return (rate [N/m], preload force [N])."""
+        rate = params['main_spring_stiffness']
+        return rate, rate * params['main_spring_preload']
+
+    def penalty(self, params):
+        """0 while both hold (with PENALTY_MARGIN); 1 per 1 % outside a range."""
+        rate, preload = self.values(params)
+        low, high = 1.0 + PENALTY_MARGIN, 1.0 - PENALTY_MARGIN
+        return 100.0 * math.hypot(
+            _outside(rate, self.rate[0] * low, self.rate[1] * high),
+            _outside(preload, self.preload[0] * low, self.preload[1] * high),
+        )
+
+    def status(self, params):
+        rate, preload = self.values(params)
+        return {
+            'constraint': self.name,
+            'value': f'k_m {rate / 1e3:.4g} N/mm, preload {preload:.4g} N',
+            'satisfied': bool(self.rate[0] <= rate <= self.rate[1]
+                              and self.preload[0] <= preload <= self.preload[1]),
+        }
+
+
 @dataclass(frozen=True)
 class ModesDecay:
     """
     Every linear mode of a case decays by e^-3 (95 %) within the measures' window.
 
-    decay rate zeta * omega >= 3 / WINDOW at the initial and final flows of the
-    paper's test; the case is the parameter set scaled by changes with the preset held.
+    decay rate -Re lambda >= 3 / WINDOW, oscillatory or not, at the initial and final
+    flows of the paper's test; the case is the parameter set scaled by changes with the
+    preset held.
     A stability requirement, not a margin: a mode slower than this rings through
     the whole window of the measures.
     """
@@ -366,17 +542,18 @@ class ModesDecay:
         return f'{self.label}: every mode decays by 95 % within {WINDOW:g} s'
 
     def value(self, params):
-        """Slowest decay rate zeta * omega [1/s] over the modes at both flows."""
+        """Slowest decay rate -Re lambda [1/s] over every mode at both flows."""
         case = case_parameters(params, self.changes, 'held-preset', cracking_pressure(params))
         rates = [
-            zeta * 2.0 * math.pi * frequency
+            mode.decay_rate
             for flow in (REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow)
-            for frequency, zeta in oscillatory_modes(case, flow)
+            for mode in modes(case, flow)
         ]
         return min(rates)
 
     def penalty(self, params):
-        return max(0.0, 1.0 - self.value(params) / self.rate) * 100.0
+        """0 while it holds (with PENALTY_MARGIN); 1 per 1 % below the rate."""
+        return max(0.0, 1.0 - self.value(params) / (self.rate * (1.0 + PENALTY_MARGIN))) * 100.0
 
     def status(self, params):
         value = self.value(params)
@@ -503,12 +680,15 @@ class CalibrationResult:
     cost: float
     intervals: list = None  # [(low, high)] or None when not computed
     correlations: np.ndarray = None
+    uncertainty_note: str = None  # why there are no intervals or correlations
     flat: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     starts: list = field(default_factory=list)
     evaluations: int = 0
     wall_time: float = 0.0
     interrupted: bool = False
+    ties: dict = field(default_factory=dict)
+    rank: int = None  # combinations of the fitted parameters the target determines
 
     @property
     def satisfied(self):
@@ -518,28 +698,39 @@ class CalibrationResult:
 class _Objective:
     """Residuals of normalised values u = value / start; remembers the best evaluation."""
 
-    def __init__(self, params, fitted, start, target, constraints, preset, progress):
+    def __init__(self, params, fitted, start, target, constraints, preset, progress, ties=None):
         self.params, self.fitted, self.start = params, fitted, np.asarray(start, dtype=float)
+        self.ties = ties or {}
         self.target, self.constraints, self.preset = target, constraints, preset
         self.progress, self.count, self.best = progress, 0, (math.inf, None)
         self.size = None
         self.label, self.last_report = '', 0.0
+        self.failure = None  # why the last failed evaluation failed
 
     def parameters(self, u):
-        return apply_values(self.params, self.fitted, u * self.start, self.preset)
+        return apply_values(self.params, self.fitted, u * self.start, self.preset, self.ties)
+
+    def use_step_times(self, u):
+        """Hand the fitted step times of u to the target."""
+        times = [v for p, v in zip(self.fitted, u * self.start) if p.name.startswith(STEP_TIME)]
+        if times:
+            self.target.step_times = times
 
     def __call__(self, u):
         self.count += 1
+        self.use_step_times(u)
         try:
             params = self.parameters(u)
             residual = np.concatenate(
                 [self.target.residuals(params), [c.penalty(params) for c in self.constraints]]
             )
-        except MODEL_ERRORS:
-            residual = None
+        except MODEL_ERRORS as error:
+            residual, self.failure = None, f'the model cannot run it: {error}'
         if self.size is None and residual is not None:
             self.size = len(residual)
-        if residual is None or not np.all(np.isfinite(residual)):
+        if residual is not None and not np.all(np.isfinite(residual)):
+            residual, self.failure = None, _non_finite(self.target, residual)
+        if residual is None:
             residual = np.full(self.size or 1, FAILED_RESIDUAL)
         cost = 0.5 * float(residual @ residual)
         if cost < self.best[0]:
@@ -551,6 +742,17 @@ class _Objective:
                 f'{self.label} evaluation {self.count}: cost {cost:.6g}, best {self.best[0]:.6g}'
             )
         return residual
+
+
+def _non_finite(target, residual):
+    """Say which residuals are not finite although the model ran: a problem of the data."""
+    names = sorted({name for name, value in zip(target.residual_names, residual)
+                    if not math.isfinite(value)})
+    return (
+        f'the residuals of {", ".join(names) or "the constraints"} are not finite although '
+        'the model ran: the target holds NaN or infinite values, or a noise level that is '
+        'not finite (a problem of the data, not of the model)'
+    )
 
 
 def _jacobian(objective, u, relative_step):
@@ -591,6 +793,7 @@ def calibrate(
     diff_step=None,
     max_evaluations=2000,
     progress=None,
+    ties=None,
 ):
     """
     Fit the FitParameters to target from several starts; returns a CalibrationResult.
@@ -599,14 +802,19 @@ def calibrate(
     constraints: residual-adding constraints; checks: judged per start after its fit;
     preset_pressure [Pa]: held during the fit (the preload re-solved) unless fitted;
     starts: number of starts (the first is params itself), spread: log-normal
-    standard deviation of the others, seed: their generator's seed. Ctrl-C ends the
+    standard deviation of the others, seed: their generator's seed; ties: {tied: (fitted
+    parameter it follows, factor)} (fit_ties). Ctrl-C ends the
     fit: the result is then the best evaluation so far, marked interrupted.
     Raises CalibrationError for a flat (not identifiable) parameter or a start the
     model cannot run.
     """
     began = clock.monotonic()
-    start = np.array([_start_value(params, p.name) for p in fitted])
-    objective = _Objective(params, fitted, start, target, constraints, preset_pressure, progress)
+    start = np.array(
+        [p.start if p.start is not None else _start_value(params, p.name) for p in fitted]
+    )
+    objective = _Objective(
+        params, fitted, start, target, constraints, preset_pressure, progress, ties
+    )
     relative = diff_step or (1e-6 if target.kind == 'recording' else 1e-4)
     objective.label = 'identifiability check:'
     try:
@@ -617,10 +825,12 @@ def calibrate(
         cost, u = objective.best
         return _interrupted(params, fitted, start, target, constraints, objective, u, cost, began)
     if np.all(base == FAILED_RESIDUAL):
-        raise CalibrationError(
-            'the model cannot run the target with the start values (no steady state or a '
-            'diverging run): check the parameter file and --params'
-        )
+        if objective.failure.startswith('the model'):
+            raise CalibrationError(
+                'the model cannot run the target with the start values (no steady state or a '
+                f'diverging run): check the parameter file and --params ({objective.failure})'
+            )
+        raise CalibrationError(f'the target cannot be compared: {objective.failure}')
     flat = [
         p
         for p, column in zip(fitted, jacobian.T)
@@ -702,11 +912,13 @@ def calibrate(
         constraints=best['checks'],
         starts=[{k: v for k, v in run.items() if k != 'u'} for run in runs],
         interrupted=interrupted,
+        ties=dict(ties or {}),
     )
     if interrupted:
         result.residuals = objective(u)
     else:
         residual, jacobian = _jacobian(objective, u, max(relative, 1e-6))
+        objective.use_step_times(u)  # the Jacobian moved them
         result.residuals = residual
         _uncertainty(result, target, jacobian, start)
     result.evaluations = objective.count
@@ -733,8 +945,22 @@ def _interrupted(params, fitted, start, target, constraints, objective, u, cost,
 
 
 def _uncertainty(result, target, jacobian, start):
-    """Approximate 95 % intervals and correlations from the Jacobian (normalised units)."""
+    """
+    Approximate 95 % intervals and correlations from the Jacobian (normalised units).
+
+    None of either when the Jacobian's rank (singular values above RANK_TOLERANCE of
+    the largest) is below the number of fitted parameters: the target then pins only
+    result.rank combinations of them (more parameters than measures), not each value.
+    """
     count, fitted = len(result.residuals), len(result.fitted)
+    singular = np.linalg.svd(jacobian, compute_uv=False)
+    result.rank = int(np.sum(singular > RANK_TOLERANCE * singular[0])) if singular[0] > 0 else 0
+    if result.rank < fitted:
+        result.uncertainty_note = (
+            f'no intervals: the target determines {result.rank} combinations of the '
+            f'{fitted} fitted parameters, not each of them'
+        )
+        return
     scale = target.covariance_scale(result.cost, count, fitted)
     information = jacobian.T @ jacobian
     try:
@@ -743,6 +969,13 @@ def _uncertainty(result, target, jacobian, start):
         result.flat = [p.name for p in result.fitted]
         return
     sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    if not np.all(sigma > 0.0):
+        result.uncertainty_note = (
+            'no intervals or correlations: the residual is zero (a perfect fit, as of a '
+            'noise-free recording of this very model), so the data tell nothing of their '
+            'noise, and an uncertainty computed from them would be zero'
+        )
+        return
     result.intervals = [
         (value - Z_95 * s * scale_, value + Z_95 * s * scale_)
         for value, s, scale_ in zip(result.values, sigma, start)

@@ -22,6 +22,17 @@ Inputs are sampled waveforms: time t [s], supply pressure p_s [Pa, gauge],
 main-valve displacement x [m], and t_step [s], the time at which the inlet-flow
 step took effect in the model (the last sample computed with the old flow).
 
+Dating a step (StepDetector, locate_step): where the flow is sampled with every
+pressure sample (valve_node, the offline model), the step is dated at the last
+sample with the old flow. A flowmeter sampled more coarsely than the pressure only
+brackets it: between its last sample with the old flow and its first with the new
+one (10 ms apart at 100 Hz). Inside that bracket the step is located from the
+supply pressure, which a relief valve's step moves at once (the inlet flow
+compresses the supply volume): at the point where the line through the first two
+pressure samples outside the pre-step noise band meets the pre-step level, kept
+between the last sample inside the band and the first outside. Its uncertainty is
+half the pressure sample interval there.
+
 Settling time T_s: the paper's, from x (the time after which x stays within
 x_inf +- 5 % of the step width), wherever x is recorded. A rig rarely records x;
 without it (x None or NaN in the window) T_s comes from the supply pressure: the
@@ -38,6 +49,11 @@ Ripple much smaller than the band cannot start or end a lobe. The extreme's
 time and value are refined by a least-squares parabola through the lobe
 samples within PEAK_FIT_DEPTH of the extreme, which makes the result nearly
 independent of the sample rate (1 kHz from the node, 10 kHz offline).
+
+A companion to T_s, not one of the six: envelope_decay_rate(), the decay rate of
+the oscillation's envelope, fitted to all its swings. T_s moves in steps of about
+half a period (a swing just inside or just outside the band); the decay rate moves
+continuously with the parameters (docs/measures.md).
 """
 
 from dataclasses import dataclass, field
@@ -47,8 +63,15 @@ import numpy as np
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
+# The measures taken relative to the settled final value p_inf (x_inf); T_1 and T_d are
+# times of peaks and need only the peaks inside the window.
+FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
+ENVELOPE_DECAY = 'envelope_decay_per_s'  # T_s's continuous companion (docs/measures.md)
 WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
+PRE_STEP_SPAN = 0.05  # [s] pressure before a bracketed step: its level and noise band
+ONSET_BAND = 4.0  # a step moves p_s out of +-4 noise standard deviations of its level
+ONSET_SAMPLES = 3  # ... for this many samples in a row (one noise spike is no step)
 SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
@@ -81,10 +104,6 @@ class StepMeasures:
             'reasons': dict(self.reasons),
             'details': dict(self.details),
         }
-
-
-def _interpolate(t, signal, time):
-    return float(np.interp(time, t, signal))
 
 
 def _refined_extreme(t, e, start, stop):
@@ -196,9 +215,45 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
     arrays; x may be None or NaN where not recorded (T_s then from p_s). direction:
     +1 for a rising inlet flow (overshoot peaks are maxima), -1 for a falling one
-    (they are minima; P_1 is then negative). window [s]:
-    normally WINDOW; a shorter one (a truncated recording) is reported in details.
+    (they are minima; P_1 is then negative). window [s]: normally WINDOW. Samples that
+    end before it (a truncated recording) are reported in details; there the measures
+    that need the final value (FINAL_VALUE_MEASURES) are undefined unless p_s has
+    settled in the last 50 ms (settled_at_the_end).
     """
+    measures = _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction,
+                              window)
+    details = measures.details
+    if 'p_inf' not in details or details['window_s'] >= window:
+        return measures
+    inside = (np.asarray(t) >= t_step) & (np.asarray(t) <= t_step + details['window_s'])
+    settled = settled_at_the_end(np.asarray(t)[inside], np.asarray(supply_pressure)[inside],
+                                 details['p_inf'])
+    details['final_value_settled'] = settled
+    if not settled:
+        reason = (
+            f'the window is truncated to {details["window_s"]:.3f} s (the recording ends) and '
+            f'p_s has not settled in its last {SETTLED_SPAN * 1e3:g} ms, so it has no final '
+            'value p_inf'
+        )
+        measures.values.update(dict.fromkeys(FINAL_VALUE_MEASURES))
+        measures.reasons.update(dict.fromkeys(FINAL_VALUE_MEASURES, reason))
+    return measures
+
+
+def settled_at_the_end(t, supply_pressure, p_inf):
+    """
+    Whether p_s [Pa] has settled by the end of its samples t [s] at p_inf [Pa].
+
+    Settled: over the last SETTLED_SPAN, |p_s - p_inf| stays within SETTLING_BAND of the
+    largest |p_s - p_inf| (5 % of the first overshoot, about, as T_s judges p_s).
+    """
+    deviation = np.abs(np.asarray(supply_pressure, dtype=float) - p_inf)
+    last = np.asarray(t) >= t[-1] - SETTLED_SPAN
+    return bool(np.max(deviation[last]) <= SETTLING_BAND * np.max(deviation))
+
+
+def _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction, window):
+    """Compute step_measures() with p_inf from whatever window there is."""
     t = np.asarray(t, dtype=float)
     p = np.asarray(supply_pressure, dtype=float)
     x = np.full_like(t, np.nan) if main_valve_displacement is None else np.asarray(
@@ -210,11 +265,19 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
         return StepMeasures(values, reasons)
     if not (t[0] <= t_step < t[-1]):
         reasons.update(
-            dict.fromkeys(MEASURE_NAMES, f'step time {t_step:.6f} s outside the samples')
+            dict.fromkeys(
+                MEASURE_NAMES,
+                f'step time {t_step:.6f} s ({t_step - t[0]:+.4f} s from the first sample) '
+                f'outside the samples ({t[-1] - t[0]:.4f} s long)',
+            )
         )
         return StepMeasures(values, reasons)
     end = min(t_step + window, t[-1])
-    inside = (t >= t_step) & (t <= end)
+    # The state before the step acts: the last sample at or before t_step (a step located
+    # between samples has not moved the one before it; interpolating would mix in the
+    # rise). The window starts with it, so that the response begins at its first sample.
+    before = max(int(np.searchsorted(t, t_step, side='right')) - 1, 0)
+    inside = (t >= t[before]) & (t <= end)
     tw, pw, xw = t[inside], p[inside], x[inside]
     settled = tw >= end - SETTLED_SPAN
     if not settled.any():  # a gap in the recording over the window's end: no p_inf
@@ -226,12 +289,12 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
             )
         )
         return StepMeasures(values, reasons)
-    x_recorded = bool(np.all(np.isfinite(xw))) and np.isfinite(_interpolate(t, x, t_step))
-    p_0 = _interpolate(t, p, t_step)
+    x_recorded = bool(np.all(np.isfinite(xw))) and np.isfinite(x[before])
+    p_0 = float(p[before])
     p_inf = float(np.mean(pw[settled]))
     details = {'t_step': t_step, 'window_s': end - t_step, 'p_0': p_0, 'p_inf': p_inf}
     if x_recorded:
-        x_0, x_inf = _interpolate(t, x, t_step), float(np.mean(xw[settled]))
+        x_0, x_inf = float(x[before]), float(np.mean(xw[settled]))
         details.update(x_0=x_0, x_inf=x_inf)
     details.update(
         direction=direction, T_s_from='main_valve' if x_recorded else 'supply_pressure'
@@ -301,6 +364,44 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     return StepMeasures(values, reasons, details)
 
 
+def envelope_decay_rate(t, supply_pressure, main_valve_displacement, t_step, window=WINDOW):
+    """
+    Return (sigma [1/s], None) or (None, reason): the decay rate of the oscillation's envelope.
+
+    The signal is the one T_s is taken from: x where recorded in the window, else p_s.
+    Its deviation e from the settled value (the mean of the window's last 50 ms) swings
+    about zero; every swing that reaches PEAK_BAND of the first overshoot is a lobe (as
+    for the overshoot peaks), of either sign, and its extreme (t_k, |e_k|) is refined by
+    a parabola. sigma is minus the slope of the weighted least-squares line through
+    (t_k, ln |e_k|), weights |e_k| / |e_1| - PEAK_BAND: a swing that grows into the fit
+    or leaves it comes in with weight zero, so sigma has no steps. For a damped
+    oscillation A exp(-sigma t) cos(omega t + phi) the line is exact. Needs three swings.
+    """
+    t = np.asarray(t, dtype=float)
+    x = None if main_valve_displacement is None else np.asarray(main_valve_displacement, float)
+    end = min(t_step + window, t[-1])
+    inside = (t >= t_step) & (t <= end)
+    use_x = x is not None and bool(np.all(np.isfinite(x[inside])))
+    tw = t[inside]
+    signal = (x if use_x else np.asarray(supply_pressure, dtype=float))[inside]
+    settled = tw >= end - SETTLED_SPAN
+    if len(tw) < 3 or not settled.any():
+        return None, 'no settled value in the window'
+    e = signal - float(np.mean(signal[settled]))
+    first = float(np.max(e))
+    extremes = []
+    for sign in (1.0, -1.0):
+        for start, stop in _lobes(sign * e, PEAK_BAND * first) if first > 0.0 else []:
+            if start + int(np.argmax(sign * e[start:stop])) < len(e) - 1:
+                extremes.append(_refined_extreme(tw, sign * e, start, stop))
+    if len(extremes) < 3:
+        return None, 'fewer than three swings of the oscillation inside the window'
+    times, sizes = np.array(extremes).T
+    weights = np.clip(sizes / np.max(sizes) - PEAK_BAND, 0.0, None)
+    slope, _ = np.polyfit(times, np.log(sizes), 1, w=np.sqrt(weights))
+    return float(-slope), None
+
+
 def _set_settling_time(values, reasons, settling):
     """Store T_s [ms] of a (time [s], reason) pair, or its reason."""
     time, reason = settling
@@ -340,6 +441,42 @@ class StepDetector:
             self.level = flow
         self.previous_time = time
         return step
+
+
+def locate_step(t, supply_pressure, bracket, direction):
+    """
+    Locate a step inside bracket (t_a, t_b) [s] from the supply pressure (module docstring).
+
+    t [s] and supply_pressure [Pa]: the samples around the step, PRE_STEP_SPAN before
+    t_a included; direction +1 up, -1 down. Returns (t_step, uncertainty) [s], or None
+    when the pressure does not show the step (too few samples before it, or no sample
+    leaves the noise band within twice the bracket).
+    """
+    t, p = np.asarray(t, dtype=float), np.asarray(supply_pressure, dtype=float)
+    t_a, t_b = bracket
+    before = (t >= t_a - PRE_STEP_SPAN) & (t <= t_a)
+    if before.sum() < 3:
+        return None
+    level = float(np.median(p[before]))
+    jumps = np.diff(p[before])
+    noise = 1.4826 * float(np.median(np.abs(jumps - np.median(jumps)))) / math.sqrt(2.0)
+    band = max(ONSET_BAND * noise, 1e-7 * abs(level))
+    e = direction * (p - level)
+    outside = (e > band) & (t > t_a)
+    runs = np.ones(max(len(e) - ONSET_SAMPLES + 1, 0), dtype=bool)
+    for k in range(ONSET_SAMPLES):
+        runs &= outside[k:len(e) - ONSET_SAMPLES + 1 + k]
+    first = np.flatnonzero(runs & (t[:len(runs)] <= t_b + (t_b - t_a)))
+    if len(first) == 0 or first[0] == 0:
+        return None
+    i = int(first[0])
+    slope = (e[i + 1] - e[i]) / (t[i + 1] - t[i])
+    onset = t[i] - e[i] / slope if slope > 0.0 else t[i - 1]
+    t_step = min(max(onset, t[i - 1], t_a), t[i], t_b)  # between samples i - 1 and i
+    below = t[t <= t_step]
+    above = t[t > t_step]
+    spacing = (above[0] if len(above) else t_step) - (below[-1] if len(below) else t_step)
+    return t_step, spacing / 2.0
 
 
 def detect_steps(t, inlet_flow, threshold=1e-6, merge_time=0.05):

@@ -26,7 +26,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
-from valve_sim.analysis.measures import MEASURE_NAMES  # noqa: E402
+from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
 from valve_sim.core.output_files import replacing  # noqa: E402
 
 
@@ -131,6 +131,7 @@ def plot_sensitivity(path, symbol, series, title):
     """
     figure, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
     percents = sorted(series)
+    _envelope_beside_settling_time(axes.flat[MEASURE_NAMES.index('T_s_ms')], series, percents)
     for axis, name in zip(axes.flat, MEASURE_NAMES):
         points = [(p, series[p][name]) for p in percents if series[p][name] is not None]
         if points:
@@ -152,6 +153,18 @@ def plot_sensitivity(path, symbol, series, title):
     save_figure(figure, path, dpi=110)
 
 
+def _envelope_beside_settling_time(axis, series, percents):
+    """On T_s's panel, its continuous companion: the envelope's decay rate, right axis."""
+    points = [(p, series[p].get(ENVELOPE_DECAY)) for p in percents]
+    points = [(p, value) for p, value in points if value is not None]
+    if not points:
+        return
+    twin = axis.twinx()
+    twin.plot(*zip(*points), 's--', color='tab:orange', markersize=4)
+    twin.set_ylabel('envelope decay rate [1/s]', color='tab:orange', fontsize=8)
+    twin.tick_params(axis='y', colors='tab:orange', labelsize=8)
+
+
 def plot_poppet_waveforms(path, waveforms, t_step):
     """
     Figure 8: pilot poppet displacement y against time for the m_p variations.
@@ -169,7 +182,7 @@ def plot_poppet_waveforms(path, waveforms, t_step):
             label=f'm_p {percent:+d} %',
         )
     axis.set_xlabel('time after the step [ms]')
-    axis.set_ylabel('poppet displacement y [um]')
+    axis.set_ylabel('poppet displacement y [µm]')
     axis.set_title('Figure 8: pilot poppet displacement for the m_p variations')
     axis.grid(True, alpha=0.3)
     axis.legend()
@@ -235,27 +248,38 @@ def plot_recording_fit(path, target, states):
     Calibration to a recording: recorded and model supply pressure (and x), and the residual.
 
     target: calibration.RecordingTarget; states: model states at its sample times.
+    The recorded samples are drawn as dots above the model's line, so that both show
+    where they agree; the first panel is zoomed on the first step (its first 0.2 s),
+    where the dynamics are.
     """
-    rows = 3 if target.position is not None else 2
-    figure, axes = plt.subplots(rows, 1, sharex=True, figsize=(9, 2.8 * rows + 1),
-                                constrained_layout=True)
+    rows = 4 if target.position is not None else 3
+    figure, axes = plt.subplots(rows, 1, figsize=(9, 2.6 * rows + 1), constrained_layout=True)
     time = target.time
-    axes[0].plot(time, target.pressure / 1e6, color='0.5', linewidth=0.7, label='recorded')
-    axes[0].plot(time, states[:, 0] / 1e6, color='tab:blue', linewidth=0.9, label='model')
-    axes[0].set_ylabel('supply pressure p_s [MPa, gauge]')
-    axes[0].legend(fontsize=8)
-    axes[1].plot(time, (target.pressure - states[:, 0]) / 1e3, color='tab:red', linewidth=0.7)
-    axes[1].set_ylabel('recorded - model [kPa]')
+    step = target.steps[0][0] if target.steps else time[0]
+    near = (time >= step - 0.02) & (time <= step + 0.2)
+    for axis, shown in ((axes[0], near), (axes[1], slice(None))):
+        _recorded_and_model(axis, time[shown], target.pressure[shown] / 1e6,
+                            states[shown, 0] / 1e6)
+        axis.set_ylabel('p_s [MPa, gauge]')
+    axes[0].set_title('Recording against the calibrated model: the first step, zoomed')
+    axes[1].set_title('the whole recording', fontsize=9)
+    axes[2].plot(time, (target.pressure - states[:, 0]) / 1e3, color='tab:red', linewidth=0.7)
+    axes[2].set_ylabel('recorded - model [kPa]')
     if target.position is not None:
-        axes[2].plot(time, target.position * 1e6, color='0.5', linewidth=0.7, label='recorded')
-        axes[2].plot(time, states[:, 4] * 1e6, color='tab:blue', linewidth=0.9, label='model')
-        axes[2].set_ylabel('main valve x [um]')
-        axes[2].legend(fontsize=8)
+        _recorded_and_model(axes[3], time, target.position * 1e6, states[:, 4] * 1e6)
+        axes[3].set_ylabel('main valve x [µm]')
     for axis in axes:
         axis.grid(True, alpha=0.3)
-    axes[-1].set_xlabel('time from the first sample [s]')
-    axes[0].set_title('Recording against the calibrated model')
+        axis.set_xlabel('time from the first sample [s]')
     save_figure(figure, path, dpi=110)
+
+
+def _recorded_and_model(axis, time, recorded, model):
+    """Draw a model line with the recorded samples as dots above it, and a legend."""
+    axis.plot(time, model, color='tab:blue', linewidth=1.2, zorder=2, label='calibrated model')
+    axis.plot(time, recorded, '.', color='black', markersize=2.0, alpha=0.6, zorder=3,
+              label='recorded')
+    axis.legend(fontsize=8)
 
 
 def plot_characteristic(

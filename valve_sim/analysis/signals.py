@@ -34,8 +34,10 @@ with the model time); clock "receive" takes each message's receive time (the bag
 log_time), which std_msgs/msg/Float64 needs since it has no header.
 
 Joining: every supply-pressure sample is one row; each other role contributes its
-latest value at or before that time (Joiner). With valve_node all stamps of a tick
-are equal, so this is an exact join. The live analyser and bag analysis share this
+latest value at or before that time (Joiner), and the row keeps that sample's time
+(row['times'][role], ns): a step of a flow sampled more coarsely than the pressure
+lies between two flow samples, which the step analysis needs. With valve_node all
+stamps of a tick are equal, so this is an exact join. The live analyser and bag analysis share this
 code, so both see the same rows.
 """
 
@@ -180,8 +182,9 @@ class Joiner:
 
     A row is complete once every other role has a sample at or after its time
     (samples of each role arrive in time order); the role's value is then its
-    latest sample at or before the row's time. Rows before a required role's
-    first sample are dropped; an optional role without a sample there is None,
+    latest sample at or before the row's time, and row['times'][role] that sample's
+    time [ns]. Rows before a required role's first sample are dropped; an optional
+    role without a sample there is None,
     and rows do not wait for an optional role that has not begun.
     """
 
@@ -229,11 +232,15 @@ class Joiner:
             if not final and not self._known_at(time_ns):
                 break
             self.pending.popleft()
-            row = {'supply_pressure': pressure}
+            row, times = {'supply_pressure': pressure}, {'supply_pressure': time_ns}
             for role, history in self.history.items():
                 while len(history) > 1 and history[1][0] <= time_ns:
                     history.popleft()
-                row[role] = history[0][1] if history and history[0][0] <= time_ns else None
+                known = history and history[0][0] <= time_ns
+                row[role] = history[0][1] if known else None
+                if known:
+                    times[role] = history[0][0]
+            row['times'] = times
             if all(row[role] is not None for role in self.required):
                 rows.append((time_ns, row))
         return rows

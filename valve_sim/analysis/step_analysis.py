@@ -16,17 +16,23 @@
 The six measures of every inlet-flow step in a stream of samples, and their JSON file.
 
 StepAnalysis is fed joined rows (valve_sim.analysis.signals) in time order: time t [s],
-supply pressure p_s [Pa, gauge], main-valve displacement x [m] and applied inlet
-flow q [m^3/s]. valve_sim.analysis.measures.StepDetector finds the steps (up and down, any
-number); once a step's window (measures.WINDOW after it) is complete,
-valve_sim.analysis.measures.step_measures gives its six measures. Only the rows from the
-oldest open step on are kept, so memory stays bounded however long the stream.
+supply pressure p_s [Pa, gauge], main-valve displacement x [m], applied inlet
+flow q [m^3/s] and the time [s] of the flow sample q came from. valve_sim.analysis.measures.
+StepDetector finds the steps (up and down, any number); a step between two flow samples
+further apart than 1.5 pressure sample intervals (a coarse flowmeter) is located inside
+them from the pressure (measures.locate_step). Once a step's window (measures.WINDOW
+after it) is complete, valve_sim.analysis.measures.step_measures gives its six measures.
+Only the rows from measures.PRE_STEP_SPAN before the oldest open step on are kept, so
+memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
 Step records (the JSON file beside a bag, `valve-sim analyse --json`): t_step [s],
 direction (+1 up, -1 down), flow_before [m^3/s], then the six measures
 (None where undefined), 'reasons' and 'details' of measures.StepMeasures.as_dict().
+A step between coarse flow samples adds to its details 't_step_bracket' [s, s] (those
+samples), 't_step_from' ('supply_pressure' where located, else
+'last_row_before_new_flow': the pressure did not show it) and 't_step_uncertainty_s'.
 """
 
 from collections import deque
@@ -35,7 +41,13 @@ import os
 from pathlib import Path
 
 import numpy as np
-from valve_sim.analysis.measures import step_measures, StepDetector, WINDOW
+from valve_sim.analysis.measures import (
+    locate_step,
+    PRE_STEP_SPAN,
+    step_measures,
+    StepDetector,
+    WINDOW,
+)
 from valve_sim.analysis.signals import seconds
 from valve_sim.core.output_files import json_text, replacing, write_text
 
@@ -55,21 +67,33 @@ class StepAnalysis:
 
     def __init__(self, threshold=1e-6, merge_time=0.05, window=WINDOW):
         self.threshold, self.merge_time, self.window = threshold, merge_time, window
+        self.first_time = None  # [s] time of the first row fed: the recording's start
         self._restart()
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
-        self.rows = deque()  # (t, p_s, x) from the oldest open step on
+        self.rows = deque()  # (t, p_s, x) from PRE_STEP_SPAN before the oldest open step on
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
+        self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
+        self.flow_time = None  # [s] time of the flow sample of the last row
 
-    def add(self, t, supply_pressure, main_valve, inlet_flow):
-        """Feed one row; returns the records of the steps whose window it completes."""
+    def add(self, t, supply_pressure, main_valve, inlet_flow, flow_time=None):
+        """
+        Feed one row; returns the records of the steps whose window it completes.
+
+        flow_time [s]: when the flow sample inlet_flow was taken (None: at t).
+        """
         records = []
+        self.first_time = t if self.first_time is None else self.first_time
         if self.rows and t <= self.rows[-1][0]:
             records = self.finish()  # time went back (a new run): close the open steps
+        flow_time = t if flow_time is None else flow_time
         step = self.detector.update(t, inlet_flow)
         if step:
             self.open_steps.append(step)
+            if self.flow_time is not None:
+                self.brackets[step[0]] = (self.flow_time, flow_time)
+        self.flow_time = flow_time
         self.rows.append((t, supply_pressure, main_valve))
         complete = [step for step in self.open_steps if t >= step[0] + self.window]
         for step in complete:
@@ -88,7 +112,11 @@ class StepAnalysis:
             record
             for time_ns, row in rows
             for record in self.add(
-                seconds(time_ns), row['supply_pressure'], row['main_valve'], row['inlet_flow']
+                seconds(time_ns),
+                row['supply_pressure'],
+                row['main_valve'],
+                row['inlet_flow'],
+                seconds(row['times'].get('inlet_flow', time_ns)),
             )
         ]
 
@@ -104,20 +132,48 @@ class StepAnalysis:
 
     def _trim(self):
         """
-        Keep the rows from the oldest open step on.
+        Keep the rows from PRE_STEP_SPAN before the oldest open step (or its bracket) on.
 
-        With none open, keep the last row (a next step's t_step).
+        With none open, keep PRE_STEP_SPAN before the last row (a next step's level).
         """
-        oldest = min((step[0] for step in self.open_steps), default=self.rows[-1][0])
-        while self.rows[0][0] < oldest:
+        oldest = min(
+            (min(step[0], self.brackets.get(step[0], step)[0]) for step in self.open_steps),
+            default=self.rows[-1][0],
+        )
+        while self.rows[0][0] < oldest - PRE_STEP_SPAN:
             self.rows.popleft()
 
     def _measure(self, step):
         t_step, flow_before, direction = step
         t, p, x = np.array(self.rows, dtype=float).T
-        return step_record(
-            t_step, flow_before, direction, step_measures(t, p, x, t_step, direction, self.window)
-        )
+        bracket, timing = self.brackets.pop(t_step, None), {}
+        if bracket and _coarser_than_rows(bracket, t):
+            located = locate_step(t, p, bracket, direction)
+            t_step = located[0] if located else t_step
+            timing = {
+                't_step_bracket': list(bracket),
+                't_step_from': 'supply_pressure' if located else 'last_row_before_new_flow',
+                't_step_uncertainty_s': located[1] if located else bracket[1] - bracket[0],
+            }
+        measures = step_measures(t, p, x, t_step, direction, self.window)
+        measures.details.update(timing)
+        return step_record(t_step, flow_before, direction, measures)
+
+
+def _coarser_than_rows(bracket, t):
+    """
+    Whether flow samples bracket (t_a, t_b) [s] a stretch of pressure rows.
+
+    That is: they are further apart than 1.5 row intervals and rows lie between them
+    (a gap in a recording of valve_node, whose flow comes with every row, has none).
+    """
+    near = t[(t >= bracket[0] - PRE_STEP_SPAN) & (t <= bracket[1])]
+    inside = np.count_nonzero((near > bracket[0]) & (near < bracket[1]))
+    return (
+        inside > 0
+        and len(near) > 2
+        and bracket[1] - bracket[0] > 1.5 * float(np.median(np.diff(near)))
+    )
 
 
 class MeasuresFile:

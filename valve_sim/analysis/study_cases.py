@@ -15,10 +15,16 @@
 """
 The cases of the paper's parameter study and the protocol that sets each case's preset.
 
-One definition for `valve-sim study`, calibration checks and tolerance studies.
+One definition for `valve-sim study`, calibration checks, tolerance studies and
+optimisation: the protocol's preset, and the runner cases of sampled valves.
 """
 
-from valve_sim.analysis.paper import STUDY_PARAMETERS, STUDY_VARIATIONS, TABLE2_CHANGES
+from valve_sim.analysis.paper import (
+    REFERENCE_SCENARIO,
+    STUDY_PARAMETERS,
+    STUDY_VARIATIONS,
+    TABLE2_CHANGES,
+)
 from valve_sim.core.parameters import scaled
 
 
@@ -60,3 +66,43 @@ def case_parameters(params, changes, protocol, preset_pressure):
     elif protocol != 'frozen-preload':
         raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
     return case
+
+
+def protocol_preset(protocol, preset_pressure):
+    """Return the preset a case of this protocol is set to: preset_pressure, or None (frozen)."""
+    if protocol not in PROTOCOLS:
+        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
+    return preset_pressure if protocol == 'held-preset' else None
+
+
+def preset_protocol(protocol, params):
+    """
+    Return (preset for the cases or None, JSON-ready statement of how each valve was set).
+
+    The preset is the cracking pressure of params (after --preset-pressure).
+    """
+    from valve_sim.core.steady_state import cracking_pressure
+
+    preset = cracking_pressure(params)
+    statement = {
+        'protocol': protocol,
+        'protocol_meaning': PROTOCOLS[protocol],
+        'preset_pressure': preset,
+        'nominal_pilot_spring_preload': params['pilot_spring_preload'],
+    }
+    return protocol_preset(protocol, preset), statement
+
+
+def sample_cases(params, names, values, preset, step_size):
+    """Runner cases for sampled values (rows of values, columns of names)."""
+    return [
+        {
+            'index': index,
+            'params': {**params, **dict(zip(names, map(float, row)))},
+            'preset_pressure': preset,
+            'scenario': REFERENCE_SCENARIO,
+            'step_size': step_size,
+            'record': [],
+        }
+        for index, row in enumerate(values)
+    ]

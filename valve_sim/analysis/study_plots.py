@@ -24,7 +24,28 @@ from valve_sim.analysis.plotting import MEASURE_LABELS, plt, save_figure
 from valve_sim.analysis.tolerances import passes
 
 
+# Parameter units shown in a unit a person reads: (SI unit, largest |value| below) ->
+# (factor, shown unit). 0.00098 m is shown as 0.98 mm, 158000 N/m as 158 N/mm.
+DISPLAY_UNITS = {
+    'm': ((1e-3, 1e6, 'µm'), (1.0, 1e3, 'mm')),
+    'N/m': ((float('inf'), 1e-3, 'N/mm'),),
+    'Pa': ((float('inf'), 1e-6, 'MPa'),),
+    'kg': ((1.0, 1e3, 'g'),),
+    'm^3': ((1e-3, 1e6, 'cm³'),),
+}
+
+
+def display_unit(unit, values):
+    """Return (factor, unit) to show values [unit] with: mm or µm for m, N/mm, MPa, g, cm³."""
+    largest = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    for below, factor, shown in DISPLAY_UNITS.get(unit, ()):
+        if largest < below:
+            return factor, shown
+    return 1.0, unit
+
+
 def _limit_lines(axis, limits, name, vertical):
+    """Mark each limit of measure name with a dashed line and its label beside the line."""
     for limit in limits:
         if limit.measure == name:
             line = axis.axvline if vertical else axis.axhline
@@ -33,6 +54,10 @@ def _limit_lines(axis, limits, name, vertical):
                 str(limit),
                 (limit.value, 0.02) if vertical else (0.02, limit.value),
                 xycoords=('data', 'axes fraction') if vertical else ('axes fraction', 'data'),
+                xytext=(3, 0) if vertical else (0, 3),  # beside the line, not over it
+                textcoords='offset points',
+                horizontalalignment='left',
+                verticalalignment='bottom',
                 color='tab:red',
                 fontsize=7,
                 rotation=90 if vertical else 0,
@@ -60,8 +85,14 @@ def plot_measure_cdfs(path, rows, limits, subtitle):
 
 
 def plot_measures_against(path, name, unit, values, rows, limits):
-    """Each measure against one varied parameter; passing valves blue, failing red."""
+    """
+    Each measure against one varied parameter; passing valves blue, failing red.
+
+    values [unit] are shown in display_unit()'s unit.
+    """
     good = np.array([passes(row, limits) for row in rows])
+    factor, shown_unit = display_unit(unit, values)
+    values = np.asarray(values) * factor
     figure, axes = plt.subplots(2, 3, figsize=(11, 6.5), constrained_layout=True)
     for axis, measure in zip(axes.flat, MEASURE_NAMES):
         y = np.array([np.nan if r['measures'][measure] is None else r['measures'][measure]
@@ -70,7 +101,7 @@ def plot_measures_against(path, name, unit, values, rows, limits):
             if mask.any():
                 axis.plot(values[mask], y[mask], '.', color=colour, markersize=4, label=label)
         _limit_lines(axis, limits, measure, vertical=False)
-        axis.set_xlabel(f'{name} [{unit}]', fontsize=9)
+        axis.set_xlabel(f'{name} [{shown_unit}]', fontsize=9)
         axis.set_ylabel(MEASURE_LABELS[measure], fontsize=8)
         axis.grid(True, alpha=0.3)
     axes.flat[0].legend(fontsize=8)

@@ -47,7 +47,12 @@ from pathlib import Path
 import sys
 import time
 
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.measures import (
+    ENVELOPE_DECAY,
+    envelope_decay_rate,
+    MEASURE_NAMES,
+    step_measures,
+)
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.input_files import (
     InputFileError,
@@ -66,6 +71,7 @@ from valve_sim.core.steady_state import cracking_pressure, preset_preload
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
 TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
 MAX_BATCH = 64
+LOOPBACK = '127.0.0.1'  # where every part of a local cluster listens
 
 
 # The numbers a row may hold besides its measures (evaluate_batch, _measured).
@@ -127,7 +133,11 @@ def _failed(row, error):
 
 
 def _measured(case, row, waveforms):
-    """Complete the row of a run: initial state, the six measures and reasons, waveforms."""
+    """
+    Complete the row of a run: initial state, the six measures and reasons, waveforms.
+
+    A case with 'envelope' set gets the envelope's decay rate too (ENVELOPE_DECAY).
+    """
     scenario = case['scenario']
     row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
     row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
@@ -146,6 +156,16 @@ def _measured(case, row, waveforms):
         reasons=measures['reasons'],
         error=None,
     )
+    if case.get('envelope'):  # T_s's continuous companion, for the study (docs/measures.md)
+        decay, reason = envelope_decay_rate(
+            waveforms.time,
+            waveforms['supply_pressure'],
+            waveforms['main_valve_displacement'],
+            scenario.step_time,
+        )
+        row['measures'][ENVELOPE_DECAY] = decay
+        if reason:
+            row['reasons'][ENVELOPE_DECAY] = reason
     if case.get('record'):
         row['waveforms'] = {
             'time': waveforms.time.tolist(),
@@ -166,7 +186,7 @@ def fingerprint(cases):
     return digest.hexdigest()[:16]
 
 
-def read_results(path, study):
+def read_results(path, study, check=None):
     """
     Rows on file for the study with this fingerprint: {index: row}.
 
@@ -174,8 +194,11 @@ def read_results(path, study):
     ends with a newline: a torn last line (the process died while writing it) is
     not a row, and drop_torn_tail() removes it before new rows are appended. The file
     is read once, within input_files' limits (STUDY_RESULTS, each line STUDY_ROW), and
-    every row is checked (check_row): a damaged one is a StudyError naming its line.
+    every row is checked by check (default check_row, the rows of evaluate_batch; the
+    rows of another evaluate need their own): a damaged one is a StudyError naming its
+    line.
     """
+    check = check or check_row
     path = Path(path)
     if not os.path.lexists(path):
         return {}
@@ -197,7 +220,7 @@ def read_results(path, study):
         where = f'{path}, line {number}'
         try:
             row = parse_json(text, STUDY_ROW, where)
-            check_row(row)
+            check(row)
         except (InputFileError, ValueError) as error:
             raise StudyError(
                 f'{where}: not a row of this study ({error}); delete that line to compute '
@@ -215,10 +238,15 @@ def check_row(row):
     if isinstance(index, bool) or not isinstance(index, int) or index < 0:
         raise ValueError(f"key 'index' must be an integer >= 0, got {shown(index)}")
     measures = row.get('measures')
-    if not isinstance(measures, dict) or set(measures) != set(MEASURE_NAMES):
-        raise ValueError(f"key 'measures' must map {', '.join(MEASURE_NAMES)} to numbers or null")
+    if not isinstance(measures, dict) or not set(MEASURE_NAMES) <= set(measures) <= set(
+        MEASURE_NAMES + (ENVELOPE_DECAY,)
+    ):
+        raise ValueError(
+            f"key 'measures' must map {', '.join(MEASURE_NAMES)} (and {ENVELOPE_DECAY}, if "
+            'asked) to numbers or null'
+        )
     for name, value in measures.items():
-        if value is not None and not _number(value):
+        if value is not None and not is_number(value):
             raise ValueError(f"key 'measures.{name}' must be a number or null, got {shown(value)}")
     reasons = row.get('reasons')
     if not isinstance(reasons, dict) or not all(isinstance(r, str) for r in reasons.values()):
@@ -226,16 +254,17 @@ def check_row(row):
     if row.get('error') is not None and not isinstance(row['error'], str):
         raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
     for key in NUMBER_KEYS:
-        if key in row and not _number(row[key]):
+        if key in row and not is_number(row[key]):
             raise ValueError(f"key '{key}' must be a number, got {shown(row[key])}")
     waveforms = row.get('waveforms', {'time': []})
     if not isinstance(waveforms, dict) or not all(
-        isinstance(trace, list) and all(map(_number, trace)) for trace in waveforms.values()
+        isinstance(trace, list) and all(map(is_number, trace)) for trace in waveforms.values()
     ):
         raise ValueError("key 'waveforms' must map names to lists of numbers")
 
 
-def _number(value):
+def is_number(value):
+    """Return whether a value read from JSON is a number (an int or a float, not a bool)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
@@ -259,10 +288,15 @@ def default_batch_size(count, workers):
 class Progress:
     """Progress and ETA on stderr, at most one line every `interval` seconds."""
 
-    def __init__(self, label, total, done, stream=sys.stderr, interval=2.0):
+    def __init__(self, label, total, done, stream=sys.stderr, interval=2.0, unit='runs'):
         self.label, self.total, self.resumed = label, total, done
-        self.done, self.stream, self.interval = done, stream, interval
+        self.done, self.stream, self.interval, self.unit = done, stream, interval, unit
         self.start = self.last = time.monotonic()
+
+    def skip(self, count):
+        """Count items found done on file: they do not count in the rate."""
+        self.done += count
+        self.resumed += count
 
     def advance(self, count):
         self.done += count
@@ -272,10 +306,12 @@ class Progress:
         self.last = now
         rate = (self.done - self.resumed) / max(now - self.start, 1e-9)
         left = (self.total - self.done) / rate if rate > 0 else float('inf')
+        pace = f'{rate:.1f} {self.unit}/s' if rate >= 1.0 else f'{60.0 * rate:.1f} {self.unit}/min'
         _say(
             self.stream,
-            f'{self.label}: {self.done}/{self.total} runs ({100.0 * self.done / self.total:.0f} %)'
-            f', {rate:.1f} runs/s, elapsed {_duration(now - self.start)}, '
+            f'{self.label}: {self.done}/{self.total} {self.unit} '
+            f'({100.0 * self.done / self.total:.0f} %), {pace}, '
+            f'elapsed {_duration(now - self.start)}, '
             f'ETA {_duration(left)}',
         )
 
@@ -303,6 +339,8 @@ def run_cases(
     evaluate=evaluate_batch,
     label='study',
     progress_stream=sys.stderr,
+    progress=None,
+    check=None,
 ):
     """
     Evaluate every case once, streaming rows to results_path; return (rows, computed).
@@ -311,7 +349,9 @@ def run_cases(
     (the rest came from the file with resume=True). Without resume an existing file
     is replaced. An interruption (Ctrl-C, a failed batch) leaves every finished row
     on file and raises; resume=True then evaluates only the missing indices.
-    Progress goes to progress_stream (None: silent).
+    Progress goes to progress_stream (None: silent), or to progress, a Progress that
+    spans more than this call (the rows on file are skipped in it). check: the row
+    check of evaluate's rows for a resume (read_results; default check_row).
     """
     indices = [case['index'] for case in cases]
     if len(set(indices)) != len(indices):
@@ -323,7 +363,7 @@ def run_cases(
             f'{results_path} is a symbolic link: valve-sim does not write a results file '
             'through a link; remove it or give another --out'
         )
-    rows = read_results(results_path, study) if resume else {}
+    rows = read_results(results_path, study, check) if resume else {}
     rows = {index: row for index, row in rows.items() if index in set(indices)}
     missing = [case for case in cases if case['index'] not in rows]
     if resume and rows:
@@ -336,7 +376,10 @@ def run_cases(
     else:
         results_path.parent.mkdir(parents=True, exist_ok=True)
         write_text(results_path, json.dumps({'study': study, 'cases': len(cases)}) + '\n')
-    progress = Progress(label, len(cases), len(rows), progress_stream)
+    if progress is None:
+        progress = Progress(label, len(cases), len(rows), progress_stream)
+    else:
+        progress.skip(len(rows))
     size = batch_size or default_batch_size(len(missing), backend.workers)
     computed = 0
     with append_to(results_path) as stream:
@@ -406,10 +449,17 @@ class DaskBackend:
     machine (default: one per core), started when the first batch is submitted, so
     that a resumed study with nothing missing starts none. A task whose worker dies
     is rescheduled by Dask; `retries` re-runs a task that raised.
+
+    The local cluster listens on the loopback interface only (scheduler, workers,
+    nannies, and the scheduler's HTTP routes on a free port): its pages show the
+    workers' details, and nothing of it is for the network. dashboard: also serve
+    Dask's dashboard there, at HOST:PORT ('127.0.0.1:0': this machine, a free port;
+    '0.0.0.0:8787' only when the network is meant to see it); its address is
+    dashboard_link once started.
     """
 
-    def __init__(self, address=None, workers=None, retries=3):
-        self.retries = retries
+    def __init__(self, address=None, workers=None, retries=3, dashboard=None):
+        self.retries, self.dashboard = retries, dashboard
         self.cluster = self._client = None
         if address:
             from distributed import Client
@@ -446,11 +496,21 @@ class DaskBackend:
                 n_workers=self.workers,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=':0',
+                host=LOOPBACK,
+                dashboard_address=self.dashboard,
+                # without a dashboard the scheduler still serves health and metrics routes
+                scheduler_kwargs={'dashboard_address': self.dashboard or f'{LOOPBACK}:0'},
                 silence_logs=logging.ERROR,
             )
             self._client = Client(self.cluster)
         return self
+
+    @property
+    def dashboard_link(self):
+        """Return the address of Dask's dashboard, or None without one (or before start)."""
+        if self._client is None or (self.cluster is not None and not self.dashboard):
+            return None
+        return self._client.dashboard_link
 
     def run(self, evaluate, batches):
         if not batches:

@@ -17,6 +17,8 @@ Manufacturing tolerances: parameter distributions, sampling, limits, yield.
 
 A variation is NAME=SPEC (NAME: ROS name or paper symbol; values in SI units):
   NAME=+-X%  or  NAME=±X%   uniform on nominal * (1 -+ X/100)
+  NAME=±Xum  (or mm)        uniform on nominal -+ X, for a length: a machine shop's
+                            tolerance (um, µm and mm; the parameter's unit must be m)
   NAME=LO:HI                uniform on [LO, HI]
   NAME=MEAN~N(S%)           normal, mean MEAN, sigma S % of MEAN (MEAN may be
   NAME=MEAN~N(S)            left out: the nominal value); sigma S in SI units
@@ -45,6 +47,8 @@ PERCENTILES = (1, 5, 50, 95, 99)
 CONFIDENCE = 0.95
 _NUMBER = r'[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?'
 _PLUS_MINUS = re.compile(rf'^(?:±|\+-|\+/-)\s*({_NUMBER})\s*%$')
+_PLUS_MINUS_LENGTH = re.compile(rf'^(?:±|\+-|\+/-)\s*({_NUMBER})\s*(um|µm|μm|mm)$')
+LENGTH_UNITS = {'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6, 'mm': 1e-3}  # to m
 _RANGE = re.compile(rf'^({_NUMBER})\s*:\s*({_NUMBER})$')
 _NORMAL = re.compile(rf'^({_NUMBER})?\s*~\s*N\(\s*({_NUMBER})\s*(%?)\s*\)$')
 _LIMIT = re.compile(rf'^\s*(\w+)\s*(<=|>=|<|>)\s*({_NUMBER})\s*$')
@@ -97,6 +101,13 @@ def parse_variation(text, params):
     if match := _PLUS_MINUS.match(spec):
         half = abs(float(match[1])) / 100.0 * abs(nominal)
         distribution = Distribution(name, 'uniform', nominal - half, nominal + half, text)
+    elif match := _PLUS_MINUS_LENGTH.match(spec):
+        if SPECS[name].unit != 'm':
+            raise ParameterError(
+                f'variation {text!r}: {match[2]} is a length, and {name} is in {SPECS[name].unit}'
+            )
+        half = abs(float(match[1])) * LENGTH_UNITS[match[2]]
+        distribution = Distribution(name, 'uniform', nominal - half, nominal + half, text)
     elif match := _RANGE.match(spec):
         distribution = Distribution(name, 'uniform', float(match[1]), float(match[2]), text)
     elif match := _NORMAL.match(spec):
@@ -105,7 +116,8 @@ def parse_variation(text, params):
         distribution = Distribution(name, 'normal', mean, sigma, text)
     else:
         raise ParameterError(
-            f'variation {text!r}: SPEC must be ±X%, LO:HI, MEAN~N(S%) or MEAN~N(S)'
+            f'variation {text!r}: SPEC must be ±X%, ±Xum (or mm), LO:HI, MEAN~N(S%) or '
+            'MEAN~N(S)'
         )
     if not (math.isfinite(distribution.a) and math.isfinite(distribution.b)):
         raise ParameterError(f'variation {text!r}: values must be finite')
@@ -114,6 +126,15 @@ def parse_variation(text, params):
     if distribution.kind == 'normal' and not distribution.b > 0.0:
         raise ParameterError(f'variation {text!r}: sigma must be > 0')
     return distribution
+
+
+def follows_nominal(text):
+    """Whether a variation NAME=SPEC is stated about the nominal value (±, or ~N without MEAN)."""
+    spec = text.partition('=')[2].strip()
+    normal = _NORMAL.match(spec)
+    return bool(
+        _PLUS_MINUS.match(spec) or _PLUS_MINUS_LENGTH.match(spec) or (normal and not normal[1])
+    )
 
 
 def parse_variations(texts, params):

@@ -35,13 +35,22 @@ from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasur
 from valve_sim.analysis.signals import (
     CLOCKS,
     Extractor,
+    FLUID_PRESSURE,
     Joiner,
+    JOINT_STATE,
+    ROLE,
     ROLES,
     seconds,
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis
-from valve_sim.commands.options import add_options, flow_value, number, plot_path
+from valve_sim.commands.options import (
+    add_options,
+    flow_value,
+    namespace_name,
+    number,
+    plot_path,
+)
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.output_files import json_text
 from valve_sim.core.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE
@@ -67,6 +76,7 @@ class Recording:
     pilot_poppet: np.ndarray  # [m], NaN where the bag has none
     inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
     problem: str = None
+    inlet_flow_time: np.ndarray = None  # [s] time of each row's flow sample (None: the row's)
 
 
 def read_recording(path, signal_map=None, required=BAG_REQUIRED):
@@ -127,9 +137,11 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED):
         role: np.array([np.nan if row.get(role) is None else row[role] for _, row in rows])
         for role in ('supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow')
     }
+    flow_times = [row['times'].get('inlet_flow', time_ns) for time_ns, row in rows]
     return Recording(
         np.array([seconds(time_ns) for time_ns, _ in rows]),
         problem='; '.join(problems) or None,
+        inlet_flow_time=np.array([seconds(time_ns) for time_ns in flow_times]),
         **column,
     )
 
@@ -150,8 +162,13 @@ def _extractor(path, channel, schema, signal_map, decoders):
 def analyse(recording, threshold=1e-6, merge_time=0.05):
     """Step records of every step in a Recording (step_analysis.StepAnalysis over its rows)."""
     analysis, records = StepAnalysis(threshold, merge_time), []
+    flow_time = recording.time if recording.inlet_flow_time is None else recording.inlet_flow_time
     for row in zip(
-        recording.time, recording.supply_pressure, recording.main_valve, recording.inlet_flow
+        recording.time,
+        recording.supply_pressure,
+        recording.main_valve,
+        recording.inlet_flow,
+        flow_time,
     ):
         records += analysis.add(*row)
     return records + analysis.finish()
@@ -200,21 +217,14 @@ def plot_steps(path, recording, records, first_number=1):
     return written
 
 
-def flows_around(recording, record):
-    """(flow before, flow at the end of the window) [m^3/s] of a step; NaN where unknown."""
-    before = np.searchsorted(recording.time, record['t_step'], side='right') - 1
-    after = np.searchsorted(recording.time, record['t_step'] + WINDOW, side='right') - 1
-    return recording.inlet_flow[max(before, 0)], recording.inlet_flow[max(after, 0)]
-
-
-def print_steps(records, recording, first_number=1):
+def print_steps(records, recording, first_number=1, paper=False):
     """
     Print each step's measures as a table (valve_sim.commands.simulate.print_table).
 
-    Steps are numbered in the recording from first_number. The paper's values are
-    shown beside the paper's own 5 -> 20 L/min step only.
+    Steps are numbered in the recording from first_number. paper: show the paper's
+    values beside them, for the paper's own step on the reference valve only (the demo;
+    a bag does not say which valve it recorded).
     """
-    from valve_sim.analysis.paper import is_reference_step
     from valve_sim.commands.simulate import print_table
 
     for k, record in enumerate(records, start=first_number):
@@ -225,8 +235,22 @@ def print_steps(records, recording, first_number=1):
         )
         print_table(
             StepMeasures({name: record[name] for name in MEASURE_NAMES}, record['reasons']),
-            paper=is_reference_step(*flows_around(recording, record)),
+            paper=paper,
         )
+        details = record['details']
+        if details.get('t_step_bracket'):
+            t_a, t_b = details['t_step_bracket']
+            how = (
+                'located from the supply pressure'
+                if details['t_step_from'] == 'supply_pressure'
+                else 'not visible in the supply pressure: dated at its last sample before '
+                'the new flow'
+            )
+            print(
+                f'  step time: between flow samples {t_a - recording.time[0]:.4f} s and '
+                f'{t_b - recording.time[0]:.4f} s ({(t_b - t_a) * 1e3:.3g} ms apart), {how}; '
+                f'uncertainty +-{details["t_step_uncertainty_s"] * 1e3:.2g} ms'
+            )
         if record['details'].get('T_s_from') == 'supply_pressure':
             print(
                 '  T_s_ms: from the supply pressure (main valve not recorded): the time after '
@@ -237,11 +261,16 @@ def print_steps(records, recording, first_number=1):
 
 
 def add_signal_arguments(parser):
-    """--topic-*, --joint-*, --ambient-pressure and --clock: where a bag's signals are."""
+    """--namespace, --topic-*, --joint-*, --ambient-pressure and --clock: where the signals are."""
+    parser.add_argument('--namespace', metavar='NS',
+                        help="namespace the valve's topics were recorded under (e.g. /rig1); "
+                        'relative --topic-* names resolve in it (default: the one namespace '
+                        "with valve_node's topics in the bag, else /)")
     for role in ROLES:
         option = role.name.replace('_', '-')
-        parser.add_argument(f'--topic-{option}', metavar='TOPIC', default='/' + role.topic,
-                            help=f'topic of the {role.meaning} (default /{role.topic})')
+        parser.add_argument(f'--topic-{option}', metavar='TOPIC',
+                            help=f'topic of the {role.meaning} (default {role.topic} in the '
+                            'namespace)')
         if role.joint:
             parser.add_argument(f'--joint-{option}', metavar='NAME', default=role.joint,
                                 help=f'JointState joint name of the {role.meaning} '
@@ -283,17 +312,75 @@ def add_arguments(parser):
                         help='direction of the inlet-flow change at --step-time (default up)')
 
 
-def signal_map_from(args):
-    """Build the SignalMap of the --topic-*, --joint-*, --ambient-pressure and --clock options."""
+def signal_map_from(args, command='analyse'):
+    """
+    Build the SignalMap of --namespace, --topic-*, --joint-*, --ambient-pressure and --clock.
+
+    Without --namespace, the roles left at their default topics look in the namespace
+    detect_namespace() finds in the bag (said on stderr when it is not the root); sets
+    args.namespace to the namespace used ('' for the root).
+    """
     options = vars(args)
-    topics = {role.name: options[f'topic_{role.name}'] for role in ROLES}
+    given = {role.name: options[f'topic_{role.name}'] for role in ROLES}
+    if args.namespace is None:
+        args.namespace = detect_namespace(args.bag, [r for r, topic in given.items() if not topic])
+        if args.namespace:
+            print(f'valve-sim {command}: the valve topics of {args.bag} are under '
+                  f'{args.namespace}: analysing those (--namespace chooses)', file=sys.stderr)
+    namespace = namespace_name(args.namespace)
+    args.namespace = namespace
+    topics = {
+        role.name: resolved(given[role.name] or role.topic, namespace) for role in ROLES
+    }
     joints = {role.name: options[f'joint_{role.name}'] for role in ROLES if role.joint}
-    return SignalMap(
-        {role: topic if topic.startswith('/') else '/' + topic for role, topic in topics.items()},
-        joints,
-        args.ambient_pressure,
-        args.clock,
+    return SignalMap(topics, joints, args.ambient_pressure, args.clock)
+
+
+def resolved(topic, namespace):
+    """Return topic resolved in namespace ('' the root): relative names go below it."""
+    return topic if topic.startswith('/') else f'{namespace}/{topic}'
+
+
+def bag_topics(path):
+    """{topic: type name} of every channel of a bag (an MCAP file or a bag folder)."""
+    topics = {}
+    for file in bag_files(path):
+        reader = BagReader(file)
+        for _ in reader.messages(topics=()):  # records every channel, yields no message
+            pass
+        topics.update(
+            {c.topic: reader.schemas[c.schema_id].name for c in reader.channels.values()
+             if c.schema_id in reader.schemas}
+        )
+    return topics
+
+
+def detect_namespace(path, roles):
+    """
+    Return the namespace of valve_node's topics in a bag, for roles left at their defaults.
+
+    '' when the root has them (or roles is empty, or no namespace has them); the one
+    namespace whose supply_pressure (FluidPressure) and applied_inlet_flow (JointState)
+    the bag holds; raises InputFileError naming them when several namespaces do.
+    """
+    if not roles:
+        return ''
+    topics = bag_topics(path)
+    namespaces = sorted(
+        topic[: -len('/' + ROLE['supply_pressure'].topic)]
+        for topic, type_name in topics.items()
+        if topic.endswith('/' + ROLE['supply_pressure'].topic)
+        and type_name == FLUID_PRESSURE
+        and topics.get(topic.rsplit('/', 1)[0] + '/' + ROLE['inlet_flow'].topic) == JOINT_STATE
     )
+    if not namespaces or '' in namespaces:
+        return ''
+    if len(namespaces) > 1:
+        raise InputFileError(
+            f"{path} holds valve_node's topics under {len(namespaces)} namespaces: "
+            f'{", ".join(namespaces)}; choose one with --namespace'
+        )
+    return namespaces[0]
 
 
 def run_characteristic(args):

@@ -36,7 +36,14 @@ import shlex
 import sys
 
 import numpy as np
-from valve_sim.commands.analyse import add_signal_arguments, read_recording, signal_map_from
+from valve_sim.analysis.signals import ROLE
+from valve_sim.commands.analyse import (
+    add_signal_arguments,
+    analyse,
+    read_recording,
+    Recording,
+    signal_map_from,
+)
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments, number
 from valve_sim.core.input_files import read_json, TARGET_MEASURES
@@ -60,6 +67,59 @@ def bounds_value(text):
         return name.strip(), (float(low), float(high))
     except ValueError:
         raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
+
+
+def range_value(text):
+    """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
+    from argparse import ArgumentTypeError
+
+    try:
+        _, (low, high) = bounds_value(f'range={text}')
+    except ArgumentTypeError:
+        raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
+    if not 0.0 < low < high < float('inf'):
+        raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
+    return low, high
+
+
+def tie_value(text):
+    """'d_v=0.98*d_s' -> ('d_v', 0.98, 'd_s') and 'd_v=d_s' -> ('d_v', 1.0, 'd_s') for --tie."""
+    from argparse import ArgumentTypeError
+
+    tied, separator, rule = text.partition('=')
+    factor, star, source = rule.rpartition('*')
+    try:
+        if not separator or not tied.strip() or not source.strip():
+            raise ValueError
+        return tied.strip(), float(factor) if star else 1.0, source.strip()
+    except ValueError:
+        raise ArgumentTypeError(
+            f'expected NAME=OTHER or NAME=FACTOR*OTHER, got {text!r}'
+        ) from None
+
+
+def positive_length(text):
+    """Parse a length [m] > 0 for --land-margin."""
+    from argparse import ArgumentTypeError
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < 0.1:
+        raise ArgumentTypeError(f'expected a length in m, 0 < M < 0.1, got {text!r}')
+    return value
+
+
+# The design rules of a main stage as real valves are built (docs/model.md), as constraints.
+DESIGN_RULES = (
+    ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
+     'bore, D_1, D_2 <= d_p - 2 M (M in m, e.g. 1e-3)'),
+    ('--main-spring-rate', range_value, 'LO:HI',
+     'constraint: main spring rate k_m within LO:HI N/m (e.g. 1e3:5e3)'),
+    ('--main-spring-preload', range_value, 'LO:HI',
+     'constraint: main spring preload force k_m x_0 within LO:HI N (e.g. 20:100)'),
+)
 
 
 def case_value(text):
@@ -113,6 +173,13 @@ def add_arguments(parser):
                         help="constraint: this case of the paper's study (preset held; e.g. "
                         'd_c=-20) ends its step test relieving through the main stage; '
                         'repeatable')
+    for flag, kind, metavar, text in DESIGN_RULES:
+        parser.add_argument(flag, type=kind, metavar=metavar, help=text)
+    parser.add_argument('--tie', type=tie_value, action='append', default=[],
+                        metavar='NAME=[FACTOR*]OTHER',
+                        help='NAME takes FACTOR (default 1) times the value of the fitted OTHER '
+                        'at every evaluation (e.g. d_v=0.98*d_s: the pilot seat 2 %% under '
+                        'the rod); repeatable')
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
@@ -132,7 +199,7 @@ def add_arguments(parser):
     add_signal_arguments(parser)
 
 
-def _target(args, step_size):
+def _target(args, step_size, signal_map):
     from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
 
     if args.target_measures:
@@ -141,10 +208,12 @@ def _target(args, step_size):
             return MeasuresTarget.from_document(document, step_size)
         except CalibrationError as error:
             raise CalibrationError(f'{args.target_measures}: {error}') from None
-    recording = read_recording(args.bag, signal_map_from(args))
+    recording = read_recording(args.bag, signal_map)
     if recording.problem:
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
+    recording = from_every_signal(recording, signal_map)
     main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
+    located = located_steps(recording)
     try:
         return RecordingTarget(
             recording.time - recording.time[0],
@@ -152,9 +221,66 @@ def _target(args, step_size):
             recording.inlet_flow,
             main_valve,
             step_size,
+            step_times=[t - recording.time[0] for t, _ in located],
+            brackets=[tuple(t - recording.time[0] for t in bracket) for _, bracket in located],
         )
     except CalibrationError as error:
         raise CalibrationError(f'{args.bag}: {error}') from None
+
+
+def located_steps(recording):
+    """
+    Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
+
+    A flowmeter slower than the pressure shows a step only at its next sample (last);
+    analyse locates it from the pressure (measures.locate_step), and calibrate fits it.
+    """
+    return [
+        (record['t_step'], tuple(record['details']['t_step_bracket']))
+        for record in analyse(recording)
+        if record['details'].get('t_step_from') == 'supply_pressure'
+    ]
+
+
+def from_every_signal(recording, signal_map):
+    """
+    Return the recording from its first row where every mapped signal it holds has a value.
+
+    A recorder subscribes topic by topic (analyser_node as rosbag2), so its first rows
+    can lack a signal (the main valve, NaN there). Those rows are dropped, and stderr
+    says so; the main valve counts only if the bag holds it at all.
+    """
+    present = {'supply_pressure': recording.supply_pressure, 'inlet_flow': recording.inlet_flow}
+    if np.any(np.isfinite(recording.main_valve)):
+        present['main_valve'] = recording.main_valve
+    known = np.logical_and.reduce([np.isfinite(values) for values in present.values()])
+    first = int(np.argmax(known)) if known.any() else len(known)
+    if first == 0:
+        return recording
+    if first == len(known):
+        from valve_sim.analysis.calibration import CalibrationError
+
+        raise CalibrationError('no sample of the recording has every mapped signal')
+    late = ', '.join(
+        f'{ROLE[role].meaning.split(" [")[0]} ({signal_map.topics[role]})'
+        for role, values in present.items()
+        if not np.isfinite(values[0])
+    )
+    print(
+        f'valve-sim calibrate: note: the recording starts at its first sample, but {late} '
+        f'begins {recording.time[first] - recording.time[0]:.3f} s later: fitting from there '
+        f'(the first {first} samples dropped)',
+        file=sys.stderr,
+    )
+    return Recording(
+        recording.time[first:],
+        recording.supply_pressure[first:],
+        recording.main_valve[first:],
+        recording.pilot_poppet[first:],
+        recording.inlet_flow[first:],
+        recording.problem,
+        None if recording.inlet_flow_time is None else recording.inlet_flow_time[first:],
+    )
 
 
 def run(args):
@@ -163,25 +289,37 @@ def run(args):
         CalibrationError,
         CaseRelieves,
         fit_parameters,
+        fit_ties,
+        LandsInsideBore,
+        MainSpringRange,
         ModesDecay,
         PilotFlowLimit,
+        step_time_parameters,
         StudyRelieves,
     )
 
-    params, settings = load_from_arguments(args)
+    signal_map = signal_map_from(args, 'calibrate') if args.bag else None
+    params, settings = load_from_arguments(args)  # in the bag's namespace, if any
     preset = args.preset_pressure or None
     if args.starts < 1 or not (0.0 <= args.spread <= 2.0) or not args.tolerance > 0.0:
         raise CalibrationError('need --starts >= 1, 0 <= --spread <= 2 and --tolerance > 0')
     step_size = settings['step_size']
     names = [name for name in args.fit.split(',') if name.strip()]
     fitted = fit_parameters(names, dict(args.bounds), params)
-    target = _target(args, step_size)
+    ties = fit_ties(args.tie, fitted)
+    target = _target(args, step_size, signal_map)
+    fitted += step_time_parameters(target)  # steps between coarse flow samples: fitted too
     constraints = []
     if args.max_pilot_flow is not None:
         constraints.append(PilotFlowLimit(args.max_pilot_flow, args.pilot_flow_at))
     if args.table2_decays:
         constraints.append(ModesDecay())
     constraints += [CaseRelieves(changes) for changes in args.relieves]
+    if args.land_margin is not None:
+        constraints.append(LandsInsideBore(args.land_margin))
+    if args.main_spring_rate or args.main_spring_preload:
+        constraints.append(MainSpringRange(args.main_spring_rate or (0.0, math.inf),
+                                           args.main_spring_preload or (0.0, math.inf)))
     checks = [StudyRelieves()] if args.study_relieves else []
     progress = None if args.quiet else lambda line: print(line, file=sys.stderr, flush=True)
     if progress:
@@ -202,6 +340,7 @@ def run(args):
         seed=args.seed,
         tolerance=args.tolerance,
         progress=progress,
+        ties=ties,
     )
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
@@ -236,21 +375,30 @@ def yaml_number(value):
 
 
 def write_parameter_file(path, result, settings, command):
-    """calibrated.yaml: every model parameter and setting; fitted ones marked."""
+    """calibrated.yaml: every model parameter and setting; fitted and derived ones marked."""
+    from valve_sim.analysis.calibration import BEARING_INPUTS
+    from valve_sim.core.bearing import COEFFICIENTS
     from valve_sim.core.steady_state import cracking_pressure
 
-    fitted = {p.name for p in result.fitted}
+    fitted = {p.name for p in result.fitted if p.unit != 's' or p.name in result.parameters}
+    marks = dict.fromkeys(fitted, '   # fitted')
+    marks.update({
+        tied: f'   # = {factor:g} {source} (tied)'
+        for tied, (source, factor) in result.ties.items()
+    })
+    if (fitted | set(result.ties)) & set(BEARING_INPUTS):
+        marks.update(dict.fromkeys(COEFFICIENTS, '   # fit of the bearing (core.bearing)'))
     lines = [
         f'# Written by: {command}',
         f'# Fitted: {", ".join(sorted(fitted))}; '
         f'main-valve cracking pressure (preset_pressure) '
         f'{yaml_number(cracking_pressure(result.parameters))} Pa.',
-        f'{NODE_NAME}:',
+        f"# '/**/{NODE_NAME}:' applies to valve_node in any namespace (and to valve-sim).",
+        f'/**/{NODE_NAME}:',
         '  ros__parameters:',
     ]
     for name, value in result.parameters.items():
-        mark = '   # fitted' if name in fitted else ''
-        lines.append(f'    {name}: {yaml_number(value)}{mark}')
+        lines.append(f'    {name}: {yaml_number(value)}{marks.get(name, "")}')
     for name, value in settings.items():
         lines.append(f'    {name}: {yaml_number(value)}')
     write_text(path, '\n'.join(lines) + '\n')
@@ -285,6 +433,7 @@ def report_document(result, target, args, command):
         'correlations': None
         if result.correlations is None
         else np.round(result.correlations, 4).tolist(),
+        'determined_combinations': result.rank,
         'cost': result.cost,
         'constraints': result.constraints,
         'starts': result.starts,
@@ -293,6 +442,8 @@ def report_document(result, target, args, command):
         'interrupted': result.interrupted,
         'preset_pressure_Pa': cracking_pressure(result.parameters),
     }
+    if result.uncertainty_note:
+        document['uncertainty_note'] = result.uncertainty_note
     if target.kind == 'measures':
         measures, _ = target.model_output(result.parameters)
         document['measures'] = [
@@ -310,7 +461,9 @@ def report_document(result, target, args, command):
         pressure = result.residuals[:count] * target.pressure_noise
         document['recording'] = {
             'samples': count,
-            'steps_at_s': [float(step[0]) for step in target.steps],
+            'steps_at_s': [
+                float(t) for t in (target.step_times or [step[0] for step in target.steps])
+            ],
             'pressure_noise_estimate_Pa': target.pressure_noise,
             'pressure_residual_rms_Pa': float(np.sqrt(np.mean(pressure**2))),
             'main_valve_recorded': target.position is not None,
@@ -337,6 +490,8 @@ def report_text(report):
             f'{entry["name"] + " (" + entry["symbol"] + ")":<34}{entry["start"]:>13.6g}'
             f'{entry["value"]:>15.8g}   {shown} {entry["unit"]}{bound}'
         )
+    if report.get('uncertainty_note'):
+        lines.append(report['uncertainty_note'])
     if report['correlations'] and len(report['fitted']) > 1:
         lines.append('correlations: ' + '; '.join(
             f'{a["symbol"]}-{b["symbol"]} {report["correlations"][i][j]:+.3f}'

@@ -15,8 +15,8 @@
 """
 The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
-Subcommands: simulate, study, tolerance, sensitivity, operating-point, characteristic,
-analyse, calibrate, repair, demo.
+Subcommands: simulate, study, tolerance, sensitivity, optimise, operating-point,
+characteristic, analyse, calibrate, repair, demo.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -42,6 +42,10 @@ SUBCOMMANDS = {
     'sensitivity': (
         'valve_sim.commands.sensitivity',
         'global sensitivity: Sobol first-order and total indices (SALib)',
+    ),
+    'optimise': (
+        'valve_sim.commands.optimise',
+        'robust design optimisation: Pareto designs whose tolerance batch meets the limits',
     ),
     'operating-point': (
         'valve_sim.commands.operating_point',

@@ -366,7 +366,7 @@ def report(folder, bag, attempts=1):
             f'the step up of attempt {attempts}: the {attempts - 1} before it could not be '
             'measured; they and their steps back down are in the bag too'
         )
-    print_steps([step], recording, first_number=len(live))
+    print_steps([step], recording, first_number=len(live), paper=True)  # the reference valve
     same = len(offline) == len(live) and all(map(measures_agree, offline, live))
     print(
         '\noffline analysis of the bag: '
@@ -397,15 +397,14 @@ def report(folder, bag, attempts=1):
 
 
 def add_arguments(parser):
-    from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT
+    from valve_sim.ros.live_view import add_port_option, DEFAULT_PORT, layout_path
 
     add_options(parser, '--out', required=False,
                 help='folder for the bag, measures JSON, figure and logs (default: a new '
                 'demo_<date>-<time> folder in the current directory)')
     add_port_option(parser, 'valve_node serves a live view over the Foxglove WebSocket protocol '
                     f'on this port of this machine (default {DEFAULT_PORT}; 0: any free port): '
-                    'open it in the Foxglove app with the layout '
-                    'share/valve_sim/foxglove/valve_layout.json')
+                    f'open it in the Foxglove app with the layout {layout_path()}')
 
 
 def run(args):

@@ -16,8 +16,9 @@
 Report the exact steady state at an inlet flow: pressures, openings, flows, forces and modes.
 
 The numbers behind docs/model.md's force and flow balances and stability margins.
---json prints the same as one JSON document under the stable key names of
-docs/model.md ("operating-point --json"), all SI.
+--mode-sensitivity adds how each linear mode's frequency and decay rate move per +1 %
+of each parameter (preset held). --json prints the same as one JSON document under
+the stable key names of docs/model.md ("operating-point --json"), all SI.
 """
 
 
@@ -30,6 +31,9 @@ def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
     parser.add_argument('--flow', type=flow_value, action='append', metavar='Q',
                         help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)')
+    parser.add_argument('--mode-sensitivity', action='store_true',
+                        help="each linear mode's change of frequency and decay rate per +1 %% of "
+                        'each parameter, the preset held (about a second per flow)')
     add_options(parser, '--json', help='print the operating points as JSON (SI units)')
 
 
@@ -41,9 +45,10 @@ def operating_point(params, inlet_flow):
     intermediate, pilot, poppet_chamber} [Pa gauge], openings {main_valve,
     first_throttle, poppet} [m], flows {main, pilot, bearings, damping_orifice,
     rod_leakage} [m^3/s], main_valve_forces and poppet_forces [N], modes
-    [{frequency_hz, damping_ratio}] slowest first.
+    [{frequency_hz, damping_ratio, decay_rate, name}] of the oscillatory modes,
+    slowest first.
     """
-    from valve_sim.core.linear import oscillatory_modes
+    from valve_sim.core.linear import modes
     from valve_sim.core.model import coefficients, flows
     from valve_sim.core.steady_state import steady_state
 
@@ -79,18 +84,56 @@ def operating_point(params, inlet_flow):
         },
         'poppet_forces': {
             'rod': c.rod_area * p_s,
+            'poppet_chamber': c.poppet_chamber_area * p_c,
             'spring': -c.pilot_spring_stiffness * (y + c.pilot_spring_preload),
             'flow': -c.flow_force_gain * y * p_c,
         },
-        'modes': [
-            {'frequency_hz': float(f), 'damping_ratio': float(z)}
-            for f, z in oscillatory_modes(params, inlet_flow)
+        'modes': [mode_entry(mode) for mode in modes(params, inlet_flow) if mode.frequency_hz > 0],
+    }
+
+
+def mode_entry(mode):
+    """Return a core.linear.Mode as a JSON-ready dict."""
+    return {
+        'frequency_hz': mode.frequency_hz,
+        'damping_ratio': mode.damping_ratio,
+        'decay_rate': mode.decay_rate,
+        'name': mode.name,
+    }
+
+
+def sensitivity(params, inlet_flow, preset_pressure):
+    """
+    Return the mode sensitivity at inlet_flow [m^3/s] as a JSON-ready dict (SI units).
+
+    Keys: modes [mode_entry, with states] (every mode, oscillatory or not, slowest
+    first), parameters [{name, symbol, value, frequency_hz, decay_rate}]: per
+    parameter the change of each mode's frequency [Hz] and decay rate [1/s] per +1 %
+    of it, in the order of modes; preset_pressure [Pa] held.
+    """
+    from valve_sim.core.linear import mode_sensitivity
+    from valve_sim.core.parameters import SPECS
+
+    base, table = mode_sensitivity(params, inlet_flow, preset_pressure)
+    return {
+        'per_percent': 1.0,
+        'preset_pressure': preset_pressure,
+        'modes': [{**mode_entry(mode), 'states': list(mode.states)} for mode in base],
+        'parameters': [
+            {
+                'name': name,
+                'symbol': SPECS[name].symbol,
+                'value': params[name],
+                'frequency_hz': [change[0] for change in changes],
+                'decay_rate': [change[1] for change in changes],
+            }
+            for name, changes in table.items()
         ],
     }
 
 
 def report(point):
-    """Print one operating_point() for people: pressures in MPa, openings in um, flows in L/min."""
+    """Print one operating_point() for people: pressures in MPa, openings in µm, flows in L/min."""
     pressure, opening, flow = point['pressures'], point['openings'], point['flows']
     main, poppet = point['main_valve_forces'], point['poppet_forces']
     litres = {name: value / LITRE_PER_MINUTE for name, value in flow.items()}
@@ -104,7 +147,7 @@ def report(point):
         f'p_c {pressure["poppet_chamber"] / 1e6:.4f}'
     )
     print(
-        f'  openings [um]    x {opening["main_valve"] * 1e6:.2f}  '
+        f'  openings [µm]    x {opening["main_valve"] * 1e6:.2f}  '
         f'(first throttle x + h = {opening["first_throttle"] * 1e6:.2f})'
         f'  y {opening["poppet"] * 1e6:.2f}'
     )
@@ -120,13 +163,39 @@ def report(point):
     )
     print(
         f'  poppet [N]       A_s p_s {poppet["rod"]:.2f}  -k_p (y + y_0) {poppet["spring"]:.2f}  '
-        f'-K_f y p_c {poppet["flow"]:.3f}'
+        f'-K_f y p_c {poppet["flow"]:.3f}  A_c p_c {poppet["poppet_chamber"]:.3f}'
     )
     modes = ', '.join(
-        f'{mode["frequency_hz"]:.1f} Hz (zeta {mode["damping_ratio"]:.4f})'
+        f'{mode["frequency_hz"]:.1f} Hz (zeta {mode["damping_ratio"]:.4f}, '
+        f'decay {mode["decay_rate"]:.3g} 1/s, {mode["name"]})'
         for mode in point['modes']
     )
     print(f'  linear modes     {modes}')
+    if 'mode_sensitivity' in point:
+        report_sensitivity(point['mode_sensitivity'])
+
+
+def report_sensitivity(table):
+    """Print a mode_sensitivity table: per parameter, each oscillatory mode's df and d(decay)."""
+    shown = [k for k, mode in enumerate(table['modes']) if mode['frequency_hz'] > 0]
+    print(
+        '  mode sensitivity per +1 % of each parameter, preset held at '
+        f'{table["preset_pressure"] / 1e6:.4f} MPa (df [Hz], d decay [1/s]):'
+    )
+    heads = [
+        f'{table["modes"][k]["name"]} {table["modes"][k]["frequency_hz"]:.0f} Hz' for k in shown
+    ]
+    print(f'    {"parameter":<36}' + ''.join(f'{head:>26}' for head in heads))
+    for row in table['parameters']:
+        label = f'{row["name"]} ({row["symbol"]})'
+        print(f'    {label:<36}' + ''.join(
+            f'{row["frequency_hz"][k]:>+13.3f}{row["decay_rate"][k]:>+13.3f}' for k in shown
+        ))
+    others = [mode for mode in table['modes'] if mode['frequency_hz'] == 0]
+    if others:
+        print('    (the non-oscillatory modes, ' + ', '.join(
+            f'{mode["name"]} {mode["decay_rate"]:.3g} 1/s' for mode in others
+        ) + ', are in --json)')
 
 
 def run(args):
@@ -134,14 +203,22 @@ def run(args):
 
     params, _ = load_from_arguments(args)
     inlet_flows = args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE)
+    cracking = cracking_pressure(params)
+
+    def point(inlet_flow):
+        entry = operating_point(params, inlet_flow)
+        if args.mode_sensitivity:
+            entry['mode_sensitivity'] = sensitivity(params, inlet_flow, cracking)
+        return entry
+
     if args.json:
         document = {
-            'cracking_pressure': cracking_pressure(params),
-            'operating_points': [operating_point(params, q) for q in inlet_flows],
+            'cracking_pressure': cracking,
+            'operating_points': [point(q) for q in inlet_flows],
         }
         print(json_text(document))
         return 0
-    print(f'main valve cracking pressure: {cracking_pressure(params) / 1e6:.4f} MPa')
+    print(f'main valve cracking pressure: {cracking / 1e6:.4f} MPa')
     for inlet_flow in inlet_flows:
-        report(operating_point(params, inlet_flow))
+        report(point(inlet_flow))
     return 0

@@ -189,13 +189,16 @@ def load_from_arguments(args, injection=None):
     """
     Return (params, settings) from --params, --set, --preset-pressure and --step-size.
 
-    --step-size overrides settings["step_size"]; fault and sensor settings go into the
-    dict injection (without one they are refused). A preset pressure (--preset-pressure,
+    The sections of --params that apply are those rcl applies to valve_node in the
+    command's --namespace, if it has one (else the root namespace). --step-size
+    overrides settings["step_size"]; fault and sensor settings go into the dict
+    injection (without one they are refused). A preset pressure (--preset-pressure,
     else preset_pressure of --set or the file) sets the pilot spring preload last.
     """
     from valve_sim.core.steady_state import with_preset_pressure
 
-    params, settings = load_parameters(args.params, dict(args.set), injection)
+    namespace = namespace_name(getattr(args, 'namespace', None))
+    params, settings = load_parameters(args.params, dict(args.set), injection, namespace)
     preset = settings.pop('preset_pressure', None)
     preset = getattr(args, 'preset_pressure', None) or preset
     if preset is not None:
@@ -217,6 +220,12 @@ def plot_path(value, default_name):
     if path.is_dir():
         return path / default_name
     return path if path.suffix else path.with_name(path.name + '.png')
+
+
+def namespace_name(namespace):
+    """'/rig1', 'rig1/' or '/' -> '/rig1', '/rig1' or '' (the root namespace), for --namespace."""
+    stripped = (namespace or '').strip().strip('/')
+    return '/' + stripped if stripped else ''
 
 
 def check_bag_arguments(args):

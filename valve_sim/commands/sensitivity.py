@@ -37,6 +37,7 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
+from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_variations, undefined_reasons
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import load_from_arguments
@@ -48,7 +49,6 @@ from valve_sim.commands.study_backend import (
 )
 from valve_sim.commands.tolerance import (
     add_study_arguments,
-    preset_protocol,
     run_samples,
     write_samples,
 )
@@ -130,7 +130,7 @@ def run(args):
         raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
-    preset, protocol = preset_protocol(args, params)
+    preset, protocol = preset_protocol(args.protocol, params)
     names = [d.name for d in distributions]
     check_runs(args.samples * (len(names) + 2), f'--samples {args.samples} x ({len(names)} + 2)')
     values = sobol_design(distributions, args.samples, args.seed)

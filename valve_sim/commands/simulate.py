@@ -25,6 +25,7 @@ sensor readings are what --mcap records on the pressure topics.
 
 import csv
 import math
+import sys
 import time
 
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -34,6 +35,7 @@ from valve_sim.commands.options import (
     check_bag_arguments,
     flow_value,
     load_from_arguments,
+    namespace_name,
     number,
     plot_path,
 )
@@ -50,6 +52,7 @@ from valve_sim.core.scenario import Scenario
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
 MAX_END_TIME = 3600.0  # [s] the longest run
 TIME = number('a time', 's', 0.0, MAX_END_TIME)
+INTERVAL = number('an interval', 's', 1e-7, 1.0)
 
 
 def add_arguments(parser):
@@ -68,8 +71,7 @@ def add_arguments(parser):
                         help=f'end of the run [s] (default {s.end_time:g}, at most '
                         f'{MAX_END_TIME:g})')
     add_options(parser, '--step-size')
-    parser.add_argument('--record-interval', default=1e-4, metavar='S',
-                        type=number('an interval', 's', 1e-7, 1.0),
+    parser.add_argument('--record-interval', default=1e-4, metavar='S', type=INTERVAL,
                         help='sample interval of the output waveforms [s] (default 1e-4, '
                         "the paper's)")
     parser.add_argument('--faults', metavar='FILE.yaml',
@@ -91,8 +93,16 @@ def add_arguments(parser):
                         default=0.0, metavar='PA',
                         help='with --rig-topics: Gaussian noise on the recorded pressure, '
                         'standard deviation [Pa]')
+    parser.add_argument('--flow-interval', type=INTERVAL, metavar='S',
+                        help='with --rig-topics: sample interval of the flowmeter [s], a whole '
+                        'multiple of the record interval (default: the pressure interval, '
+                        '1 ms; e.g. 0.01 for a 100 Hz flowmeter)')
     add_options(parser, '--seed', help='seed of the --pressure-noise generator')
     add_options(parser, '--bag-folder', '--start-time')
+    parser.add_argument('--namespace', metavar='NS',
+                        help='the valve as valve_node in this namespace (e.g. /rig1): the '
+                        '--params sections that apply to it, and with --mcap its topics '
+                        'below it (default: the root namespace)')
 
 
 def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
@@ -124,6 +134,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
             publish_interval,
             start_time_ns=start_ns,
             folder=args.bag_folder,
+            flow_interval=args.flow_interval,
         )
         return
     write_simulation_bag(
@@ -134,6 +145,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
         start_time_ns=start_ns,
         folder=args.bag_folder,
         readings=readings,
+        namespace=namespace_name(getattr(args, 'namespace', None)),
     )
 
 
@@ -212,6 +224,8 @@ def run(args):
     from valve_sim.core.simulation import simulate
 
     check_bag_arguments(args)
+    if args.flow_interval is not None and not (args.mcap and args.rig_topics):
+        raise ParameterError('--flow-interval needs --mcap and --rig-topics')
     injection = {}
     params, settings = load_from_arguments(args, injection)
     faults, sensors, schedule = load_injection(args, injection)
@@ -227,6 +241,7 @@ def run(args):
         faults,
         schedule,
         1.0 / settings['publish_rate'],
+        halt_on_overpressure=True,
     )
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
     measures = step_measures(
@@ -243,6 +258,21 @@ def run(args):
             + [f'fault schedule {args.faults or injection.get(FAULT_SCHEDULE)}'] * bool(schedule)
         )
         measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
+    if waveforms.halted:
+        halted_at, why = waveforms.halted
+        overpressure = (
+            f'OVERPRESSURE at t = {halted_at:.6f} s: {why} The model halts there, as '
+            'valve_node does: it holds its last good state to the end of the run, and '
+            f"supply_pressure is reported at burst_pressure = {params['burst_pressure']:g} Pa "
+            '(gauge), the limit it passed'
+        )
+        measures.values = dict.fromkeys(MEASURE_NAMES)
+        measures.reasons = dict.fromkeys(
+            MEASURE_NAMES,
+            f'the run halted at an overpressure at t = {halted_at:.6f} s '
+            '(details.overpressure; stderr)',
+        )
+        measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
     if args.csv:
         write_csv(args.csv, waveforms)
     if args.plot:
@@ -273,4 +303,8 @@ def run(args):
             print(f'faults from the start: {faults.describe()}')
         for applied_at, changes in waveforms.events:
             print(f'at t = {applied_at:.6f} s: {changes}')
+    if waveforms.halted:
+        print(f'valve-sim simulate: {measures.details["overpressure"]["message"]}; the outputs '
+              'show it so', file=sys.stderr)
+        return 1
     return 0

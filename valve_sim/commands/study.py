@@ -33,7 +33,8 @@ config/reference.yaml), or --preset-pressure. Every output names its protocol.
 
 Writes into --out:
   results.jsonl     one row per run as it completes (--resume completes a broken study)
-  sensitivity.csv   parameter, variation_percent, protocol, preset and initial state, measures
+  sensitivity.csv   parameter, variation_percent, protocol, preset and initial state, the six
+                    measures and envelope_decay_per_s (T_s's continuous companion)
   table3.csv        measure, table1, table2, relative_change_percent, protocol
   figure06_m_m.png ... figure12_k_p.png, figure08_pilot_poppet.png, figure13_P_o.png
 A case without a step response (no steady state, no relief through the main
@@ -45,16 +46,20 @@ from pathlib import Path
 import sys
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
-from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS, study_cases
+from valve_sim.analysis.study_cases import (
+    DEFAULT_PROTOCOL,
+    protocol_preset,
+    PROTOCOLS,
+    study_cases,
+)
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options, load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
     open_backend,
-    protocol_preset,
 )
 from valve_sim.core.output_files import replacing
 from valve_sim.core.parameters import scaled
@@ -65,6 +70,8 @@ from valve_sim.core.parameters import scaled
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
 FIGURE8_PARAMETER = 'm_p'  # Figure 8: the poppet waveforms of the m_p variations
+# The six measures and T_s's continuous companion, the envelope's decay rate [1/s].
+STUDY_MEASURES = (*MEASURE_NAMES, ENVELOPE_DECAY)
 CASE_COLUMNS = (
     'protocol',
     'preset_pressure_Pa',
@@ -96,6 +103,7 @@ def runner_case(index, params, changes, step_size, protocol, preset_pressure):
         'scenario': REFERENCE_SCENARIO,
         'step_size': step_size,
         'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
+        'envelope': True,
     }
 
 
@@ -201,14 +209,14 @@ def _label(symbol, percent):
 
 
 def _value(measures, name):
-    return measures[name] if measures[name] is not None else ''
+    return measures[name] if measures.get(name) is not None else ''
 
 
 def write_sensitivity(path, results):
     with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(
-            ['parameter', 'variation_percent', *CASE_COLUMNS, *MEASURE_NAMES, 'reasons']
+            ['parameter', 'variation_percent', *CASE_COLUMNS, *STUDY_MEASURES, 'reasons']
         )
         for symbol in STUDY_PARAMETERS:
             for percent in STUDY_VARIATIONS:
@@ -220,7 +228,7 @@ def write_sensitivity(path, results):
                         symbol,
                         percent,
                         *('' if case[c] is None else case[c] for c in CASE_COLUMNS),
-                        *(_value(measures, name) for name in MEASURE_NAMES),
+                        *(_value(measures, name) for name in STUDY_MEASURES),
                         reasons,
                     ]
                 )
@@ -232,8 +240,8 @@ def write_table3(path, results):
     with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(['measure', 'table1', 'table2', 'relative_change_percent', 'protocol'])
-        for name in MEASURE_NAMES:
-            a, b = table1[name], table2[name]
+        for name in STUDY_MEASURES:
+            a, b = table1.get(name), table2.get(name)
             change = (b - a) / a * 100.0 if a not in (None, 0.0) and b is not None else ''
             writer.writerow([name, _value(table1, name), _value(table2, name), change, protocol])
 

@@ -85,13 +85,6 @@ def add_protocol_arguments(parser):
                         const='frozen-preload', help='same as --protocol frozen-preload')
 
 
-def protocol_preset(protocol, preset_pressure):
-    """Return the preset a case of this protocol is set to: preset_pressure, or None (frozen)."""
-    if protocol not in PROTOCOLS:
-        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
-    return preset_pressure if protocol == 'held-preset' else None
-
-
 def add_runner_arguments(parser):
     """--scheduler, --workers, --batch-size and --resume."""
     parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
@@ -108,6 +101,11 @@ def add_runner_arguments(parser):
     parser.add_argument('--resume', action='store_true',
                         help='keep the runs already in DIR/results.jsonl and compute only the '
                         'missing ones')
+    parser.add_argument('--dashboard', nargs='?', const='127.0.0.1:0', metavar='HOST:PORT',
+                        help="serve Dask's dashboard of the local cluster and print its address "
+                        '(default 127.0.0.1:0: this machine only, a free port; 0.0.0.0:PORT '
+                        'shows it to the network). Without it the local cluster has none, and '
+                        'every part of it listens on 127.0.0.1 only')
 
 
 def open_backend(args, command, pool_fallback=False):
@@ -130,9 +128,14 @@ def open_backend(args, command, pool_fallback=False):
             )
             return PoolBackend(args.workers)
         raise StudyError(f'{command} runs on Dask, which is not installed: {PIP_INSTALL}')
-    backend = DaskBackend(args.scheduler, args.workers)
-    where = args.scheduler or 'a local cluster'
+    dashboard = getattr(args, 'dashboard', None)
+    backend = DaskBackend(args.scheduler, args.workers, dashboard=dashboard)
+    where = args.scheduler or 'a local cluster (listening on 127.0.0.1 only)'
     print(f'{command}: {backend.workers} Dask workers on {where}', file=sys.stderr)
+    if dashboard:
+        link = backend.start().dashboard_link  # started now, to say where to look
+        print(f'{command}: Dask dashboard: {link or "none (the scheduler serves none)"}',
+              file=sys.stderr)
     return backend
 
 

@@ -35,8 +35,7 @@ from pathlib import Path
 import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
-from valve_sim.analysis.study_cases import PROTOCOLS
+from valve_sim.analysis.study_cases import preset_protocol, sample_cases
 from valve_sim.analysis.tolerances import (
     draw,
     parse_limits,
@@ -53,7 +52,6 @@ from valve_sim.commands.study_backend import (
     check_runs,
     MAX_RUNS,
     open_backend,
-    protocol_preset,
 )
 from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import SPECS
@@ -85,39 +83,6 @@ def add_arguments(parser):
                         'of two), random: pseudo-random (all seeded)')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
-
-
-def preset_protocol(args, params):
-    """
-    Return (preset for the cases or None, JSON-ready statement of how each valve was set).
-
-    The preset is the cracking pressure of params (after --preset-pressure).
-    """
-    from valve_sim.core.steady_state import cracking_pressure
-
-    preset = cracking_pressure(params)
-    statement = {
-        'protocol': args.protocol,
-        'protocol_meaning': PROTOCOLS[args.protocol],
-        'preset_pressure': preset,
-        'nominal_pilot_spring_preload': params['pilot_spring_preload'],
-    }
-    return protocol_preset(args.protocol, preset), statement
-
-
-def sample_cases(params, names, values, preset, step_size):
-    """Runner cases for sampled values (rows of values, columns of names)."""
-    return [
-        {
-            'index': index,
-            'params': {**params, **dict(zip(names, map(float, row)))},
-            'preset_pressure': preset,
-            'scenario': REFERENCE_SCENARIO,
-            'step_size': step_size,
-            'record': [],
-        }
-        for index, row in enumerate(values)
-    ]
 
 
 def write_samples(path, names, values, rows, limits):
@@ -192,7 +157,7 @@ def run(args):
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary, params)
     limits = parse_limits(args.limits)
-    preset, protocol = preset_protocol(args, params)
+    preset, protocol = preset_protocol(args.protocol, params)
     names = [d.name for d in distributions]
     check_runs(args.samples, f'--samples {args.samples}')
     values = draw(distributions, args.samples, args.seed, args.sampler)

@@ -77,29 +77,40 @@ def fit_bearing_coefficients(
     return float(k[0]), float(k[1]), float(k[2]), lam, error
 
 
-# The bearing design behind K_1..K_3 in config/reference.yaml (docs/model.md):
-# four bearings, each a 0.38 mm orifice feeding a pocket whose land (9 mm wide,
-# 0.8 mm flow length, 9.5 um radial clearance) drains to the pilot chamber; fitted
-# at the 7 MPa preset. tests check that the parameter file holds this fit.
+# The bearing lands behind K_1..K_3 in config/reference.yaml (docs/model.md): four
+# bearings, each an orifice of the parameter set's d_b feeding a pocket whose land
+# (9 mm wide, 0.8 mm flow length, 9.5 um radial clearance) drains to the pilot chamber;
+# fitted at the 7 MPa preset. tests check that the parameter file holds this fit.
 REFERENCE_BEARING = {
     'count': 4,
-    'orifice_diameter': 0.38e-3,  # d_b [m]
     'land_width': 9e-3,  # w [m]
     'land_length': 0.8e-3,  # l [m]
     'clearance': 9.5e-6,  # c [m]
     'design_pressure': 7e6,  # p_s [Pa]
 }
+COEFFICIENTS = ('bearing_coefficient_1', 'bearing_coefficient_2', 'bearing_coefficient_3')
 
 
-def reference_bearing_fit(discharge_coefficient=0.67, density=988.0, viscosity=0.5482e-3):
-    """fit_bearing_coefficients() for REFERENCE_BEARING with the Table 1 fluid and C_b."""
+def reference_bearing_fit(params):
+    """
+    fit_bearing_coefficients() for REFERENCE_BEARING's lands and the orifice of params.
+
+    params: a parameter dict (d_b, C_b, rho, mu are read from it).
+    """
     b = REFERENCE_BEARING
-    conductance = land_conductance(b['land_width'], b['land_length'], b['clearance'], viscosity)
+    conductance = land_conductance(
+        b['land_width'], b['land_length'], b['clearance'], params['fluid_viscosity']
+    )
     return fit_bearing_coefficients(
-        b['orifice_diameter'],
-        discharge_coefficient,
-        density,
+        params['bearing_orifice_diameter'],
+        params['bearing_discharge_coefficient'],
+        params['fluid_density'],
         conductance,
         b['design_pressure'],
         b['count'],
     )
+
+
+def with_bearing_fit(params):
+    """Copy of params whose K_1..K_3 are the fit of REFERENCE_BEARING with its d_b."""
+    return {**params, **dict(zip(COEFFICIENTS, reference_bearing_fit(params)[:3]))}

@@ -169,7 +169,7 @@ class FaultSet:
             if name in FAULT_SWITCH_SPECS:
                 parts.append(name)
             else:
-                parts.append(f'{name} = {value:g} {FAULT_DOUBLE_SPECS[name].unit}')
+                parts.append(f'{name} = {value:g}{unit_suffix(FAULT_DOUBLE_SPECS[name])}')
         return ', '.join(parts)
 
 
@@ -190,6 +190,11 @@ def check_fault(name, value):
     return checked_number(spec, value, 'fault parameter')
 
 
+def unit_suffix(spec):
+    """Return ' ' + the unit of spec to write after a number, or '' for a fraction ('1')."""
+    return '' if spec.unit == '1' else f' {spec.unit}'
+
+
 def checked_number(spec, value, kind):
     """
     Return value as a float if it is a finite number within spec's limits.
@@ -197,7 +202,7 @@ def checked_number(spec, value, kind):
     Raise ParameterError naming the parameter (kind, spec.name), its symbol and limits.
     """
     label = f"{kind} '{spec.name}' ({spec.symbol})"
-    unit = '' if spec.unit == '1' else f' {spec.unit}'
+    unit = unit_suffix(spec)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(
             f'{label} must be a number{unit and " in" + unit}, got {shown(value)}'

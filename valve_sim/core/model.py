@@ -29,6 +29,11 @@ State vector (SI units, pressures gauge, i.e. relative to the tank):
 
 Departures from the printed equations, each explained in docs/model.md:
 - alpha_s of Eq. (8) carries the factor 1/2 that the derivation gives.
+- Every area on which a chamber's pressure pushes a valve is the area by which the
+  valve's motion sweeps that chamber's volume: A_m1 = alpha_s in Eq. (1), a swept
+  term alpha_m x_dot in Eq. (2), and the poppet chamber's net area
+  A_c = pi/4 (d_v^2 - d_s^2) in Eqs. (4) and (7) (zero for the paper's balanced
+  poppet, d_v = d_s).
 - Every turbulent orifice law sgn(dp) sqrt(|dp|) turns laminar (a cubic with
   finite slope) below |dp| = dp_tr, and is exact above it, so that zero-flow and
   closed-valve states stay stable under fixed-step RK4.
@@ -90,11 +95,12 @@ Coefficients = namedtuple(
         'intermediate_compliance_inv',  # beta / V_m              [Pa/m^3]
         'pilot_compliance_inv',  # beta / V_p              [Pa/m^3]
         'poppet_chamber_compliance_inv',  # beta / V_c             [Pa/m^3]
-        'swept_area',  # A_m1 = pi/4 (d_p^2 - d_i^2)  [m^2]
-        'rod_area',  # A_s = pi/4 d_s^2        [m^2]
-        'back_area',  # A_p = pi/4 d_p^2        [m^2]
-        'supply_force_area',  # alpha_s, Eq. (8)        [m^2]
-        'intermediate_force_area',  # alpha_m, Eq. (8)        [m^2]
+        # Each area below is both a force area and a swept area (docs/model.md, "Areas").
+        'rod_area',  # A_s = pi/4 d_s^2: p_s on the rod, swept out of V_s  [m^2]
+        'back_area',  # A_p = pi/4 d_p^2: p_p on the main valve, swept out of V_p  [m^2]
+        'supply_force_area',  # alpha_s, Eq. (8) = A_m1, swept out of V_s  [m^2]
+        'intermediate_force_area',  # alpha_m, Eq. (8), swept out of V_m  [m^2]
+        'poppet_chamber_area',  # A_c = pi/4 (d_v^2 - d_s^2), swept out of V_c  [m^2]
         'flow_force_gain',  # K_f, Eq. (9)            [m]
         'first_throttle_gain',  # pi C_d D_1 sqrt(2/rho)  [m^2/s/sqrt(Pa) per m]
         'second_throttle_gain',  # pi C_d D_2 sqrt(2/rho)
@@ -146,16 +152,17 @@ def coefficients(p, faults=HEALTHY):
     )
     d_p, theta = p['main_valve_back_diameter'], p['poppet_half_angle']
     c_d, d_v = p['discharge_coefficient'], p['pilot_seat_diameter']
+    d_s = p['sensing_rod_diameter']
     c = Coefficients(
         supply_compliance_inv=p['bulk_modulus'] / p['supply_volume'],
         intermediate_compliance_inv=p['bulk_modulus'] / p['intermediate_volume'],
         pilot_compliance_inv=p['bulk_modulus'] / p['pilot_volume'],
         poppet_chamber_compliance_inv=p['bulk_modulus'] / p['poppet_chamber_volume'],
-        swept_area=math.pi / 4.0 * (d_p**2 - p['swept_inner_diameter'] ** 2),
-        rod_area=math.pi / 4.0 * p['sensing_rod_diameter'] ** 2,
+        rod_area=math.pi / 4.0 * d_s**2,
         back_area=math.pi / 4.0 * d_p**2,
         supply_force_area=math.pi / 4.0 * (d_p**2 - land_1 / 2.0),
         intermediate_force_area=math.pi / 8.0 * (land_1 - land_2),
+        poppet_chamber_area=math.pi / 4.0 * (d_v**2 - d_s**2),
         flow_force_gain=math.pi * c_d * d_v * math.sin(2.0 * theta),
         first_throttle_gain=math.pi * c_d * p['first_throttle_outer_diameter'] * root,
         second_throttle_gain=math.pi * c_d * p['second_throttle_outer_diameter'] * root,
@@ -171,7 +178,7 @@ def coefficients(p, faults=HEALTHY):
         damping_orifice_gain=math.pi / 4.0 * c_d * p['damping_orifice_diameter'] ** 2 * root,
         rod_leakage_conductance=(
             math.pi
-            * p['sensing_rod_diameter']
+            * d_s
             * p['sensing_rod_clearance'] ** 3
             / (12.0 * p['fluid_viscosity'] * p['sensing_rod_length'])
         ),
@@ -318,7 +325,12 @@ def flows(state, c):
 
 @jit
 def net_forces(state, c):
-    """Net forces on the main valve and the poppet [N], Eqs. (6)-(7) without inertia."""
+    """
+    Net forces on the main valve and the poppet [N], Eqs. (6)-(7) without inertia.
+
+    The poppet's A_c p_c is the poppet chamber's pressure on the seat area less the
+    rod's (zero for the paper's balanced poppet).
+    """
     p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
     x, x_dot, y, y_dot = state[X], state[X_DOT], state[Y], state[Y_DOT]
     force_x = (
@@ -330,6 +342,7 @@ def net_forces(state, c):
     )
     force_y = (
         c.rod_area * p_s
+        + c.poppet_chamber_area * p_c
         - c.flow_force_gain * max(y, 0.0) * p_c
         - c.pilot_spring_stiffness * (y + c.pilot_spring_preload)
         - c.pilot_poppet_damping * y_dot
@@ -386,15 +399,19 @@ def derivatives(state, inlet_flow, c):
     q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
     x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
     supply = c.supply_compliance_inv * (
-        inlet_flow - q_m1 - q_n - q_s - c.swept_area * x_dot - c.rod_area * y_dot
-    )  # (1)
+        inlet_flow - q_m1 - q_n - q_s - c.supply_force_area * x_dot - c.rod_area * y_dot
+    )  # (1), A_m1 = alpha_s
     if c.seat_leakage_gain > 0.0:
         supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c)
     if state[P_S] >= c.supply_pressure_limit and supply > 0.0:
         supply = 0.0  # the supply's relief takes the rest of the inflow
-    intermediate = c.intermediate_compliance_inv * (q_m1 - q_m2)  # (2)
+    intermediate = c.intermediate_compliance_inv * (
+        q_m1 - q_m2 - c.intermediate_force_area * x_dot
+    )  # (2) with its swept term
     pilot = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
-    poppet_chamber = c.poppet_chamber_compliance_inv * (q_c + q_s - q_p)  # (4)
+    poppet_chamber = c.poppet_chamber_compliance_inv * (
+        q_c + q_s - q_p - c.poppet_chamber_area * y_dot
+    )  # (4) with its swept term
     force_x, force_y = net_forces(state, c)
     if c.static_friction > 0.0:
         force_x += bearing_friction(x_dot, force_x, c)

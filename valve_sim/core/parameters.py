@@ -23,11 +23,18 @@ No ROS imports here: the node turns these specs into ParameterDescriptors.
 """
 
 from dataclasses import dataclass
+import logging
 import math
 from pathlib import Path
 import sys
 
 from valve_sim.core.input_files import InputFileError, PARAMETER_FILE, read_yaml, shown
+from valve_sim.core.parameter_sections import (
+    describe_not_applied,
+    node_fqn,
+    parameters_for_node,
+    SectionError,
+)
 
 
 PACKAGE = 'valve_sim'
@@ -185,15 +192,6 @@ PARAMETERS = (
         1e-4,
         0.2,
         'main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)',
-        OURS,
-    ),
-    ParameterSpec(
-        'swept_inner_diameter',
-        'd_i',
-        'm',
-        0.0,
-        0.2,
-        'inner diameter of the supply-side swept annulus (A_m1 = pi/4 (d_p^2 - d_i^2))',
         OURS,
     ),
     ParameterSpec(
@@ -449,14 +447,34 @@ SETTING_SPECS = {spec.name: spec for spec in SETTINGS}
 SYMBOLS = {spec.symbol: spec.name for spec in PARAMETERS}
 
 # Pairs (larger, smaller) that must hold strictly: a land's outer diameter exceeds
-# its inner one, and the lands and the swept annulus lie inside the valve face.
+# its inner one, and the lands lie inside the valve face.
 ORDERED_PAIRS = (
     ('first_throttle_outer_diameter', 'first_throttle_inner_diameter'),
     ('second_throttle_outer_diameter', 'second_throttle_inner_diameter'),
-    ('main_valve_back_diameter', 'swept_inner_diameter'),
     ('main_valve_back_diameter', 'first_throttle_outer_diameter'),
     ('main_valve_back_diameter', 'second_throttle_outer_diameter'),
 )
+
+
+# Parameters that no longer exist, by name and symbol, and why. A parameter file that
+# still sets one (an older calibrated.yaml) is read with it ignored and a warning logged;
+# naming one anywhere else (--set, a live change) is an error that says why.
+RETIRED = {
+    'swept_inner_diameter': (
+        'the swept area A_m1 of Eq. (1) is now the supply force area alpha_s, derived from '
+        'd_p, D_1 and d_1 (docs/model.md, "Areas: what pushes, what sweeps")'
+    ),
+}
+RETIRED_SYMBOLS = {'d_i': 'swept_inner_diameter'}
+log = logging.getLogger(__name__)
+
+
+def retired_reason(name):
+    """Say why name (ROS name or symbol) is no parameter any more; None if it is not retired."""
+    name = RETIRED_SYMBOLS.get(name, name)
+    if name in RETIRED:
+        return f"parameter '{name}' no longer exists: {RETIRED[name]}"
+    return None
 
 
 def resolve_name(name):
@@ -465,7 +483,17 @@ def resolve_name(name):
         return name
     if name in SYMBOLS:
         return SYMBOLS[name]
+    reason = retired_reason(name)
+    if reason:
+        raise ParameterError(reason)
     raise ParameterError(f"unknown parameter '{name}'; known: {', '.join(SPECS)}")
+
+
+def without_retired(raw, source):
+    """Drop from raw the retired parameters a file sets, each with a logged warning."""
+    for name in [n for n in raw if retired_reason(n)]:
+        log.warning(f'{source}: ignoring {name} = {raw.pop(name)!r}: {retired_reason(name)}')
+    return raw
 
 
 def check_value(name, value):
@@ -527,54 +555,77 @@ def validate(params):
 
 
 def config_path(filename):
+    """Return the path of a file shipped in config/ (shipped_file), or raise ParameterError."""
+    return shipped_file('config', filename)
+
+
+def shipped_file(folder, filename):
     """
-    Return the path of a file shipped in config/, or raise ParameterError naming where it looked.
+    Return the path of a file shipped in folder/ (config, foxglove), or raise ParameterError.
 
     Looked for, in this order: the package's share directory as ament_index knows it
     (a colcon install, once its setup file is sourced: AMENT_PREFIX_PATH); the
     share directory of the prefix this module is installed in (a colcon or pip
     install used without sourcing); the source tree (a clone, or an editable install).
+    The error names every place it looked.
     """
     candidates = []
     try:
         from ament_index_python.packages import get_package_share_directory
 
-        candidates.append(Path(get_package_share_directory(PACKAGE)) / 'config' / filename)
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / folder / filename)
     except (ImportError, LookupError, OSError, ValueError):
         pass  # no ament_index, no AMENT_PREFIX_PATH, or valve_sim not in it: the fallbacks
     here = Path(__file__).resolve()
     candidates += [
-        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / 'config' / filename,
-        Path(sys.prefix) / 'share' / PACKAGE / 'config' / filename,
-        here.parents[2] / 'config' / filename,  # source tree
+        here.parents[min(5, len(here.parents) - 1)] / 'share' / PACKAGE / folder / filename,
+        Path(sys.prefix) / 'share' / PACKAGE / folder / filename,
+        here.parents[2] / folder / filename,  # source tree
     ]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
     raise ParameterError(
-        f"config file '{filename}' not found in: {', '.join(str(c) for c in candidates)}"
+        f"{folder} file '{filename}' not found in: {', '.join(str(c) for c in candidates)}"
     )
 
 
-def read_parameter_file(path, node_name=NODE_NAME):
+def parameter_document(path):
     """
-    Read the parameters of one node from a ROS 2 parameter file.
+    Return the parsed YAML of a ROS 2 parameter file, or raise ParameterError.
 
-    Accepts the node's own section or the wildcard '/**'; returns the raw dict of
-    ros__parameters (values unvalidated) or raises ParameterError. The file is read
-    once, within the limits of input_files.PARAMETER_FILE.
+    The file is read once, within the limits of input_files.PARAMETER_FILE (a regular
+    file, bounded size, aliases and nesting, numbers that fit a float), and parsed as
+    ROS 2 reads it (YAML 1.2 floats: 1e-3 is a float).
     """
     try:
-        document = read_yaml(path, PARAMETER_FILE)
+        return read_yaml(path, PARAMETER_FILE)
     except InputFileError as error:
         raise ParameterError(str(error)) from None
-    if not isinstance(document, dict):
-        raise ParameterError(f"parameter file {path} must map node names to 'ros__parameters'")
-    for key in (node_name, '/' + node_name, '/**'):
-        section = document.get(key)
-        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
-            return dict(section['ros__parameters'])
-    raise ParameterError(f"parameter file {path} has no '{node_name}: ros__parameters:' section")
+
+
+def read_parameter_file(path, namespace=''):
+    """
+    Read what a ROS 2 parameter file sets for valve_node in namespace ('' is the root).
+
+    Every section that rcl would apply to the node (valve_sim.core.parameter_sections:
+    '/**', '/**/relief_valve', '/<namespace>/relief_valve', and 'relief_valve' in the
+    root namespace) is merged in rcl's order; returns {dotted name: value}, values
+    unvalidated. Raises ParameterError if the file cannot be read or no section applies
+    (naming the sections meant for the node that apply elsewhere).
+    """
+    fqn = node_fqn(namespace, NODE_NAME)
+    try:
+        sections = parameters_for_node([(str(path), parameter_document(path))], fqn)
+    except SectionError as error:
+        raise ParameterError(f'parameter file {error}') from None
+    if not sections.applied:
+        raise ParameterError(
+            f'parameter file {path} has no section that applies to {fqn} '
+            f"('/**/{NODE_NAME}: ros__parameters:' applies in any namespace)"
+            + (f'; {describe_not_applied(sections, fqn)}' if sections.not_applied else '')
+        )
+    return sections.parameters
 
 
 # Parameters of fault injection (valve_sim.core.faults, valve_sim.core.sensors): prefixes
@@ -583,32 +634,23 @@ INJECTION_PREFIXES = ('fault.', 'sensor.')
 FAULT_SCHEDULE = 'fault_schedule'
 
 
-def flattened(raw, prefix=''):
-    """Nested mappings of a parameter file as dotted names, as ROS 2 reads them."""
-    flat = {}
-    for key, value in raw.items():
-        if isinstance(value, dict):
-            flat.update(flattened(value, f'{prefix}{key}.'))
-        else:
-            flat[f'{prefix}{key}'] = value
-    return flat
-
-
-def load_parameters(path=None, overrides=None, injection=None):
+def load_parameters(path=None, overrides=None, injection=None, namespace=''):
     """
     Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
     path: a ROS 2 parameter file that sets some or all parameters (like a second
-    --params-file for the node); the rest keep their reference values. Run-time
+    --params-file for the node), its sections applied as they apply to valve_node in
+    namespace (read_parameter_file); the rest keep their reference values. Run-time
     settings in either file (SETTINGS: step_size, publish_rate, ...) are checked
-    and returned separately; any other key is an error. overrides (name or paper
+    and returned separately; a retired parameter (RETIRED) in the file is ignored with a
+    logged warning; any other key is an error. overrides (name or paper
     symbol -> value) are applied last. Fault and sensor settings (fault.*, sensor.*,
     fault_schedule) go into the dict injection, unchecked; without one they are an
     error (the command does not use them). Returns (params, settings).
     """
-    raw = flattened(read_parameter_file(config_path('reference.yaml')))
+    raw = read_parameter_file(config_path('reference.yaml'))
     if path is not None:
-        raw.update(flattened(read_parameter_file(path)))
+        raw.update(without_retired(read_parameter_file(path, namespace), path))
     raw.update(overrides or {})
     for name in [n for n in raw if n.startswith(INJECTION_PREFIXES) or n == FAULT_SCHEDULE]:
         if injection is None:

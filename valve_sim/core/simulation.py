@@ -35,12 +35,13 @@ simulate(): there rounding errors grow before the step as they would on a rig.
 from dataclasses import dataclass, field
 
 import numpy as np
+from valve_sim.core.errors import OverpressureError
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.integrator import advance, advance_lanes
 from valve_sim.core.limits import schedule_problem
 from valve_sim.core.linear import jacobian
-from valve_sim.core.model import coefficients, flows as model_flows, STATE_NAMES, X_DOT
+from valve_sim.core.model import coefficients, flows as model_flows, P_S, STATE_NAMES, X_DOT
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario  # noqa: F401 (also offered here)
 from valve_sim.core.steady_state import steady_state, SteadyStateError
@@ -55,12 +56,15 @@ class Waveforms:
     Sampled run: time [s], states (rows of the 8 model states, SI), and inlet flow.
 
     inlet_flow [m^3/s] is the flow applied over the interval that ends at each sample.
+    halted: (time [s], reason) of an overpressure the run halted at (run_flows'
+    halt_on_overpressure), else None.
     """
 
     time: np.ndarray
     states: np.ndarray
     inlet_flow: np.ndarray
     events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
+    halted: tuple = None
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
@@ -161,6 +165,7 @@ def run_flows(
     faults=HEALTHY,
     schedule=(),
     tick_interval=1e-3,
+    halt_on_overpressure=False,
 ):
     """
     Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
@@ -171,26 +176,43 @@ def run_flows(
     time. Returns Waveforms sampled every record_interval [s]; their events list what
     was applied when (sensor settings included, for the sensor stage). Raises
     IntegrationError if the run diverges, SteadyStateError if the start fails,
-    ParameterError for a bad fault or tick interval.
+    ParameterError for a bad fault or tick interval. halt_on_overpressure: an
+    overpressure (OverpressureError) halts the run as it halts valve_node instead: the
+    last good state is held to the end, its supply pressure reported at burst_pressure
+    (what valve_node publishes), and Waveforms.halted says when and why.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     flows = np.ascontiguousarray(flows, dtype=float)
     state = steady_state(params, initial_flow, faults)
     check_schedule(params, flows)
     initial = state.copy()
-    records, events, start = [], [], 0
+    records, events, start, halted = [], [], 0, None
     events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
+
+    def run(stop):
+        """Advance from step start to stop; after an overpressure hold to the end."""
+        nonlocal halted
+        chunk = flows[start:stop]
+        c = coefficients(params, faults)
+        try:
+            return advance(state, chunk, c, step_size, record_every, start * step_size)
+        except OverpressureError as error:
+            if not halt_on_overpressure:
+                raise
+            done = error.steps_done  # the steps before the failing one, from the last good state
+            whole = done // record_every * record_every
+            good = advance(state, chunk[:whole], c, step_size, record_every, start * step_size)
+            advance(state, chunk[whole:done], c, step_size, 0, (start + whole) * step_size)
+            held = state.copy()
+            held[P_S] = params['burst_pressure']
+            rows = (len(flows) - start) // record_every - len(good)
+            halted = ((start + done + 1) * step_size, str(error))
+            return np.vstack([good, np.tile(held, (rows, 1))])
+
     for stop, changes in events_at:
-        records.append(
-            advance(
-                state,
-                flows[start:stop],
-                coefficients(params, faults),
-                step_size,
-                record_every,
-                start * step_size,
-            )
-        )
+        records.append(run(stop))
+        if halted:
+            break
         faults = apply_faults(state, faults, changes)
         if stop == 0:
             initial = state.copy()
@@ -198,20 +220,13 @@ def run_flows(
             records[-1][-1] = state  # the tick's sample shows the state after the event
         events.append((stop * step_size, changes))
         start = stop
-    records.append(
-        advance(
-            state,
-            flows[start:],
-            coefficients(params, faults),
-            step_size,
-            record_every,
-            start * step_size,
-        )
+    if not halted:
+        records.append(run(len(flows)))
+    waveforms = _waveforms(
+        initial, np.vstack(records), flows, record_every, step_size, initial_flow, events=events
     )
-    record = np.vstack(records)
-    return _waveforms(
-        initial, record, flows, record_every, step_size, initial_flow, events=events
-    )
+    waveforms.halted = halted
+    return waveforms
 
 
 def simulate(
@@ -222,12 +237,13 @@ def simulate(
     faults=HEALTHY,
     schedule=(),
     tick_interval=1e-3,
+    halt_on_overpressure=False,
 ):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
-    faults, schedule, tick_interval: as run_flows. Raises IntegrationError if the run
-    diverges, SteadyStateError if the start fails.
+    faults, schedule, tick_interval, halt_on_overpressure: as run_flows. Raises
+    IntegrationError if the run diverges, SteadyStateError if the start fails.
     """
     flows = step_flows(scenario, step_size)
     return run_flows(
@@ -239,6 +255,7 @@ def simulate(
         faults,
         schedule,
         tick_interval,
+        halt_on_overpressure,
     )
 
 
@@ -308,7 +325,7 @@ def simulate_batch(
     return results
 
 
-def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
+def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5, step_times=()):
     """
     Run the model driven by a sampled inlet flow; returns the 8 states at the sample times.
 
@@ -317,7 +334,11 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
     applied_inlet_flow; a flow meter averaging over its sample interval). The run
     starts at the exact steady state of inlet_flow[0] at time[0]. Sample intervals
     are rounded to whole steps (an error below step_size / 2 per sample, not
-    accumulated). Raises IntegrationError or SteadyStateError.
+    accumulated). step_times [s, on the time axis]: steps known to lie inside an
+    interval (located between coarse flow samples): there the flow is inlet_flow[i-1]
+    up to the step time and inlet_flow[i] after it, the RK4 step that holds it taking
+    the time-weighted mean (so the states move smoothly with a step time). Raises
+    IntegrationError or SteadyStateError.
     """
     time = np.asarray(time, dtype=float)
     inlet_flow = np.asarray(inlet_flow, dtype=float)
@@ -326,5 +347,15 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5):
     if len(time) < 2 or np.any(counts < 1):
         raise ValueError('sample times must increase by at least one step size')
     flows = np.repeat(inlet_flow[1:], counts)
+    for t_step in step_times:
+        i = int(np.searchsorted(time, t_step))  # the interval (time[i-1], time[i]] holding it
+        if not 0 < i < len(time):
+            continue
+        position = (t_step - time[0]) / step_size
+        k = min(max(int(position), ends[i - 1]), ends[i] - 1)  # the RK4 step holding it
+        before, after = inlet_flow[i - 1], inlet_flow[i]
+        flows[ends[i - 1]:k] = before
+        share = min(max(position - k, 0.0), 1.0)  # of step k still at the old flow
+        flows[k] = share * before + (1.0 - share) * after
     waveforms = run_flows(params, flows, step_size, step_size, float(inlet_flow[0]))
     return waveforms.states[ends]

@@ -156,6 +156,7 @@ def write_simulation_bag(
     folder=False,
     frame_prefix=DEFAULT_FRAME_PREFIX,
     readings=None,
+    namespace='',
 ):
     """
     Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
@@ -168,8 +169,9 @@ def write_simulation_bag(
     (log_time) after a transport delay (transport_delays()). folder: write a
     rosbag2 bag folder at path instead of a file. readings: the pressure topics'
     values per tick [Pa absolute] (sensors.read_waveforms; nan: nothing published);
-    default: the model's pressures + ambient_pressure. Returns the number of ticks
-    written; raises ParameterError for a bad interval.
+    default: the model's pressures + ambient_pressure. namespace: the node's ('/rig1'),
+    its topics below it; '' the root. Returns the number of ticks written; raises
+    ParameterError for a bad interval.
     """
     from valve_sim.recording.bag import BagWriter  # here: valve_node needs no MCAP library
 
@@ -181,8 +183,9 @@ def write_simulation_bag(
     indices = range(0, len(waveforms.time), every)
     delays = iter(transport_delays(len(indices) * (len(TICK_TOPICS) + 1)).tolist())
     try:
+        prefix = namespace.rstrip('/') + '/'
         for topic, type_name in TOPIC_TYPES.items():
-            bag.add_topic('/' + topic, type_name)
+            bag.add_topic(prefix + topic, type_name)
         commanded = None
         for row, (previous, index) in enumerate(zip([None, *indices], indices)):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
@@ -194,14 +197,15 @@ def write_simulation_bag(
                     else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
                 )
                 bag.write_message(
-                    '/inlet_flow', Float64(data=flow), command_ns + next(delays), command_ns
+                    prefix + 'inlet_flow', Float64(data=flow), command_ns + next(delays),
+                    command_ns,
                 )
                 commanded = flow
             published = None if readings is None else readings[row].tolist()
             for topic, data in tick.fill(
                 time_ns, waveforms.states[index], flow, ambient_pressure, published
             ):
-                bag.write(bag.channels['/' + topic], data, time_ns + next(delays), time_ns)
+                bag.write(bag.channels[prefix + topic], data, time_ns + next(delays), time_ns)
         return len(indices)
     finally:
         bag.close()
@@ -219,20 +223,24 @@ def write_rig_bag(
     *,
     start_time_ns,
     folder=False,
+    flow_interval=None,
 ):
     """
     Write an offline run as a test rig records it: two std_msgs/msg/Float64 topics.
 
-    pressure_topic: supply pressure [Pa absolute: gauge + ambient_pressure] with
-    Gaussian noise of standard deviation pressure_noise [Pa] (generator seeded with
-    seed); flow_topic: the inlet flow [m^3/s] over the interval ending at each
-    sample, as a flow meter reports it. No main-valve position, no headers: the
-    receive time (log_time) is the sample time, start_time_ns [ns since the epoch]
-    + the model time. folder: a rosbag2 bag folder at path. Returns the number of samples.
+    pressure_topic: supply pressure [Pa absolute: gauge + ambient_pressure] every
+    publish_interval [s], with Gaussian noise of standard deviation pressure_noise [Pa]
+    (generator seeded with seed); flow_topic: the inlet flow [m^3/s] over the interval
+    ending at each sample, as a flow meter reports it, every flow_interval [s] (default
+    publish_interval; a whole multiple of the waveforms' interval). No main-valve
+    position, no headers: the receive time (log_time) is the sample time,
+    start_time_ns [ns since the epoch] + the model time. folder: a rosbag2 bag folder
+    at path. Returns the number of pressure samples.
     """
     from valve_sim.recording.bag import BagWriter
 
     every = samples_per_publish(waveforms, publish_interval)
+    flow_every = samples_per_publish(waveforms, flow_interval or publish_interval)
     indices = np.arange(0, len(waveforms.time), every)
     noise = np.random.default_rng(seed).normal(0.0, pressure_noise, len(indices))
     pressure = waveforms.states[indices, P_S] + ambient_pressure + noise
@@ -242,11 +250,15 @@ def write_rig_bag(
     try:
         for topic in (pressure_topic, flow_topic):
             bag.add_topic(topic, 'std_msgs/msg/Float64')
-        for index, value in zip(indices, pressure):
+        flows = set(range(0, len(waveforms.time), flow_every))
+        for index in sorted(flows | set(indices.tolist())):  # in time order, pressure first
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
-            bag.write_message(pressure_topic, Float64(data=float(value)), time_ns, time_ns)
-            flow = float(waveforms.inlet_flow[index])
-            bag.write_message(flow_topic, Float64(data=flow), time_ns, time_ns)
+            if index % every == 0:
+                value = float(pressure[index // every])
+                bag.write_message(pressure_topic, Float64(data=value), time_ns, time_ns)
+            if index in flows:
+                flow = float(waveforms.inlet_flow[index])
+                bag.write_message(flow_topic, Float64(data=flow), time_ns, time_ns)
         return len(indices)
     finally:
         bag.close()

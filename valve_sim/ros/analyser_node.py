@@ -164,10 +164,42 @@ DOUBLE_PARAMETERS = (
     ),
 )
 DOUBLE_DEFAULTS = {
+    'ambient_pressure': STANDARD_ATMOSPHERE,
     'step_threshold': 1e-6,
     'step_merge_time': 0.05,
     'drain_period': 0.005,
     'flush_interval': 1.0,
+}
+# Every parameter the node declares, but hardware_id (valve_sim.ros.diagnostics): the
+# node declares these tables, and --help and the launch file's check list them.
+PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
+    'topics': (
+        DEFAULT_TOPICS,
+        "topics to record (relative names resolve in the node's namespace); the analysed "
+        'topics are always recorded',
+        {},
+    ),
+    'output_dir': ('.', 'folder of the recordings (created if missing)', {}),
+    'bag_folder': (
+        False,
+        'record a rosbag2 bag folder (metadata.yaml + .mcap) instead of a single .mcap',
+        {},
+    ),
+    'queue_depth': (
+        1000,
+        'reliable subscription queue per topic [messages]',
+        {'integer_range': [IntegerRange(from_value=10, to_value=1_000_000, step=1)]},
+    ),
+    **{
+        f'{name}_{kind}': (
+            getattr(ROLE[name], 'topic' if kind == 'topic' else 'joint'),
+            f'{"topic" if kind == "topic" else "JointState joint"} of the {ROLE[name].meaning}',
+            {},
+        )
+        for name in REQUIRED
+        for kind in ('topic', 'joint')
+        if kind == 'topic' or ROLE[name].joint
+    },
 }
 
 
@@ -260,12 +292,13 @@ def qos_offer(qos):
     }
 
 
-def measures_message(record, name, hardware_id, bag):
+def measures_message(record, name, hardware_id, bag, start=None):
     """
     Build the step_measures DiagnosticArray of a step record.
 
     The record is one of valve_sim.analysis.step_analysis; name and hardware_id
-    the status's; bag the name of the file it was recorded in.
+    the status's; bag the name of the file it was recorded in; start [s] the time of
+    its first analysed sample (the message says how long after it the step came).
     """
 
     def number(value):
@@ -285,11 +318,14 @@ def measures_message(record, name, hardware_id, bag):
     summary = ', '.join(
         f'{name} = {record[name]:.4g}' for name in MEASURE_NAMES if record[name] is not None
     )
+    when = f' at t = {record["t_step"]:.6f} s'
+    if start is not None:
+        when += f' ({record["t_step"] - start:.4f} s after the first sample)'
     status = DiagnosticStatus(
         level=DiagnosticStatus.WARN if record['reasons'] else DiagnosticStatus.OK,
         name=name,
         hardware_id=hardware_id,
-        message=f'step {"up" if record["direction"] > 0 else "down"}: {summary}',
+        message=f'step {"up" if record["direction"] > 0 else "down"}{when}: {summary}',
         values=[KeyValue(key=key, value=value) for key, value in values.items()],
     )
     array = DiagnosticArray(status=[status])
@@ -359,51 +395,16 @@ class ValveAnalyser(Node):
 
     def _declare_parameters(self):
         """Declare the parameters (all read-only: restart to change); returns {name: value}."""
-
-        def declare(name, default, description, **constraints):
+        settings = {}
+        for name, (default, description, constraints) in PLAIN_PARAMETERS.items():
             descriptor = ParameterDescriptor(
                 name=name, description=description, read_only=True, **constraints
             )
-            return self.declare_parameter(name, default, descriptor).value
-
-        settings = {
-            'topics': declare(
-                'topics',
-                DEFAULT_TOPICS,
-                'topics to record (relative names resolve in the '
-                "node's namespace); the analysed topics are always recorded",
-            ),
-            'output_dir': declare(
-                'output_dir', '.', 'folder of the recordings (created if missing)'
-            ),
-            'bag_folder': declare(
-                'bag_folder',
-                False,
-                'record a rosbag2 bag folder (metadata.yaml + .mcap) instead of a single .mcap',
-            ),
-            'queue_depth': declare(
-                'queue_depth',
-                1000,
-                'reliable subscription queue per topic [messages]',
-                integer_range=[IntegerRange(from_value=10, to_value=1_000_000, step=1)],
-            ),
-            'ambient_pressure': declare_double(
-                self, SETTING_SPECS['ambient_pressure'], STANDARD_ATMOSPHERE, read_only=True
-            ),
-        }
-        for spec in DOUBLE_PARAMETERS:
+            settings[name] = self.declare_parameter(name, default, descriptor).value
+        for spec in (SETTING_SPECS['ambient_pressure'], *DOUBLE_PARAMETERS):
             settings[spec.name] = declare_double(
                 self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True
             )
-        for name in REQUIRED:
-            role = ROLE[name]
-            settings[f'{name}_topic'] = declare(
-                f'{name}_topic', role.topic, f'topic of the {role.meaning}'
-            )
-            if role.joint:
-                settings[f'{name}_joint'] = declare(
-                    f'{name}_joint', role.joint, f'JointState joint of the {role.meaning}'
-                )
         return settings
 
     @staticmethod
@@ -569,6 +570,7 @@ class ValveAnalyser(Node):
                 diagnostics.status_name(self, MEASURES_TASK),
                 self.hardware_id,
                 self.bag.path.name,
+                self.analysis.first_time,
             )
             self.get_logger().info(message.status[0].message)
             self.measures_publisher.publish(message)
@@ -675,17 +677,9 @@ def record(stop):
 
 
 def parameter_names():
-    """Return the names of the node's ROS parameters, in the order they are declared."""
-    return (
-        ['topics', 'output_dir', 'queue_depth', 'ambient_pressure']
-        + [spec.name for spec in DOUBLE_PARAMETERS]
-        + [
-            f'{name}_{kind}'
-            for name in REQUIRED
-            for kind in ('topic', 'joint')
-            if kind == 'topic' or ROLE[name].joint
-        ]
-    )
+    """Return the names of the node's own ROS parameters, from the tables it declares."""
+    return [*PLAIN_PARAMETERS, 'ambient_pressure', *(spec.name for spec in DOUBLE_PARAMETERS),
+            diagnostics.HARDWARE_ID]
 
 
 def parse_arguments(args):

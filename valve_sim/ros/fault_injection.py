@@ -173,19 +173,20 @@ class FaultInjection:
         """Return whether p_s [Pa gauge] of state has reached the supply's limit [Pa]."""
         return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= state[P_S])
 
-    def status_message(self, faults, stamp, name):
+    def status_message(self, faults, stamp, name, hardware_id):
         """
         Return the fault_status DiagnosticArray: every fault and sensor setting in effect.
 
-        stamp: builtin_interfaces Time from which they hold; name: the node's full name.
-        Level WARN while any is active; the message names the active ones.
+        stamp: builtin_interfaces Time from which they hold; name: the status name
+        ('<node name>: faults', as diagnostics.status_name gives it); hardware_id: the
+        node's. Level WARN while any is active; the message names the active ones.
         """
         active = [faults.describe()] * bool(faults.active()) + self.sensors.describe_faults()
         settings = {**faults.as_parameters(), **self.sensors.settings}
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if active else DiagnosticStatus.OK,
-            name=f'{name}: faults',
-            hardware_id=name,
+            name=name,
+            hardware_id=hardware_id,
             message=', '.join(active) or 'healthy valve, ideal sensors',
             values=[
                 KeyValue(key=key, value=_text(value)) for key, value in settings.items()

@@ -25,7 +25,6 @@ every topic of the graph instead, and needs nothing from valve_sim.
 """
 
 from pathlib import Path
-import sys
 
 from valve_sim.core.errors import InputFileError
 
@@ -36,10 +35,19 @@ LAYOUT = 'valve_layout.json'  # the valve's Foxglove layout, installed in share/
 
 
 def layout_path():
-    """Return the path of the valve's Foxglove layout: installed, else in the source tree."""
-    installed = Path(sys.prefix) / 'share' / 'valve_sim' / 'foxglove' / LAYOUT
-    source = Path(__file__).resolve().parents[2] / 'foxglove' / LAYOUT
-    return installed if installed.is_file() else source
+    """
+    Return the path of the valve's Foxglove layout, where this installation has it.
+
+    A colcon or pip install has it in its prefix's share/valve_sim/foxglove, a clone or
+    an editable install in the source tree (valve_sim.core.parameters.shipped_file);
+    the source tree's path, if none has it.
+    """
+    from valve_sim.core.parameters import ParameterError, shipped_file
+
+    try:
+        return shipped_file('foxglove', LAYOUT)
+    except ParameterError:
+        return Path(__file__).resolve().parents[2] / 'foxglove' / LAYOUT
 
 
 def add_port_option(parser, help_text):

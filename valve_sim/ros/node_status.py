@@ -91,6 +91,7 @@ class NodeStatus:
         self.last_failure = ''
         self.halted = None  # why the model stopped advancing, or None while it runs
         self.schedule_refused = ''  # why the last fault schedule set live was refused
+        self.saturated = None  # [Pa gauge] p_s published at this limit while halted by it
         self._reported = Counters()
         self._durations_ns = []
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
@@ -191,8 +192,14 @@ class NodeStatus:
         if self.halted is not None:
             level = DiagnosticStatus.ERROR
             problems.append(
-                'model halted, publishing its last good state until a reset, a new inlet flow '
+                'model halted, holding its last good state until a reset, a new inlet flow '
                 'or a parameter change'
+                + (
+                    f'; supply_pressure published at burst_pressure = {self.saturated:g} Pa '
+                    '(gauge), the limit it passed'
+                    if self.saturated is not None
+                    else ''
+                )
             )
         if inputs.stale:
             level = max(level, DiagnosticStatus.WARN)

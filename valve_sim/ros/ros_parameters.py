@@ -24,6 +24,10 @@ double parameter would refuse. declare_double() and integers_as_doubles() accept
 an integer for a double parameter and store it as a double. value_problem()
 explains a bad value with the parameter's symbol, limits and unit (rclpy's own
 type refusal names neither the parameter nor the expected unit).
+
+log_parameter_files() says which sections of each --params-file rcl applied to the
+node, and warns of sections meant for it (by its name) that apply to another
+namespace: rcl ignores those silently (valve_sim.core.parameter_sections).
 """
 
 import difflib
@@ -37,6 +41,8 @@ from rcl_interfaces.msg import (
 )
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.parameter import Parameter
+from valve_sim.core.parameter_sections import describe_not_applied, parameters_for_node
+from valve_sim.core.parameters import parameter_document, ParameterError
 
 
 def descriptor(spec, read_only=False):
@@ -132,3 +138,46 @@ def undeclared_reason(name, specs):
         return f"{reason}; '{name}' is the paper's symbol of '{by_symbol[name]}': set that"
     close = difflib.get_close_matches(name, list(specs), n=1)
     return f"{reason}; did you mean '{close[0]}'?" if close else reason
+
+
+def parameter_file_arguments(argv):
+    """Return the --params-file paths among the ROS arguments of argv, in order."""
+    files, in_ros_arguments, arguments = [], False, iter(argv)
+    for argument in arguments:
+        if argument == '--ros-args':
+            in_ros_arguments = True
+        elif argument == '--':
+            in_ros_arguments = False
+        elif in_ros_arguments and argument == '--params-file':
+            files.append(next(arguments, None))
+    return [path for path in files if path]
+
+
+def log_parameter_files(node, argv):
+    """
+    Log the sections of each --params-file of argv that apply to node, as rcl applied them.
+
+    A section that names the node but applies to another namespace (`relief_valve:` for
+    /rig1/relief_valve) is a warning: rcl ignores it without a word.
+    """
+    fqn, logger = node.get_fully_qualified_name(), node.get_logger()
+    files = []
+    for path in parameter_file_arguments(argv):
+        try:
+            files.append((path, parameter_document(path)))
+        except ParameterError as error:  # rcl read it; it changed or vanished since
+            logger.warn(str(error))
+    try:
+        sections = parameters_for_node(files, fqn)
+    except ValueError as error:
+        logger.warn(f'parameter file {error}')
+        return
+    for path, _ in files:
+        applied = [name for source, name in sections.applied if source == path]
+        logger.info(
+            f"parameter file {path}: applied section(s) {', '.join(applied)} to {fqn}"
+            if applied
+            else f'parameter file {path}: no section applies to {fqn}'
+        )
+    if sections.not_applied:
+        logger.warn(f'{describe_not_applied(sections, fqn)}: their values are not used')

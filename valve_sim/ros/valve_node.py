@@ -90,6 +90,7 @@ from valve_sim.core.parameters import (
     ParameterError,
     PARAMETERS,
     PRESET_PRESSURE,
+    retired_reason,
     SETTING_SPECS,
     SETTINGS,
     SPECS,
@@ -127,12 +128,14 @@ from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThrea
 from valve_sim.ros.ros_parameters import (
     declare_double,
     integers_as_doubles,
+    log_parameter_files,
     undeclared_reason,
     value_problem,
 )
 
 
 STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
+FAULT_STATUS_TASK = 'faults'  # fault_status status '<node name>: faults'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
@@ -174,10 +177,11 @@ LIVE_NAMES = frozenset(VALVE_SPECS) | INJECTION_NAMES | {FAULT_SCHEDULE}  # retu
 class ReliefValveNode(Node):
     """The valve model on a timer at publish_rate, fed by inlet_flow, publishing its state."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, argv=(), **kwargs):
         self._inlet_subscription = None  # taken by the tick, left out of subscriptions
         super().__init__(NODE_NAME, **kwargs)
         self.clock_guard = GuardedTimeSource.install(self)
+        log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
         self.hardware_id = diagnostics.declare_hardware_id(self)
@@ -257,6 +261,11 @@ class ReliefValveNode(Node):
         """
         reference, reference_settings = load_parameters()
         defaults = {**reference, **reference_settings}
+        # rclpy drops an undeclared override silently: say so for a retired parameter that
+        # a parameter file (an older calibrated.yaml) still sets.
+        for name in filter(retired_reason, self._parameter_overrides):
+            self.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
+                                      f'{retired_reason(name)}')
         values = {
             spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
             for spec in PARAMETERS + SETTINGS
@@ -324,7 +333,7 @@ class ReliefValveNode(Node):
             if p.name in VALVE_SPECS
             else None
             if self.has_parameter(p.name)
-            else undeclared_reason(p.name, VALVE_SPECS)
+            else retired_reason(p.name) or undeclared_reason(p.name, VALVE_SPECS)
             for p in parameter_list
         )
         reason = next(filter(None, problems), None)
@@ -652,9 +661,20 @@ class ReliefValveNode(Node):
                 return
         self.model.halt(str(error))
         self.status.halted = str(error)
+        # After an overpressure p_s is published at the limit it passed, as a transducer
+        # at full scale reads, not at the last normal state (a relief valve that reads
+        # 7 MPa while it takes an impossible flow would mislead the bench).
+        saturated = self.model.params['burst_pressure']
+        self.status.saturated = saturated if isinstance(error, OverpressureError) else None
         self.get_logger().error(
-            'the model stops advancing and publishes its last good state until a reset, '
+            'the model stops advancing and holds its last good state until a reset, '
             'a new inlet flow or a parameter change'
+            + (
+                f'; supply_pressure is published at burst_pressure = {saturated:g} Pa (gauge), '
+                'the limit it passed, the other topics at their last values'
+                if self.status.saturated is not None
+                else ''
+            )
         )
 
     def _resume(self, cause):
@@ -663,6 +683,7 @@ class ReliefValveNode(Node):
             return
         self.model.resume()
         self.status.halted = None
+        self.status.saturated = None
         self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
@@ -690,18 +711,29 @@ class ReliefValveNode(Node):
             if time_ns is None
             else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
         )
-        name = self.get_fully_qualified_name()
-        self._fault_status.publish(self.injection.status_message(self.model.faults, stamp, name))
+        name = diagnostics.status_name(self, FAULT_STATUS_TASK)
+        self._fault_status.publish(
+            self.injection.status_message(self.model.faults, stamp, name, self.hardware_id)
+        )
 
     def _publish_state(self):
-        """Publish the state of the model time, all messages with the same stamp."""
+        """
+        Publish the state of the model time, all messages with the same stamp.
+
+        After an overpressure (saturated) the supply pressure is published at the limit
+        it passed, the rest of the held state as it is.
+        """
         ambient = self.settings['ambient_pressure']
+        state = self.model.state
+        if self.status.saturated is not None:
+            state = state.copy()
+            state[P_S] = self.status.saturated
         tick = self._tick_messages.fill(
             self.model.time_ns,
-            self.model.state,
+            state,
             self.applied_flow,
             ambient,
-            self.injection.readings(self.model.time_ns, self.model.state, ambient),
+            self.injection.readings(self.model.time_ns, state, ambient),
         )
         for topic, data in tick:
             self._tick_publishers[topic].publish(data)
@@ -721,7 +753,8 @@ class ReliefValveNode(Node):
             topics, port, host, name=self.get_fully_qualified_name()
         )
         self.get_logger().info(
-            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics)'
+            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics); '
+            f'layout {live_view.layout_path()}'
         )
 
     def _take_inputs(self, started_ns):
@@ -743,6 +776,7 @@ class ReliefValveNode(Node):
             self.get_logger().warn(response.message)
             return response
         self.status.halted = None
+        self.status.saturated = None
         time_ns = self.model.time_ns or 0
         response.success = True
         response.message = (
@@ -841,6 +875,7 @@ class ReliefValveNode(Node):
             'fault_schedule': self.injection.schedule_path,
             'fault_schedule_loading': self.schedule_loader.loading,
             'fault_schedule_refused': self.status.schedule_refused,
+            'supply_pressure_saturated_at': self.status.saturated,
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
             'receive_threads': self.receive_threads.describe(),
@@ -912,8 +947,8 @@ def parse_arguments(args):
     live_view.add_port_option(
         parser,
         'serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
-        f'(default port {live_view.DEFAULT_PORT}; 0: any free port). On a ROS install, run '
-        'foxglove_bridge instead',
+        f'(default port {live_view.DEFAULT_PORT}; 0: any free port); the layout to open: '
+        f'{live_view.layout_path()}. On a ROS install, run foxglove_bridge instead',
     )
     parser.add_argument(
         '--foxglove-host',
@@ -931,7 +966,7 @@ def main(args=None):
     options = parse_arguments(args)
     stop = spinning.init(args)
     try:
-        node = ReliefValveNode()
+        node = ReliefValveNode(sys.argv if args is None else args)
     except STARTUP_ERRORS as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {error}')
         rclpy.try_shutdown()

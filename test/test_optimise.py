@@ -1,0 +1,257 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+`valve-sim optimise`: a known robust optimum, the yield against `tolerance`, resume, errors.
+
+Small budgets throughout: a few candidates of a few sampled valves each.
+"""
+
+import csv
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+from valve_sim.analysis.optimisation import (
+    outcome_of,
+    pareto_front,
+    parse_design,
+    parse_objectives,
+    RobustProblem,
+    search,
+)
+from valve_sim.analysis.optimisation_report import parameter_file_text
+from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.study_cases import preset_protocol
+from valve_sim.analysis.study_runner import SerialBackend
+from valve_sim.analysis.tolerances import parse_variations, unit_samples
+from valve_sim.commands.cli import main
+from valve_sim.core.parameters import load_parameters
+
+
+D_C = 'damping_orifice_diameter'
+
+
+def problem_of(reference, design, minimise, limits, tolerances, **settings):
+    """Return a RobustProblem on the reference valve, preset held at its cracking pressure."""
+    preset, _ = preset_protocol('held-preset', reference)
+    return RobustProblem(
+        params=reference,
+        design=tuple(parse_design(design, reference)),
+        objectives=tuple(parse_objectives(minimise, None)),
+        limits=tuple(limits),
+        tolerances=tuple(tolerances),
+        preset_pressure=preset,
+        **{'required_yield': 1.0, 'min_decay_rate': None, 'confirm_samples': 0, **settings},
+    ).check()
+
+
+def test_the_optimiser_finds_a_known_robust_optimum(reference, tmp_path):
+    # P_1 falls and r_d rises monotonically with d_c below the reference d_c (docs/model.md,
+    # the parameter study; above it r_d flattens out). Minimise P_1 with r_d <= r_d(d_lim),
+    # d_lim 3 % below the reference d_c, for every valve made within d_c ±1 %: the optimum
+    # is the d_c whose largest sampled valve sits at d_lim. With 8 Sobol points u that
+    # valve is d (0.99 + 0.02 max u), so d* = d_lim / (0.99 + 0.02 max u), about 0.8 %
+    # below the nominal-only answer d_lim.
+    nominal = reference[D_C]
+    limit_at = 0.97 * nominal
+    design = [f'd_c={0.90 * nominal!r}:{1.03 * nominal!r}']
+    probe = problem_of(reference, design, ['P_1_percent'], ['r_d<=1'], ['d_c=±1%'], samples=8)
+    r_d = evaluate_candidate(probe.case(0, 'probe', {D_C: limit_at}))['nominal']['measures']['r_d']
+    problem = problem_of(reference, design, ['P_1_percent'], [f'r_d<={r_d!r}'],
+                         ['d_c=±1%'], samples=8)
+    optimum = limit_at / (0.99 + 0.02 * unit_samples(8, 1, 0, 'sobol').max())
+    records = search(problem, SerialBackend(), tmp_path, population=8, generations=8,
+                     stream=None)
+    values = [(row['design'][D_C], problem.feasible(row)) for _, row in records]
+    assert all(feasible == (d <= optimum) for d, feasible in values), 'the yield decides'
+    assert any(d > optimum for d, _ in values), 'the search must try beyond the optimum'
+    (best,) = outcome_of(problem, records, SerialBackend(), tmp_path, False)['pareto']
+    found = best[1]['design'][D_C]
+    assert optimum - 0.25 * (limit_at - optimum) < found <= optimum
+    assert best[1]['yield'] == 1.0 and best[1]['pass'] == '1' * 8
+
+
+def test_the_yield_gives_the_same_pass_or_fail_per_sample_as_tolerance(reference, tmp_path):
+    # One candidate's Monte Carlo against `valve-sim tolerance` on its parameter file,
+    # the same tolerances, sampler, seed and limits: every valve judged the same.
+    tolerances = 'd_c=±2%,k_p=±5%'
+    design = {D_C: 1.02e-3, 'pilot_spring_stiffness': 150e3}
+    probe = problem_of(reference, ['d_c=±20%', 'k_p=±20%'], ['P_1_percent'], ['P_1_percent<=99'],
+                       [tolerances], samples=16, sampler='sobol', seed=3)
+    nominal = evaluate_candidate(probe.case(0, 'c', design))['nominal']['measures']['P_1_percent']
+    limit = f'P_1_percent<={nominal!r}'  # about half the valves overshoot more
+    problem = problem_of(reference, ['d_c=±20%', 'k_p=±20%'], ['P_1_percent'], [limit],
+                         [tolerances], samples=16, sampler='sobol', seed=3)
+    row = evaluate_candidate(problem.case(0, 'c', design))
+    assert 0 < row['passed'] < 16, 'a mix of passing and failing valves makes the test'
+    params_file = tmp_path / 'design.yaml'
+    params_file.write_text(parameter_file_text(problem, design, 'test design'))
+    out = tmp_path / 'tolerance'
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'tolerance', '--params',
+         str(params_file), '--vary', tolerances, '--samples', '16', '--sampler', 'sobol',
+         '--seed', '3', '--limits', limit, '--workers', '1', '--out', str(out)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    with open(out / 'samples.csv') as stream:
+        verdicts = ''.join(line['pass'] for line in csv.DictReader(stream))
+    assert verdicts == row['pass']
+    assert f"yield {row['passed']}/16" in result.stdout
+
+
+class InterruptedBackend(SerialBackend):
+    """Serial batches, with Ctrl-C after `batches` of them over all its calls."""
+
+    def __init__(self, batches):
+        self.left = batches
+
+    def run(self, evaluate, batches):
+        for rows in super().run(evaluate, batches):
+            if self.left == 0:
+                raise KeyboardInterrupt
+            self.left -= 1
+            yield rows
+
+
+def test_resume_redoes_nothing_already_done(reference, tmp_path):
+    problem = problem_of(reference, ['d_c=±10%', 'k_p=±10%'], ['P_1_percent', 'T_s_ms'],
+                         ['r_d<=0.87'], ['d_c=±7um,k_p=±10%'], samples=4, confirm_samples=4,
+                         required_yield=0.5)
+    evaluated = []
+
+    def counting(cases):
+        evaluated.extend((case['label'], case['keep_samples']) for case in cases)
+        return evaluate_candidates(cases)
+
+    def optimise(folder, backend, resume):
+        records = search(problem, backend, folder, 4, 3, resume, counting, stream=None)
+        return records, outcome_of(problem, records, backend, folder, resume, counting, None)
+
+    fresh = optimise(tmp_path / 'fresh', SerialBackend(), False)
+    assert len(evaluated) == 12 + len(fresh[1]['pareto']) + 2
+    evaluated.clear()
+    with pytest.raises(KeyboardInterrupt):
+        optimise(tmp_path / 'run', InterruptedBackend(6), False)  # in generation 2
+    assert len(evaluated) == 7  # the 7th candidate was being computed: it is not on file
+    done = set(evaluated[:6])
+    evaluated.clear()
+    resumed = optimise(tmp_path / 'run', SerialBackend(), True)
+    assert not done & set(evaluated) and len(evaluated) == 12 - 6 + len(fresh[1]['pareto']) + 2
+    assert resumed == fresh
+    evaluated.clear()
+    assert optimise(tmp_path / 'run', SerialBackend(), True) == fresh
+    assert evaluated == []
+
+
+def test_the_command_writes_the_pareto_set_and_resumes_without_computing(tmp_path):
+    out = tmp_path / 'optimise'
+    command = [sys.executable, '-m', 'valve_sim.commands.cli', 'optimise',
+               '--design', 'd_c=±5%', '--minimise', 'P_1_percent',
+               '--maximise', 'r_d', '--tolerance', 'd_c=±5um', '--limits', 'P_1_percent<=20',
+               '--yield', '90%', '--samples', '4', '--confirm-samples', '8',
+               '--population', '4', '--generations', '2', '--workers', '1', '--out', str(out)]
+    first = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert re.search(r'optimise: generation 2/2: 8/8 candidates \(100 %\).*ETA', first.stderr)
+    summary = json.loads((out / 'pareto.json').read_text())
+    assert summary['candidates_evaluated'] == 8 and summary['pareto']
+    for entry in summary['pareto']:
+        assert 0.0 <= entry['confirmed_yield']['ci95'][0] <= entry['confirmed_yield']['fraction']
+        params, settings = load_parameters(out / entry['parameter_file'])
+        assert params[D_C] == entry['design'][D_C]
+        assert settings['preset_pressure'] == summary['problem']['preset_pressure']
+    with open(out / 'pareto.csv') as stream:
+        assert len(list(csv.DictReader(stream))) == len(summary['pareto'])
+    assert (out / 'pareto_front.png').exists() and (out / 'distributions.png').exists()
+    assert set(summary['baselines']) == {'reference', 'table2'}
+    before = (out / 'pareto.json').read_text()
+    again = subprocess.run(command + ['--resume'], capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert 'resumed: 8 of 8 candidates read' in again.stderr and 'confirming' not in again.stderr
+    assert (out / 'pareto.json').read_text() == before
+
+
+GOOD = ['--design', 'd_c=±20%', '--minimise', 'P_1_percent', '--tolerance', 'd_c=±5um']
+
+
+@pytest.mark.parametrize(
+    'change, message',
+    [
+        (['--design', 'd_c=1.2e-3:0.8e-3'], "'d_c=1.2e-3:0.8e-3': the range must have LO < HI"),
+        (['--design', 'd_c=0.8e-3'], "--design: 'd_c=0.8e-3': SPEC must be"),
+        (['--design', 'x_y=1:2'], "unknown parameter 'x_y'"),
+        (['--design', 'd_c=0:1e-3'], 'leave the limits of damping_orifice_diameter'),
+        (['--design', 'd_c=±20%,d_c=±10%'], 'given twice: damping_orifice_diameter'),
+        (['--design', 'y_0=±10%'], 'design it with --frozen-preload'),
+        (['--limits', 'P_9<=1'], "limit 'P_9<=1': expected MEASURE<=VALUE"),
+        (['--limits', 'r_d<<0.8'], "limit 'r_d<<0.8'"),
+        (['--minimise', 'P_9'], "--minimise 'P_9': not a measure"),
+        (['--tolerance', 'd_c=0.9e-3:1.1e-3'], 'tolerance must follow its value'),
+        (['--tolerance', 'k_p=±5um'], 'um is a length, and pilot_spring_stiffness is in N/m'),
+        (['--yield', '1.5'], "--yield '1.5': expected a fraction in (0, 1]"),
+        (['--samples', '100'], 'the Sobol sampler needs a power of two samples, not 100'),
+        (['--population', '1'], '--population must be at least 2'),
+    ],
+)
+def test_bad_bounds_limits_and_settings_get_one_line_errors(change, message, capsys, tmp_path):
+    options = dict(zip(GOOD[::2], GOOD[1::2]))
+    options.update(zip(change[::2], change[1::2]))
+    out = tmp_path / 'never'
+    argv = ['optimise', *(part for pair in options.items() for part in pair), '--out', str(out)]
+    assert main(argv) == 1
+    error = capsys.readouterr().err
+    assert error.startswith('valve-sim optimise: error: ') and error.count('\n') == 1, error
+    assert message in error
+    assert not out.exists()
+
+
+def test_tolerances_in_a_machine_shops_units(reference):
+    (distribution,) = parse_variations(['d_c=±5um'], reference)
+    assert (distribution.a, distribution.b) == pytest.approx((0.995e-3, 1.005e-3))
+    (distribution,) = parse_variations(['d_c=+-0.01mm'], reference)
+    assert (distribution.a, distribution.b) == pytest.approx((0.99e-3, 1.01e-3))
+
+
+def test_pareto_front():
+    points = [[1, 5], [2, 2], [3, 3], [5, 1], [2, 2], [4, 4]]
+    assert pareto_front(points) == [0, 1, 3, 4]
+    assert pareto_front([[3], [1], [2]]) == [1]
+
+
+def test_a_parameter_file_applies_to_the_node_in_any_namespace(reference, tmp_path):
+    problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], [], ['d_c=±5um'])
+    text = parameter_file_text(problem, {D_C: 1.1e-3}, 'test')
+    assert '\n/**/relief_valve:\n  ros__parameters:\n' in text
+    path = tmp_path / 'design.yaml'
+    path.write_text(text)
+    params, settings = load_parameters(path)
+    assert params == {**reference, D_C: 1.1e-3}
+    assert settings['preset_pressure'] == problem.preset_pressure
+
+
+def test_no_feasible_design_is_said_and_fails(tmp_path):
+    out = tmp_path / 'optimise'
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'optimise', '--design', 'd_c=±5%',
+         '--minimise', 'P_1_percent', '--tolerance', 'd_c=±5um', '--limits', 'T_s_ms<=1',
+         '--samples', '4', '--confirm-samples', '4', '--population', '4', '--generations', '1',
+         '--workers', '1', '--out', str(out)],
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 1, result.stderr
+    assert 'no candidate meets the limits and the required yield' in result.stdout
+    assert json.loads((out / 'pareto.json').read_text())['pareto'] == []

@@ -1,0 +1,229 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Robust design optimisation: the best valve within bounds whose machined batch meets the spec.
+
+NSGA-II (pymoo) over the designed parameters (--design); each candidate's nominal
+measures are the objectives (--minimise, --maximise), and its yield, the share of
+valves made within --tolerance that meet --limits (and whose modes decay), comes from
+a quasi-random Monte Carlo run as one batch on the Dask runner. The Pareto designs
+and the baselines (the reference valve, Table 2) are then confirmed with more,
+independent samples. See valve_sim.analysis.optimisation. Writes into --out:
+  evaluations/     the runner's results, one file per generation (--resume)
+  pareto.csv       each Pareto design: values, nominal measures, both yields
+  pareto.json      the problem, the Pareto set, the baselines, the chosen design
+                   against Table 2 measure by measure
+  params/          a parameter file per Pareto design and baseline
+  pareto_front.png, distributions.png (the chosen design's measures against
+                   Table 2's under the same tolerances)
+"""
+
+from argparse import ArgumentTypeError
+from pathlib import Path
+import sys
+
+from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
+from valve_sim.analysis.study_cases import preset_protocol
+from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
+from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import add_options, load_from_arguments
+from valve_sim.commands.study_backend import (
+    add_protocol_arguments,
+    add_runner_arguments,
+    open_backend,
+)
+from valve_sim.core.errors import StudyError
+from valve_sim.core.parameters import ParameterError
+
+# The optimiser and the model (pymoo, numba, scipy) are imported in the functions that run
+# them, so that `valve-sim optimise --help` stays quick.
+
+
+def decay_rate_value(text):
+    """'3' -> 3.0 [1/s]; 'off' -> None (argparse type)."""
+    if text.strip().lower() == 'off':
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float('nan')
+    if not value >= 0.0 or value == float('inf'):
+        raise ArgumentTypeError(f'expected a rate >= 0 in 1/s, or off; got {text!r}')
+    return value
+
+
+def add_arguments(parser):
+    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
+    parser.add_argument('--design', action='append', required=True, metavar='NAME=LO:HI,...',
+                        help='designed parameters and their bounds: NAME=LO:HI (SI) or NAME=±X%% '
+                        '(of the nominal value); repeatable')
+    parser.add_argument('--minimise', action='append', metavar='MEASURE,...',
+                        help='measures of the nominal valve to minimise, e.g. P_1_percent,T_s_ms')
+    parser.add_argument('--maximise', action='append', metavar='MEASURE,...',
+                        help='measures of the nominal valve to maximise')
+    parser.add_argument('--limits', metavar='SPEC', default='',
+                        help='what every valve must meet, e.g. "r_d<=0.85,P_o_percent<=0.2" '
+                        '(as for tolerance)')
+    parser.add_argument('--tolerance', action='append', required=True, metavar='NAME=SPEC,...',
+                        help='machining tolerances about each design, as tolerance --vary: '
+                        'NAME=±X%%, NAME=±Xum (or mm: a length), NAME=~N(S%%), NAME=~N(S); '
+                        'LO:HI only for a parameter not designed; repeatable')
+    parser.add_argument('--yield', dest='required_yield', default='0.99', metavar='FRACTION',
+                        help='required share of valves meeting the limits (default 0.99; '
+                        '99%% works too)')
+    stability = ("every valve's slowest linear mode must decay at R [1/s] at 5 and 20 L/min "
+                 f'(default {MIN_DECAY_RATE:g}: 95 %% within the 1 s window); off: not asked')
+    parser.add_argument('--min-decay-rate', type=decay_rate_value, default=MIN_DECAY_RATE,
+                        metavar='R', help=stability)
+    parser.add_argument('--samples', type=int, default=256, metavar='N',
+                        help='Monte Carlo valves per candidate (default 256)')
+    parser.add_argument('--confirm-samples', type=int, default=1024, metavar='N',
+                        help='valves per Pareto design and baseline in the confirmation, with '
+                        'the next seed (default 1024; 0: no confirmation)')
+    parser.add_argument('--sampler', choices=SAMPLERS, default='sobol',
+                        help='sobol: scrambled Sobol, N a power of two (default); lhs: Latin '
+                        'hypercube; random: pseudo-random (all seeded)')
+    parser.add_argument('--population', type=int, default=24, metavar='N',
+                        help='candidates per generation (default 24)')
+    parser.add_argument('--generations', type=int, default=20, metavar='N',
+                        help='generations, the first one a Latin hypercube (default 20)')
+    add_options(parser, '--seed', help='seed of the optimiser and the samples (default 0)')
+    add_options(parser, '--step-size')
+    add_protocol_arguments(parser)
+    add_runner_arguments(parser)
+
+
+def problem_from(args):
+    """Return (RobustProblem, the protocol's statement) from the options."""
+    from valve_sim.analysis.optimisation import (
+        exact_text,
+        parse_design,
+        parse_fraction,
+        parse_objectives,
+        parse_tolerances,
+        RobustProblem,
+    )
+
+    params, settings = load_from_arguments(args)
+    design = parse_design(args.design, params, args.protocol)
+    if args.population < 2 or args.generations < 1:
+        raise ParameterError('--population must be at least 2 and --generations at least 1')
+    if args.confirm_samples < 0:
+        raise ParameterError('--confirm-samples must be 0 (no confirmation) or more')
+    preset, protocol = preset_protocol(args.protocol, params)
+    problem = RobustProblem(
+        params=params,
+        design=tuple(design),
+        objectives=tuple(parse_objectives(args.minimise, args.maximise)),
+        limits=tuple(exact_text(limit) for limit in parse_limits(args.limits)),
+        tolerances=tuple(parse_tolerances(args.tolerance, params, design)),
+        required_yield=parse_fraction(args.required_yield, '--yield'),
+        preset_pressure=preset,
+        protocol=args.protocol,
+        samples=args.samples,
+        sampler=args.sampler,
+        seed=args.seed,
+        confirm_samples=args.confirm_samples,
+        min_decay_rate=args.min_decay_rate,
+        step_size=settings['step_size'],
+    )
+    return problem.check(), protocol
+
+
+def print_outcome(problem, summary):
+    """Print the Pareto set, then the chosen design against Table 2, measure by measure."""
+    names = [bound.name for bound in problem.design]
+    objectives = [o.measure for o in problem.objectives]
+    print(f"{summary['candidates_evaluated']} candidates, {summary['candidates_feasible']} "
+          f"meet the limits and the yield; Pareto set of {len(summary['pareto'])}:")
+    print(f'{"design":<15}' + ''.join(f'{n[:13]:>14}' for n in names + objectives)
+          + f'{"yield (95 % interval)":>28}')
+    for entry in summary['pareto']:
+        result = entry['confirmed_yield'] or entry['search_yield']
+        cells = [entry['design'][n] for n in names] + [
+            entry['nominal_measures'][m] for m in objectives]
+        mark = ' *' if entry['chosen'] else ''
+        print(f"{entry['label']:<15}" + ''.join(f'{v:>14.5g}' for v in cells)
+              + f'{_yield_text(result):>28}{mark}')
+    if not summary['pareto']:
+        print('no candidate meets the limits and the required yield: loosen --limits or '
+              '--yield, or widen --design')
+        return
+    if summary['chosen'] is None:
+        print('no Pareto design meets the required yield on confirmation')
+        return
+    versus = summary.get('chosen_against_table2')
+    if not versus:
+        return
+    chosen = next(e for e in summary['pareto'] if e['chosen'])
+    table2 = summary['baselines']['table2']
+    print(f"\n{summary['chosen']} (*) against Table 2, nominal valves:")
+    print(f'{"measure":<14}{"chosen":>12}{"Table 2":>12}{"change":>10}')
+    for name in MEASURE_NAMES:
+        row = versus[name]
+        cells = ''.join('{:>12}'.format('-' if row[k] is None else f'{row[k]:.4g}')
+                        for k in ('chosen', 'table2'))
+        change = '-' if row['change_percent'] is None else f"{row['change_percent']:+.1f} %"
+        print(f'{name:<14}{cells}{change:>10}')
+    for label, entry in (('chosen', chosen), ('Table 2', table2)):
+        result = entry['confirmed_yield'] or entry['search_yield']
+        print(f'yield of {label}: {_yield_text(result)} over {result["samples"]} valves')
+
+
+def _yield_text(result):
+    low, high = result['ci95']
+    return f"{100 * result['fraction']:.1f} % ({100 * low:.1f}-{100 * high:.1f})"
+
+
+def run(args):
+    from valve_sim.analysis.optimisation import outcome_of, search
+    from valve_sim.analysis.optimisation_plots import plot_distributions, plot_pareto_front
+    from valve_sim.analysis.optimisation_report import write_outputs
+
+    try:
+        import pymoo  # noqa: F401  (is it installed?)
+    except ImportError:
+        raise StudyError(
+            "optimise needs pymoo, which is not installed: pip install 'pymoo>=0.6.2'"
+        )
+    problem, protocol = problem_from(args)
+    out = make_folder(Path(args.out))
+    runs = args.population * args.generations * (problem.samples + 1)
+    print(
+        f"optimise: protocol {protocol['protocol']}, preset "
+        f"{protocol['preset_pressure'] / 1e6:.4f} MPa; {args.generations} generations of "
+        f'{args.population} candidates, {problem.samples} valves each ({runs} runs), then the '
+        f'Pareto set and 2 baselines with {problem.confirm_samples} valves each',
+        file=sys.stderr,
+    )
+    backend = open_backend(args, 'optimise')
+    try:
+        records = search(problem, backend, out / 'evaluations', args.population,
+                         args.generations, args.resume, batch_size=args.batch_size or 1)
+        outcome = outcome_of(problem, records, backend, out / 'evaluations', args.resume,
+                             batch_size=args.batch_size or 1)
+    finally:
+        backend.close()
+    summary = write_outputs(out, problem, outcome, records, args.population, args.generations)
+    plot_pareto_front(out / 'pareto_front.png', problem, records, outcome)
+    if outcome['chosen'] is not None and 'table2' in outcome['baselines']:
+        plot_distributions(out / 'distributions.png', problem, [
+            (summary['chosen'], outcome['pareto'][outcome['chosen']][2]),
+            ('Table 2', outcome['baselines']['table2']),
+        ])
+    print_outcome(problem, summary)
+    print(f'wrote {out}/pareto.csv, {out}/pareto.json, {out}/params/ and figures')
+    return 0 if summary['chosen'] is not None else 1
