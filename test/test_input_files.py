@@ -30,6 +30,7 @@ from pathlib import Path
 from hostile_inputs import FILES, JSON_TEXTS, make_file, mutations, YAML_TEXTS
 import pytest
 from valve_sim.analysis.calibration import CalibrationError
+from valve_sim.analysis.robust_yield import check_candidate_row
 from valve_sim.analysis.study_runner import read_results
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError, StudyError
@@ -70,7 +71,7 @@ def read_metadata(path):
     return bag_files(folder)
 
 
-def read_study_results(path):
+def read_study_results(path, check=None):
     """Read path as results.jsonl: a valid header, then path's content as the rows."""
     results = path.parent / f'{path.name}.jsonl'
     header = json.dumps({'study': STUDY, 'cases': 1}) + '\n'
@@ -78,7 +79,12 @@ def read_study_results(path):
         results.write_bytes(header.encode() + path.read_bytes() + b'\n')
     elif path.exists() or path.is_symlink():  # a FIFO, a device, a sparse file: as it is
         path.rename(results)
-    return read_results(results, STUDY)
+    return read_results(results, STUDY, check)
+
+
+def read_optimise_results(path):
+    """Read path as one of optimise's results files (--resume): candidate rows."""
+    return read_study_results(path, check_candidate_row)
 
 
 YAML_READERS = {
@@ -86,20 +92,28 @@ YAML_READERS = {
     'parameter file': read_parameters,
     'bag metadata': read_metadata,
 }
-JSON_READERS = {'study results': read_study_results}
+JSON_READERS = {'study results': read_study_results, 'optimise results': read_optimise_results}
+RUNNER_ROW = {
+    'index': 0,
+    'measures': {'P_o_percent': 0.1, 'P_1_percent': 3.1, 'T_1_ms': 6.8, 'r_d': 0.8,
+                 'T_d_ms': 25.0, 'T_s_ms': None},
+    'reasons': {'T_s_ms': 'no settling'},
+    'error': None,
+}
+CANDIDATE_ROW = {  # as robust_yield.evaluate_candidate writes it (two valves kept)
+    'index': 3, 'label': 'candidate 3', 'design': {'damping_orifice_diameter': 1.02e-3},
+    'samples': 2, 'error': None, 'preset_pressure': 7e6,
+    'nominal': {**RUNNER_ROW, 'decay_rate': 12.5, 'pass': True},
+    'passed': 1, 'ci95': [0.0126, 0.987], 'failures': {'r_d<=0.85': 1, 'run failed': 0},
+    'percentiles': {'r_d': {'defined': 2, 'undefined': 0, 'p50': 0.8}}, 'yield': 0.5,
+    'pass': '10', 'sample_rows': [{**RUNNER_ROW, 'index': i, 'pass': i == 0} for i in (0, 1)],
+}
 VALID = {
     'fault schedule': config_path('fault_schedule_example.yaml').read_bytes(),
     'parameter file': config_path('reference.yaml').read_bytes(),
     'bag metadata': METADATA.encode(),
-    'study results': json.dumps(
-        {
-            'index': 0,
-            'measures': {'P_o_percent': 0.1, 'P_1_percent': 3.1, 'T_1_ms': 6.8, 'r_d': 0.8,
-                         'T_d_ms': 25.0, 'T_s_ms': None},
-            'reasons': {'T_s_ms': 'no settling'},
-            'error': None,
-        }
-    ).encode(),
+    'study results': json.dumps(RUNNER_ROW).encode(),
+    'optimise results': json.dumps(CANDIDATE_ROW).encode(),
 }
 
 
@@ -167,6 +181,23 @@ def test_schema_errors_name_the_file_and_the_key(tmp_path):
         path = tmp_path / f'row_{key}'
         path.write_text(json.dumps({**row, key: value}))
         message = refused(read_study_results, path)
+        assert f"'{key}'" in message and 'line 2' in message, message
+
+
+def test_a_resumed_row_of_the_study_envelope_or_optimise_is_read_and_checked(tmp_path):
+    """The envelope's decay rate is a measure too; optimise's rows have their own keys."""
+    path = tmp_path / 'envelope'
+    row = {**RUNNER_ROW, 'measures': {**RUNNER_ROW['measures'], 'envelope_decay_per_s': 5.0}}
+    path.write_text(json.dumps(row))
+    assert read_study_results(path)[0] == row
+    path = tmp_path / 'candidate'
+    path.write_text(json.dumps(CANDIDATE_ROW))
+    assert read_optimise_results(path)[3] == CANDIDATE_ROW
+    for key, value in (('design', {'d_c': 'wide'}), ('ci95', [0.1]), ('samples', -1),
+                       ('nominal', {**RUNNER_ROW, 'measures': {}}), ('pass', 1)):
+        path = tmp_path / f'candidate_{key}'
+        path.write_text(json.dumps({**CANDIDATE_ROW, key: value}))
+        message = refused(read_optimise_results, path)
         assert f"'{key}'" in message and 'line 2' in message, message
 
 

@@ -55,7 +55,7 @@ from valve_sim.analysis.tolerances import (
     SAMPLERS,
     unit_samples,
 )
-from valve_sim.core.parameters import ParameterError, resolve_name, scaled, SPECS
+from valve_sim.core.parameters import ParameterError, resolve_name, scaled
 
 
 SENSES = ('minimise', 'maximise')
@@ -86,15 +86,8 @@ def parse_design(texts, params, protocol='held-preset'):
             bound = parse_variation(text, params)
         except ParameterError as error:
             raise ParameterError(f'--design: {str(error).replace("variation ", "", 1)}') from None
-        spec = SPECS[bound.name]
         if bound.kind != 'uniform':
             raise ParameterError(f'--design {text!r}: bounds are LO:HI or ±X% (of the nominal)')
-        if bound.a < spec.minimum or bound.b > spec.maximum:
-            raise ParameterError(
-                f'--design {text!r}: bounds {bound.a:g}:{bound.b:g} {spec.unit} leave the limits '
-                f'of {bound.name} ({spec.symbol}), [{spec.minimum:g}, {spec.maximum:g}] '
-                f'{spec.unit}'
-            )
         if bound.name == 'pilot_spring_preload' and protocol == 'held-preset':
             raise ParameterError(
                 '--design: the held preset sets pilot_spring_preload in every valve; design it '

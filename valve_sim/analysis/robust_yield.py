@@ -193,7 +193,7 @@ def check_candidate_row(row):
             raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
         return
     nominal = row.get('nominal')
-    check_row(nominal)
+    _check_inner(check_row, nominal, 'nominal')
     decay = nominal.get('decay_rate')
     if not (decay is None or is_number(decay)) or not isinstance(nominal.get('pass'), bool):
         raise ValueError("key 'nominal' must hold a decay_rate (a number or null) and a pass")
@@ -203,5 +203,13 @@ def check_candidate_row(row):
     sample_rows = row.get('sample_rows', [])
     if not isinstance(sample_rows, list):
         raise ValueError("key 'sample_rows' must list the sampled valves' rows")
-    for sample_row in sample_rows:
-        check_row(sample_row)
+    for number, sample_row in enumerate(sample_rows):
+        _check_inner(check_row, sample_row, f'sample_rows[{number}]')
+
+
+def _check_inner(check, row, key):
+    """check(row) for a row inside a row: a ValueError names the key it is under."""
+    try:
+        check(row)
+    except ValueError as error:
+        raise ValueError(f"key '{key}': {error}") from None

@@ -64,21 +64,27 @@ def bounds_value(text):
     try:
         if not separator or not colon:
             raise ValueError
-        return name.strip(), (float(low), float(high))
+        low, high = float(low), float(high)
     except ValueError:
         raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
+    if not -math.inf < low < high < math.inf:
+        raise ArgumentTypeError(f'LO and HI must be finite with LO < HI, got {text!r}')
+    return name.strip(), (low, high)
 
 
 def range_value(text):
     """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
     from argparse import ArgumentTypeError
 
+    low, colon, high = text.partition(':')
     try:
-        _, (low, high) = bounds_value(f'range={text}')
-    except ArgumentTypeError:
+        if not colon:
+            raise ValueError
+        low, high = float(low), float(high)
+    except ValueError:
         raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
-    if not 0.0 < low < high < float('inf'):
-        raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
+    if not 0.0 < low < high < math.inf:
+        raise ArgumentTypeError(f'LO and HI must be finite with 0 < LO < HI, got {text!r}')
     return low, high
 
 
@@ -111,6 +117,8 @@ def positive_length(text):
     return value
 
 
+MAX_CHANGE_PERCENT = 1000.0  # [%] the largest change of a --relieves case (11 times the value)
+
 # The design rules of a main stage as real valves are built (docs/model.md), as constraints.
 DESIGN_RULES = (
     ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
@@ -137,6 +145,10 @@ def case_value(text):
             raise ArgumentTypeError(
                 f'expected SYMBOL=PERCENT[,SYMBOL=PERCENT...], got {text!r}'
             ) from None
+        if not -100.0 < changes[name.strip()] <= MAX_CHANGE_PERCENT:
+            raise ArgumentTypeError(
+                f'a change must be in (-100, {MAX_CHANGE_PERCENT:g}] %, got {part.strip()!r}'
+            )
     return changes
 
 

@@ -36,6 +36,7 @@ from valve_sim.core.parameters import (
     FAULT_SCHEDULE,
     load_parameters,
     ParameterError,
+    SPECS,
 )
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -59,9 +60,14 @@ def number(kind, unit, low, high, low_open=False, integer=False):
 
     Every numeric option of valve-sim is parsed by one of these (or by flow_value,
     pressure_value), so a NaN, an infinity or an absurd value is a usage error that
-    names the range, never a run with nonsense results.
+    names the range, never a run with nonsense results. The type's bounds (its
+    attribute bounds) are added to the option's --help by the CLI's help formatter.
     """
-    interval = f'{"(" if low_open else "["}{low:g}, {high:g}]{(" " + unit) if unit else ""}'
+    shown = '{:,}' if integer else '{:g}'
+    interval = (
+        f'{"(" if low_open else "["}{shown.format(low)}, {shown.format(high)}]'
+        f'{(" " + unit) if unit else ""}'
+    )
 
     def parse(text):
         try:
@@ -74,6 +80,7 @@ def number(kind, unit, low, high, low_open=False, integer=False):
         return value
 
     parse.__name__ = kind  # argparse names the type in its messages
+    parse.bounds = f'in {interval}'
     return parse
 
 
@@ -81,9 +88,14 @@ def flow_value(text):
     """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
     units = {'L/min': LITRE_PER_MINUTE, 'l/min': LITRE_PER_MINUTE, 'm^3/s': 1.0, 'm3/s': 1.0}
     value = quantity(text, units, 'flow', '5L/min or 8.33e-5')
-    if not math.isfinite(value) or value < 0.0:
-        raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
+    if not 0.0 <= value <= MAX_FLOW:
+        raise ArgumentTypeError(f'flow must be {flow_value.bounds}, got {text!r}')
     return value
+
+
+# The largest flow any option takes: the largest max_inlet_flow a valve may be given.
+MAX_FLOW = SPECS['max_inlet_flow'].maximum  # [m^3/s]
+flow_value.bounds = f'in [0, {MAX_FLOW:g}] m^3/s'
 
 
 def pressure_value(text):
@@ -93,6 +105,9 @@ def pressure_value(text):
     if not math.isfinite(value) or value <= 0.0:
         raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
     return value
+
+
+pressure_value.bounds = 'finite, > 0 Pa'
 
 
 def start_time(text):

@@ -68,8 +68,7 @@ def add_arguments(parser):
     parser.add_argument('--ramp-time', type=TIME, default=0.0, metavar='S',
                         help='change the flow linearly over this time instead of at once [s]')
     parser.add_argument('--end-time', type=TIME, default=s.end_time, metavar='S',
-                        help=f'end of the run [s] (default {s.end_time:g}, at most '
-                        f'{MAX_END_TIME:g})')
+                        help=f'end of the run [s] (default {s.end_time:g})')
     add_options(parser, '--step-size')
     parser.add_argument('--record-interval', default=1e-4, metavar='S', type=INTERVAL,
                         help='sample interval of the output waveforms [s] (default 1e-4, '

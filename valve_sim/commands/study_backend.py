@@ -102,10 +102,24 @@ def add_runner_arguments(parser):
                         help='keep the runs already in DIR/results.jsonl and compute only the '
                         'missing ones')
     parser.add_argument('--dashboard', nargs='?', const='127.0.0.1:0', metavar='HOST:PORT',
+                        type=dashboard_address,
                         help="serve Dask's dashboard of the local cluster and print its address "
                         '(default 127.0.0.1:0: this machine only, a free port; 0.0.0.0:PORT '
                         'shows it to the network). Without it the local cluster has none, and '
                         'every part of it listens on 127.0.0.1 only')
+
+
+def dashboard_address(text):
+    """Parse --dashboard's HOST:PORT, PORT in [0, 65535] (argparse type)."""
+    from argparse import ArgumentTypeError
+
+    host, colon, port = text.strip().rpartition(':')
+    if not (colon and host and port.isdigit() and int(port) <= 65535):
+        raise ArgumentTypeError(f'must be HOST:PORT with a PORT in [0, 65535], got {text!r}')
+    return f'{host}:{int(port)}'
+
+
+dashboard_address.bounds = 'HOST:PORT, PORT in [0, 65535]'
 
 
 def open_backend(args, command, pool_fallback=False):

@@ -137,6 +137,10 @@ def open_regular(path, kind):
         descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
     except OSError as error:
         raise InputFileError(f'cannot read {kind.name} {path}: {error.strerror}') from error
+    except ValueError:  # a NUL character in the name: no file can have it
+        raise InputFileError(
+            f'cannot read {kind.name} {shown(str(path))}: a NUL in its name'
+        ) from None
     try:
         info = os.fstat(descriptor)
         if not stat.S_ISREG(info.st_mode):
