@@ -83,8 +83,15 @@ def valve_sim(*arguments, timeout=120, cwd=None):
     return result.returncode, lines[-1] if lines else '', time.monotonic() - started
 
 
-def refused_in_one_line(code, line, seconds):
-    return code in (1, 2) and 'Traceback' not in line and seconds < 60
+def refusal(report, klass, attack, *arguments, also='', within=60):
+    """
+    Run `valve-sim ARGUMENTS`; report whether it refused in one line of its own.
+
+    The line must name also, and come within `within` seconds.
+    """
+    code, line, seconds = valve_sim(*arguments)
+    refused = code in (1, 2) and 'Traceback' not in line and also in line and seconds < within
+    report.add(klass, attack, refused, f'{seconds:.2f} s: {line[-70:]}')
 
 
 def attack_live_schedules(report, context, folder):
@@ -120,52 +127,33 @@ def attack_readers(report, folder):
         for option in ('--params', '--faults'):
             path = folder / f'reader_{option[2:]}_{len(os.listdir(folder))}.yaml'
             make_file(path, content)
-            code, line, seconds = valve_sim('simulate', option, path, '--end-time', '0.3')
-            report.add('1 files', f'simulate {option}: {kind}',
-                       refused_in_one_line(code, line, seconds), f'{seconds:.2f} s: {line[-70:]}')
+            refusal(report, '1 files', f'simulate {option}: {kind}',
+                    'simulate', option, path, '--end-time', '0.3')
         bag = folder / f'bag_{len(os.listdir(folder))}'
         bag.mkdir()
         make_file(bag / 'metadata.yaml', content)
-        code, line, seconds = valve_sim('analyse', bag)
-        report.add('1 files', f'analyse BAG/metadata.yaml: {kind}',
-                   refused_in_one_line(code, line, seconds), f'{seconds:.2f} s: {line[-70:]}')
+        refusal(report, '1 files', f'analyse BAG/metadata.yaml: {kind}', 'analyse', bag)
     for kind, content in {**FILES, **JSON_TEXTS}.items():
         path = folder / f'target_{len(os.listdir(folder))}.json'
         make_file(path, content)
-        code, line, seconds = valve_sim('calibrate', '--target-measures', path, '--fit', 'd_c',
-                                        '--out', folder / 'calib')
-        report.add('1 files', f'calibrate --target-measures: {kind}',
-                   refused_in_one_line(code, line, seconds), f'{seconds:.2f} s: {line[-70:]}')
+        refusal(report, '1 files', f'calibrate --target-measures: {kind}', 'calibrate',
+                '--target-measures', path, '--fit', 'd_c', '--out', folder / 'calib')
 
 
 def attack_clock_and_roll_backs(report, context, folder):
     """Classes 2 and 3 on a node driven by /clock."""
-    from builtin_interfaces.msg import Time
-    from rosgraph_msgs.msg import Clock
     import test_hostile_node as hostile
     from valve_harness import running_valve
-    from valve_sim.core.parameters import load_parameters
 
-    params, settings = load_parameters()
-    defaults = {**params, **{name: settings[name] for name in
-                             ('step_size', 'publish_rate', 'ambient_pressure')},
-                'fault.damping_orifice_blockage': 0.0, 'sensor.supply_pressure.bias': 0.0}
+    defaults = hostile.reference_values()
     with running_valve(context, folder / 'valve_node_sim.log', namespace='/attack_sim',
                        use_sim_time=True) as (process, probe):
         probe.start_clock(hostile.START_S * NS_PER_S, hostile.PERIOD_NS)
         for sec, nanosec in ((-5, 0), (2**31 - 1, 4_000_000_000)):
             probe.restore(defaults, hostile.FLOW)
-            before = int(probe.wait_for_diagnostics()['refused_clock_messages'])
-            deadline = time.monotonic() + 30
-            while time.monotonic() < deadline and int(
-                probe.wait_for_diagnostics()['refused_clock_messages']
-            ) <= before:
-                probe.clock.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-            now_ns = probe.clock_ns
-            probe.send_clock(now_ns)
-            probe.run_until(now_ns + 20 * hostile.PERIOD_NS)
+            stamp_ns, expected_ns = hostile.bad_clock_then_good(probe, sec, nanosec)
             report.add('2 clock', f'/clock sec={sec} nanosec={nanosec}',
-                       process.poll() is None and probe.latest()[0] == probe.clock_ns,
+                       process.poll() is None and stamp_ns == expected_ns,
                        'ignored and counted; ticking on the good clock')
         for kind, change in hostile.ROLL_BACK_CASES.items():
             probe.restore(defaults, hostile.FLOW)
@@ -175,43 +163,29 @@ def attack_clock_and_roll_backs(report, context, folder):
                        'declared parameters as before the change' if agree else
                        f'declared {probe.get_parameters(*before)} != {before}')
         probe.restore(defaults, hostile.FLOW)
-        result = probe.set_parameters_atomically(preset_pressure=6.5e6,
-                                                 max_inlet_flow=hostile.LIFTED_MAX_FLOW)
-        start_ns = probe.clock_ns
-        probe.tick_at(start_ns + 1000 * NS_PER_S)
-        back_ns = start_ns - 1000 * NS_PER_S
-        probe.send_clock(back_ns)
-        hostile.tick_exactly(probe, back_ns + hostile.PERIOD_NS)
-        hostile.overpressure(probe, lambda: hostile.tick_exactly(probe, back_ns + 2_000_000))
+        jumps, diagnostics = hostile.preset_change_jump_back_overpressure(probe)
         kept = probe.get_parameters('preset_pressure')['preset_pressure']
         report.add('2 clock', 'jump back 2000 s, then an overpressure',
-                   result.successful and abs(kept - 6.5e6) < 1.0,
+                   int(diagnostics['clock_jumps_back']) == jumps + 1 and abs(kept - 6.5e6) < 1.0,
                    'the 1000 s old preset change kept (new time base)')
         hostile.take_flow(probe, hostile.FLOW)
 
 
 def attack_wire(report, folder):
     """Class 4."""
-    import numpy as np
-    from valve_sim.core.parameters import load_parameters
+    from hostile_inputs import bag_with_inf_pressure
     from valve_sim.core.sensors import default_settings, SensorStage
-    from valve_sim.core.simulation import Scenario, simulate
-    from valve_sim.recording.valve_topics import write_simulation_bag
 
-    code, line, _ = valve_sim('simulate', '--set', 'sensor.supply_pressure.resolution=1e-320')
-    report.add('4 wire', 'resolution 1e-320', code == 1 and 'resolution' in line, line[-70:])
+    refusal(report, '4 wire', 'resolution 1e-320', 'simulate', '--set',
+            'sensor.supply_pressure.resolution=1e-320', also='resolution')
     stage = SensorStage({**default_settings(), 'sensor.supply_pressure.range_max': 1e7,
                          'sensor.supply_pressure.stuck': True,
                          'sensor.supply_pressure.stuck_at': 1e9})
     reading = stage.read(0, [7e6] * 4)[0]
     report.add('4 wire', 'stuck_at 1e9 Pa, range_max 1e7 Pa', reading == 1e7,
                f'published {reading:g} Pa')
-    waveforms = simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=1.2),
-                         record_interval=1e-3)
-    readings = waveforms.states[:, :4] + 101325.0
-    readings[300:, 0] = np.inf
     bag = folder / 'inf.mcap'
-    write_simulation_bag(bag, waveforms, readings=readings, start_time_ns=1_700_000_000 * NS_PER_S)
+    bag_with_inf_pressure(bag)
     result = subprocess.run([sys.executable, '-m', 'valve_sim.commands.cli', 'analyse', str(bag),
                              '--json'], capture_output=True, text=True, cwd=REPO, timeout=120)
     try:
@@ -225,27 +199,20 @@ def attack_wire(report, folder):
 
 def attack_recordings(report, folder):
     """Class 5."""
+    from hostile_inputs import make_sparse_mcap
     from test_hostile_options import FULL_DISK
-    from test_recovery import log_times, many_chunks
+    from test_recovery import flipped_chunk_length, log_times
 
     path = folder / 'flipped.mcap'
-    chunks = many_chunks(path)
-    everything = log_times(path)
-    data = bytearray(path.read_bytes())
-    data[chunks[3] + 1 + 5] ^= 1
-    path.write_bytes(bytes(data))
+    _, everything = flipped_chunk_length(path, bit=40)
     code, line, seconds = valve_sim('repair', path, '-o', folder / 'flipped.repaired.mcap')
     kept = len(log_times(folder / 'flipped.repaired.mcap')) if code == 0 else 0
     report.add('5 recordings', 'bit flip in a chunk length (footer kept)',
                kept == len(everything), f'repair kept {kept} of {len(everything)}')
     hole = folder / 'hole.mcap'
-    with open(hole, 'wb') as stream:
-        stream.write(b'\x89MCAP0\r\n')
-        stream.truncate(2 * 1024**3)
-    code, line, seconds = valve_sim('analyse', hole)
-    report.add('5 recordings', 'MCAP magic and a 2 GiB sparse hole',
-               code == 1 and 'corrupt at byte 8' in line and seconds < 10,
-               f'{seconds:.2f} s: {line[-60:]}')
+    make_sparse_mcap(hole)
+    refusal(report, '5 recordings', 'MCAP magic and a 2 GiB sparse hole', 'analyse', hole,
+            also='corrupt at byte 8', within=10)
     measures = folder / 'bag.measures.json'
     result = subprocess.run([sys.executable, '-c', FULL_DISK, str(measures)], cwd=REPO,
                             capture_output=True, text=True, timeout=120)
@@ -289,7 +256,7 @@ def attack_rogue_type(report, context, folder):
 
 def attack_options(report, folder):
     """Class 6."""
-    from test_hostile_options import OPTIONS
+    from test_hostile_options import OPTIMISE, OPTIONS
 
     for arguments, option, values in OPTIONS:
         for value in values:
@@ -298,11 +265,11 @@ def attack_options(report, folder):
                        f'{seconds:.2f} s: {line[-60:]}')
     for arguments in (['tolerance', '--vary', 'd_c=±2%', '--samples', '1000000000'],
                       ['sensitivity', '--samples', '1073741824'],
-                      ['tolerance', '--vary', 'd_c=±2%', '--workers', '100000']):
-        code, line, seconds = valve_sim(*arguments, '--out', folder / 'study')
-        report.add('6 options', ' '.join(arguments[-2:]),
-                   refused_in_one_line(code, line, seconds) and 'memory' in line,
-                   f'{seconds:.2f} s: {line[-70:]}')
+                      ['tolerance', '--vary', 'd_c=±2%', '--workers', '100000'],
+                      [*OPTIMISE[:-2], '--samples', '524288'],
+                      [*OPTIMISE[:-2], '--population', '10000', '--generations', '11']):
+        refusal(report, '6 options', f'{arguments[0]} {" ".join(arguments[-2:])}', *arguments,
+                '--out', folder / 'study', also='memory')
     plots = folder / 'plots'
     plots.mkdir()
     code, line, _ = valve_sim('simulate', '--end-time', '0.4', '--step-time', '0.1',

@@ -25,7 +25,8 @@ input there (make_file), or to the text or bytes of a document:
                mappings, merge keys), an alias that contains itself, 100 levels of nesting,
                numbers that do not fit a float, bytes that are not UTF-8
   JSON_TEXTS   the same for JSON: deep nesting, NaN and Infinity, 1e400, huge integers
-mutations() gives seeded random damage of a valid file's bytes, for fuzzing.
+mutations() gives seeded random damage of a valid file's bytes, for fuzzing;
+make_sparse_mcap() and bag_with_inf_pressure() make the hostile recordings.
 """
 
 import os
@@ -115,6 +116,27 @@ def make_nothing(path):
 def make_sparse(path):
     with open(path, 'wb') as stream:
         stream.truncate(2 * 1024**3)
+
+
+def make_sparse_mcap(path):
+    """Write the MCAP magic, then a 2 GiB sparse hole (a file preallocated and never written)."""
+    with open(path, 'wb') as stream:
+        stream.write(b'\x89MCAP0\r\n')
+        stream.truncate(2 * 1024**3)
+
+
+def bag_with_inf_pressure(path):
+    """Write a simulated step's bag whose supply pressure reads inf from 0.3 s (0.1 s after it)."""
+    import numpy as np
+    from valve_sim.core.parameters import load_parameters
+    from valve_sim.core.simulation import Scenario, simulate
+    from valve_sim.recording.valve_topics import write_simulation_bag
+
+    waveforms = simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=1.2),
+                         record_interval=1e-3)
+    readings = waveforms.states[:, :4] + 101325.0
+    readings[300:, 0] = np.inf
+    write_simulation_bag(path, waveforms, readings=readings, start_time_ns=1_700_000_000 * 10**9)
 
 
 FILES = {

@@ -208,18 +208,22 @@ def sim(context, tmp_path_factory):
         yield process, probe, log
 
 
-@pytest.fixture
-def sim_valve(sim):
-    """Yield the node on /clock restored: reference parameters and settings, 5 L/min."""
-    process, probe, _ = sim
+def reference_values():
+    """Return the declared values a node is restored to: reference parameters, no fault."""
     params, settings = load_parameters()
-    defaults = {
+    return {
         **params,
         **{name: settings[name] for name in ('step_size', 'publish_rate', 'ambient_pressure')},
         'fault.damping_orifice_blockage': 0.0,
         'sensor.supply_pressure.bias': 0.0,
     }
-    probe.restore(defaults, FLOW)
+
+
+@pytest.fixture
+def sim_valve(sim):
+    """Yield the node on /clock restored: reference parameters and settings, 5 L/min."""
+    process, probe, _ = sim
+    probe.restore(reference_values(), FLOW)
     yield probe
     assert process.poll() is None, 'valve_node died'
     assert probe.non_finite == 0, 'a NaN or inf was published'
@@ -230,10 +234,19 @@ def sim_valve(sim):
 )
 def test_a_clock_the_node_cannot_represent_is_ignored_and_counted(sim_valve, sec, nanosec):
     """Negative seconds, or past 2^31 s: ignored, counted; the node goes on with its clock."""
+    stamp_ns, expected_ns = bad_clock_then_good(sim_valve, sec, nanosec)
+    assert stamp_ns == expected_ns
+
+
+def bad_clock_then_good(probe, sec, nanosec):
+    """
+    Publish /clock (sec, nanosec) until the node counts it refused, then 20 good ticks.
+
+    Returns (the stamp of the last state published, the stamp expected: 20 periods on).
+    """
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
 
-    probe = sim_valve
     before = int(probe.wait_for_diagnostics()['refused_clock_messages'])
     now_ns = probe.clock_ns
 
@@ -244,7 +257,7 @@ def test_a_clock_the_node_cannot_represent_is_ignored_and_counted(sim_valve, sec
     probe.wait_for(refused, 'the bad /clock counted')
     probe.send_clock(now_ns)
     probe.run_until(now_ns + 20 * PERIOD_NS)  # ticking on the good clock as before
-    assert probe.latest()[0] == now_ns + 20 * PERIOD_NS
+    return probe.latest()[0], now_ns + 20 * PERIOD_NS
 
 
 def change_and_overpressure(probe, **change):
@@ -355,6 +368,19 @@ def test_a_clock_jump_back_starts_a_new_time_base_for_the_roll_back_window(sim_v
     """
     probe = sim_valve
     log = sim[2]
+    jumps, report = preset_change_jump_back_overpressure(probe)
+    assert int(report['clock_jumps_back']) == jumps + 1
+    assert probe.get_parameters('preset_pressure')['preset_pressure'] == pytest.approx(6.5e6)
+    assert 'rolled back' not in Path(log).read_text().split('clock jumped back')[-1]
+    take_flow(probe, FLOW)  # a flow the next restore's max_inlet_flow accepts
+
+
+def preset_change_jump_back_overpressure(probe):
+    """
+    Change the preset, run 1000 s of clock, jump back by 2000 s, then an overpressure.
+
+    Returns (clock_jumps_back before the jump, the diagnostics of the overpressure).
+    """
     result = probe.set_parameters_atomically(preset_pressure=6.5e6, max_inlet_flow=LIFTED_MAX_FLOW)
     assert result.successful, result.reason
     start_ns = probe.clock_ns
@@ -363,11 +389,7 @@ def test_a_clock_jump_back_starts_a_new_time_base_for_the_roll_back_window(sim_v
     back_ns = start_ns - 1000 * NS_PER_S
     probe.send_clock(back_ns)
     tick_exactly(probe, back_ns + PERIOD_NS)  # the first tick after the jump: a new time base
-    report = overpressure(probe, lambda: tick_exactly(probe, back_ns + 2 * PERIOD_NS))
-    assert int(report['clock_jumps_back']) == jumps + 1
-    assert probe.get_parameters('preset_pressure')['preset_pressure'] == pytest.approx(6.5e6)
-    assert 'rolled back' not in Path(log).read_text().split('clock jumped back')[-1]
-    take_flow(probe, FLOW)  # a flow the next restore's max_inlet_flow accepts
+    return jumps, overpressure(probe, lambda: tick_exactly(probe, back_ns + 2 * PERIOD_NS))
 
 
 def test_the_schedule_check_process_answers_in_one_line():

@@ -30,6 +30,7 @@ from pathlib import Path
 import subprocess
 import sys
 
+from hostile_inputs import bag_with_inf_pressure
 import numpy as np
 import pytest
 from valve_sim.commands.cli import main
@@ -99,22 +100,26 @@ def test_a_meaningless_number_is_a_usage_error_naming_the_range(
 
 def test_every_numeric_option_is_bounded_and_its_help_gives_the_bounds():
     """
-    No option of any command parses a bare int or float, and --help states each bound.
+    No option of any command parses a bare int or float; --help and docs/valve_node.md
+    state each bound.
 
     The class, not the examples: a numeric option added later without a bounded type
     (options.number, flow_value, pressure_value) fails here.
     """
     from valve_sim.commands.cli import build_parser, SUBCOMMANDS
 
+    docs = (REPO / 'docs' / 'valve_node.md').read_text()
     for command in SUBCOMMANDS:
         parser = build_parser([command])
         sub = parser._subparsers._group_actions[0].choices[command]
         text = ' '.join(sub.format_help().split())
+        row = next((line for line in docs.splitlines() if line.startswith(f'| `{command}` |')), '')
         for action in sub._actions:
             assert action.type not in (int, float), (command, action.option_strings)
             bounds = getattr(action.type, 'bounds', None)
             if bounds:
                 assert ' '.join(bounds.split()) in text, (command, action.option_strings)
+                assert f'`{action.option_strings[-1]}` {bounds}' in row, (command, bounds)
         numeric = [a for a in sub._actions if getattr(a.type, 'bounds', None)]
         assert numeric or command in ('repair',), command
 
@@ -285,16 +290,8 @@ def test_a_stuck_sensor_saturates_at_its_range():
 
 def test_analyse_json_of_non_finite_samples_is_strict_json_with_reasons(tmp_path, capsys):
     """A bag whose supply pressure turns to inf: null measures with reasons, never Infinity."""
-    from valve_sim.core.simulation import Scenario, simulate
-    from valve_sim.core.parameters import load_parameters
-    from valve_sim.recording.valve_topics import write_simulation_bag
-
-    waveforms = simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=1.2),
-                         record_interval=1e-3)
-    readings = waveforms.states[:, :4] + 101325.0
-    readings[300:, 0] = np.inf
     path = tmp_path / 'inf.mcap'
-    write_simulation_bag(path, waveforms, readings=readings, start_time_ns=1_700_000_000 * 10**9)
+    bag_with_inf_pressure(path)
     assert main(['analyse', str(path), '--json']) == 0
     out, err = capsys.readouterr()
     document = json.loads(out, parse_constant=lambda name: pytest.fail(f'{name} in the JSON'))

@@ -175,12 +175,17 @@ def test_schema_errors_name_the_file_and_the_key(tmp_path):
     path = tmp_path / 'input.yaml'
     path.write_text(METADATA.replace('- run_0.mcap\n  files', '- 7\n  files'))
     assert 'relative_file_paths' in refused(read_metadata, path)
-    row = json.loads(VALID['study results'])
-    for key, value in (('index', 'zero'), ('measures', {'P_o_percent': 1}), ('error', 5),
-                       ('reasons', []), ('cracking_pressure', 'high')):
+    changes = (('index', 'zero'), ('measures', {'P_o_percent': 1}), ('error', 5),
+               ('reasons', []), ('cracking_pressure', 'high'))
+    rows_refused_naming_the_key(tmp_path, read_study_results, RUNNER_ROW, changes)
+
+
+def rows_refused_naming_the_key(tmp_path, read, row, changes):
+    """Each (key, value) of changes set in row: read refuses it, naming the key and line 2."""
+    for key, value in changes:
         path = tmp_path / f'row_{key}'
         path.write_text(json.dumps({**row, key: value}))
-        message = refused(read_study_results, path)
+        message = refused(read, path)
         assert f"'{key}'" in message and 'line 2' in message, message
 
 
@@ -193,12 +198,9 @@ def test_a_resumed_row_of_the_study_envelope_or_optimise_is_read_and_checked(tmp
     path = tmp_path / 'candidate'
     path.write_text(json.dumps(CANDIDATE_ROW))
     assert read_optimise_results(path)[3] == CANDIDATE_ROW
-    for key, value in (('design', {'d_c': 'wide'}), ('ci95', [0.1]), ('samples', -1),
-                       ('nominal', {**RUNNER_ROW, 'measures': {}}), ('pass', 1)):
-        path = tmp_path / f'candidate_{key}'
-        path.write_text(json.dumps({**CANDIDATE_ROW, key: value}))
-        message = refused(read_optimise_results, path)
-        assert f"'{key}'" in message and 'line 2' in message, message
+    changes = (('design', {'d_c': 'wide'}), ('ci95', [0.1]), ('samples', -1),
+               ('nominal', {**RUNNER_ROW, 'measures': {}}), ('pass', 1))
+    rows_refused_naming_the_key(tmp_path, read_optimise_results, CANDIDATE_ROW, changes)
 
 
 def test_a_nan_measure_in_a_resumed_study_is_refused(tmp_path):

@@ -26,6 +26,7 @@ import subprocess
 import sys
 import time
 
+from hostile_inputs import make_sparse_mcap
 from mcap.reader import make_reader
 import pytest
 from rosbags.highlevel import AnyReader
@@ -306,19 +307,28 @@ def log_times(path):
     return [message.log_time for _, _, message in BagReader(path).messages()]
 
 
+def flipped_chunk_length(path, bit, cut=False):
+    """
+    Write many_chunks() to path with one bit of the 4th chunk's length flipped.
+
+    cut: the file also ends 3 chunks early (no footer). Returns (the chunks' offsets,
+    the log times of every message written).
+    """
+    chunks = many_chunks(path)
+    everything = log_times(path)
+    data = bytearray(path.read_bytes())
+    data[chunks[3] + 1 + bit // 8] ^= 1 << bit % 8
+    path.write_bytes(bytes(data[:chunks[-3]] if cut else data))
+    return chunks, everything
+
+
 @pytest.mark.parametrize('bit', [0, 17, 40])  # the length field's low, middle and high bits
 @pytest.mark.parametrize('cut', [False, True])  # a file with its footer, or one cut short
 def test_a_bit_flip_in_a_chunk_length_is_corrupt_and_repair_keeps_every_intact_chunk(
     tmp_path, bit, cut
 ):
     path = tmp_path / 'flipped.mcap'
-    chunks = many_chunks(path)
-    everything = log_times(path)
-    data = bytearray(path.read_bytes())
-    data[chunks[3] + 1 + bit // 8] ^= 1 << bit % 8
-    if cut:
-        data = data[:chunks[-3]]
-    path.write_bytes(bytes(data))
+    chunks, everything = flipped_chunk_length(path, bit, cut)
     scan = diagnose(path)
     assert f'is corrupt at byte {chunks[3]}' in scan.damage or (
         f'the chunk at byte {chunks[3]} fails its CRC' in scan.damage
@@ -337,9 +347,7 @@ def test_a_bit_flip_in_a_chunk_length_is_corrupt_and_repair_keeps_every_intact_c
 def test_analyse_gives_a_sparse_hole_the_verdict_of_repair_as_fast(tmp_path):
     """MCAP magic, then a 2 GiB hole: analyse spun for minutes while repair answered at once."""
     path = tmp_path / 'hole.mcap'
-    with open(path, 'wb') as stream:
-        stream.write(b'\x89MCAP0\r\n')
-        stream.truncate(2 * 1024**3)
+    make_sparse_mcap(path)
     analysed, repaired = valve_sim('analyse', path), valve_sim('repair', path)
     verdict = f'{path} is corrupt at byte 8: no MCAP record starts there'
     assert analysed.returncode == repaired.returncode == 1

@@ -131,11 +131,11 @@ def parse_variation(text, params):
 
 def _check_within_limits(distribution, text):
     """
-    Refuse a variation that leaves the parameter's limits (SPECS): a valve beyond them
-    cannot be set.
+    Refuse a variation that leaves the parameter's limits (SPECS).
 
-    Uniform: [a, b] within the limits; normal: the mean within them and sigma at most
-    their span (the tails beyond are drawn, and fail as runs that cannot be set).
+    A valve beyond them cannot be set. Uniform: [a, b] within the limits; normal: the
+    mean within them and sigma at most their span (the tails beyond are drawn, and
+    fail as runs that cannot be set).
     """
     spec, a, b = SPECS[distribution.name], distribution.a, distribution.b
     limits = (

@@ -119,6 +119,11 @@ def positive_length(text):
 
 MAX_CHANGE_PERCENT = 1000.0  # [%] the largest change of a --relieves case (11 times the value)
 
+bounds_value.bounds = 'LO, HI finite, LO < HI'
+range_value.bounds = 'LO, HI finite, 0 < LO < HI'
+tie_value.bounds = 'FACTOR finite, > 0'
+positive_length.bounds = 'in (0, 0.1) m'
+
 # The design rules of a main stage as real valves are built (docs/model.md), as constraints.
 DESIGN_RULES = (
     ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
@@ -150,6 +155,9 @@ def case_value(text):
                 f'a change must be in (-100, {MAX_CHANGE_PERCENT:g}] %, got {part.strip()!r}'
             )
     return changes
+
+
+case_value.bounds = f'each PERCENT in (-100, {MAX_CHANGE_PERCENT:g}]'
 
 
 def add_arguments(parser):
