@@ -404,4 +404,4 @@ def test_simulate_writes_a_rig_bag_with_a_slower_flowmeter(tmp_path, capsys):
     assert len(times['/rig/p']) == 301 and len(times['/rig/q']) == 31
     assert set(np.diff(times['/rig/q'])) == {10_000_000}
     code, _, err = run_cli(capsys, 'simulate', '--end-time', '0.3', '--flow-interval', '0.01')
-    assert code == 1 and '--flow-interval needs --mcap, --rig-topics' in err
+    assert code == 1 and '--flow-interval needs --mcap and --rig-topics' in err

@@ -34,6 +34,7 @@ import pytest
 from valve_harness import running_valve, start_node, TIMEOUT
 from valve_sim.core.parameters import config_path, load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE
+from valve_sim.recording.valve_topics import PRESSURE_TOPICS
 
 
 pytestmark = [pytest.mark.timeout(600), pytest.mark.usefixtures('valve_node_kernels')]
@@ -337,7 +338,7 @@ def test_a_roll_back_restores_everything_it_rolls_back(sim_valve, kind):
     """
     probe = sim_valve
     change = ROLL_BACK_CASES[kind]
-    steady_reading = probe.latest()[1]
+    steady_readings = {topic: probe.latest(topic)[1] for topic in PRESSURE_TOPICS}
     before = change_and_overpressure(probe, **change)
     report = probe.wait_for_diagnostics()
     assert probe.get_parameters(*before) == before
@@ -345,7 +346,15 @@ def test_a_roll_back_restores_everything_it_rolls_back(sim_valve, kind):
     assert float(report['publish_rate_hz']) == load_parameters()[1]['publish_rate']
     assert report['faults_active'] == ''
     probe.next_tick()
-    assert probe.latest()[1] == pytest.approx(steady_reading, rel=1e-6), 'as before the change'
+    # The absurd flow still held halts the restored model at its last good state: p_s
+    # reads at burst_pressure (an overpressure on the wire), the other chambers as before.
+    params, settings = load_parameters()
+    burst = params['burst_pressure'] + settings['ambient_pressure']
+    assert probe.latest()[1] == pytest.approx(burst, rel=1e-12)
+    for topic in PRESSURE_TOPICS[1:]:
+        assert probe.latest(topic)[1] == pytest.approx(steady_readings[topic], rel=1e-6), (
+            f'{topic} as before the change'
+        )
     take_flow(probe, FLOW)  # the absurd flow held would refuse any change
     probe.next_tick()
     assert probe.set_parameters(input_timeout=30.0)[0].successful  # unrelated

@@ -100,11 +100,11 @@ def test_a_meaningless_number_is_a_usage_error_naming_the_range(
 
 def test_every_numeric_option_is_bounded_and_its_help_gives_the_bounds():
     """
-    No option of any command parses a bare int or float; --help and docs/valve_node.md
-    state each bound.
+    No option of any command parses a bare int or float; --help and the docs give the bounds.
 
-    The class, not the examples: a numeric option added later without a bounded type
-    (options.number, flow_value, pressure_value) fails here.
+    docs/valve_node.md states each bound. The class, not the examples: a numeric option
+    added later without a bounded type (options.number, flow_value, pressure_value)
+    fails here.
     """
     from valve_sim.commands.cli import build_parser, SUBCOMMANDS
 
