@@ -42,16 +42,15 @@ from pathlib import Path
 
 import numpy as np
 from valve_sim.analysis.expectations import parse_expectations
-from valve_sim.core.errors import InputFileError
 from valve_sim.core.fault_schedule import (
     check_change,
     FaultEvent,
     parse_schedule,
     tick_index,
 )
+from valve_sim.core.input_files import InputFileError, read_yaml, SCENARIO_FILE
 from valve_sim.core.input_profile import parse_profile, ProfileError
 from valve_sim.core.parameters import (
-    _RosYamlLoader,
     check_value,
     FAULT_SCHEDULE,
     INJECTION_PREFIXES,
@@ -63,7 +62,6 @@ from valve_sim.core.parameters import (
     SPECS,
 )
 from valve_sim.core.quantities import FLOW, LENGTH, NUMBER, parse_quantity, PRESSURE, TIME
-import yaml
 
 
 TOP_KEYS = ('scenario', 'description', 'duration', 'valve', 'inputs', 'events', 'expect')
@@ -126,17 +124,8 @@ class BenchScenario:
 
 
 def read_document(path):
-    """Return the parsed YAML of a scenario file (floats as ROS 2 reads them: 1e-3 is one)."""
-    try:
-        return yaml.load(Path(path).read_text(), Loader=_RosYamlLoader)
-    except OSError as error:
-        raise InputFileError(f'cannot read scenario {path}: {error.strerror}') from error
-    except yaml.MarkedYAMLError as error:  # one line: the problem and where
-        mark = error.problem_mark
-        raise InputFileError(f'scenario {path} is not valid YAML: {error.problem} at line '
-                             f'{mark.line + 1}, column {mark.column + 1}') from error
-    except (yaml.YAMLError, UnicodeDecodeError) as error:
-        raise InputFileError(f'scenario {path} is not valid YAML: {error}') from error
+    """Return the parsed YAML of a scenario file (input_files: bounded, checked, one line)."""
+    return read_yaml(path, SCENARIO_FILE)
 
 
 def load_scenario(path, read_bag_column=None):

@@ -45,11 +45,12 @@ reads bags), so this module needs no bag library.
 
 import csv
 from dataclasses import dataclass
+import io
 import math
 from pathlib import Path
 
 import numpy as np
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import INPUT_CSV, InputFileError, read_text
 from valve_sim.core.quantities import FREQUENCY, NUMBER, parse_quantity, TIME
 
 
@@ -249,11 +250,11 @@ def _csv_column(path, document, key):
     for needed in ('time', 'value'):
         if needed not in document:
             raise ProfileError(key, f"needs '{needed}', the name of its column")
+    text = read_text(path, INPUT_CSV)
     try:
-        with open(path, newline='') as stream:
-            rows = list(csv.DictReader(stream))
-    except (OSError, UnicodeDecodeError, csv.Error) as error:
-        raise InputFileError(f'cannot read {path}: {getattr(error, "strerror", None) or error}')
+        rows = list(csv.DictReader(io.StringIO(text, newline='')))
+    except csv.Error as error:
+        raise InputFileError(f'{INPUT_CSV.name} {path}: {error}') from None
     columns = rows[0].keys() if rows else ()
     for needed in ('time', 'value'):
         if document[needed] not in columns:

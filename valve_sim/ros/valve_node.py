@@ -74,6 +74,12 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import (
+    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
+    MAX_ALIASES,
+    MAX_DEPTH,
+    MAX_EVENTS,
+)
 from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
@@ -97,6 +103,7 @@ from valve_sim.core.retuning import (
     dependent_change,
     merged_parameters,
 )
+from valve_sim.core.sensors import SENSOR_NAMES
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -104,6 +111,7 @@ from valve_sim.core.steady_state import (
 )
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
+from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
@@ -111,6 +119,7 @@ from valve_sim.ros.fault_injection import (
     FAULT_STATUS_TOPIC,
     FaultInjection,
     INJECTION_NAMES,
+    ScheduleLoader,
     split_changes,
 )
 from valve_sim.ros.inlet_input import InletFlowInput
@@ -171,6 +180,7 @@ class ReliefValveNode(Node):
     def __init__(self, argv=(), **kwargs):
         self._inlet_subscription = None  # taken by the tick, left out of subscriptions
         super().__init__(NODE_NAME, **kwargs)
+        self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
@@ -195,6 +205,10 @@ class ReliefValveNode(Node):
         self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
+        self.schedule_loader = ScheduleLoader()
+        self._opened_schedule = None  # the file a change being checked sets as fault_schedule
+        self._before_change = {}  # declared values of the change being checked, before it
+        self._undo = {}  # declared values before the last change that retuned the model
         self._create_outputs()
         self._inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
@@ -366,10 +380,10 @@ class ReliefValveNode(Node):
             faults, sensors = split_changes(changes)
             self.model.faults.changed(faults)
             self.injection.sensors.checked(sensors)
-            if FAULT_SCHEDULE in changes:
-                FaultInjection({}, changes[FAULT_SCHEDULE])
             check_limits(params, self.model.state, self.inlet_flow)
             self.model.trial(params, settings['step_size'], self.inlet_flow, faults or None)
+            if FAULT_SCHEDULE in changes:
+                self._open_schedule(changes[FAULT_SCHEDULE])
         except IntegrationError as error:
             return SetParametersResult(
                 successful=False,
@@ -380,29 +394,100 @@ class ReliefValveNode(Node):
             )
         except (ParameterError, SteadyStateError, InputFileError) as error:
             return SetParametersResult(successful=False, reason=str(error))
+        self._before_change = {
+            name: self.get_parameter(name).value
+            for name in changes
+            if name != FAULT_SCHEDULE
+        }
         return SetParametersResult(successful=True)
+
+    def _open_schedule(self, path):
+        """
+        Open (not read) a schedule file set live; '' sets none. Raises InputFileError.
+
+        The file is read and checked on the loader's thread (_take_schedule applies it).
+        """
+        if self.schedule_loader.loading:
+            raise ParameterError(
+                f'fault schedule {self.schedule_loader.loading} is still being read and '
+                'checked; set fault_schedule again once the log says it is in use'
+            )
+        self._opened_schedule = self.schedule_loader.opened(path) if path else None
 
     def _apply_parameter_change(self, parameters):
         """Post-set callback: the accepted change takes effect from the next tick."""
         changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
         if not changes or self._restoring:
             return
+        before, self._before_change = self._before_change, {}
         params, settings = self._merged(changes)
-        rate_changed = settings['publish_rate'] != self.settings['publish_rate']
         faults, sensors = split_changes(changes)
-        self.model.retune(params, settings['step_size'], faults or None)
+        if self.model.retune(params, settings['step_size'], faults or None):
+            self._undo = before  # what a roll-back of this change restores
         self.injection.sensors.change(sensors)
         if FAULT_SCHEDULE in changes:
-            self.injection.use_schedule(changes[FAULT_SCHEDULE])
+            self._load_schedule(changes[FAULT_SCHEDULE])
         if faults or sensors:
             self._publish_fault_status()
         self.input.max_inlet_flow = params['max_inlet_flow']
-        self.settings = settings
+        self._use_settings(settings)
         self._resume('a parameter change')
+        self.get_logger().info(f'parameters set: {changes}')
+
+    def _use_settings(self, settings):
+        """Use the run-time settings; a new publish_rate recreates the tick timer."""
+        rate_changed = settings['publish_rate'] != self.settings['publish_rate']
+        self.settings = settings
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()
-        self.get_logger().info(f'parameters set: {changes}')
+
+    def _load_schedule(self, path):
+        """Read the schedule file opened by the check on the loader's thread ('': none, now)."""
+        stream, self._opened_schedule = self._opened_schedule, None
+        if not path:
+            self.injection.use_events((), '')
+            return
+        self.schedule_loader.start(path, stream)
+        self.get_logger().info(f'reading fault schedule {path}: in use once it is checked')
+
+    def _take_schedule(self):
+        """
+        At a tick: use a schedule the loader has read and checked, from this tick on.
+
+        A file the loader refused is logged, counted as a refused parameter change, shown
+        in the diagnostics (fault_schedule_refused), and fault_schedule is set back to
+        the file in use.
+        """
+        loaded = self.schedule_loader.take()
+        if loaded is None:
+            return
+        path, events = loaded
+        if not isinstance(events, str):
+            self.injection.use_events(events, path)
+            self.get_logger().info(
+                f'fault schedule {path} in use: {len(events)} events, t from this tick'
+            )
+            return
+        self.status.schedule_refused = f'{path}: {events}'
+        self.status.counters.refused_fault_schedules += 1
+        self._count_refusal(f'fault_schedule {path}: {events}')
+        self._set_declared({FAULT_SCHEDULE: self.injection.schedule_path})
+
+    def _set_declared(self, values):
+        """Set declared parameter values {name: value} that differ, without the callbacks."""
+        changed = [
+            Parameter(name, value=value)
+            for name, value in values.items()
+            if self.get_parameter(name).value != value
+        ]
+        if not changed:
+            return
+        self._restoring = True
+        try:
+            super().set_parameters_atomically(changed)
+        finally:
+            self._restoring = False
 
     def _merged(self, changes):
         """(params, settings) with changes applied, checked; raises ParameterError."""
@@ -417,24 +502,29 @@ class ReliefValveNode(Node):
         return merged_parameters(self.model.params, changes), settings
 
     def _restore_parameters(self):
-        """Report the rolled-back model parameters and step size as the node's parameter values."""
-        in_use = {
-            **self.model.params,
-            'step_size': self.model.step_size,
-            **self.model.faults.as_parameters(),
-        }
-        changed = [
-            Parameter(name, value=value)
-            for name, value in in_use.items()
-            if self.get_parameter(name).value != value
-        ]
-        if not changed:
-            return
-        self._restoring = True
-        try:
-            super().set_parameters_atomically(changed)
-        finally:
-            self._restoring = False
+        """
+        After the model rolled back its last change: the rest of that change undone too.
+
+        Settings and sensor settings of the change return to their values before it,
+        and the node's declared parameters to what is in use (the model's parameters,
+        step size and faults, and every other value of the change): all agree again,
+        and a later change cannot bring back a part of the one undone.
+        """
+        undo, self._undo = self._undo, {}
+        sensors = {name: value for name, value in undo.items() if name in SENSOR_NAMES}
+        self.injection.sensors.change(sensors)
+        self._use_settings(
+            {**self.settings, **{n: v for n, v in undo.items() if n in SETTING_SPECS}}
+        )
+        self._set_declared(
+            {
+                **undo,
+                **self.model.params,
+                'step_size': self.model.step_size,
+                **self.model.faults.as_parameters(),
+            }
+        )
+        self._publish_fault_status()
 
     # --- stepping ---------------------------------------------------------------------------
 
@@ -447,27 +537,35 @@ class ReliefValveNode(Node):
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
         self._take_inputs(started)
-        self.input.stamp(now_ns)
-        if self.model.time_ns is None or now_ns < self.model.time_ns:
+        starting = self.model.time_ns is None or now_ns < self.model.time_ns
+        if starting:
             self._start(now_ns)
-            self._inject()
-            self._publish_state()
-        else:
+        self.input.stamp(now_ns)
+        if not starting:
             self._count_lateness(now_ns)
             self._advance(now_ns)
-            self._inject()
-            self._publish_state()
+        self._inject()
+        self._publish_state()
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
         if self._housekeeping_due:
             self._housekeeping()
 
     def _start(self, now_ns):
-        """Anchor the model time to the clock: at the first tick, or when the clock jumped back."""
+        """
+        Anchor the model time to the clock: at the first tick, or when the clock jumped back.
+
+        A jump back starts a new time base: everything timed (the roll-back window, the
+        schedule's origin, the sensors' lag, the input's age) moves with the model time.
+        """
         if self.model.time_ns is not None:
+            shift_ns = now_ns - self.model.time_ns
+            self.status.counters.clock_jumps_back += 1
             self.get_logger().warn(
-                f'clock jumped back by {(self.model.time_ns - now_ns) / NS_PER_S:g} s; '
-                'model time restarts from the clock'
+                f'clock jumped back by {-shift_ns / NS_PER_S:g} s; model time restarts from '
+                'the clock, in a new time base'
             )
+            self.injection.rebase(shift_ns)
+            self.input.rebase(shift_ns)
         self.model.start(now_ns)
         self.input.received_ns = self.input.received_ns or now_ns
         self.status.previous_slot_ns = None
@@ -514,6 +612,7 @@ class ReliefValveNode(Node):
 
     def _inject(self):
         """Apply the schedule's events due at this tick; watch for overpressure."""
+        self._take_schedule()
         changes = self.injection.due(self.model.time_ns)
         if changes:
             result = self.set_parameters_atomically(
@@ -727,6 +826,7 @@ class ReliefValveNode(Node):
         counters.accepted_inputs = self.input.accepted
         counters.rejected_inputs = self.input.rejected
         counters.lost_inputs = self.input.lost
+        counters.refused_clock_messages = self.clock_guard.refused
         self.input.single_publisher = self._inlet_subscription.get_publisher_count() == 1
 
     def _warn_rejected_inputs(self):
@@ -772,6 +872,9 @@ class ReliefValveNode(Node):
             'faults_active': self.model.faults.describe(),
             'sensor_dropout': ', '.join(self.injection.sensors.dropped_topics()),
             'overpressure': self.injection.overpressure,
+            'fault_schedule': self.injection.schedule_path,
+            'fault_schedule_loading': self.schedule_loader.loading,
+            'fault_schedule_refused': self.status.schedule_refused,
             'supply_pressure_saturated_at': self.status.saturated,
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
@@ -805,13 +908,21 @@ class ReliefValveNode(Node):
         return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
 
 
-STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
+STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)
 
 
 def parse_arguments(args):
     """valve_node's own command line (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
-        prog='valve_node', description='The virtual relief valve as a ROS 2 node.'
+        prog='valve_node',
+        description='The virtual relief valve as a ROS 2 node.',
+        epilog=(
+            f'fault_schedule: a regular file of {FAULT_SCHEDULE_FILE.limits()} and at most '
+            f'{MAX_EVENTS:,} events (YAML, UTF-8, at most {MAX_ALIASES} aliases, '
+            f'{MAX_DEPTH} levels deep), read in a process of its own when set live; a '
+            '/clock before 0 s or at or past 2^31 s is ignored and counted. '
+            'docs/valve_node.md, "Files it reads, and other hostile input".'
+        ),
     )
     parser.add_argument(
         '--executor',
@@ -874,6 +985,7 @@ def main(args=None):
     finally:
         if node.live_view is not None:
             node.live_view.close()
+        node.schedule_loader.close()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
