@@ -30,33 +30,24 @@ from pathlib import Path
 import time
 
 from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import number
 
 
 def progress(text):
     print(f'scenario: {text}', flush=True)
 
 
-def positive_rate(text):
-    from argparse import ArgumentTypeError
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise ArgumentTypeError(f'not a number: {text!r}') from None
-    if not 0.0 < value <= 1000.0:
-        raise ArgumentTypeError(f'the rate must be in (0, 1000], got {text!r}')
-    return value
-
-
 def add_arguments(parser):
     actions = parser.add_subparsers(dest='action', required=True, metavar='ACTION')
     run_parser = actions.add_parser('run', help='run a scenario and judge it',
+                                    formatter_class=parser.formatter_class,
                                     description='run a scenario on valve_node in lockstep and '
                                     'judge its expectations (exit 0 only if all hold)')
     run_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
     run_parser.add_argument('--out', metavar='DIR', help='folder for the bag, reports, figure '
                             'and logs (default: a new scenario_<name>_<date>-<time> folder here)')
-    run_parser.add_argument('--rate', type=positive_rate, metavar='R',
+    run_parser.add_argument('--rate', type=number('a rate', '', 0.0, 1000.0, low_open=True),
+                            metavar='R',
                             help='at most R times real time (1: real time, 0.5: half speed; '
                             'default: as fast as the nodes go)')
     run_parser.add_argument('--wait-topic', action='append', default=[], metavar='TOPIC',
@@ -65,6 +56,7 @@ def add_arguments(parser):
     run_parser.add_argument('--junit', type=Path, metavar='FILE.xml',
                             help='write the JUnit report here instead of DIR/junit.xml')
     check_parser = actions.add_parser('check', help='read and check a scenario without running',
+                                      formatter_class=parser.formatter_class,
                                       description='read and check a scenario file; prints what '
                                       'it runs')
     check_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
