@@ -28,6 +28,7 @@ the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 from argparse import ArgumentTypeError
 from datetime import datetime, timezone
 import math
+import sys
 
 from valve_sim.core.parameters import (
     check_value,
@@ -66,6 +67,15 @@ def pressure_value(text):
     value = quantity(text, units, 'pressure', '7MPa or 7e6')
     if not math.isfinite(value) or value <= 0.0:
         raise ArgumentTypeError(f'pressure must be finite and > 0, got {text!r}')
+    return value
+
+
+def gauge_pressure_value(text):
+    """Parse a gauge pressure, 0 and below allowed: '1e6', '-0.5bar', '1MPa' -> Pa (argparse type)."""
+    units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
+    value = quantity(text, units, 'pressure', '1MPa or 1e6')
+    if not math.isfinite(value):
+        raise ArgumentTypeError(f'pressure must be finite, got {text!r}')
     return value
 
 
@@ -118,6 +128,13 @@ OPTIONS = {
         'like the adjusting screw, after --params and --set (also preset_pressure in a file '
         'or --set)',
     },
+    '--tank-pressure': {
+        'type': gauge_pressure_value,
+        'metavar': 'P',
+        'help': "the tank's (return line's) pressure, gauge (e.g. 1MPa; default: tank_pressure "
+        'of the parameter file or --set, 0: the tank at ambient); the valve cracks that much '
+        'higher (docs/model.md, "Back pressure")',
+    },
     '--step-size': {
         'type': float,
         'metavar': 'S',
@@ -156,7 +173,7 @@ def add_options(parser, *flags, **changes):
 
 def load_from_arguments(args, injection=None):
     """
-    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
+    Return (params, settings) from --params, --set, --preset-pressure, --tank-pressure, --step-size.
 
     The sections of --params that apply are those rcl applies to valve_node in the
     command's --namespace, if it has one (else the root namespace). --step-size
@@ -172,11 +189,32 @@ def load_from_arguments(args, injection=None):
     preset = getattr(args, 'preset_pressure', None) or preset
     if preset is not None:
         params = with_preset_pressure(params, check_value('preset_pressure', preset))
+    if getattr(args, 'tank_pressure', None) is not None:
+        settings['tank_pressure'] = args.tank_pressure
+    check_tank_pressure(settings['tank_pressure'], params, settings)
+    if settings['tank_pressure'] and not hasattr(args, 'tank_pressure'):
+        print(
+            f"valve-sim: tank_pressure = {settings['tank_pressure']:g} Pa of the parameters is "
+            'not used here: this command takes the valve with the tank at ambient '
+            '(simulate and operating-point take --tank-pressure)',
+            file=sys.stderr,
+        )
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size
     if not 1e-7 <= settings['step_size'] <= 1e-4:
         raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
     return params, settings
+
+
+def check_tank_pressure(pressure, params, settings):
+    """Raise ParameterError unless pressure [Pa, gauge] is a valid tank pressure for the valve."""
+    from valve_sim.core.limits import tank_pressure_problem
+
+    problem = tank_pressure_problem(
+        pressure, params['burst_pressure'], settings['ambient_pressure']
+    )
+    if problem:
+        raise ParameterError(problem)
 
 
 def namespace_name(namespace):

@@ -102,7 +102,13 @@ DEFAULT_TOPICS = [
     'joint_states',
     '/diagnostics',
     'fault_status',  # valve_node's faults and sensor settings, each change (docs/faults.md)
+    'tank_pressure',  # the second input, if a bench sends it, and what the valve applied
+    'applied_tank_pressure',
+    'relief_flow',
 ]
+# The signals measured: the required ones, and the tank's pressure where it is recorded (the
+# measures then take the supply pressure above the tank, step_analysis).
+ANALYSED = REQUIRED + ('tank_pressure',)
 MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
 RECORDING_TASK = 'recording'
 MEASURES_QOS = QoSProfile(
@@ -181,7 +187,7 @@ PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
             f'{"topic" if kind == "topic" else "JointState joint"} of the {ROLE[name].meaning}',
             {},
         )
-        for name in REQUIRED
+        for name in ANALYSED
         for kind in ('topic', 'joint')
         if kind == 'topic' or ROLE[name].joint
     },
@@ -339,8 +345,8 @@ class ValveAnalyser(Node):
         super().__init__(NODE_NAME, **kwargs)
         settings = self._declare_parameters()
         self.signal_map = SignalMap(
-            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in REQUIRED},
-            joints={role: settings[f'{role}_joint'] for role in REQUIRED if ROLE[role].joint},
+            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
+            joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
             ambient_pressure=settings['ambient_pressure'],
         )
         self.wanted = dict.fromkeys(
@@ -356,7 +362,7 @@ class ValveAnalyser(Node):
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
         )
-        self.joiner = Joiner()
+        self.joiner = Joiner(optional=('tank_pressure',))
         self.analysis = StepAnalysis(settings['step_threshold'], settings['step_merge_time'])
         self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
