@@ -20,13 +20,14 @@ supply pressure p_s [Pa, gauge], main-valve displacement x [m], applied inlet
 flow q [m^3/s], the time [s] of the flow sample q came from and, where known, the
 tank pressure p_t [Pa, gauge]. The measures are taken on the pressure across the
 valve, p_s - p_t: the supply pressure above the tank, which is p_s itself with the
-tank at ambient (a back pressure then moves no measure of the valve's own response). valve_sim.analysis.measures.
-StepDetector finds the steps (up and down, any number); a step between two flow samples
-further apart than 1.5 pressure sample intervals (a coarse flowmeter) is located inside
-them from the pressure (measures.locate_step). Once a step's window (measures.WINDOW
-after it) is complete, valve_sim.analysis.measures.step_measures gives its six measures.
-Only the rows from measures.PRE_STEP_SPAN before the oldest open step on are kept, so
-memory stays bounded however long the stream.
+tank at ambient (a back pressure then moves no measure of the valve's own response).
+valve_sim.analysis.measures.StepDetector finds the steps (up and down, any number); a
+step between two flow samples further apart than 1.5 pressure sample intervals (a coarse
+flowmeter) is located inside them from the pressure (measures.locate_step). Once a
+step's window (measures.WINDOW after it) is complete,
+valve_sim.analysis.measures.step_measures gives its six measures. Only the rows from
+measures.PRE_STEP_SPAN before the oldest open step on are kept, so memory stays bounded
+however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
@@ -76,7 +77,7 @@ class StepAnalysis:
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
-        self.rows = deque()  # (t, p_s - p_t, x, p_t) from PRE_STEP_SPAN before the oldest open step
+        self.rows = deque()  # (t, p_s - p_t, x, p_t), PRE_STEP_SPAN before the oldest open step on
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row

@@ -80,7 +80,7 @@ class Recording:
     relief_flow: np.ndarray = None  # [m^3/s], NaN where the bag has none
 
     def valve_pressure(self):
-        """The supply pressure above the tank [Pa]: p_s - p_t where p_t is known, else p_s."""
+        """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
         if self.tank_pressure is None:
             return self.supply_pressure
         return np.where(
@@ -283,8 +283,8 @@ def print_steps(records, recording, first_number=1, paper=False):
             print(f'  note: {record["details"]["note"]}')
         if 'tank_pressure_pa' in details:
             print(
-                f'  pressure: the supply above the tank; tank at {details["tank_pressure_pa"]:.6g} '
-                'Pa (gauge) at the step'
+                '  pressure: the supply above the tank; tank at '
+                f'{details["tank_pressure_pa"]:.6g} Pa (gauge) at the step'
             )
         relief = flows_around(recording, record['t_step'])
         if relief:
@@ -466,8 +466,10 @@ def run_characteristic(args):
     else:
         from valve_sim.commands.characteristic import print_marks
 
-        print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}'
-              + (' (pressures: the supply above the recorded tank pressure)' if above_tank else ''))
+        print(
+            f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}'
+            + (' (pressures: the supply above the recorded tank pressure)' if above_tank else '')
+        )
         print_marks(marks)
     return 0
 

@@ -71,7 +71,7 @@ def pressure_value(text):
 
 
 def gauge_pressure_value(text):
-    """Parse a gauge pressure, 0 and below allowed: '1e6', '-0.5bar', '1MPa' -> Pa (argparse type)."""
+    """Parse a gauge pressure, 0 or below too: '1e6', '-0.5bar', '1MPa' -> Pa (argparse type)."""
     units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
     value = quantity(text, units, 'pressure', '1MPa or 1e6')
     if not math.isfinite(value):
@@ -173,13 +173,14 @@ def add_options(parser, *flags, **changes):
 
 def load_from_arguments(args, injection=None):
     """
-    Return (params, settings) from --params, --set, --preset-pressure, --tank-pressure, --step-size.
+    Return (params, settings) from the model's options, --params to --step-size.
 
     The sections of --params that apply are those rcl applies to valve_node in the
     command's --namespace, if it has one (else the root namespace). --step-size
-    overrides settings["step_size"]; fault and sensor settings go into the dict
-    injection (without one they are refused). A preset pressure (--preset-pressure,
-    else preset_pressure of --set or the file) sets the pilot spring preload last.
+    overrides settings["step_size"], --tank-pressure settings["tank_pressure"]; fault
+    and sensor settings go into the dict injection (without one they are refused). A
+    preset pressure (--preset-pressure, else preset_pressure of --set or the file) sets
+    the pilot spring preload last.
     """
     from valve_sim.core.steady_state import with_preset_pressure
 

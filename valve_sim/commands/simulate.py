@@ -176,7 +176,7 @@ def _scenario(args):
 
 
 def tank_profile(args, params, settings):
-    """The TankPressure of --tank-pressure (settings), --final-tank-pressure and their times."""
+    """Return the TankPressure of --tank-pressure (settings), --final-tank-pressure, its times."""
     step_time = args.step_time if args.tank_step_time is None else args.tank_step_time
     if not 0.0 <= step_time <= args.end_time or not args.tank_ramp_time >= 0.0:
         raise ParameterError('need 0 <= --tank-step-time <= --end-time and --tank-ramp-time >= 0')
@@ -318,7 +318,8 @@ def run(args):
             '(details.overpressure; stderr)',
         )
         measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
-    relief = relief_flows(params, waveforms, faults) if args.csv or args.plot or args.mcap else None
+    written = args.csv or args.plot or args.mcap
+    relief = relief_flows(params, waveforms, faults) if written else None
     if args.csv:
         write_csv(args.csv, waveforms, relief)
     if args.plot:

@@ -201,6 +201,6 @@ class RealTimeModel:
         self.resume()
 
     def relief_flows(self):
-        """Return the flows into the tank [m^3/s] of the state: (relief, main stage, pilot, seat)."""
+        """Return the flows into the tank [m^3/s]: (relief, main stage, pilot, seat leakage)."""
         main, pilot, leakage = relief_flows(self.state, self._coefficients, self.tank_pressure)
         return main + pilot + leakage, main, pilot, leakage

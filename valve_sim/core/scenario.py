@@ -16,8 +16,8 @@
 The paper's test as data: an inlet-flow step (or ramp) from one steady flow to another.
 
 TankPressure is the second input's profile the same way: the tank's (back) pressure held,
-stepped or ramped. Kept apart from the simulation so that the command line and the paper's reference
-data can name scenarios without loading the integrator (numba) or scipy.
+stepped or ramped. Kept apart from the simulation so that the command line and the
+paper's reference data can name scenarios without loading the integrator (numba) or scipy.
 """
 
 from dataclasses import dataclass

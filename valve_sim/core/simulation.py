@@ -20,8 +20,8 @@ initial_flow, the inlet flow changed to final_flow at step_time (at once, or ove
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve. The tank's pressure, the second input, is a TankPressure profile
 (held, stepped or ramped; the tank at ambient by default), and relief_flows() gives what
-the valve passed to the tank at each sample. Faults (a FaultSet) hold from the start; a fault schedule
-(valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
+the valve passed to the tank at each sample. Faults (a FaultSet) hold from the start; a
+fault schedule (valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 
 simulate() integrates the whole run. simulate_batch(), for studies, runs many
 parameter sets through one scenario on the lanes kernel and does not integrate
@@ -130,7 +130,7 @@ RELIEF_COLUMNS = ('relief_flow', 'main_stage_flow', 'pilot_flow', 'seat_leakage_
 
 @jit
 def _relief_rows(states, tank_pressures, c, rows, out):
-    """Write the relief flow and its parts (RELIEF_COLUMNS) of the given rows of states into out."""
+    """Write the relief flow and its parts (RELIEF_COLUMNS) of the rows of states into out."""
     for i in rows:
         main, pilot, leakage = model_relief_flows(states[i], c, tank_pressures[i])
         out[i, 0] = main + pilot + leakage

@@ -257,7 +257,7 @@ def steady_coefficients(params, faults):
 
 
 def empty_valve(tank_pressure=0.0):
-    """Return the state of the closed valve without inflow: every chamber at the tank's pressure."""
+    """Return the closed valve without inflow: every chamber at the tank's pressure."""
     state = np.zeros(8)
     state[[P_S, P_M, P_P, P_C]] = tank_pressure
     return state

@@ -895,7 +895,7 @@ class ReliefValveNode(Node):
 
     def _tank_report(self, now_ns):
         """
-        The tank input's diagnostics values: pressure, source, counts, age and staleness.
+        Return the tank input's diagnostics values: pressure, source, counts, age, staleness.
 
         Stale as inlet_flow is (input_timeout), once the topic has set the tank pressure.
         """
