@@ -191,15 +191,17 @@ def write_csv(path, waveforms, relief):
     """
     Waveforms as CSV, SI units in the header.
 
-    Time, the applied inputs (inlet flow, tank pressure gauge), the eight states and
-    the flows to the tank (relief: simulation.relief_flows).
+    Time, the applied inlet flow, the eight states, the applied tank pressure (gauge)
+    and the flows to the tank (relief: simulation.relief_flows); the columns before
+    the tank's are those of the runs before it existed.
     """
     from valve_sim.core.model import STATE_NAMES
     from valve_sim.core.simulation import RELIEF_COLUMNS
 
     header = (
-        ['time_s', 'inlet_flow_m3_s', 'tank_pressure_Pa']
+        ['time_s', 'inlet_flow_m3_s']
         + [f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)]
+        + ['tank_pressure_Pa']
         + [f'{name}_m3_s' for name in RELIEF_COLUMNS]
     )
     with open(path, 'w', newline='') as stream:
@@ -210,9 +212,8 @@ def write_csv(path, waveforms, relief):
             relief,
         ):
             writer.writerow(
-                [f'{t:.7f}', f'{q:.9e}', f'{p_t:.9e}']
-                + [f'{v:.9e}' for v in state]
-                + [f'{v:.9e}' for v in flows]
+                [f'{t:.7f}', f'{q:.9e}']
+                + [f'{v:.9e}' for v in (*state, p_t, *flows)]
             )
 
 
