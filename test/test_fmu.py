@@ -23,7 +23,7 @@ two at once, bad inputs, refused parameter changes, an overpressure and a diverg
 """
 
 import csv
-from ctypes import c_void_p
+from ctypes import byref
 import json
 import math
 
@@ -37,14 +37,17 @@ from valve_sim.core.parameters import PARAMETERS, SPECS
 from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
 
 fmpy = pytest.importorskip('fmpy')
-from fmpy.fmi1 import FMICallException  # noqa: E402, I100 (only with fmpy)
+from fmpy.fmi1 import calloc, FMICallException, free  # noqa: E402, I100 (only with fmpy)
 from fmpy.fmi2 import (  # noqa: E402
     FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
     fmi2Discard,
     fmi2Error,
 )
+from fmpy.logging import addLoggerProxy  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 
@@ -81,8 +84,9 @@ class Valve:
         self.log = []
         callbacks = fmi2CallbackFunctions()
         callbacks.logger = fmi2CallbackLoggerTYPE(self._logged)
-        callbacks.allocateMemory = fmpy.calloc
-        callbacks.freeMemory = fmpy.free
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(byref(callbacks))  # formats the message as a C master would
         self._callbacks = callbacks  # kept alive as long as the instance
         self.fmu = FMU2Slave(
             guid=self.description.guid, unzipDirectory=str(folder),
@@ -183,3 +187,31 @@ def test_fmpy_runs_the_papers_step_as_simulate_does(fmu, offline):
     assert {name: fmu_measures[name] for name in MEASURE_NAMES} == {
         name: measures[name] for name in MEASURE_NAMES
     }
+
+
+def test_probe(unzipped):
+    a = Valve(unzipped, 'a').initialise()
+    a.step()
+    print(a.get('supply_pressure'))
+    a.set(inlet_flow=float('nan'))
+    try:
+        a.step()
+    except FMICallException as e:
+        print('EXC', e, e.status)
+    print(a.log)
+    a.set(inlet_flow=Q0)
+    a.step()
+    print(a.get('supply_pressure'))
+    c = Valve(unzipped, 'c', {'step_size': 5e-5, 'poppet_chamber_volume': 1e-9}).initialise()
+    for i in range(3):
+        try:
+            c.step()
+        except FMICallException as e:
+            print('EXC', e, e.status)
+    print(c.log[-3:], c.fmu.getBoolean([c.refs['halted']]))
+    b = Valve(unzipped, 'b', {'max_inlet_flow': 10.0}).initialise()
+    b.set(inlet_flow=1.0)
+    for i in range(50):
+        b.step()
+    print(b.log[-3:], b.get('supply_pressure'))
+    assert 0

@@ -33,11 +33,13 @@ Variables (SI; pressures gauge, above the ambient pressure, as `valve-sim simula
 doStep integrates the whole internal steps that fit up to the communication point and
 carries the remainder into the next step, as valve_node does (RealTimeModel), so any
 communication step works. A parameter change between steps is checked and trial-run
-as valve_node checks it; one refused, or an invalid input, ends the step with an
-exception, which pythonfmu returns as fmi2Error. An overpressure halts the model as it
-halts valve_node (supply_pressure at burst_pressure, the rest held) with a logged
-warning and fmi2OK; a divergence holds the state and returns fmi2Discard with the
-reason logged. A new input or parameter change lets a halted model advance again.
+as valve_node checks it. An overpressure halts the model as it halts valve_node
+(supply_pressure at burst_pressure, the rest held): fmi2OK with a logged warning. A
+divergence keeps the last good state: fmi2Discard with the reason logged, until an input
+or a parameter changes. An invalid input (NaN, negative, beyond the limits), a refused
+parameter change or a failed start: fmi2Discard, nothing integrated, the reason logged
+with status error; the instance stays usable. No call lets an exception out: pythonfmu
+0.7 returns fmi2Fatal for one and releases the slave object, which ends the instance.
 """
 
 from pathlib import Path
@@ -71,7 +73,7 @@ from valve_sim.core.steady_state import cracking_pressure
 PARAMETER_FILE = 'parameters.yaml'  # in the FMU's resources/: the defaults it was built with
 INITIAL_STATES = ('steady', 'closed')
 NEVER_SKIP_NS = 2**62  # the master's clock is the model's: no lag is ever skipped
-REFUSED = (ParameterError, SteadyStateError, IntegrationError)
+REFUSED = (ParameterError, SteadyStateError, IntegrationError)  # what a start or change meets
 
 # The SI base-unit exponents of each unit used (FMI 2.0 UnitDefinitions).
 BASE_UNITS = {
@@ -150,7 +152,8 @@ class ReliefValve(Fmi2Slave):
         self._start_ns = 0
         self._clock_ns = None
         self._applied = None  # (inlet flow, tank pressure) of the last step
-        self._saturated = False
+        self._saturated = False  # halted by an overpressure: p_s shown at burst_pressure
+        self._failed = None  # why the start failed
         for spec in PARAMETERS:
             setattr(self, spec.name, self._defaults[spec.name])
             self._parameter(spec)
@@ -225,24 +228,30 @@ class ReliefValve(Fmi2Slave):
         root.insert(list(root).index(root.find('CoSimulation')) + 1, units)
         return root
 
-    # --- FMI calls ---------------------------------------------------------------------------
+    # --- FMI calls: none lets an exception out (pythonfmu would end the instance) ------------
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self._start_ns = round(start_time * NS_PER_S)
 
     def exit_initialization_mode(self):
         """Start the model: the steady state at the inputs, or the closed valve."""
-        if self.initial_state not in INITIAL_STATES:
-            raise ParameterError(
-                f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
-                f'got {self.initial_state!r}'
-            )
-        params, preset = self._requested(self._defaults, self._default_preset)
-        step_size = check_value('step_size', float(self.step_size))
-        inlet_flow, tank_pressure = self._inputs(params)
-        start_flow = inlet_flow if self.initial_state == 'steady' else 0.0
-        self.model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
-        self.model.start(self._start_ns)
+        try:
+            if self.initial_state not in INITIAL_STATES:
+                raise ParameterError(
+                    f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
+                    f'got {self.initial_state!r}'
+                )
+            params, preset = self._requested(self._defaults, self._default_preset)
+            step_size = check_value('step_size', self.step_size)
+            inlet_flow, tank_pressure = self._inputs(params)
+            start_flow = inlet_flow if self.initial_state == 'steady' else 0.0
+            model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
+        except REFUSED as error:
+            self._failed = f'the FMU could not start: {error}'
+            self.log(self._failed, Fmi2Status.error)
+            return
+        self.model = model
+        model.start(self._start_ns)
         self._clock_ns = self._start_ns
         self._applied = (start_flow, tank_pressure)
         self._show(params, preset)
@@ -252,27 +261,47 @@ class ReliefValve(Fmi2Slave):
         """
         Integrate from current_time over step_size [s]; True: fmi2OK, False: fmi2Discard.
 
-        Raises (fmi2Error) for an invalid input or a refused parameter change, before
-        anything is integrated.
+        Discarded, with the reason logged: a step refused (an invalid input, a refused
+        parameter change, a start that failed, a step not from the FMU's time), of which
+        nothing is integrated, and a divergence, of which the last good state is kept.
+        Either way the FMU stays at current_time; the master may redo the step.
         """
+        try:
+            self._step(current_time, step_size)
+        except IntegrationError as error:
+            self.log(f'{error} The last good state is held; the step is discarded, as are '
+                     'the next until an input or a parameter changes.', Fmi2Status.discard)
+            return False
+        except REFUSED as error:
+            self.log(f'doStep at t = {current_time!r} s refused, nothing integrated: {error}',
+                     Fmi2Status.error)
+            return False
+        return True
+
+    def _step(self, current_time, step_size):
+        """do_step's work; raises what refuses the step or IntegrationError."""
         model = self.model
         if model is None:
-            raise RuntimeError('doStep before the FMU was initialised')
+            raise ParameterError(self._failed or 'doStep before the FMU was initialised')
         begin_ns = round(current_time * NS_PER_S)
         if begin_ns != self._clock_ns or not step_size >= 0.0:
-            raise ValueError(
-                f'doStep from t = {current_time!r} s over {step_size!r} s: the FMU is at '
-                f't = {self._clock_ns / NS_PER_S!r} s and steps forward only'
+            raise ParameterError(
+                f'a step over {step_size!r} s from t = {current_time!r} s: the FMU is at '
+                f't = {self._clock_ns / NS_PER_S!r} s and steps forward from there only'
             )
         inlet_flow, tank_pressure = self._inputs(model.params)
         retuned = self._retune(inlet_flow, tank_pressure)
         if retuned or (inlet_flow, tank_pressure) != self._applied:
             self._resume('a parameter change' if retuned else 'a new input')
+        self._applied = (inlet_flow, tank_pressure)
+        if model.halted is not None and not self._saturated:
+            raise IntegrationError('The model is halted after a divergence (logged before).')
         now_ns = round((current_time + step_size) * NS_PER_S)
         try:
             model.advance_to(now_ns, inlet_flow, NEVER_SKIP_NS, tank_pressure)
         except OverpressureError as error:
-            self._halt(now_ns, error)
+            model.hold_until(now_ns)
+            model.halt(str(error))
             self._saturated = True
             self.log(
                 f'{error} The model halts there, as valve_node does: it holds its last good '
@@ -281,24 +310,22 @@ class ReliefValve(Fmi2Slave):
                 'an input or a parameter changes', Fmi2Status.warning,
             )
         except IntegrationError as error:
-            self._halt(now_ns, error)
-            self.log(f'{error} The last good state is held; the step is discarded.',
-                     Fmi2Status.discard)
+            model.halt(str(error))
+            self._update_outputs()
+            raise
         self._clock_ns = now_ns
-        self._applied = (inlet_flow, tank_pressure)
         self._update_outputs()
-        return model.halted is None or self._saturated
 
     # --- the adapter -------------------------------------------------------------------------
 
     def _inputs(self, params):
-        """Return the inputs (inlet flow, tank pressure) as floats; ValueError if invalid."""
+        """Return the inputs (inlet flow, tank pressure) as floats; ParameterError if invalid."""
         flow, tank = self.inlet_flow, self.tank_pressure
         problem = inlet_flow_problem(flow, params['max_inlet_flow']) or tank_pressure_problem(
             tank, params['burst_pressure']
         )
         if problem:
-            raise ValueError(f'input refused, nothing integrated: {problem}')
+            raise ParameterError(f'input refused: {problem}')
         return float(flow), float(tank)
 
     def _requested(self, params, preset):
@@ -350,11 +377,6 @@ class ReliefValve(Fmi2Slave):
         for name in SPECS:
             setattr(self, name, params[name])
         self.preset_pressure = self._preset = preset
-
-    def _halt(self, now_ns, error):
-        self.model.hold_until(now_ns)
-        self.model.halt(str(error))
-        self._saturated = False
 
     def _resume(self, cause):
         if self.model.halted is not None:
