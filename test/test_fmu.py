@@ -34,6 +34,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import PARAMETERS, SPECS
+from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
 
 fmpy = pytest.importorskip('fmpy')
@@ -75,33 +76,42 @@ def unzipped(fmu, tmp_path_factory):
     return folder, fmpy.read_model_description(str(fmu))
 
 
+LOGS = {}  # instance name: [(status, message)] it logged
+
+
+def _logged(_environment, instance, status, _category, message):
+    LOGS[instance.decode()].append((status, message.decode()))
+
+
+# One set for all instances: FMPy's logger proxy (which formats the message as a C
+# master would) keeps one logger for the process.
+CALLBACKS = fmi2CallbackFunctions(
+    logger=fmi2CallbackLoggerTYPE(_logged),
+    allocateMemory=fmi2CallbackAllocateMemoryTYPE(calloc),
+    freeMemory=fmi2CallbackFreeMemoryTYPE(free),
+)
+addLoggerProxy(byref(CALLBACKS))
+
+
 class Valve:
     """One FMU instance driven by FMI 2.0 calls through FMPy, its log kept."""
 
     def __init__(self, unzipped, name, parameters=None, strings=None):
         folder, self.description = unzipped
         self.refs = {v.name: v.valueReference for v in self.description.modelVariables}
-        self.log = []
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(self._logged)
-        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(callbacks))  # formats the message as a C master would
-        self._callbacks = callbacks  # kept alive as long as the instance
+        assert name not in LOGS, 'one name per instance: the log is kept by name'
+        self.log = LOGS[name] = []
         self.fmu = FMU2Slave(
             guid=self.description.guid, unzipDirectory=str(folder),
             modelIdentifier=self.description.coSimulation.modelIdentifier, instanceName=name,
         )
-        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        self.fmu.instantiate(callbacks=CALLBACKS, loggingOn=True)
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()
         self.set(**(parameters or {}))
         for key, value in (strings or {}).items():
             self.fmu.setString([self.refs[key]], [value])
         self.time = 0.0
-
-    def _logged(self, _environment, _instance, status, _category, message):
-        self.log.append((status, message.decode()))
 
     def initialise(self):
         self.fmu.exitInitializationMode()
@@ -189,29 +199,81 @@ def test_fmpy_runs_the_papers_step_as_simulate_does(fmu, offline):
     }
 
 
-def test_probe(unzipped):
-    a = Valve(unzipped, 'a').initialise()
-    a.step()
-    print(a.get('supply_pressure'))
-    a.set(inlet_flow=float('nan'))
-    try:
-        a.step()
-    except FMICallException as e:
-        print('EXC', e, e.status)
-    print(a.log)
-    a.set(inlet_flow=Q0)
-    a.step()
-    print(a.get('supply_pressure'))
-    c = Valve(unzipped, 'c', {'step_size': 5e-5, 'poppet_chamber_volume': 1e-9}).initialise()
-    for i in range(3):
-        try:
-            c.step()
-        except FMICallException as e:
-            print('EXC', e, e.status)
-    print(c.log[-3:], c.fmu.getBoolean([c.refs['halted']]))
-    b = Valve(unzipped, 'b', {'max_inlet_flow': 10.0}).initialise()
-    b.set(inlet_flow=1.0)
-    for i in range(50):
-        b.step()
-    print(b.log[-3:], b.get('supply_pressure'))
-    assert 0
+def trace(valve, steps, size=INTERVAL):
+    """Step valve steps times; return the supply pressure after each step."""
+    pressures = []
+    for _ in range(steps):
+        valve.step(size)
+        pressures.append(valve.get('supply_pressure')[0])
+    return np.array(pressures)
+
+
+def test_two_instances_with_different_parameters_do_not_interfere(unzipped, reference):
+    lower = with_preset_pressure(reference, 6e6)
+    first = Valve(unzipped, 'first', {'preset_pressure': 6e6}).initialise()
+    second = Valve(unzipped, 'second').initialise()
+    assert first.get('pilot_spring_preload') == [lower['pilot_spring_preload']]
+    assert first.get('supply_pressure') == [steady_state(lower, Q0)[P_S]]
+    assert second.get('supply_pressure') == [steady_state(reference, Q0)[P_S]]
+    first.set(inlet_flow=Q1)
+    second.set(inlet_flow=Q1)
+    traces = {first: [], second: []}
+    for _ in range(200):  # interleaved, as a master steps two valves
+        for valve in (first, second):
+            traces[valve] += trace(valve, 1).tolist()
+    for valve in (first, second):
+        valve.close()
+    for valve, params in ((first, lower), (second, reference)):  # each as if alone
+        offline = simulate(params, Scenario(Q0, Q1, 0.0, 0.2), record_interval=INTERVAL)
+        np.testing.assert_allclose(traces[valve], offline['supply_pressure'][1:], rtol=1e-12)
+    assert abs(traces[first][-1] - traces[second][-1]) > 5e5  # 1 MPa lower preset
+
+
+def test_any_communication_step_carries_the_remainder_over(unzipped):
+    """1 ms steps, 0.3333 ms steps, 1 us steps: the same state at the same time."""
+    valves = [Valve(unzipped, f'valve{i}').initialise() for i in range(3)]
+    for valve in valves:
+        valve.set(inlet_flow=Q1)
+    trace(valves[0], 50)
+    while valves[1].time + 3.333e-4 < 0.05:
+        valves[1].step(3.333e-4)
+    valves[1].step(0.05 - valves[1].time)
+    trace(valves[2], 100, 1e-6)
+    valves[2].step(0.05 - valves[2].time)
+    names = ('supply_pressure', 'pilot_pressure', 'main_valve_displacement', 'relief_flow')
+    results = [valve.get(*names) for valve in valves]
+    for valve in valves:
+        valve.close()
+    assert results[1] == results[0] and results[2] == results[0]
+
+
+def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on(
+    unzipped, reference
+):
+    valve = Valve(unzipped, 'refusing').initialise()
+    good = Valve(unzipped, 'good').initialise()
+    trace(valve, 5)
+    held = valve.get(*OUTPUTS[:3])
+    bad = [
+        {'inlet_flow': math.nan}, {'inlet_flow': -1e-4}, {'inlet_flow': 1.0},
+        {'tank_pressure': math.inf}, {'main_valve_mass': math.nan},
+        {'preset_pressure': 1e9}, {'step_size': 1.0},
+    ]
+    for values in bad:
+        valve.set(**values)
+        with pytest.raises(FMICallException) as refusal:
+            valve.step()
+        assert refusal.value.status == fmi2Discard  # not fmi2OK, and no crash
+        status, message = valve.log[-1]
+        assert status == fmi2Error and 'refused' in message, values
+        assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
+        valve.set(inlet_flow=Q0, tank_pressure=0.0)
+    assert valve.get('main_valve_mass', 'preset_pressure', 'step_size') == [
+        reference['main_valve_mass'], cracking_pressure(reference), 1e-5
+    ]  # the refused parameters are back at the values in use
+    trace(good, 5)
+    valve.set(inlet_flow=Q1)
+    good.set(inlet_flow=Q1)
+    assert np.array_equal(trace(valve, 20), trace(good, 20))  # as if nothing bad came
+    valve.close()
+    good.close()
