@@ -47,6 +47,7 @@ from fmpy.fmi2 import (  # noqa: E402
     fmi2CallbackLoggerTYPE,
     fmi2Discard,
     fmi2Error,
+    fmi2Warning,
 )
 from fmpy.logging import addLoggerProxy  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
@@ -277,3 +278,81 @@ def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on
     assert np.array_equal(trace(valve, 20), trace(good, 20))  # as if nothing bad came
     valve.close()
     good.close()
+
+
+def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, reference):
+    valve = Valve(unzipped, 'overpressure', {'max_inlet_flow': 10.0}).initialise()
+    valve.set(inlet_flow=1.0)
+    trace(valve, 3)  # fmi2OK throughout: no exception
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
+    assert valve.get('supply_pressure') == [reference['burst_pressure']]
+    warnings = [message for status, message in valve.log if status == fmi2Warning]
+    assert len(warnings) == 1 and 'overpressure' in warnings[0]
+    valve.set(inlet_flow=Q0)  # a new input: the valve advances again
+    pressures = trace(valve, 50)
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
+    assert np.all(pressures < reference['burst_pressure'])
+    valve.close()
+
+
+def test_a_divergence_is_discarded_with_its_reason_until_a_parameter_changes(
+    unzipped, reference
+):
+    too_small = {'step_size': 5e-5, 'poppet_chamber_volume': 1e-9}  # RK4 unstable there
+    valve = Valve(unzipped, 'diverging', too_small).initialise()
+    start = valve.get(*OUTPUTS[:3])
+    for _ in range(2):
+        with pytest.raises(FMICallException) as discard:
+            valve.step()
+        assert discard.value.status == fmi2Discard
+    assert valve.log[0][0] == fmi2Discard and 'diverged' in valve.log[0][1]
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
+    assert valve.get(*OUTPUTS[:3]) == start  # the last good state, finite
+    valve.set(poppet_chamber_volume=reference['poppet_chamber_volume'])
+    assert np.all(np.isfinite(trace(valve, 10)))
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
+    valve.close()
+
+
+def test_the_start_closed_or_at_the_steady_state_of_the_inputs(unzipped, reference):
+    names = ('supply_pressure', 'intermediate_pressure', 'pilot_pressure',
+             'poppet_chamber_pressure', 'main_valve_displacement', 'poppet_displacement')
+    closed = Valve(unzipped, 'closed', strings={'initial_state': 'closed'}).initialise()
+    assert closed.get(*names) == [steady_state(reference, 0.0)[i] for i in (0, 1, 2, 3, X, 6)]
+    filling = trace(closed, 5)  # from the inlet flow
+    assert filling[0] > 0.0 and np.all(np.diff(filling) > 0.0)
+    tank = 1e6
+    steady = Valve(unzipped, 'steady', {'tank_pressure': tank}).initialise()
+    assert steady.get(*names) == [steady_state(reference, Q0, tank_pressure=tank)[i]
+                                  for i in (0, 1, 2, 3, X, 6)]
+    main, pilot, leakage = steady.get('main_stage_flow', 'pilot_flow', 'seat_leakage_flow')
+    assert steady.get('relief_flow') == [main + pilot + leakage]
+    assert main + pilot + leakage == pytest.approx(Q0, rel=1e-9)  # steady: all flow relieved
+    wrong = Valve(unzipped, 'wrong', strings={'initial_state': 'open'}).initialise()
+    with pytest.raises(FMICallException) as refusal:
+        wrong.step()
+    assert refusal.value.status == fmi2Discard
+    assert any(status == fmi2Error and "initial_state must be one of steady, closed" in message
+               for status, message in wrong.log)
+    for valve in (closed, steady, wrong):
+        valve.close()
+
+
+def test_preset_pressure_and_the_model_parameters_are_tunable_as_in_valve_node(
+    unzipped, reference
+):
+    valve = Valve(unzipped, 'tuned').initialise()
+    valve.set(preset_pressure=6.5e6)
+    trace(valve, 1)
+    assert valve.get('pilot_spring_preload') == [
+        with_preset_pressure(reference, 6.5e6)['pilot_spring_preload']
+    ]
+    valve.set(main_spring_stiffness=reference['main_spring_stiffness'] * 1.1)
+    trace(valve, 1)
+    retuned = {
+        **with_preset_pressure(reference, 6.5e6),
+        'main_spring_stiffness': reference['main_spring_stiffness'] * 1.1,
+    }
+    assert valve.get('preset_pressure') == [pytest.approx(cracking_pressure(retuned), rel=1e-12)]
+    assert trace(valve, 300)[-1] == pytest.approx(steady_state(retuned, Q0)[P_S], rel=1e-3)
+    valve.close()
