@@ -40,7 +40,6 @@ from valve_sim.core.steady_state import cracking_pressure, steady_state, with_pr
 fmpy = pytest.importorskip('fmpy')
 from fmpy.fmi1 import calloc, FMICallException, free  # noqa: E402, I100 (only with fmpy)
 from fmpy.fmi2 import (  # noqa: E402
-    FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
     fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
@@ -48,6 +47,7 @@ from fmpy.fmi2 import (  # noqa: E402
     fmi2Discard,
     fmi2Error,
     fmi2Warning,
+    FMU2Slave,
 )
 from fmpy.logging import addLoggerProxy  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
@@ -71,7 +71,7 @@ def fmu(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def unzipped(fmu, tmp_path_factory):
-    """The FMU extracted once, with its model description: for direct FMI calls."""
+    """Extract the FMU once; return the folder and its model description (direct FMI calls)."""
     folder = tmp_path_factory.mktemp('unzipped')
     fmpy.extract(str(fmu), str(folder))
     return folder, fmpy.read_model_description(str(fmu))
@@ -109,7 +109,7 @@ class Valve:
         self.fmu.instantiate(callbacks=CALLBACKS, loggingOn=True)
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()
-        self.set(**(parameters or {}))
+        self.set_values(**(parameters or {}))
         for key, value in (strings or {}).items():
             self.fmu.setString([self.refs[key]], [value])
         self.time = 0.0
@@ -118,7 +118,7 @@ class Valve:
         self.fmu.exitInitializationMode()
         return self
 
-    def set(self, **values):
+    def set_values(self, **values):
         for name, value in values.items():
             self.fmu.setReal([self.refs[name]], [value])
 
@@ -148,8 +148,10 @@ def test_fmpy_validates_the_fmu_and_its_variables_carry_units_and_sources(fmu, r
     assert float(variables['preset_pressure'].start) == cracking_pressure(reference)
     assert variables['step_size'].variability == 'tunable'
     assert variables['initial_state'].variability == 'fixed'
-    assert {n: (variables[n].causality, variables[n].unit) for n in ('inlet_flow',
-            'tank_pressure')} == {'inlet_flow': ('input', 'm^3/s'), 'tank_pressure': ('input', 'Pa')}
+    assert (variables['inlet_flow'].causality, variables['inlet_flow'].unit) == (
+        'input', 'm^3/s')
+    assert (variables['tank_pressure'].causality, variables['tank_pressure'].unit) == (
+        'input', 'Pa')
     for name in ('supply_pressure', 'intermediate_pressure', 'pilot_pressure',
                  'poppet_chamber_pressure'):
         assert (variables[name].causality, variables[name].unit) == ('output', 'Pa')
@@ -216,8 +218,8 @@ def test_two_instances_with_different_parameters_do_not_interfere(unzipped, refe
     assert first.get('pilot_spring_preload') == [lower['pilot_spring_preload']]
     assert first.get('supply_pressure') == [steady_state(lower, Q0)[P_S]]
     assert second.get('supply_pressure') == [steady_state(reference, Q0)[P_S]]
-    first.set(inlet_flow=Q1)
-    second.set(inlet_flow=Q1)
+    first.set_values(inlet_flow=Q1)
+    second.set_values(inlet_flow=Q1)
     traces = {first: [], second: []}
     for _ in range(200):  # interleaved, as a master steps two valves
         for valve in (first, second):
@@ -234,7 +236,7 @@ def test_any_communication_step_carries_the_remainder_over(unzipped):
     """1 ms steps, 0.3333 ms steps, 1 us steps: the same state at the same time."""
     valves = [Valve(unzipped, f'valve{i}').initialise() for i in range(3)]
     for valve in valves:
-        valve.set(inlet_flow=Q1)
+        valve.set_values(inlet_flow=Q1)
     trace(valves[0], 50)
     while valves[1].time + 3.333e-4 < 0.05:
         valves[1].step(3.333e-4)
@@ -261,20 +263,20 @@ def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on
         {'preset_pressure': 1e9}, {'step_size': 1.0},
     ]
     for values in bad:
-        valve.set(**values)
+        valve.set_values(**values)
         with pytest.raises(FMICallException) as refusal:
             valve.step()
         assert refusal.value.status == fmi2Discard  # not fmi2OK, and no crash
         status, message = valve.log[-1]
         assert status == fmi2Error and 'refused' in message, values
         assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
-        valve.set(inlet_flow=Q0, tank_pressure=0.0)
+        valve.set_values(inlet_flow=Q0, tank_pressure=0.0)
     assert valve.get('main_valve_mass', 'preset_pressure', 'step_size') == [
         reference['main_valve_mass'], cracking_pressure(reference), 1e-5
     ]  # the refused parameters are back at the values in use
     trace(good, 5)
-    valve.set(inlet_flow=Q1)
-    good.set(inlet_flow=Q1)
+    valve.set_values(inlet_flow=Q1)
+    good.set_values(inlet_flow=Q1)
     assert np.array_equal(trace(valve, 20), trace(good, 20))  # as if nothing bad came
     valve.close()
     good.close()
@@ -282,13 +284,13 @@ def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on
 
 def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, reference):
     valve = Valve(unzipped, 'overpressure', {'max_inlet_flow': 10.0}).initialise()
-    valve.set(inlet_flow=1.0)
+    valve.set_values(inlet_flow=1.0)
     trace(valve, 3)  # fmi2OK throughout: no exception
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
     assert valve.get('supply_pressure') == [reference['burst_pressure']]
     warnings = [message for status, message in valve.log if status == fmi2Warning]
     assert len(warnings) == 1 and 'overpressure' in warnings[0]
-    valve.set(inlet_flow=Q0)  # a new input: the valve advances again
+    valve.set_values(inlet_flow=Q0)  # a new input: the valve advances again
     pressures = trace(valve, 50)
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
     assert np.all(pressures < reference['burst_pressure'])
@@ -308,7 +310,7 @@ def test_a_divergence_is_discarded_with_its_reason_until_a_parameter_changes(
     assert valve.log[0][0] == fmi2Discard and 'diverged' in valve.log[0][1]
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
     assert valve.get(*OUTPUTS[:3]) == start  # the last good state, finite
-    valve.set(poppet_chamber_volume=reference['poppet_chamber_volume'])
+    valve.set_values(poppet_chamber_volume=reference['poppet_chamber_volume'])
     assert np.all(np.isfinite(trace(valve, 10)))
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
     valve.close()
@@ -332,7 +334,7 @@ def test_the_start_closed_or_at_the_steady_state_of_the_inputs(unzipped, referen
     with pytest.raises(FMICallException) as refusal:
         wrong.step()
     assert refusal.value.status == fmi2Discard
-    assert any(status == fmi2Error and "initial_state must be one of steady, closed" in message
+    assert any(status == fmi2Error and 'initial_state must be one of steady, closed' in message
                for status, message in wrong.log)
     for valve in (closed, steady, wrong):
         valve.close()
@@ -342,12 +344,12 @@ def test_preset_pressure_and_the_model_parameters_are_tunable_as_in_valve_node(
     unzipped, reference
 ):
     valve = Valve(unzipped, 'tuned').initialise()
-    valve.set(preset_pressure=6.5e6)
+    valve.set_values(preset_pressure=6.5e6)
     trace(valve, 1)
     assert valve.get('pilot_spring_preload') == [
         with_preset_pressure(reference, 6.5e6)['pilot_spring_preload']
     ]
-    valve.set(main_spring_stiffness=reference['main_spring_stiffness'] * 1.1)
+    valve.set_values(main_spring_stiffness=reference['main_spring_stiffness'] * 1.1)
     trace(valve, 1)
     retuned = {
         **with_preset_pressure(reference, 6.5e6),

@@ -43,7 +43,7 @@ def add_arguments(parser):
 
 
 def parameter_file(params, settings):
-    """The FMU's defaults as a ROS 2 parameter file's text (the node's own format)."""
+    """Return the FMU's defaults as a ROS 2 parameter file's text (the node's own format)."""
     import yaml
 
     values = {**params, **{n: settings[n] for n in ('step_size', 'initial_inlet_flow',

@@ -127,7 +127,7 @@ class Quantity(Real):
 
 
 def parameter_description(spec):
-    """A catalogue spec as one description line: meaning, symbol, unit and source."""
+    """Return a catalogue spec as one description line: meaning, symbol, unit and source."""
     return f'{spec.describe()}; source: {spec.source}'
 
 
@@ -135,7 +135,7 @@ class ReliefValve(Fmi2Slave):
     """The direct-pressure-sensing water-hydraulic relief valve of valve_sim (one instance)."""
 
     author = 'valve_sim developers'
-    license = 'Apache-2.0'
+    license = 'Apache-2.0'  # noqa: A003 (pythonfmu's attribute)
     version = __version__
     description = (
         'valve_sim relief valve: inlet flow and tank pressure in; chamber pressures (gauge), '
@@ -210,7 +210,7 @@ class ReliefValve(Fmi2Slave):
 
     def to_xml(self, model_options=None):
         """
-        pythonfmu's XML with the units and the initial unknowns FMI 2.0 asks for.
+        Return pythonfmu's XML with the units and the initial unknowns FMI 2.0 asks for.
 
         UnitDefinitions (after CoSimulation) with SI base units; the outputs, calculated
         at initialisation, as ModelStructure/InitialUnknowns.
@@ -305,7 +305,7 @@ class ReliefValve(Fmi2Slave):
             self._saturated = True
             self.log(
                 f'{error} The model halts there, as valve_node does: it holds its last good '
-                f"state and supply_pressure is reported at burst_pressure = "
+                'state and supply_pressure is reported at burst_pressure = '
                 f"{model.params['burst_pressure']:g} Pa (gauge), the limit it passed, until "
                 'an input or a parameter changes', Fmi2Status.warning,
             )
