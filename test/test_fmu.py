@@ -358,3 +358,14 @@ def test_preset_pressure_and_the_model_parameters_are_tunable_as_in_valve_node(
     assert valve.get('preset_pressure') == [pytest.approx(cracking_pressure(retuned), rel=1e-12)]
     assert trace(valve, 300)[-1] == pytest.approx(steady_state(retuned, Q0)[P_S], rel=1e-3)
     valve.close()
+
+
+def test_fmpy_ends_a_run_at_a_nan_input_with_what_came_before(fmu):
+    signal = np.array(
+        [(0.0, Q0, 0.0), (0.01, Q0, 0.0), (0.01, math.nan, 0.0), (0.02, math.nan, 0.0)],
+        dtype=[('time', float), ('inlet_flow', float), ('tank_pressure', float)],
+    )
+    result = fmpy.simulate_fmu(str(fmu), stop_time=0.02, output_interval=INTERVAL,
+                               input=signal, output=['supply_pressure'])
+    assert result['time'][-1] == pytest.approx(0.01)  # the step that met the NaN refused
+    assert np.all(np.isfinite(result['supply_pressure']))
