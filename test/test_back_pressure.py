@@ -27,7 +27,6 @@ from valve_sim.core.model import coefficients, P_C, P_S, relief_flows as model_r
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.simulation import (
     LITRE_PER_MINUTE,
-    RELIEF_COLUMNS,
     relief_flows,
     Scenario,
     simulate,
@@ -39,6 +38,7 @@ from valve_sim.core.steady_state import cracking_pressure, steady_state, SteadyS
 STEP = 1e-5  # [s] the reference step size
 WORN_SEAT = FaultSet(seat_leakage_diameter=0.2e-3)  # a leak to the tank beside q_m2 and q_p
 BAR = 1e5
+FLOW_STEP = Scenario(5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE, step_time=0.005, end_time=0.06)
 
 
 def stored_volume(params, states):
@@ -51,10 +51,8 @@ def stored_volume(params, states):
     flow balance". Gauge pressures: a constant term does not change its rate.
     """
     c = coefficients(params)
-    compliances = [
-        params[name] / params['bulk_modulus']
-        for name in ('supply_volume', 'intermediate_volume', 'pilot_volume', 'poppet_chamber_volume')
-    ]
+    chambers = ('supply_volume', 'intermediate_volume', 'pilot_volume', 'poppet_chamber_volume')
+    compliances = [params[name] / params['bulk_modulus'] for name in chambers]
     compressed = states[:, P_S:P_C + 1] @ np.array(compliances)
     return compressed - c.tank_force_area * states[:, X] + c.seat_area * states[:, Y]
 
@@ -83,11 +81,8 @@ def volume_balance(params, run, faults):
 @pytest.mark.parametrize(
     'scenario, tank',
     [
-        (Scenario(5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE, step_time=0.005, end_time=0.06), TankPressure()),
-        (
-            Scenario(5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE, step_time=0.005, end_time=0.06),
-            TankPressure(4 * BAR),
-        ),
+        (FLOW_STEP, TankPressure()),
+        (FLOW_STEP, TankPressure(4 * BAR)),
         (
             Scenario(10 * LITRE_PER_MINUTE, 10 * LITRE_PER_MINUTE, end_time=0.06),
             TankPressure(1 * BAR, 6 * BAR, step_time=0.005, ramp_time=0.002),
@@ -134,7 +129,7 @@ def test_a_constant_back_pressure_relieves_what_flows_in_at_steady_state(referen
 
 @pytest.fixture(scope='module')
 def variant(reference):
-    """A design not fitted: a stiffer pilot spring set lower, a narrower damping orifice."""
+    """Return a design not fitted: a stiffer pilot spring set lower, a narrower damping orifice."""
     return {
         **reference,
         'pilot_spring_stiffness': 1.5 * reference['pilot_spring_stiffness'],
