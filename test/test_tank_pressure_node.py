@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 import rclpy
 from sensor_msgs.msg import FluidPressure, JointState
-from valve_harness import running_valve, stamp_ns, TIMEOUT
+from valve_harness import running_valve, SpinningNode, stamp_ns, TIMEOUT
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import config_path, load_parameters
 from valve_sim.core.simulation import (
@@ -56,7 +56,7 @@ NAMESPACE = '/tank'
 RETUNABLE_SETTINGS = ('step_size', 'publish_rate', 'input_timeout', 'ambient_pressure')
 
 
-class TankPort:
+class TankPort(SpinningNode):
     """Test-side node in the valve's namespace: sends tank_pressure, records the tank topics."""
 
     def __init__(self, context, namespace):
@@ -69,25 +69,11 @@ class TankPort:
         )
         self.node.create_subscription(JointState, 'relief_flow', self._on_relief, 10_000)
         self.publisher = self.node.create_publisher(FluidPressure, 'tank_pressure', 100)
-        self.executor = EXECUTORS[DEFAULT_EXECUTOR](context=context)
-        self.executor.add_node(self.node)
-        self.closing = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        self.spin_in_background(context, EXECUTORS[DEFAULT_EXECUTOR])
         deadline = time.monotonic() + TIMEOUT
         while self.publisher.get_subscription_count() == 0:
             assert time.monotonic() < deadline, 'valve_node never subscribed tank_pressure'
             time.sleep(0.05)
-
-    def _spin(self):
-        while not self.closing.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self):
-        self.closing.set()
-        self.thread.join(TIMEOUT)
-        self.executor.shutdown()
-        self.node.destroy_node()
 
     def _on_applied(self, message):
         with self.condition:
