@@ -904,13 +904,14 @@ class ReliefValveNode(Node):
         from_topic = received.value is not None
         age = max(now_ns - received.received_ns, 0) / NS_PER_S if from_topic else None
         stale = from_topic and timeout > 0.0 and age > timeout
-        if stale != self.tank_stale:
-            log = self.get_logger().warn if stale else self.get_logger().info
-            log(
+        # One logging call per severity: rclpy refuses a call site whose severity changes.
+        if stale and not self.tank_stale:
+            self.get_logger().warn(
                 f'no tank_pressure for {age:.1f} s: input stale, holding '
-                f'{self.tank_pressure:g} Pa (gauge)' if stale
-                else 'tank_pressure received again: input fresh'
+                f'{self.tank_pressure:g} Pa (gauge)'
             )
+        elif self.tank_stale and not stale:
+            self.get_logger().info('tank_pressure received again: input fresh')
         self.tank_stale = stale
         if from_topic and not self.tank_from_topic:
             self.get_logger().info(
