@@ -116,7 +116,7 @@ def main():
                 best_time(direct_calls(unzipped, description, 1e-4), args.repeats), 1e-4),
         }
     results = {}
-    print(f'the paper\'s {SCENARIO.end_time:g} s step, 10 us RK4 steps; best of {args.repeats}')
+    print(f"the paper's {SCENARIO.end_time:g} s step, 10 us RK4 steps; best of {args.repeats}")
     print(f'{"run":<34}{"wall [s]":>10}{"/ offline":>11}{"doStep/s":>11}{"x real time":>13}')
     for name, (wall, interval) in runs.items():
         rate = SCENARIO.end_time / interval / wall if interval else None
