@@ -26,10 +26,17 @@ import csv
 from ctypes import byref
 import json
 import math
+import os
+from pathlib import Path
+import shutil
+import site
+import subprocess
+import sysconfig
 
 import numpy as np
 import pytest
 from test_cli import valve_sim
+import valve_sim as valve_sim_package
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.core.model import P_S, X
@@ -369,3 +376,38 @@ def test_fmpy_ends_a_run_at_a_nan_input_with_what_came_before(fmu):
                                input=signal, output=['supply_pressure'])
     assert result['time'][-1] == pytest.approx(0.01)  # the step that met the NaN refused
     assert np.all(np.isfinite(result['supply_pressure']))
+
+
+def test_a_c_master_runs_the_papers_step_with_libpython_preloaded(unzipped, offline, tmp_path):
+    """
+    The FMU loaded as OpenModelica, Hopsan and fmi_adapter load it: dlopen from C.
+
+    The binary needs libpython loaded first (LD_PRELOAD) and valve_sim on PYTHONPATH
+    (docs/fmu.md). Not asserted: the exit status. The process ends with SIGSEGV or
+    SIGABRT after fmi2FreeInstance, when pythonfmu finalises the embedded interpreter:
+    any pythonfmu slave that imports numpy does (docs/fmu.md), the results are complete.
+    """
+    compiler = shutil.which('cc') or shutil.which('gcc')
+    if compiler is None:
+        pytest.skip('no C compiler')
+    folder, description = unzipped
+    master = tmp_path / 'fmu_c_master'
+    headers = Path(fmpy.__file__).parent / 'c-code'
+    subprocess.run([compiler, '-O1', f'-I{headers}', '-o', str(master),
+                    str(Path(__file__).parent / 'fmu_c_master.c'), '-ldl', '-lm'], check=True)
+    refs = {v.name: v.valueReference for v in description.modelVariables}
+    library = Path(sysconfig.get_config_var('LIBDIR')) / sysconfig.get_config_var('LDLIBRARY')
+    paths = [str(Path(valve_sim_package.__file__).parents[1]), *site.getsitepackages()]
+    result = subprocess.run(
+        [str(master), str(folder / 'binaries' / 'linux64' / 'ReliefValve.so'),
+         (folder / 'resources').as_uri(), description.guid, str(refs['inlet_flow']),
+         str(refs['supply_pressure']), repr(Q0), repr(Q1), repr(STEP_TIME), repr(END_TIME),
+         repr(INTERVAL)],
+        env={**os.environ, 'LD_PRELOAD': str(library), 'PYTHONPATH': os.pathsep.join(paths)},
+        capture_output=True, text=True, timeout=300,
+    )
+    assert 'fmi2Terminate: status 0; fmi2FreeInstance returned' in result.stderr, result.stderr
+    pressures = np.array([float(line.split()[1]) for line in result.stdout.splitlines()])
+    rows, _ = offline
+    expected = np.array([float(row['supply_pressure_Pa']) for row in rows[1:]])
+    np.testing.assert_allclose(pressures, expected, rtol=1e-9, atol=0)
