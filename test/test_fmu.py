@@ -411,3 +411,19 @@ def test_a_c_master_runs_the_papers_step_with_libpython_preloaded(unzipped, offl
     rows, _ = offline
     expected = np.array([float(row['supply_pressure_Pa']) for row in rows[1:]])
     np.testing.assert_allclose(pressures, expected, rtol=1e-9, atol=0)
+
+
+def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
+    path = tmp_path / 'tuned.fmu'
+    valve_sim('fmu', '--out', str(path), '--set', 'd_c=1.2e-3', '--preset-pressure', '6.5e6',
+              '--step-size', '5e-6')
+    variables = {v.name: v for v in fmpy.read_model_description(str(path)).modelVariables}
+    params = with_preset_pressure({**reference, 'damping_orifice_diameter': 1.2e-3}, 6.5e6)
+    assert {name: float(variables[name].start) for name in SPECS} == params
+    assert float(variables['preset_pressure'].start) == pytest.approx(6.5e6, rel=1e-9)
+    assert float(variables['step_size'].start) == 5e-6
+    result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
+                               output=['supply_pressure'])
+    assert result['supply_pressure'][0] == steady_state(params, Q0)[P_S]
+    refused = valve_sim('fmu', '--out', str(tmp_path / 'valve.zip'), check=False)
+    assert refused.returncode == 1 and '--out must name a .fmu file' in refused.stderr

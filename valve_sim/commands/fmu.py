@@ -28,7 +28,7 @@ import sys
 import tempfile
 
 from valve_sim.commands.options import add_options, load_from_arguments
-from valve_sim.core.parameters import NODE_NAME
+from valve_sim.core.parameters import NODE_NAME, ParameterError
 
 
 SLAVE = 'valve_sim.fmu.relief_valve_slave'  # the module pythonfmu packs: ReliefValve
@@ -65,7 +65,7 @@ def build(out, params, settings):
 
     out = Path(out)
     if out.suffix != '.fmu':
-        raise ValueError(f'--out must name a .fmu file, got {out}')
+        raise ParameterError(f'--out must name a .fmu file, got {out}')
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix='valve_sim_fmu_') as folder:
         defaults = Path(folder) / PARAMETER_FILE
