@@ -171,7 +171,7 @@ class ReliefValve(Fmi2Slave):
         self.inlet_flow = settings['initial_inlet_flow']
         self.tank_pressure = settings['tank_pressure']
         self.register_variable(Quantity(
-            'inlet_flow', 'm^3/s', 0.0, self._defaults['max_inlet_flow'],
+            'inlet_flow', 'm^3/s', 0.0,  # no max: max_inlet_flow is tunable
             causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
             description='q_in: inlet flow into the supply port, 0 to max_inlet_flow',
         ))
