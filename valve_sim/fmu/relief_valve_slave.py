@@ -48,11 +48,7 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
 from pythonfmu.enums import Fmi2Status
 from valve_sim import __version__
-from valve_sim.core.errors import (
-    IntegrationError,
-    OverpressureError,
-    SteadyStateError,
-)
+from valve_sim.core.errors import IntegrationError, OverpressureError, SteadyStateError
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 from valve_sim.core.model import STATE_NAMES
 from valve_sim.core.parameters import (
@@ -65,8 +61,12 @@ from valve_sim.core.parameters import (
     SPECS,
 )
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
-from valve_sim.core.retuning import check_limits, check_preset, dependent_change
-from valve_sim.core.retuning import merged_parameters
+from valve_sim.core.retuning import (
+    check_limits,
+    check_preset,
+    dependent_change,
+    merged_parameters,
+)
 from valve_sim.core.steady_state import cracking_pressure
 
 
@@ -78,7 +78,6 @@ REFUSED = (ParameterError, SteadyStateError, IntegrationError)  # what a start o
 # The SI base-unit exponents of each unit used (FMI 2.0 UnitDefinitions).
 BASE_UNITS = {
     'm': {'m': 1},
-    'm^2': {'m': 2},
     'm^3': {'m': 3},
     'm^3/s': {'m': 3, 's': -1},
     'Pa': {'kg': 1, 'm': -1, 's': -2},
@@ -181,10 +180,9 @@ class ReliefValve(Fmi2Slave):
             description='p_t: pressure of the tank (return line), gauge: 0 is ambient; '
             'below burst_pressure',
         ))
-        for index, name in enumerate(STATE_NAMES):
-            if name in OUTPUT_STATES:
-                setattr(self, name, 0.0)
-                self._output(name, 'Pa' if name.endswith('pressure') else 'm', OUTPUT_STATES)
+        for name in OUTPUT_STATES:
+            setattr(self, name, 0.0)
+            self._output(name, 'Pa' if name.endswith('pressure') else 'm', OUTPUT_STATES)
         for name in OUTPUT_FLOWS:
             setattr(self, name, 0.0)
             self._output(name, 'm^3/s', OUTPUT_FLOWS)
