@@ -106,6 +106,8 @@ DEFAULT_TOPICS = [
     'applied_tank_pressure',
     'relief_flow',
 ]
+# Recorded once published, never waited for: only a bench with a back pressure sends it.
+OPTIONAL_TOPICS = ('tank_pressure',)
 # The signals measured: the required ones, and the tank's pressure where it is recorded (the
 # measures then take the supply pressure above the tank, step_analysis).
 ANALYSED = REQUIRED + ('tank_pressure',)
@@ -353,6 +355,7 @@ class ValveAnalyser(Node):
             [self.resolve_topic_name(t) for t in settings['topics']]
             + list(self.signal_map.topics.values())
         )
+        self.optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
@@ -542,11 +545,13 @@ class ValveAnalyser(Node):
         Publish the recording status on /diagnostics.
 
         ERROR once a topic cannot be recorded; else WARN while a topic has no
-        message or when some were lost; else OK.
+        message or when some were lost; else OK. An optional topic (OPTIONAL_TOPICS)
+        counts once it has a publisher.
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
             for topic in self.wanted
+            if topic in self.recorded or topic not in self.optional
         }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
         waiting = [topic for topic, count in counts.items() if count == 0]
