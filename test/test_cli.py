@@ -87,7 +87,7 @@ def test_simulate_from_a_closed_valve_with_a_ramp():
         (('--set', 'nonsense=1'), "unknown parameter 'nonsense'"),
         (('--set', 'm_m'), 'NAME=VALUE'),
         (('--params', '/nonexistent/params.yaml'), 'cannot read parameter file'),
-        (('--initial-flow=-5L/min',), 'flow must be finite and >= 0'),
+        (('--initial-flow=-5L/min',), 'flow must be in [0, '),
         (('--final-flow', 'lots'), 'not a flow'),
         (('--step-size', '1e-3'), 'step size'),
         (('--set', 'V_c=1e-9'), 'diverged'),

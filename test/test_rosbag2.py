@@ -279,7 +279,7 @@ def test_bag_folder_problems_are_clear_errors(bag_folder, tmp_path, capsys):
     cases = {
         missing: 'step_0.mcap named in metadata.yaml is missing',
         sqlite: "storage 'sqlite3'",
-        broken: 'is not rosbag2 bag metadata',
+        broken: 'is not valid YAML',
         empty: 'neither metadata.yaml nor .mcap files',
     }
     for path, message in cases.items():
