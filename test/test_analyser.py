@@ -26,7 +26,7 @@ import subprocess
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
@@ -37,6 +37,8 @@ from rclpy.parameter import Parameter
 from valve_harness import flushed
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import relief_flows
 from valve_sim.recording.bag import BagReader, message_definition
 from valve_sim.recording.replay import Replay
 from valve_sim.ros.analyser_node import (
@@ -49,6 +51,22 @@ import yaml
 
 
 TIMEOUT = 60.0  # [s] for anything that waits on another process
+# A publisher of diagnostic_msgs/KeyValue on supply_pressure, until killed.
+ROGUE_PUBLISHER = """
+import rclpy, time
+from diagnostic_msgs.msg import KeyValue
+rclpy.init()
+node = rclpy.create_node('rogue')
+publisher = node.create_publisher(KeyValue, 'supply_pressure', 10)
+while True:
+    publisher.publish(KeyValue(key='rogue', value='x'))
+    time.sleep(0.01)
+"""
+
+
+def tick_relief(waveforms):
+    """Return the relief flow and its parts at each sample of the reference valve's run."""
+    return relief_flows(load_parameters()[0], waveforms)
 
 
 @contextmanager
@@ -93,7 +111,7 @@ def recording(node, tick_waveforms, tmp_path_factory):
     with running_analyser(folder) as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(tick_waveforms, time.time_ns(), every=1)
+        replay.publish(tick_waveforms, time.time_ns(), every=1, relief=tick_relief(tick_waveforms))
         deadline = time.monotonic() + TIMEOUT
         while not messages:
             executor.spin_once(timeout_sec=0.05)
@@ -171,7 +189,7 @@ def test_hard_kill_leaves_every_flushed_chunk_readable(node, tick_waveforms, tmp
     with running_analyser(tmp_path, 'flush_interval:=0.2') as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(tick_waveforms, time.time_ns(), every=2)
+        replay.publish(tick_waveforms, time.time_ns(), every=2, relief=tick_relief(tick_waveforms))
         published, topics = (
             sum(replay.published.values()),
             {'/' + topic for topic in replay.published},
@@ -211,43 +229,112 @@ def test_a_best_effort_publisher_is_recorded_and_its_qos_reported(node, tmp_path
     """As rosbag2 does: a SensorDataQoS (best-effort) topic is subscribed best effort."""
     from rclpy.qos import qos_profile_sensor_data
     from std_msgs.msg import Float64
+
+    code, log, _ = record_while(
+        node,
+        tmp_path,
+        node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data),
+        Float64(data=1e-4),
+        lambda values: values.get('qos /inlet_flow') == 'best_effort/volatile'
+        and int(values.get('messages /inlet_flow', 0)) > 0,
+    )
+    assert code == 0, log
+    assert 'recording /inlet_flow (std_msgs/msg/Float64) with QoS best_effort/volatile' in log
+    bag = next(tmp_path.glob('*.mcap'))
+    assert sum(1 for _ in BagReader(bag).messages({'/inlet_flow'})) > 0
+
+
+def record_while(node, folder, publisher, message, done, *parameters):
+    """
+    Run an analyser into folder, publishing message on publisher until done(last status).
+
+    done gets the latest recording status's values ({} before one came). Returns
+    (exit code after SIGINT, its log, that status).
+    """
     from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
 
-    recording_status = f'{NODE_NAME}: {RECORDING_TASK}'  # the analyser keeps its default name
     statuses = []
     subscription = node.create_subscription(
         DiagnosticArray,
         '/diagnostics',
-        lambda array: statuses.extend(s for s in array.status if s.name == recording_status),
+        lambda array: statuses.extend(
+            s for s in array.status if s.name == f'{NODE_NAME}: {RECORDING_TASK}'
+        ),
         10,
     )
-    publisher = node.create_publisher(Float64, 'inlet_flow', qos_profile_sensor_data)
     executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
 
-    def recorded():
-        values = {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
-        return values.get('qos /inlet_flow') == 'best_effort/volatile' and int(
-            values.get('messages /inlet_flow', 0)
-        ) > 0
+    def latest():
+        return {kv.key: kv.value for status in statuses[-1:] for kv in status.values}
 
     try:
-        with running_analyser(tmp_path) as analyser:
+        with running_analyser(folder, *parameters) as analyser:
             deadline = time.monotonic() + TIMEOUT
-            while not recorded():
-                assert time.monotonic() < deadline, f'not recorded best effort: {statuses[-1:]}'
-                publisher.publish(Float64(data=1e-4))
-                executor.spin_once(timeout_sec=0.05)
+            while not done(latest()):
+                assert analyser.poll() is None, analyser.communicate()[0]
+                assert time.monotonic() < deadline, f'timed out, last status: {statuses[-1:]}'
+                publisher.publish(message)
+                executor.spin_once(timeout_sec=0.01)
+            status = statuses[-1]
             analyser.send_signal(signal.SIGINT)
             log = analyser.communicate(timeout=TIMEOUT)[0]
     finally:
         executor.remove_node(node)
         node.destroy_publisher(publisher)
         node.destroy_subscription(subscription)
-    assert analyser.returncode == 0, log
-    assert 'recording /inlet_flow (std_msgs/msg/Float64) with QoS best_effort/volatile' in log
+    return analyser.returncode, log, status
+
+
+def test_a_rogue_type_on_an_analysed_topic_does_not_stop_its_recording(node, tmp_path):
+    """
+    A publisher of another type on supply_pressure, whose type name sorts first.
+
+    The analyser records the FluidPressure the analysis reads (rosbag2 would record
+    neither), raises WARN naming the other type, and the bag holds the pressure.
+    """
+    from sensor_msgs.msg import FluidPressure
+
+    # Another process: one participant cannot hold two types on a topic.
+    rogue = subprocess.Popen([sys.executable, '-c', ROGUE_PUBLISHER])
+    try:
+        code, log, status = record_while(
+            node,
+            tmp_path,
+            node.create_publisher(FluidPressure, 'supply_pressure', 10),
+            FluidPressure(fluid_pressure=7.1e6),
+            lambda values: 'diagnostic_msgs/msg/KeyValue'
+            in values.get('other types on /supply_pressure', '')
+            and int(values.get('messages /supply_pressure', 0)) > 100,
+        )
+    finally:
+        rogue.kill()
+        rogue.wait()
+    assert code == 0 and status.level == DiagnosticStatus.WARN, log
     bag = next(tmp_path.glob('*.mcap'))
-    assert sum(1 for _ in BagReader(bag).messages({'/inlet_flow'})) > 0
+    recorded = [s.name for _, s, _ in BagReader(bag).messages({'/supply_pressure'})]
+    assert len(recorded) > 100 and set(recorded) == {'sensor_msgs/msg/FluidPressure'}
+
+
+@pytest.mark.parametrize('sec, nanosec', [(-3, 0), (2**31 - 1, 4_000_000_000)])
+def test_a_clock_the_analyser_cannot_represent_is_ignored_and_the_bag_closed(
+    node, tmp_path, sec, nanosec
+):
+    """A /clock of negative seconds or past 2^31 s: ignored, counted, the bag closed on SIGINT."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    from valve_sim.recording.recovery import diagnose
+
+    code, log, _ = record_while(
+        node,
+        tmp_path,
+        node.create_publisher(Clock, '/clock', 10),
+        Clock(clock=Time(sec=sec, nanosec=nanosec)),
+        lambda values: int(values.get('refused /clock messages', 0)) > 0,
+        'use_sim_time:=true',
+    )
+    assert code == 0 and 'Traceback' not in log, log
+    assert diagnose(next(tmp_path.glob('*.mcap'))).damage is None, 'closed, with its footer'
 
 
 def test_help_lists_every_parameter_the_node_declares(context, tmp_path):

@@ -205,7 +205,6 @@ GOOD = ['--design', 'd_c=±20%', '--minimise', 'P_1_percent', '--tolerance', 'd_
         (['--tolerance', 'k_p=±5um'], 'um is a length, and pilot_spring_stiffness is in N/m'),
         (['--yield', '1.5'], "--yield '1.5': expected a fraction in (0, 1]"),
         (['--samples', '100'], 'the Sobol sampler needs a power of two samples, not 100'),
-        (['--population', '1'], '--population must be at least 2'),
     ],
 )
 def test_bad_bounds_limits_and_settings_get_one_line_errors(change, message, capsys, tmp_path):

@@ -26,6 +26,7 @@ import subprocess
 import sys
 import time
 
+from hostile_inputs import make_sparse_mcap
 from mcap.reader import make_reader
 import pytest
 from rosbags.highlevel import AnyReader
@@ -98,18 +99,26 @@ def test_a_file_cut_anywhere_is_truncated_and_repaired_to_what_it_holds(tmp_path
 
 
 def test_analyse_says_truncated_and_where_for_a_file_cut_before_its_first_chunk(tmp_path):
-    """The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap."""
+    """
+    The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap.
+
+    analyse reads the file as repair does (recovery.Scan): what the chunk cut short
+    holds, with the warning that says where the file ends; the repaired copy gives the
+    same analysis.
+    """
     cut = tmp_path / 't.mcap'
     cut.write_bytes(REFERENCE_BAG.read_bytes()[:449000])
-    result = valve_sim('analyse', cut)
-    assert result.returncode == 1
-    assert 'truncated' in result.stderr and 'ends at byte 449000' in result.stderr, result.stderr
-    assert 'valve-sim repair' in result.stderr and 'Traceback' not in result.stderr
+    analysed = valve_sim('analyse', cut)
+    assert analysed.returncode == 0, analysed.stderr
+    assert 'truncated' in analysed.stderr and 'ends at byte 449000' in analysed.stderr
+    assert 'valve-sim repair' in analysed.stderr and 'Traceback' not in analysed.stderr
     result = valve_sim('repair', cut)
     assert result.returncode == 0, result.stderr
     kept = rosbags_messages(tmp_path / 't.repaired.mcap')
     assert f'kept {len(kept)} messages' in result.stdout and len(kept) > 4000, result.stdout
     assert sorted(kept) == sorted(messages_in_order(REFERENCE_BAG)[: len(kept)])
+    repaired = valve_sim('analyse', tmp_path / 't.repaired.mcap')
+    assert repaired.stdout == analysed.stdout and repaired.stderr == ''
 
 
 def test_a_complete_file_is_copied_whole_and_never_overwritten(tmp_path):
@@ -268,3 +277,119 @@ def test_a_bag_folder_is_repaired_file_by_file_into_a_new_bag_folder(tmp_path):
         assert reader.end_time == max(t for _, t, _ in kept) + 1  # rosbags: one past the last
     assert (folder / 'rig_1.mcap').stat().st_size == 449000, 'the source is only read'
     assert not (folder / 'metadata.yaml').exists()
+
+
+# --- corrupt is not truncated, and a hole is not a hang -----------------------------------------
+
+
+def many_chunks(path, messages=3000, chunk_size=8192):
+    """Write a closed bag of supply-pressure messages in small chunks; return the chunk offsets."""
+    from valve_sim.recording.bag import BagWriter
+    from valve_sim.recording.recovery import RECORD_HEADER
+
+    bag = BagWriter(path, chunk_size=chunk_size)
+    bag.add_topic('/supply_pressure', 'sensor_msgs/msg/FluidPressure')
+    for k in range(messages):
+        bag.write_message('/supply_pressure', {'fluid_pressure': float(k)}, k, k)
+    bag.close()
+    data, offset, chunks = path.read_bytes(), 8, []
+    while offset < len(data):
+        opcode, length = RECORD_HEADER.unpack_from(data, offset)
+        if opcode == 6:
+            chunks.append(offset)
+        if opcode == 2:
+            return chunks
+        offset += RECORD_HEADER.size + length
+    return chunks
+
+
+def log_times(path):
+    return [message.log_time for _, _, message in BagReader(path).messages()]
+
+
+def flipped_chunk_length(path, bit, cut=False):
+    """
+    Write many_chunks() to path with one bit of the 4th chunk's length flipped.
+
+    cut: the file also ends 3 chunks early (no footer). Returns (the chunks' offsets,
+    the log times of every message written).
+    """
+    chunks = many_chunks(path)
+    everything = log_times(path)
+    data = bytearray(path.read_bytes())
+    data[chunks[3] + 1 + bit // 8] ^= 1 << bit % 8
+    path.write_bytes(bytes(data[:chunks[-3]] if cut else data))
+    return chunks, everything
+
+
+@pytest.mark.parametrize('bit', [0, 17, 40])  # the length field's low, middle and high bits
+@pytest.mark.parametrize('cut', [False, True])  # a file with its footer, or one cut short
+def test_a_bit_flip_in_a_chunk_length_is_corrupt_and_repair_keeps_every_intact_chunk(
+    tmp_path, bit, cut
+):
+    path = tmp_path / 'flipped.mcap'
+    chunks, everything = flipped_chunk_length(path, bit, cut)
+    scan = diagnose(path)
+    assert f'is corrupt at byte {chunks[3]}' in scan.damage or (
+        f'the chunk at byte {chunks[3]} fails its CRC' in scan.damage
+    ), scan.damage
+    report = repair(path, tmp_path / 'repaired.mcap')
+    kept = log_times(tmp_path / 'repaired.mcap')
+    lost = set(everything) - set(kept)
+    assert set(kept) <= set(everything) and kept == sorted(kept)
+    if not cut:  # only the length field is damaged: the chunk itself is read past it
+        assert not lost, report.summary()
+    assert len(lost) <= 4 * len(everything) / len(chunks), (len(lost), report.summary())
+    with pytest.raises(InputFileError, match='damaged'):
+        log_times(path)  # analyse says what repair says
+
+
+def test_analyse_gives_a_sparse_hole_the_verdict_of_repair_as_fast(tmp_path):
+    """MCAP magic, then a 2 GiB hole: analyse spun for minutes while repair answered at once."""
+    path = tmp_path / 'hole.mcap'
+    make_sparse_mcap(path)
+    analysed, repaired = valve_sim('analyse', path), valve_sim('repair', path)
+    verdict = f'{path} is corrupt at byte 8: no MCAP record starts there'
+    assert analysed.returncode == repaired.returncode == 1
+    assert verdict in analysed.stderr and verdict in repaired.stderr, (analysed, repaired)
+
+
+def test_random_damage_of_a_bag_keeps_every_intact_chunk(tmp_path):
+    """
+    Fuzz: 40 seeded damages of 1-3 bytes, half of them in the records' framing.
+
+    Wherever the damage, repair keeps the messages of every chunk it did not touch (a
+    corrupt record once made it drop every later chunk), and analyse's reader gives
+    the same verdict: a refusal naming the damage, never a crash.
+    """
+    import random
+
+    source = tmp_path / 'source.mcap'
+    chunks = many_chunks(source, messages=1500, chunk_size=4096)
+    with open(source, 'rb') as stream:
+        indexes = make_reader(stream).get_summary().chunk_indexes
+    ranges = [(c.chunk_start_offset, c.chunk_start_offset + c.chunk_length,
+               range(c.message_start_time, c.message_end_time + 1)) for c in indexes]
+    data, rng = source.read_bytes(), random.Random(25)
+    for number in range(40):
+        damaged, positions = bytearray(data), []
+        for _ in range(rng.randint(1, 3)):
+            framing = rng.random() < 0.5
+            at = rng.choice(chunks) + rng.randrange(9) if framing else rng.randrange(
+                chunks[0], ranges[-1][1]
+            )
+            damaged[at] ^= rng.randrange(1, 256)
+            positions.append(at)
+        path = tmp_path / f'damaged{number}.mcap'
+        path.write_bytes(bytes(damaged))
+        try:
+            log_times(path)
+        except InputFileError as error:
+            assert 'damaged' in str(error)
+        repair(path, tmp_path / f'repaired{number}.mcap')
+        kept = set(log_times(tmp_path / f'repaired{number}.mcap'))
+        intact = {
+            time for start, end, times in ranges
+            if not any(start <= at < end for at in positions) for time in times
+        }
+        assert intact <= kept, (number, positions, len(intact - kept))

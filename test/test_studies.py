@@ -473,6 +473,10 @@ def test_variation_forms(reference, text, kind, a, b):
         ('d_c=5e-3:1e-3', 'LO < HI'),
         ('d_c=~N(0%)', 'sigma must be > 0'),
         ('d_c=±1%,d_c=±2%', 'varied twice: damping_orifice_diameter'),
+        ('d_c=±1e300%', 'leave the limits of damping_orifice_diameter'),
+        ('d_c=-1:1e-3', 'leave the limits of damping_orifice_diameter'),
+        ('d_c=~N(1e300)', 'leave the limits of damping_orifice_diameter'),
+        ('d_c=5~N(1%)', 'leave the limits of damping_orifice_diameter'),
     ],
 )
 def test_bad_variations_name_the_culprit(reference, text, message):

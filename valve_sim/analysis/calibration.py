@@ -46,6 +46,7 @@ from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measur
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
 from valve_sim.core.bearing import with_bearing_fit
+from valve_sim.core.input_files import shown
 from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.linear import modes
 from valve_sim.core.model import coefficients, flows, X
@@ -275,9 +276,10 @@ class MeasuresTarget:
             except (KeyError, TypeError, ValueError):
                 raise CalibrationError(
                     f"measure {name}: need a number or {{'value': number, 'tolerance': number, "
-                    f"'weight': number}}, got {entry!r}"
+                    f"'weight': number}}, got {shown(entry)}"
                 ) from None
-            for what, number in (('value', values[name]), ('tolerance', tolerances[name])):
+            numbers = (values[name], tolerances[name], weights[name])
+            for what, number in zip(('value', 'tolerance', 'weight'), numbers):
                 if not math.isfinite(number):
                     raise CalibrationError(f'measure {name}: {what} must be finite')
             if tolerances[name] <= 0.0 or weights[name] <= 0.0:

@@ -75,6 +75,7 @@ ONSET_SAMPLES = 3  # ... for this many samples in a row (one noise spike is no s
 SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
+NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
 
 
 @dataclass
@@ -84,6 +85,17 @@ class StepMeasures:
     values: dict
     reasons: dict = field(default_factory=dict)
     details: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        """Make a measure that is not finite (inf or NaN samples) None, with its reason."""
+        for name, value in self.values.items():
+            if value is not None and not math.isfinite(value):
+                self.values[name] = None
+                self.reasons[name] = NOT_FINITE
+        self.details = {
+            key: None if isinstance(value, float) and not math.isfinite(value) else value
+            for key, value in self.details.items()
+        }
 
     def as_dict(self):
         """JSON-ready: the six names (None where undefined), 'reasons' and 'details'."""

@@ -23,7 +23,7 @@ from itertools import combinations
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.plotting import MEASURE_LABELS, plt
+from valve_sim.analysis.plotting import MEASURE_LABELS, plt, save_figure
 from valve_sim.analysis.study_plots import _limit_lines
 from valve_sim.analysis.tolerances import parse_limits
 
@@ -92,8 +92,7 @@ def plot_pareto_front(path, problem, records, outcome):
     figure.suptitle(
         f'{len(rows)} candidates, nominal measures;\n{int(feasible.sum())} meet the limits and '
         f'the yield (Monte Carlo of {problem.samples} valves)', fontsize=10)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_distributions(path, problem, designs):
@@ -129,5 +128,4 @@ def plot_distributions(path, problem, designs):
     figure.suptitle(
         f"The same tolerances ({', '.join(problem.tolerances)}), {designs[0][1]['samples']} "
         'valves each; dotted: the nominal valve, dashed: the limits', fontsize=9)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)

@@ -24,9 +24,9 @@ holds preset_pressure, which sets the pilot spring preload when the file is load
 """
 
 import csv
-import json
 
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import NODE_NAME, PARAMETERS
 
 
@@ -136,14 +136,14 @@ def write_outputs(out, problem, outcome, records, population, generations):
         entry = design_entry(problem, row, confirmed, generation)
         entry['chosen'] = number == outcome['chosen']
         entry['parameter_file'] = f'params/{design_name(row)}.yaml'
-        (out / entry['parameter_file']).write_text(parameter_file_text(
+        write_text(out / entry['parameter_file'], parameter_file_text(
             problem, row['design'], f"valve-sim optimise: {row['label']}, a Pareto design"))
         pareto.append(entry)
     baselines = {}
     for label, row in outcome['baselines'].items():
         baselines[label] = design_entry(problem, row, row)
         baselines[label]['parameter_file'] = f'params/{label}.yaml'
-        (out / f'params/{label}.yaml').write_text(parameter_file_text(
+        write_text(out / f'params/{label}.yaml', parameter_file_text(
             problem, row['design'], f'valve-sim optimise: the baseline {label}'))
     chosen = outcome['chosen']
     summary = {
@@ -158,7 +158,7 @@ def write_outputs(out, problem, outcome, records, population, generations):
         summary['chosen_against_table2'] = comparison(
             outcome['pareto'][chosen][1], outcome['baselines']['table2']
         )
-    (out / 'pareto.json').write_text(json.dumps(summary, indent=2) + '\n')
+    write_text(out / 'pareto.json', json_text(summary) + '\n')
     write_csv(out / 'pareto.csv', problem, pareto)
     return summary
 
@@ -170,7 +170,7 @@ def write_csv(path, problem, pareto):
               'search_samples', 'search_yield', 'search_ci95_low', 'search_ci95_high',
               'confirm_samples', 'yield', 'ci95_low', 'ci95_high', 'meets_yield', 'chosen',
               'parameter_file']
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
         for entry in pareto:

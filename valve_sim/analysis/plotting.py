@@ -18,6 +18,8 @@ Figures: the paper's Figure 5 (step response) and the parameter-study plots.
 Matplotlib with the Agg backend: files only, no display needed.
 """
 
+from pathlib import Path
+
 import matplotlib
 
 
@@ -25,6 +27,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
 from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
+from valve_sim.core.output_files import replacing  # noqa: E402
 
 
 MEASURE_LABELS = {
@@ -35,6 +38,21 @@ MEASURE_LABELS = {
     'T_d_ms': 'T_d, period of damped vibration [ms]',
     'T_s_ms': 'T_s, settling time [ms]',
 }
+
+
+def save_figure(figure, path, dpi):
+    """
+    Write figure to path (its format from the suffix, PNG without one) and close it.
+
+    Written whole through a temporary file (core.output_files.replacing): a link at
+    path is replaced, never followed; an existing folder at path is an error.
+    """
+    path = Path(path)
+    try:
+        with replacing(path, 'wb') as stream:
+            figure.savefig(stream, dpi=dpi, format=path.suffix[1:].lower() or 'png')
+    finally:
+        plt.close(figure)
 
 
 def _measure_text(measures):
@@ -119,8 +137,7 @@ def plot_step_response(
     axes[0].set_title(title)
     if measures:
         _text_box(axes[0], (0.99, 0.05), _measure_text(measures), opacity=0.8)
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    save_figure(figure, path, dpi=120)
 
 
 def plot_sensitivity(path, symbol, series, title):
@@ -151,8 +168,7 @@ def plot_sensitivity(path, symbol, series, title):
         axis.set_xlabel(f'variation of {symbol} [%]')
         axis.grid(True, alpha=0.3)
     figure.suptitle(f'{title}: effect of {symbol}')
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def _envelope_beside_settling_time(axis, series, percents):
@@ -188,8 +204,7 @@ def plot_poppet_waveforms(path, waveforms, t_step):
     axis.set_title('Figure 8: pilot poppet displacement for the m_p variations')
     axis.grid(True, alpha=0.3)
     axis.legend()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_pressure_increment(path, series):
@@ -203,8 +218,7 @@ def plot_pressure_increment(path, series):
     axis.set_title('Figure 13: pressure increment against d_c and k_p')
     axis.grid(True, alpha=0.3)
     axis.legend()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_measures_fit(path, target, measures, waveforms):
@@ -244,8 +258,7 @@ def plot_measures_fit(path, target, measures, waveforms):
     bars.set_ylabel('(model - target) / tolerance')
     bars.legend(fontsize=8)
     bars.grid(True, axis='y', alpha=0.3)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_recording_fit(path, target, states):
@@ -276,8 +289,7 @@ def plot_recording_fit(path, target, states):
     for axis in axes:
         axis.grid(True, alpha=0.3)
         axis.set_xlabel('time from the first sample [s]')
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def _recorded_and_model(axis, time, recorded, model):
@@ -352,5 +364,4 @@ def plot_characteristic(
     axes[0].set_title(title or 'Static pressure-flow characteristic (slow ramp up and down)')
     axes[0].legend(loc='lower right', fontsize=8)
     axes[1].legend(loc='upper left', fontsize=8)
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    save_figure(figure, path, dpi=120)

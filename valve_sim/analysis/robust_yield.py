@@ -36,6 +36,9 @@ does (same distributions, sampler and seed, each valve set to the nominal valve'
 cracking pressure), and runs the nominal valve and all samples through
 study_runner.evaluate_batch in one call: one batch of the lanes kernel.
 
+check_candidate_row(row) checks a row read back from a results file (--resume) before
+it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
+
 A sampled valve passes when its run meets every limit (tolerances.passes) and, with
 min_decay_rate, every linear mode decays at least that fast at both flows of the
 test (core.linear.slowest_decay_rate; the default 3 1/s is 95 % within the measures'
@@ -54,6 +57,7 @@ from valve_sim.analysis.tolerances import (
     yield_interval,
 )
 from valve_sim.core.errors import MODEL_ERRORS
+from valve_sim.core.input_files import shown
 from valve_sim.core.parameters import validate
 
 
@@ -157,3 +161,55 @@ def evaluate_candidate(case):
             run['sample'] = dict(zip(names, map(float, sample)))
         row['sample_rows'] = sample_rows
     return row
+
+
+def check_candidate_row(row):
+    """
+    Raise ValueError naming the key unless row is a candidate row as evaluate_candidate makes it.
+
+    The resume check of study_runner.read_results for the optimisation's results files:
+    the nominal valve's row and every kept sample row are checked as the runner's rows.
+    """
+    from valve_sim.analysis.study_runner import check_row, is_number
+
+    if not isinstance(row, dict):
+        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+    index, samples = row.get('index'), row.get('samples')
+    for key, value in (('index', index), ('samples', samples), ('passed', row.get('passed'))):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ValueError(f"key '{key}' must be an integer >= 0, got {shown(value)}")
+    if not isinstance(row.get('label'), str) or not isinstance(row.get('pass'), str):
+        raise ValueError("keys 'label' and 'pass' must be text")
+    design = row.get('design')
+    if not isinstance(design, dict) or not all(map(is_number, design.values())):
+        raise ValueError(f"key 'design' must map parameter names to numbers, got {shown(design)}")
+    ci95 = row.get('ci95')
+    if not is_number(row.get('yield')) or not (
+        isinstance(ci95, list) and len(ci95) == 2 and all(map(is_number, ci95))
+    ):
+        raise ValueError("keys 'yield' and 'ci95' must be a number and two numbers")
+    if row.get('error') is not None:
+        if not isinstance(row['error'], str):
+            raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+        return
+    nominal = row.get('nominal')
+    _check_inner(check_row, nominal, 'nominal')
+    decay = nominal.get('decay_rate')
+    if not (decay is None or is_number(decay)) or not isinstance(nominal.get('pass'), bool):
+        raise ValueError("key 'nominal' must hold a decay_rate (a number or null) and a pass")
+    for key in ('failures', 'percentiles'):
+        if not isinstance(row.get(key), dict):
+            raise ValueError(f"key '{key}' must be a JSON object, got {shown(row.get(key))}")
+    sample_rows = row.get('sample_rows', [])
+    if not isinstance(sample_rows, list):
+        raise ValueError("key 'sample_rows' must list the sampled valves' rows")
+    for number, sample_row in enumerate(sample_rows):
+        _check_inner(check_row, sample_row, f'sample_rows[{number}]')
+
+
+def _check_inner(check, row, key):
+    """check(row) for a row inside a row: a ValueError names the key it is under."""
+    try:
+        check(row)
+    except ValueError as error:
+        raise ValueError(f"key '{key}': {error}") from None

@@ -49,6 +49,7 @@ code, so both see the same rows.
 
 from collections import deque
 from dataclasses import dataclass, field
+import math
 
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
@@ -158,7 +159,8 @@ class Extractor:
             raise InputFileError(
                 f'topic {topic} is {FLOAT64}, which has no header stamp: use the receive clock'
             )
-        self.type_name, self.roles, self.map = type_name, roles, signal_map
+        self.topic, self.type_name, self.roles, self.map = topic, type_name, roles, signal_map
+        self.non_finite = 0  # values left out: inf or NaN (a broken sensor, a corrupt file)
 
     def _value(self, role, message):
         if self.type_name == FLOAT64:
@@ -177,13 +179,16 @@ class Extractor:
         """
         Return [(role, time_ns, value)] of one message.
 
-        A JointState lacking the joint gives nothing for it.
+        A JointState lacking the joint gives nothing for it; a value that is not finite
+        gives nothing either, and is counted (non_finite).
         """
         time_ns = (
             receive_time_ns if self.map.clock == 'receive' else stamp_ns(message.header.stamp)
         )
-        values = ((role, self._value(role, message)) for role in self.roles)
-        return [(role, time_ns, value) for role, value in values if value is not None]
+        values = [(role, self._value(role, message)) for role in self.roles]
+        finite = [(role, v) for role, v in values if v is not None and math.isfinite(v)]
+        self.non_finite += sum(v is not None for _, v in values) - len(finite)
+        return [(role, time_ns, value) for role, value in finite]
 
 
 class Joiner:

@@ -55,6 +55,7 @@ from valve_sim.analysis.measures import (
     WINDOW,
 )
 from valve_sim.analysis.signals import seconds
+from valve_sim.core.output_files import json_text, replacing, write_text
 
 
 def step_record(t_step, flow_before, direction, measures):
@@ -202,23 +203,32 @@ def _coarser_than_rows(bracket, t):
 
 class MeasuresFile:
     """
-    A bag's step records as one JSON document {"bag": name, "steps": [...]}, appended in place.
+    A bag's step records as one JSON document {"bag": name, "steps": [...]}, kept valid.
 
-    Each append() overwrites the closing brackets with the new record and the
-    brackets again, so the file is valid JSON after every step and nothing but
-    the file holds the records (memory stays bounded however many steps).
+    Each append() writes a new file (the old one without its closing brackets, the new
+    record, the brackets) and renames it over the old (core.output_files.replacing), so
+    the file is valid JSON after every step, even when the disk fills during a write,
+    and nothing but the file holds the records (memory stays bounded however many
+    steps). Measures that are not finite are written as null (strict JSON).
     """
 
     TAIL = '\n]}\n'
+    COPY_BLOCK = 1024 * 1024  # [bytes]
 
     def __init__(self, path, bag_name):
         self.path, self.count = Path(path), 0
-        self.path.write_text('{"bag": ' + json.dumps(bag_name) + ', "steps": [' + self.TAIL)
+        write_text(self.path, '{"bag": ' + json.dumps(bag_name) + ', "steps": [' + self.TAIL)
 
     def append(self, record):
         """Add one step record at the end of the steps list."""
-        text = (',' if self.count else '') + '\n' + json.dumps(record, indent=2) + self.TAIL
-        with open(self.path, 'r+b') as stream:
-            stream.seek(-len(self.TAIL), os.SEEK_END)
-            stream.write(text.encode())
+        text = (',' if self.count else '') + '\n' + json_text(record) + self.TAIL
+        with open(self.path, 'rb') as old, replacing(self.path, 'wb') as new:
+            left = os.fstat(old.fileno()).st_size - len(self.TAIL)
+            while left > 0:
+                block = old.read(min(left, self.COPY_BLOCK))
+                if not block:
+                    break
+                new.write(block)
+                left -= len(block)
+            new.write(text.encode())
         self.count += 1

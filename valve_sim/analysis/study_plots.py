@@ -20,7 +20,7 @@ Rows are the study runner's (measures, error); limits are tolerances.Limit.
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.plotting import MEASURE_LABELS, plt
+from valve_sim.analysis.plotting import MEASURE_LABELS, plt, save_figure
 from valve_sim.analysis.tolerances import passes
 
 
@@ -81,8 +81,7 @@ def plot_measure_cdfs(path, rows, limits, subtitle):
         axis.set_ylim(0.0, 1.02)
         axis.grid(True, alpha=0.3)
     figure.suptitle(f'Tolerance study, {len(rows)} valves: {subtitle}', fontsize=9)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_measures_against(path, name, unit, values, rows, limits):
@@ -107,8 +106,7 @@ def plot_measures_against(path, name, unit, values, rows, limits):
         axis.grid(True, alpha=0.3)
     axes.flat[0].legend(fontsize=8)
     figure.suptitle(f'Measures against {name}', fontsize=10)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def plot_sobol_indices(path, measure, labels, indices):
@@ -129,5 +127,4 @@ def plot_sobol_indices(path, measure, labels, indices):
     axis.axhline(0.0, color='0.5', linewidth=0.8)
     axis.grid(True, axis='y', alpha=0.3)
     axis.legend(fontsize=8)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)

@@ -54,6 +54,15 @@ from valve_sim.analysis.measures import (
     step_measures,
 )
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
+from valve_sim.core.input_files import (
+    InputFileError,
+    json_lines,
+    parse_json,
+    shown,
+    STUDY_RESULTS,
+    STUDY_ROW,
+)
+from valve_sim.core.output_files import append_to, finite, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
@@ -63,6 +72,15 @@ RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are 
 TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
 MAX_BATCH = 64
 LOOPBACK = '127.0.0.1'  # where every part of a local cluster listens
+
+
+# The numbers a row may hold besides its measures (evaluate_batch, _measured).
+NUMBER_KEYS = (
+    'pilot_spring_preload',
+    'cracking_pressure',
+    'initial_supply_pressure',
+    'initial_main_valve_displacement',
+)
 
 
 def evaluate_case(case):
@@ -168,35 +186,86 @@ def fingerprint(cases):
     return digest.hexdigest()[:16]
 
 
-def read_results(path, study):
+def read_results(path, study, check=None):
     """
     Rows on file for the study with this fingerprint: {index: row}.
 
     A missing file gives {}; a file of another study raises StudyError. Every row
     ends with a newline: a torn last line (the process died while writing it) is
-    not a row, and drop_torn_tail() removes it before new rows are appended.
+    not a row, and drop_torn_tail() removes it before new rows are appended. The file
+    is read once, within input_files' limits (STUDY_RESULTS, each line STUDY_ROW), and
+    every row is checked by check (default check_row, the rows of evaluate_batch; the
+    rows of another evaluate need their own): a damaged one is a StudyError naming its
+    line.
     """
+    check = check or check_row
     path = Path(path)
-    if not path.exists():
+    if not os.path.lexists(path):
         return {}
-    lines = path.read_text().split('\n')[:-1]
-    try:
-        header = json.loads(lines[0]) if lines else {}
-    except json.JSONDecodeError:
-        header = {}
-    if header.get('study') != study:
+    lines = json_lines(path, STUDY_RESULTS, STUDY_ROW)
+    header = {}
+    for number, text in lines:
+        try:
+            header = parse_json(text, STUDY_ROW, f'{path}, line {number},')
+        except InputFileError:
+            pass
+        break
+    if not isinstance(header, dict) or header.get('study') != study:
         raise StudyError(
             f'{path} holds results of a different study (other parameters, samples or '
             'seed); give another --out or run without --resume to start afresh'
         )
     rows = {}
-    for number, line in enumerate(lines[1:], 2):
+    for number, text in lines:
+        where = f'{path}, line {number}'
         try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            raise StudyError(f'{path}, line {number}: not a JSON row') from None
+            row = parse_json(text, STUDY_ROW, where)
+            check(row)
+        except (InputFileError, ValueError) as error:
+            raise StudyError(
+                f'{where}: not a row of this study ({error}); delete that line to compute '
+                'the run again, or run without --resume to start afresh'
+            ) from None
         rows.setdefault(row['index'], row)
     return rows
+
+
+def check_row(row):
+    """Raise ValueError naming the key unless row is a results row as evaluate_batch makes it."""
+    if not isinstance(row, dict):
+        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+    index = row.get('index')
+    if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+        raise ValueError(f"key 'index' must be an integer >= 0, got {shown(index)}")
+    measures = row.get('measures')
+    if not isinstance(measures, dict) or not set(MEASURE_NAMES) <= set(measures) <= set(
+        MEASURE_NAMES + (ENVELOPE_DECAY,)
+    ):
+        raise ValueError(
+            f"key 'measures' must map {', '.join(MEASURE_NAMES)} (and {ENVELOPE_DECAY}, if "
+            'asked) to numbers or null'
+        )
+    for name, value in measures.items():
+        if value is not None and not is_number(value):
+            raise ValueError(f"key 'measures.{name}' must be a number or null, got {shown(value)}")
+    reasons = row.get('reasons')
+    if not isinstance(reasons, dict) or not all(isinstance(r, str) for r in reasons.values()):
+        raise ValueError(f"key 'reasons' must map measure names to text, got {shown(reasons)}")
+    if row.get('error') is not None and not isinstance(row['error'], str):
+        raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+    for key in NUMBER_KEYS:
+        if key in row and not is_number(row[key]):
+            raise ValueError(f"key '{key}' must be a number, got {shown(row[key])}")
+    waveforms = row.get('waveforms', {'time': []})
+    if not isinstance(waveforms, dict) or not all(
+        isinstance(trace, list) and all(map(is_number, trace)) for trace in waveforms.values()
+    ):
+        raise ValueError("key 'waveforms' must map names to lists of numbers")
+
+
+def is_number(value):
+    """Return whether a value read from JSON is a number (an int or a float, not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def drop_torn_tail(path):
@@ -271,6 +340,7 @@ def run_cases(
     label='study',
     progress_stream=sys.stderr,
     progress=None,
+    check=None,
 ):
     """
     Evaluate every case once, streaming rows to results_path; return (rows, computed).
@@ -280,14 +350,20 @@ def run_cases(
     is replaced. An interruption (Ctrl-C, a failed batch) leaves every finished row
     on file and raises; resume=True then evaluates only the missing indices.
     Progress goes to progress_stream (None: silent), or to progress, a Progress that
-    spans more than this call (the rows on file are skipped in it).
+    spans more than this call (the rows on file are skipped in it). check: the row
+    check of evaluate's rows for a resume (read_results; default check_row).
     """
     indices = [case['index'] for case in cases]
     if len(set(indices)) != len(indices):
         raise ValueError('case indices must be unique')
     study = fingerprint(cases)
     results_path = Path(results_path)
-    rows = read_results(results_path, study) if resume else {}
+    if results_path.is_symlink():
+        raise StudyError(
+            f'{results_path} is a symbolic link: valve-sim does not write a results file '
+            'through a link; remove it or give another --out'
+        )
+    rows = read_results(results_path, study, check) if resume else {}
     rows = {index: row for index, row in rows.items() if index in set(indices)}
     missing = [case for case in cases if case['index'] not in rows]
     if resume and rows:
@@ -299,20 +375,20 @@ def run_cases(
         drop_torn_tail(results_path)
     else:
         results_path.parent.mkdir(parents=True, exist_ok=True)
-        results_path.write_text(json.dumps({'study': study, 'cases': len(cases)}) + '\n')
+        write_text(results_path, json.dumps({'study': study, 'cases': len(cases)}) + '\n')
     if progress is None:
         progress = Progress(label, len(cases), len(rows), progress_stream)
     else:
         progress.skip(len(rows))
     size = batch_size or default_batch_size(len(missing), backend.workers)
     computed = 0
-    with open(results_path, 'a') as stream:
+    with append_to(results_path) as stream:
         try:
             for batch_rows in backend.run(evaluate, batches_of(missing, size)):
                 fresh = [row for row in batch_rows if row['index'] not in rows]
                 for row in fresh:
                     rows[row['index']] = row
-                    stream.write(json.dumps(row) + '\n')
+                    stream.write(json.dumps(finite(row)) + '\n')
                 stream.flush()
                 computed += len(fresh)
                 progress.advance(len(fresh))

@@ -125,7 +125,31 @@ def parse_variation(text, params):
         raise ParameterError(f'variation {text!r}: the range must have LO < HI')
     if distribution.kind == 'normal' and not distribution.b > 0.0:
         raise ParameterError(f'variation {text!r}: sigma must be > 0')
+    _check_within_limits(distribution, text)
     return distribution
+
+
+def _check_within_limits(distribution, text):
+    """
+    Refuse a variation that leaves the parameter's limits (SPECS).
+
+    A valve beyond them cannot be set. Uniform: [a, b] within the limits; normal: the
+    mean within them and sigma at most their span (the tails beyond are drawn, and
+    fail as runs that cannot be set).
+    """
+    spec, a, b = SPECS[distribution.name], distribution.a, distribution.b
+    limits = (
+        f'the limits of {distribution.name} ({spec.symbol}), [{spec.minimum:g}, '
+        f'{spec.maximum:g}] {spec.unit}'
+    )
+    if distribution.kind == 'uniform' and not spec.minimum <= a < b <= spec.maximum:
+        raise ParameterError(f'variation {text!r}: values {a:g}:{b:g} {spec.unit} leave {limits}')
+    if distribution.kind == 'normal' and not (
+        spec.minimum <= a <= spec.maximum and b <= spec.maximum - spec.minimum
+    ):
+        raise ParameterError(
+            f'variation {text!r}: mean {a:g} {spec.unit}, sigma {b:g} {spec.unit} leave {limits}'
+        )
 
 
 def follows_nominal(text):

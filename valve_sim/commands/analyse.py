@@ -33,7 +33,6 @@ where recorded, is reported beside the inlet flow and drawn under the pressures.
 """
 
 from dataclasses import dataclass
-import json
 import sys
 
 import numpy as np
@@ -50,9 +49,16 @@ from valve_sim.analysis.signals import (
     SignalMap,
 )
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis, tank_details
-from valve_sim.commands.options import add_options, flow_value, namespace_name
+from valve_sim.commands.options import (
+    add_options,
+    flow_value,
+    namespace_name,
+    number,
+    plot_path,
+)
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.parameters import STANDARD_ATMOSPHERE
+from valve_sim.core.output_files import json_text
+from valve_sim.core.parameters import SETTING_SPECS, STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.rosbag2_metadata import bag_files
 
@@ -121,6 +127,12 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED):
                 rows.extend(joiner.add(role, time_ns, value))
         found.update(channel.topic for channel in reader.channels.values())
         problems += [reader.problem] if reader.problem else []
+        problems += [
+            f'{file}: {extractor.non_finite} value(s) on {extractor.topic} are not finite '
+            '(inf or NaN) and were left out'
+            for extractor, _ in extractors.values()
+            if extractor.non_finite
+        ]
     rows.extend(joiner.finish())
     for role in required:
         if signal_map.topics[role] not in found and reader.problem:
@@ -327,8 +339,9 @@ def add_signal_arguments(parser):
             parser.add_argument(f'--joint-{option}', metavar='NAME', default=role.joint,
                                 help=f'JointState joint name of the {role.meaning} '
                                 f'(default {role.joint})')
-    parser.add_argument('--ambient-pressure', type=float, default=STANDARD_ATMOSPHERE,
-                        metavar='PA',
+    ambient = SETTING_SPECS['ambient_pressure']
+    parser.add_argument('--ambient-pressure', default=STANDARD_ATMOSPHERE, metavar='PA',
+                        type=number('a pressure', 'Pa', ambient.minimum, ambient.maximum),
                         help='subtracted from the recorded pressure to get gauge pressure; 0 '
                         f'for a gauge sensor (default {STANDARD_ATMOSPHERE:g})')
     parser.add_argument('--clock', choices=CLOCKS, default='header',
@@ -341,13 +354,17 @@ def add_arguments(parser):
                         help="rosbag2 MCAP file or bag folder (valve_node's topics, or "
                         'mapped ones)')
     add_options(parser, '--json', help='print the step records as JSON')
-    add_options(parser, '--plot', help='draw Figure 5 of each step')
+    add_options(parser, '--plot', help='draw Figure 5 of each step (FILE_step<k>.png for '
+                'several; an existing folder: figure5.png in it)')
     add_signal_arguments(parser)
-    parser.add_argument('--step-threshold', type=float, default=1e-6, metavar='Q',
-                        help='smallest inlet-flow change taken as a step [m^3/s] (default 1e-6)')
-    parser.add_argument('--step-time', type=float, metavar='S',
-                        help="analyse one step at this time [s, on the bag's time axis] instead "
-                        'of detecting steps; the inlet flow is then not needed')
+    parser.add_argument('--step-threshold', default=1e-6, metavar='Q',
+                        type=number('a flow', 'm^3/s', 0.0, 1.0, low_open=True),
+                        help='smallest inlet-flow change taken as a step [m^3/s] (default 1e-6; '
+                        'in (0, 1])')
+    parser.add_argument('--step-time', type=number('a time', 's', 0.0, 1e12), metavar='S',
+                        help="analyse one step at this time [s, on the bag's time axis, inside "
+                        'the recording] instead of detecting steps; the inlet flow is then not '
+                        'needed')
     parser.add_argument('--characteristic', action='store_true',
                         help='the bag is a slow flow ramp up and down: report the static '
                         'characteristic (cracking, rated-flow and reseat pressures, override, '
@@ -449,20 +466,21 @@ def run_characteristic(args):
     if args.plot:
         from valve_sim.analysis.plotting import plot_characteristic
 
+        plot = plot_path(args.plot, 'characteristic.png')
         plot_characteristic(
-            args.plot,
+            plot,
             recording.inlet_flow,
             recording.valve_pressure(),
             marks,
             title=f'Static characteristic of {args.bag}',
         )
-        print(f'wrote {args.plot}', file=sys.stderr)
+        print(f'wrote {plot}', file=sys.stderr)
     above_tank = bool(np.any(np.isfinite(recording.tank_pressure)))
     if args.json:
         document = {'bag': str(args.bag), 'characteristic': marks.as_dict()}
         if above_tank:
             document['pressure'] = 'supply above the tank'
-        print(json.dumps(document, indent=2))
+        print(json_text(document))
     else:
         from valve_sim.commands.characteristic import print_marks
 
@@ -483,15 +501,20 @@ def run(args):
         print(f'valve-sim analyse: warning: {recording.problem}', file=sys.stderr)
     if args.step_time is None:
         records = analyse(recording, args.step_threshold)
+    elif not recording.time[0] <= args.step_time < recording.time[-1]:
+        raise InputFileError(
+            f'--step-time {args.step_time:g} s is outside the recording of {args.bag} '
+            f'(t from {recording.time[0]:.6f} to {recording.time[-1]:.6f} s)'
+        )
     else:
         records = [
             analyse_step(recording, args.step_time, 1 if args.step_direction == 'up' else -1)
         ]
     if args.plot and records:
-        for target in plot_steps(args.plot, recording, records):
+        for target in plot_steps(plot_path(args.plot, 'figure5.png'), recording, records):
             print(f'wrote {target}', file=sys.stderr)
     if args.json:
-        print(json.dumps({'bag': str(args.bag), 'steps': records}, indent=2))
+        print(json_text({'bag': str(args.bag), 'steps': records}))
     elif records:
         print_steps(records, recording)
     else:

@@ -30,7 +30,6 @@ bounds from their specs or --bounds NAME=LO:HI. Writes into --out:
 Ctrl-C stops the fit and writes the best result so far (exit code 130).
 """
 
-import json
 import math
 from pathlib import Path
 import shlex
@@ -46,8 +45,9 @@ from valve_sim.commands.analyse import (
     signal_map_from,
 )
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, flow_value, load_from_arguments
-from valve_sim.core.errors import InputFileError
+from valve_sim.commands.options import add_options, flow_value, load_from_arguments, number
+from valve_sim.core.input_files import read_json, TARGET_MEASURES
+from valve_sim.core.output_files import json_text, write_text
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -64,21 +64,27 @@ def bounds_value(text):
     try:
         if not separator or not colon:
             raise ValueError
-        return name.strip(), (float(low), float(high))
+        low, high = float(low), float(high)
     except ValueError:
         raise ArgumentTypeError(f'expected NAME=LO:HI (SI units), got {text!r}') from None
+    if not -math.inf < low < high < math.inf:
+        raise ArgumentTypeError(f'LO and HI must be finite with LO < HI, got {text!r}')
+    return name.strip(), (low, high)
 
 
 def range_value(text):
     """'LO:HI' -> (LO, HI) for --main-spring-rate and --main-spring-preload (SI units)."""
     from argparse import ArgumentTypeError
 
+    low, colon, high = text.partition(':')
     try:
-        _, (low, high) = bounds_value(f'range={text}')
-    except ArgumentTypeError:
+        if not colon:
+            raise ValueError
+        low, high = float(low), float(high)
+    except ValueError:
         raise ArgumentTypeError(f'expected LO:HI (SI units), got {text!r}') from None
-    if not 0.0 < low < high < float('inf'):
-        raise ArgumentTypeError(f'need 0 < LO < HI, got {text!r}')
+    if not 0.0 < low < high < math.inf:
+        raise ArgumentTypeError(f'LO and HI must be finite with 0 < LO < HI, got {text!r}')
     return low, high
 
 
@@ -111,6 +117,13 @@ def positive_length(text):
     return value
 
 
+MAX_CHANGE_PERCENT = 1000.0  # [%] the largest change of a --relieves case (11 times the value)
+
+bounds_value.bounds = 'LO, HI finite, LO < HI'
+range_value.bounds = 'LO, HI finite, 0 < LO < HI'
+tie_value.bounds = 'FACTOR finite, > 0'
+positive_length.bounds = 'in (0, 0.1) m'
+
 # The design rules of a main stage as real valves are built (docs/model.md), as constraints.
 DESIGN_RULES = (
     ('--land-margin', positive_length, 'M', 'constraint: both throttle lands inside the guide '
@@ -137,7 +150,14 @@ def case_value(text):
             raise ArgumentTypeError(
                 f'expected SYMBOL=PERCENT[,SYMBOL=PERCENT...], got {text!r}'
             ) from None
+        if not -100.0 < changes[name.strip()] <= MAX_CHANGE_PERCENT:
+            raise ArgumentTypeError(
+                f'a change must be in (-100, {MAX_CHANGE_PERCENT:g}] %, got {part.strip()!r}'
+            )
     return changes
+
+
+case_value.bounds = f'each PERCENT in (-100, {MAX_CHANGE_PERCENT:g}]'
 
 
 def add_arguments(parser):
@@ -145,7 +165,8 @@ def add_arguments(parser):
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument('--target-measures', metavar='FILE.json',
                         help='the six measures to fit: '
-                        '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...}')
+                        '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...} (JSON, '
+                        f'{TARGET_MEASURES.limits()})')
     target.add_argument('--bag', metavar='BAG',
                         help='a recorded step to fit: an .mcap file or a rosbag2 bag folder '
                         '(topics mapped as in analyse)')
@@ -182,13 +203,16 @@ def add_arguments(parser):
     parser.add_argument('--study-relieves', action='store_true',
                         help="check: every case of the paper's study (preset held) opens the main "
                         'stage and ends its step test relieving through it (26 runs per start)')
-    parser.add_argument('--starts', type=int, default=3, metavar='N',
+    parser.add_argument('--starts', type=number('a count', '', 1, 1000, integer=True),
+                        default=3, metavar='N',
                         help='optimiser starts (default 3)')
-    parser.add_argument('--spread', type=float, default=0.1, metavar='S',
+    parser.add_argument('--spread', type=number('a spread', '', 0.0, 2.0), default=0.1,
+                        metavar='S',
                         help='log-normal spread of the starts after the first (default 0.1, '
                         'about 10 %%)')
     add_options(parser, '--seed', help='seed of the starts')
-    parser.add_argument('--tolerance', type=float, default=1e-10, metavar='TOL',
+    parser.add_argument('--tolerance', type=number('a tolerance', '', 0.0, 1.0, low_open=True),
+                        default=1e-10, metavar='TOL',
                         help='ftol = xtol = gtol of least_squares (default 1e-10)')
     add_options(parser, '--step-size')
     parser.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
@@ -199,15 +223,11 @@ def _target(args, step_size, signal_map):
     from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
 
     if args.target_measures:
+        document = read_json(args.target_measures, TARGET_MEASURES)
         try:
-            document = json.loads(Path(args.target_measures).read_text())
-        except OSError as error:
-            raise InputFileError(
-                f'cannot read {args.target_measures}: {error.strerror}'
-            ) from error
-        except json.JSONDecodeError as error:
-            raise InputFileError(f'{args.target_measures} is not valid JSON: {error}') from error
-        return MeasuresTarget.from_document(document, step_size)
+            return MeasuresTarget.from_document(document, step_size)
+        except CalibrationError as error:
+            raise CalibrationError(f'{args.target_measures}: {error}') from None
     recording = read_recording(args.bag, signal_map)
     if recording.problem:
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
@@ -346,9 +366,9 @@ def run(args):
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_parameter_file(out / 'calibrated.yaml', result, settings, command)
     report = report_document(result, target, args, command)
-    (out / 'report.json').write_text(json.dumps(report, indent=2) + '\n')
+    write_text(out / 'report.json', json_text(report) + '\n')
     text = report_text(report)
-    (out / 'report.txt').write_text(text)
+    write_text(out / 'report.txt', text)
     plot_fit(out / 'fit.png', result, target)
     print(text, end='')
     print(f'wrote {out}/calibrated.yaml, report.json, report.txt and fit.png')
@@ -401,7 +421,7 @@ def write_parameter_file(path, result, settings, command):
         lines.append(f'    {name}: {yaml_number(value)}{marks.get(name, "")}')
     for name, value in settings.items():
         lines.append(f'    {name}: {yaml_number(value)}')
-    path.write_text('\n'.join(lines) + '\n')
+    write_text(path, '\n'.join(lines) + '\n')
 
 
 def report_document(result, target, args, command):

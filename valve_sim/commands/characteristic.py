@@ -27,7 +27,6 @@ and compared with the exact steady-state curve. Writes into --out:
 """
 
 import csv
-import json
 from pathlib import Path
 import sys
 
@@ -42,9 +41,11 @@ from valve_sim.commands.options import (
     check_bag_arguments,
     flow_value,
     load_from_arguments,
+    number,
 )
 from valve_sim.commands.simulate import write_bag
 from valve_sim.core.errors import SteadyStateError
+from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -63,13 +64,16 @@ def add_arguments(parser):
     parser.add_argument('--rated-flow', type=flow_value, metavar='Q',
                         help='rated flow of the valve: the override is taken at it and cracking '
                         'at 1 %% of it (default: --max-flow)')
-    parser.add_argument('--ramp-time', type=float, default=10.0, metavar='S',
+    parser.add_argument('--ramp-time', type=number('a time', 's', 0.01, 600.0), default=10.0,
+                        metavar='S',
                         help='duration of each ramp, up and down [s] (default 10; slower is '
                         'closer to static)')
-    parser.add_argument('--hold-time', type=float, default=0.5, metavar='S',
+    parser.add_argument('--hold-time', type=number('a time', 's', 0.0, 600.0), default=0.5,
+                        metavar='S',
                         help='time held at --max-flow between the ramps [s] (default 0.5)')
     add_options(parser, '--step-size')
-    parser.add_argument('--record-interval', type=float, default=1e-3, metavar='S',
+    parser.add_argument('--record-interval', type=number('an interval', 's', 1e-7, 1.0),
+                        default=1e-3, metavar='S',
                         help="sample interval of the output [s] (default 1e-3, a rig's 1 kHz)")
     add_options(parser, '--out', required=False, help='write CSV, JSON and the figure here')
     add_options(parser, '--json', help='print the marks as JSON')
@@ -133,7 +137,7 @@ def ramp_test(params, max_flow, rated_flow, ramp_time, hold_time, step_size, rec
 
 
 def _write_csv(path, header, rows):
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
         writer.writerows(rows)
@@ -198,7 +202,7 @@ def run(args):
             relief=relief_flows(params, waveforms),
         )
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(json_text(report))
     else:
         print_marks(marks['main_stage_flow'], steady)
         curve = marks['pressure_flow_curve']
@@ -237,7 +241,7 @@ def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow)
         ['inlet_flow_m3_s', 'supply_pressure_Pa', 'main_stage_flow_m3_s'],
         ([f'{q:.9e}', f'{p:.9e}', f'{m:.9e}'] for q, p, m in zip(flows, pressure, main_steady)),
     )
-    (out / 'characteristic.json').write_text(json.dumps(report, indent=2) + '\n')
+    write_text(out / 'characteristic.json', json_text(report) + '\n')
     plot_characteristic(out / 'characteristic.png', q_in, p_s, marks, (flows, pressure), steady)
     print(f'wrote {out}/characteristic.csv, steady_state.csv, characteristic.json and '
           'characteristic.png', file=sys.stderr)

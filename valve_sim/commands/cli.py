@@ -78,6 +78,16 @@ SUBCOMMANDS = {
 }
 
 
+class BoundsHelpFormatter(argparse.HelpFormatter):
+    """Help that states each numeric option's bounds, from its type (options.number)."""
+
+    def _get_help_string(self, action):
+        text, bounds = action.help or '', getattr(action.type, 'bounds', None)
+        if not bounds or bounds in text or action.help == argparse.SUPPRESS:
+            return text
+        return f'{text} ({bounds})'
+
+
 def build_parser(argv):
     """
     Build the parser, with the arguments of the subcommand argv names only.
@@ -89,7 +99,8 @@ def build_parser(argv):
     parser = argparse.ArgumentParser(prog='valve-sim', description=__doc__.strip().splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name, (module_name, help_text) in SUBCOMMANDS.items():
-        sub = commands.add_parser(name, help=help_text, description=help_text)
+        sub = commands.add_parser(name, help=help_text, description=help_text,
+                                  formatter_class=BoundsHelpFormatter)
         if name == chosen:
             module = importlib.import_module(module_name)
             sub.description = module.__doc__.strip().splitlines()[0]

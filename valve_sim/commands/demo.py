@@ -28,7 +28,6 @@ folder gets the bag, its measures JSON, figure5.png and the two nodes' logs. Exi
 one line saying what is missing if any measure, the bag or the figure is.
 """
 
-import json
 import math
 from pathlib import Path
 import re
@@ -42,6 +41,7 @@ from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import add_options
 from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.input_files import MEASURES_FILE, read_json
 
 
 # Live and offline measures come from the same code on the same samples; they may differ
@@ -351,7 +351,7 @@ def report(folder, bag, attempts=1):
     from valve_sim.commands.analyse import analyse, plot_steps, print_steps, read_recording
 
     measures_path = bag.with_suffix('.measures.json')
-    live = json.loads(measures_path.read_text())['steps']
+    live = read_json(measures_path, MEASURES_FILE)['steps']
     recording = read_recording(bag)
     if len(live) != 2 * attempts - 1 or live[-1]['direction'] != 1:
         raise IncompleteRunError(

@@ -23,9 +23,9 @@ of each parameter (preset held). --json prints the same as one JSON document und
 the stable key names of docs/model.md ("operating-point --json"), all SI.
 """
 
-import json
 
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments
+from valve_sim.core.output_files import json_text
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
@@ -235,7 +235,7 @@ def run(args):
             'tank_pressure': tank,
             'operating_points': [point(q) for q in inlet_flows],
         }
-        print(json.dumps(document, indent=2))
+        print(json_text(document))
         return 0
     print(
         f'main valve cracking pressure: {cracking / 1e6:.4f} MPa'

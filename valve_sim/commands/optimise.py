@@ -39,17 +39,29 @@ from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, load_from_arguments
+from valve_sim.commands.options import add_options, load_from_arguments, number
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
+    check_fits,
+    MAX_RUNS,
     open_backend,
 )
 from valve_sim.core.errors import StudyError
-from valve_sim.core.parameters import ParameterError
+from valve_sim.core.input_files import size_text
 
 # The optimiser and the model (pymoo, numba, scipy) are imported in the functions that run
 # them, so that `valve-sim optimise --help` stays quick.
+
+# [bytes] a sampled valve's run on the worker that evaluates its candidate: every valve of
+# a candidate runs in one batch, waveforms and all; 1.1-1.5 MiB measured (tracemalloc
+# peak of study_runner.evaluate_batch over 32-128 valves of the step test), rounded up
+BYTES_PER_VALVE = 2 * 1024 * 1024
+MAX_CANDIDATES = 100_000  # population x generations: the rows kept for the Pareto set
+# [bytes] a candidate's row kept in the client (2.4 KiB as JSON), with Python's overhead
+BYTES_PER_CANDIDATE = 16 * 1024
+MAX_POPULATION = 10_000
+MAX_GENERATIONS = 10_000
 
 
 def decay_rate_value(text):
@@ -60,9 +72,14 @@ def decay_rate_value(text):
         value = float(text)
     except ValueError:
         value = float('nan')
-    if not value >= 0.0 or value == float('inf'):
-        raise ArgumentTypeError(f'expected a rate >= 0 in 1/s, or off; got {text!r}')
+    if not 0.0 <= value <= MAX_DECAY_RATE:
+        raise ArgumentTypeError(f'must be a rate {decay_rate_value.bounds}; got {text!r}')
     return value
+
+
+# [1/s] a mode decaying by e in 1 us: faster than the model's steps (10 us) resolve
+MAX_DECAY_RATE = 1e6
+decay_rate_value.bounds = f'in [0, {MAX_DECAY_RATE:g}] 1/s, or off'
 
 
 def add_arguments(parser):
@@ -88,18 +105,24 @@ def add_arguments(parser):
                  f'(default {MIN_DECAY_RATE:g}: 95 %% within the 1 s window); off: not asked')
     parser.add_argument('--min-decay-rate', type=decay_rate_value, default=MIN_DECAY_RATE,
                         metavar='R', help=stability)
-    parser.add_argument('--samples', type=int, default=256, metavar='N',
-                        help='Monte Carlo valves per candidate (default 256)')
-    parser.add_argument('--confirm-samples', type=int, default=1024, metavar='N',
+    parser.add_argument('--samples', type=number('a sample count', '', 1, MAX_RUNS, integer=True),
+                        default=256, metavar='N',
+                        help='Monte Carlo valves per candidate, run together on one worker '
+                        f'({size_text(BYTES_PER_VALVE)} of memory each; default 256)')
+    parser.add_argument('--confirm-samples', default=1024, metavar='N',
+                        type=number('a sample count', '', 0, MAX_RUNS, integer=True),
                         help='valves per Pareto design and baseline in the confirmation, with '
                         'the next seed (default 1024; 0: no confirmation)')
     parser.add_argument('--sampler', choices=SAMPLERS, default='sobol',
                         help='sobol: scrambled Sobol, N a power of two (default); lhs: Latin '
                         'hypercube; random: pseudo-random (all seeded)')
-    parser.add_argument('--population', type=int, default=24, metavar='N',
+    parser.add_argument('--population', default=24, metavar='N',
+                        type=number('a population', '', 2, MAX_POPULATION, integer=True),
                         help='candidates per generation (default 24)')
-    parser.add_argument('--generations', type=int, default=20, metavar='N',
-                        help='generations, the first one a Latin hypercube (default 20)')
+    parser.add_argument('--generations', default=20, metavar='N',
+                        type=number('a generation count', '', 1, MAX_GENERATIONS, integer=True),
+                        help='generations, the first one a Latin hypercube (default 20; '
+                        f'population x generations at most {MAX_CANDIDATES:,} candidates)')
     add_options(parser, '--seed', help='seed of the optimiser and the samples (default 0)')
     add_options(parser, '--step-size')
     add_protocol_arguments(parser)
@@ -119,10 +142,6 @@ def problem_from(args):
 
     params, settings = load_from_arguments(args)
     design = parse_design(args.design, params, args.protocol)
-    if args.population < 2 or args.generations < 1:
-        raise ParameterError('--population must be at least 2 and --generations at least 1')
-    if args.confirm_samples < 0:
-        raise ParameterError('--confirm-samples must be 0 (no confirmation) or more')
     preset, protocol = preset_protocol(args.protocol, params)
     problem = RobustProblem(
         params=params,
@@ -183,6 +202,17 @@ def print_outcome(problem, summary):
         print(f'yield of {label}: {_yield_text(result)} over {result["samples"]} valves')
 
 
+def check_sizes(args):
+    """Raise StudyError unless a candidate's valves fit a worker and the candidates the client."""
+    valves = max(args.samples, args.confirm_samples) + 1  # the sampled valves and the nominal
+    which = '--samples' if args.samples >= args.confirm_samples else '--confirm-samples'
+    check_fits(f'{which} {valves - 1}', valves, 'valves run together on one worker', MAX_RUNS,
+               BYTES_PER_VALVE)
+    check_fits(f'--population {args.population} x --generations {args.generations}',
+               args.population * args.generations, 'candidates', MAX_CANDIDATES,
+               BYTES_PER_CANDIDATE)
+
+
 def _yield_text(result):
     low, high = result['ci95']
     return f"{100 * result['fraction']:.1f} % ({100 * low:.1f}-{100 * high:.1f})"
@@ -200,6 +230,7 @@ def run(args):
             "optimise needs pymoo, which is not installed: pip install 'pymoo>=0.6.2'"
         )
     problem, protocol = problem_from(args)
+    check_sizes(args)
     out = make_folder(Path(args.out))
     runs = args.population * args.generations * (problem.samples + 1)
     print(

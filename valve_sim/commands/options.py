@@ -28,13 +28,16 @@ the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 from argparse import ArgumentTypeError
 from datetime import datetime, timezone
 import math
+from pathlib import Path
 import sys
 
+from valve_sim.core.input_files import PARAMETER_FILE
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
     load_parameters,
     ParameterError,
+    SPECS,
 )
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -52,13 +55,48 @@ def quantity(text, units, kind, example):
         raise ArgumentTypeError(f'not a {kind}: {text!r} (use e.g. {example})') from None
 
 
+def number(kind, unit, low, high, low_open=False, integer=False):
+    """
+    Return an argparse type: finite values (integers if integer) in [low, high] or (low, high].
+
+    Every numeric option of valve-sim is parsed by one of these (or by flow_value,
+    pressure_value), so a NaN, an infinity or an absurd value is a usage error that
+    names the range, never a run with nonsense results. The type's bounds (its
+    attribute bounds) are added to the option's --help by the CLI's help formatter.
+    """
+    shown = '{:,}' if integer else '{:g}'
+    interval = (
+        f'{"(" if low_open else "["}{shown.format(low)}, {shown.format(high)}]'
+        f'{(" " + unit) if unit else ""}'
+    )
+
+    def parse(text):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise ArgumentTypeError(f'not {kind}: {text!r}') from None
+        inside = low < value <= high if low_open else low <= value <= high
+        if not (math.isfinite(value) and inside):
+            raise ArgumentTypeError(f'{kind} must be in {interval}, got {text!r}')
+        return value
+
+    parse.__name__ = kind  # argparse names the type in its messages
+    parse.bounds = f'in {interval}'
+    return parse
+
+
 def flow_value(text):
     """Parse a volume flow from '8.3e-5', '8.3e-5m^3/s' or '5L/min' -> m^3/s (argparse type)."""
     units = {'L/min': LITRE_PER_MINUTE, 'l/min': LITRE_PER_MINUTE, 'm^3/s': 1.0, 'm3/s': 1.0}
     value = quantity(text, units, 'flow', '5L/min or 8.33e-5')
-    if not math.isfinite(value) or value < 0.0:
-        raise ArgumentTypeError(f'flow must be finite and >= 0, got {text!r}')
+    if not 0.0 <= value <= MAX_FLOW:
+        raise ArgumentTypeError(f'flow must be {flow_value.bounds}, got {text!r}')
     return value
+
+
+# The largest flow any option takes: the largest max_inlet_flow a valve may be given.
+MAX_FLOW = SPECS['max_inlet_flow'].maximum  # [m^3/s]
+flow_value.bounds = f'in [0, {MAX_FLOW:g}] m^3/s'
 
 
 def pressure_value(text):
@@ -70,6 +108,9 @@ def pressure_value(text):
     return value
 
 
+pressure_value.bounds = 'finite, > 0 Pa'
+
+
 def gauge_pressure_value(text):
     """Parse a gauge pressure, 0 or below too: '1e6', '-0.5bar', '1MPa' -> Pa (argparse type)."""
     units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
@@ -77,6 +118,9 @@ def gauge_pressure_value(text):
     if not math.isfinite(value):
         raise ArgumentTypeError(f'pressure must be finite, got {text!r}')
     return value
+
+
+gauge_pressure_value.bounds = 'finite Pa (gauge), not below vacuum, below burst_pressure'
 
 
 def start_time(text):
@@ -111,7 +155,7 @@ OPTIONS = {
     '--params': {
         'metavar': 'FILE.yaml',
         'help': 'ROS 2 parameter file overlaid on config/reference.yaml '
-        '(e.g. config/table2.yaml)',
+        f'(e.g. config/table2.yaml; a regular file, {PARAMETER_FILE.limits()})',
     },
     '--set': {
         'type': assignment,
@@ -136,14 +180,18 @@ OPTIONS = {
         'higher (docs/model.md, "Back pressure")',
     },
     '--step-size': {
-        'type': float,
+        'type': number('a step size', 's', 1e-7, 1e-4),
         'metavar': 'S',
         'help': 'RK4 step [s] (default: step_size of the parameter file, 1e-5)',
     },
     # What a command writes; most commands say in their own words what (help=...).
     '--out': {'metavar': 'DIR', 'required': True, 'help': 'output folder (created if missing)'},
     '--json': {'action': 'store_true'},
-    '--plot': {'metavar': 'FILE.png'},
+    '--plot': {
+        'metavar': 'FILE.png',
+        'help': 'draw the figure to FILE.png (an existing folder: a file of the default name '
+        'in it)',
+    },
     '--mcap': {'metavar': 'FILE.mcap'},
     '--bag-folder': {
         'action': 'store_true',
@@ -156,7 +204,8 @@ OPTIONS = {
         'help': 'with --mcap: wall-clock time of model time 0, ISO 8601 (e.g. '
         '2026-11-29T12:00:00Z; default: now, to the millisecond)',
     },
-    '--seed': {'type': int, 'default': 0, 'metavar': 'N'},
+    '--seed': {'type': number('a seed', '', 0, 2**63 - 1, integer=True), 'default': 0,
+               'metavar': 'N'},
 }
 
 
@@ -216,6 +265,18 @@ def check_tank_pressure(pressure, params, settings):
     )
     if problem:
         raise ParameterError(problem)
+
+
+def plot_path(value, default_name):
+    """
+    Return the file --plot names: value itself, or default_name inside it if it is a folder.
+
+    A name without a suffix gets '.png', as matplotlib would add it.
+    """
+    path = Path(value)
+    if path.is_dir():
+        return path / default_name
+    return path if path.suffix else path.with_name(path.name + '.png')
 
 
 def namespace_name(namespace):

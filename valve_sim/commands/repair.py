@@ -26,6 +26,7 @@ new folder, with its metadata.yaml (as `ros2 bag reindex` writes it).
 
 from pathlib import Path
 
+from valve_sim.core.input_files import InputFileError
 from valve_sim.recording.recovery import repair, repair_folder
 
 
@@ -34,7 +35,8 @@ def add_arguments(parser):
                         help='the damaged MCAP file, or a rosbag2 bag folder (only read)')
     parser.add_argument('-o', '--output', metavar='OUT',
                         help='the complete copy (default: BAG.repaired.mcap beside a file, '
-                        'BAG_repaired/ beside a folder)')
+                        'BAG_repaired/ beside a folder; written whole, through a temporary '
+                        'file; a symbolic link at a default name is replaced, not followed)')
 
 
 def default_output(bag):
@@ -48,8 +50,13 @@ def default_output(bag):
 def run(args):
     output = Path(args.output) if args.output else default_output(args.bag)
     if not Path(args.bag).is_dir():
-        print(repair(args.bag, output).summary())
+        print(repair(args.bag, output, explicit=bool(args.output)).summary())
         return 0
+    if not args.output and output.is_symlink():
+        raise InputFileError(
+            f'{output} is a symbolic link, which valve-sim does not write through unless '
+            'named: give -o OUT'
+        )
     for report in repair_folder(args.bag, output):
         print(report.summary())
     print(f'wrote {output}, a bag folder with its metadata.yaml')

@@ -31,7 +31,6 @@ test, each valve set to the preset first (protocol held-preset, or
 """
 
 import csv
-import json
 from pathlib import Path
 import sys
 
@@ -45,6 +44,7 @@ from valve_sim.commands.options import load_from_arguments
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
+    check_runs,
     PIP_INSTALL,
 )
 from valve_sim.commands.tolerance import (
@@ -53,6 +53,7 @@ from valve_sim.commands.tolerance import (
     write_samples,
 )
 from valve_sim.core.errors import StudyError
+from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import SPECS
 
 
@@ -87,7 +88,7 @@ def measure_indices(distributions, rows, seed):
 
 
 def write_indices(path, distributions, indices):
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(
             ['measure', 'parameter', 'symbol', 'S1', 'S1_conf', 'ST', 'ST_conf', 'interaction']
@@ -131,6 +132,7 @@ def run(args):
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
     preset, protocol = preset_protocol(args.protocol, params)
     names = [d.name for d in distributions]
+    check_runs(args.samples * (len(names) + 2), f'--samples {args.samples} x ({len(names)} + 2)')
     values = sobol_design(distributions, args.samples, args.seed)
     out = make_folder(Path(args.out))
     print(
@@ -142,8 +144,9 @@ def run(args):
     indices = measure_indices(distributions, rows, args.seed)
     write_indices(out / 'indices.csv', distributions, indices)
     write_samples(out / 'samples.csv', names, values, rows, [])
-    (out / 'design.json').write_text(
-        json.dumps(
+    write_text(
+        out / 'design.json',
+        json_text(
             {
                 'base_samples': args.samples,
                 'runs': len(values),

@@ -27,7 +27,6 @@ readings are what --mcap records on the pressure topics.
 """
 
 import csv
-import json
 import math
 import sys
 import time
@@ -43,8 +42,12 @@ from valve_sim.commands.options import (
     gauge_pressure_value,
     load_from_arguments,
     namespace_name,
+    number,
+    plot_path,
 )
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
+from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
+from valve_sim.core.output_files import json_text, replacing
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
 from valve_sim.core.scenario import Scenario, TankPressure
 
@@ -53,6 +56,9 @@ from valve_sim.core.scenario import Scenario, TankPressure
 
 
 STATE_UNITS = ('Pa', 'Pa', 'Pa', 'Pa', 'm', 'm_s', 'm', 'm_s')
+MAX_END_TIME = 3600.0  # [s] the longest run
+TIME = number('a time', 's', 0.0, MAX_END_TIME)
+INTERVAL = number('an interval', 's', 1e-7, 1.0)
 
 
 def add_arguments(parser):
@@ -63,32 +69,34 @@ def add_arguments(parser):
                         'valve (default 5L/min)')
     parser.add_argument('--final-flow', type=flow_value, default=s.final_flow, metavar='Q',
                         help='inlet flow after the step (default 20L/min)')
-    parser.add_argument('--step-time', type=float, default=s.step_time, metavar='S',
-                        help='time of the step [s]')
-    parser.add_argument('--ramp-time', type=float, default=0.0, metavar='S',
+    parser.add_argument('--step-time', type=TIME, default=s.step_time, metavar='S',
+                        help=f'time of the step [s] (default {s.step_time:g})')
+    parser.add_argument('--ramp-time', type=TIME, default=0.0, metavar='S',
                         help='change the flow linearly over this time instead of at once [s]')
-    parser.add_argument('--end-time', type=float, default=s.end_time, metavar='S',
-                        help='end of the run [s]')
+    parser.add_argument('--end-time', type=TIME, default=s.end_time, metavar='S',
+                        help=f'end of the run [s] (default {s.end_time:g})')
     add_options(parser, '--tank-pressure', help="the tank's (return line's) pressure from the "
                 'start, gauge (e.g. 1MPa; default: tank_pressure of the parameter file or --set, '
                 '0: at ambient): the run starts at its steady state')
     parser.add_argument('--final-tank-pressure', type=gauge_pressure_value, metavar='P',
                         help="the tank's pressure after --tank-step-time, gauge: a back-pressure "
                         'step (default: held at --tank-pressure)')
-    parser.add_argument('--tank-step-time', type=float, metavar='S',
+    parser.add_argument('--tank-step-time', type=TIME, metavar='S',
                         help="time of the tank's step [s] (default: --step-time)")
-    parser.add_argument('--tank-ramp-time', type=float, default=0.0, metavar='S',
+    parser.add_argument('--tank-ramp-time', type=TIME, default=0.0, metavar='S',
                         help="change the tank's pressure linearly over this time instead [s]")
     add_options(parser, '--step-size')
-    parser.add_argument('--record-interval', type=float, default=1e-4, metavar='S',
+    parser.add_argument('--record-interval', default=1e-4, metavar='S', type=INTERVAL,
                         help='sample interval of the output waveforms [s] (default 1e-4, '
                         "the paper's)")
     parser.add_argument('--faults', metavar='FILE.yaml',
                         help='fault schedule (docs/faults.md): events at t [s], applied at the '
-                        'first tick (1/publish_rate) at or after t, as valve_node does')
+                        'first tick (1/publish_rate) at or after t, as valve_node does (YAML, '
+                        f'{FAULT_SCHEDULE_FILE.limits()}, at most {MAX_EVENTS} events)')
     add_options(parser, '--json', help='print the six measures as JSON')
     parser.add_argument('--csv', metavar='FILE', help='write the waveforms as CSV (SI units)')
-    add_options(parser, '--plot', help="draw the paper's Figure 5")
+    add_options(parser, '--plot', help="draw the paper's Figure 5 (an existing folder: "
+                'figure5.png in it)')
     add_options(parser, '--mcap',
                 help="write the run as a rosbag2 MCAP file in valve_node's topic layout and time "
                 "base (1 kHz ticks, absolute pressures: gauge + the settings' ambient_pressure)")
@@ -96,10 +104,11 @@ def add_arguments(parser):
                         help='with --mcap: write what a test rig records instead, the supply '
                         'pressure and the inlet flow as std_msgs/msg/Float64 on these two '
                         'topics (no main-valve position)')
-    parser.add_argument('--pressure-noise', type=float, default=0.0, metavar='PA',
+    parser.add_argument('--pressure-noise', type=number('a pressure', 'Pa', 0.0, 1e8),
+                        default=0.0, metavar='PA',
                         help='with --rig-topics: Gaussian noise on the recorded pressure, '
                         'standard deviation [Pa]')
-    parser.add_argument('--flow-interval', type=float, metavar='S',
+    parser.add_argument('--flow-interval', type=INTERVAL, metavar='S',
                         help='with --rig-topics: sample interval of the flowmeter [s], a whole '
                         'multiple of the record interval (default: the pressure interval, '
                         '1 ms; e.g. 0.01 for a 100 Hz flowmeter)')
@@ -168,8 +177,8 @@ def rig_topics(text):
 
 
 def _scenario(args):
-    if not 0.0 <= args.step_time < args.end_time or args.ramp_time < 0.0 or args.end_time > 3600.0:
-        raise ParameterError('need 0 <= --step-time < --end-time <= 3600 s and --ramp-time >= 0')
+    if not args.step_time < args.end_time:
+        raise ParameterError('need --step-time < --end-time')
     return Scenario(
         args.initial_flow, args.final_flow, args.step_time, args.end_time, args.ramp_time
     )
@@ -204,7 +213,7 @@ def write_csv(path, waveforms, relief):
         + ['tank_pressure_Pa']
         + [f'{name}_m3_s' for name in RELIEF_COLUMNS]
     )
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
         for t, q, p_t, state, flows in zip(
@@ -261,10 +270,8 @@ def run(args):
     from valve_sim.core.simulation import relief_flows, simulate
 
     check_bag_arguments(args)
-    if args.flow_interval is not None and not (
-        args.mcap and args.rig_topics and args.flow_interval > 0.0
-    ):
-        raise ParameterError('--flow-interval needs --mcap, --rig-topics and a value > 0 s')
+    if args.flow_interval is not None and not (args.mcap and args.rig_topics):
+        raise ParameterError('--flow-interval needs --mcap and --rig-topics')
     injection = {}
     params, settings = load_from_arguments(args, injection)
     faults, sensors, schedule = load_injection(args, injection)
@@ -327,7 +334,7 @@ def run(args):
         from valve_sim.analysis.plotting import plot_step_response
 
         plot_step_response(
-            args.plot,
+            plot_path(args.plot, 'figure5.png'),
             waveforms.time,
             waveforms['supply_pressure'] - waveforms.tank_pressure,
             waveforms['main_valve_displacement'],
@@ -346,7 +353,7 @@ def run(args):
         _, readings = read_waveforms(waveforms, sensors, interval, settings['ambient_pressure'])
         write_bag(args, waveforms, settings['ambient_pressure'], interval, readings, relief)
     if args.json:
-        print(json.dumps(measures.as_dict(), indent=2))
+        print(json_text(measures.as_dict()))
     else:
         print_table(
             measures, paper=is_papers_run(params, scenario) and not faulty and not above_tank

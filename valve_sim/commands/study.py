@@ -61,6 +61,7 @@ from valve_sim.commands.study_backend import (
     add_runner_arguments,
     open_backend,
 )
+from valve_sim.core.output_files import replacing
 from valve_sim.core.parameters import scaled
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
@@ -212,7 +213,7 @@ def _value(measures, name):
 
 
 def write_sensitivity(path, results):
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(
             ['parameter', 'variation_percent', *CASE_COLUMNS, *STUDY_MEASURES, 'reasons']
@@ -236,7 +237,7 @@ def write_sensitivity(path, results):
 def write_table3(path, results):
     table1, table2 = results['reference']['measures'], results['table2']['measures']
     protocol = results['reference']['case']['protocol']
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(['measure', 'table1', 'table2', 'relative_change_percent', 'protocol'])
         for name in STUDY_MEASURES:

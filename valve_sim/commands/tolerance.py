@@ -31,7 +31,6 @@ paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
 """
 
 import csv
-import json
 from pathlib import Path
 import sys
 
@@ -46,12 +45,15 @@ from valve_sim.analysis.tolerances import (
     summarise,
 )
 from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, load_from_arguments
+from valve_sim.commands.options import add_options, load_from_arguments, number
 from valve_sim.commands.study_backend import (
     add_protocol_arguments,
     add_runner_arguments,
+    check_runs,
+    MAX_RUNS,
     open_backend,
 )
+from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import SPECS
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
@@ -61,7 +63,9 @@ from valve_sim.core.parameters import SPECS
 def add_study_arguments(parser, samples_help):
     """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
     add_options(parser, '--params', '--set', '--preset-pressure', '--out')
-    parser.add_argument('--samples', type=int, default=256, metavar='N', help=samples_help)
+    parser.add_argument('--samples', type=number('a sample count', '', 1, 10**12, integer=True),
+                        default=256, metavar='N',
+                        help=f'{samples_help}; at most {MAX_RUNS:,} runs in all')
     add_options(parser, '--seed', help='seed of the sampler (default 0)')
     add_options(parser, '--step-size')
 
@@ -82,7 +86,7 @@ def add_arguments(parser):
 
 
 def write_samples(path, names, values, rows, limits):
-    with open(path, 'w', newline='') as stream:
+    with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(
             ['index', *names, 'pilot_spring_preload', *MEASURE_NAMES, 'pass', 'reasons', 'error']
@@ -155,6 +159,7 @@ def run(args):
     limits = parse_limits(args.limits)
     preset, protocol = preset_protocol(args.protocol, params)
     names = [d.name for d in distributions]
+    check_runs(args.samples, f'--samples {args.samples}')
     values = draw(distributions, args.samples, args.seed, args.sampler)
     out = make_folder(Path(args.out))
     rows = run_samples(args, 'tolerance', params, names, values, preset, settings, out)
@@ -168,7 +173,7 @@ def run(args):
         **summarise(rows, limits),
     }
     write_samples(out / 'samples.csv', names, values, rows, limits)
-    (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+    write_text(out / 'summary.json', json_text(summary) + '\n')
     from valve_sim.analysis.study_plots import plot_measure_cdfs, plot_measures_against
 
     plot_measure_cdfs(out / 'measures_cdf.png', rows, limits, f"protocol {protocol['protocol']}")

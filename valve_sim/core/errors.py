@@ -17,9 +17,11 @@ The errors a user can cause (bad parameters, bad files, a diverging run).
 
 The command line prints these as one line and exits 1; anything else is a bug
 and keeps its traceback. Defined here, light to import (no numba, no scipy), and
-also offered by the modules that raise them (integrator, steady_state).
+also offered by the modules that raise them (integrator, steady_state; InputFileError
+lives with the file readers, input_files).
 """
 
+from valve_sim.core.input_files import InputFileError
 from valve_sim.core.parameters import ParameterError
 
 
@@ -39,10 +41,6 @@ class OverpressureError(IntegrationError):
 
 class SteadyStateError(RuntimeError):
     """No steady state could be found."""
-
-
-class InputFileError(ValueError):
-    """A file given by the user cannot be read or has the wrong content."""
 
 
 class IncompleteRunError(RuntimeError):

@@ -28,20 +28,37 @@ use_sim_time), offline from the start of the run. An event takes effect at the
 first tick at or after its time (tick_index): valve_node and `valve-sim simulate
 --faults` apply it there, after the model has reached that tick and before the
 tick's sample is published, so one file gives the same response offline and live.
+
+A schedule file is read once (input_files.FAULT_SCHEDULE: a regular file of at most
+1 MiB) and holds at most MAX_EVENTS events; load_schedule() returns the checked events,
+which are what is applied. Run as `python -m valve_sim.core.fault_schedule FD PATH`, this
+module checks the file open on descriptor FD in a process of its own (memory limited to
+CHECK_MEMORY) and prints its events as JSON lines (event_lines): valve_node's way to read a
+schedule set live, so that parsing it never holds the node's interpreter.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
+import json
+import os
+import resource
+import sys
 
-from valve_sim.core.errors import InputFileError
 from valve_sim.core.faults import check_fault, FAULT_NAMES
+from valve_sim.core.input_files import (
+    FAULT_SCHEDULE,
+    InputFileError,
+    MAX_EVENTS,
+    open_regular,
+    read_yaml,
+    shown,
+)
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
-import yaml
 
 
 NS_PER_S = 1_000_000_000
 MAX_TIME = 1e6  # [s] latest event time accepted (11.6 days)
+CHECK_MEMORY = 2 * 1024**3  # [bytes] address space of the process that checks a file
 
 
 @dataclass(frozen=True)
@@ -59,7 +76,7 @@ def check_change(name, value):
     if name in SENSOR_NAMES:
         return check_sensor(name, value)
     raise ParameterError(
-        f"'{name}' is neither a fault (fault.*) nor a sensor setting (sensor.*) parameter"
+        f'{shown(name)} is neither a fault (fault.*) nor a sensor setting (sensor.*) parameter'
     )
 
 
@@ -67,6 +84,11 @@ def parse_schedule(document, source='schedule'):
     """Events of a parsed schedule document, sorted by time (stable); raises ParameterError."""
     if not isinstance(document, dict) or not isinstance(document.get('events'), list):
         raise ParameterError(f"{source}: expected a mapping with a list 'events'")
+    if len(document['events']) > MAX_EVENTS:
+        raise ParameterError(
+            f"{source}: 'events' lists {len(document['events'])} events, more than the "
+            f'{MAX_EVENTS} a schedule may hold'
+        )
     events = []
     for index, event in enumerate(document['events']):
         where = f'{source}: event {index + 1}'
@@ -74,7 +96,9 @@ def parse_schedule(document, source='schedule'):
             raise ParameterError(f"{where}: expected exactly the keys 't' and 'set'")
         t = event['t']
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not 0.0 <= t <= MAX_TIME:
-            raise ParameterError(f'{where}: t must be a time in [0, {MAX_TIME:g}] s, got {t!r}')
+            raise ParameterError(
+                f'{where}: t must be a time in [0, {MAX_TIME:g}] s, got {shown(t)}'
+            )
         if not isinstance(event['set'], dict) or not event['set']:
             raise ParameterError(f"{where}: 'set' must map parameter names to values")
         try:
@@ -85,16 +109,56 @@ def parse_schedule(document, source='schedule'):
     return sorted(events, key=lambda e: e.time_ns)
 
 
-def load_schedule(path):
-    """Read and check a fault schedule file; raises InputFileError or ParameterError."""
-    path = Path(path)
+def open_schedule(path):
+    """
+    Open a fault schedule file without reading it: a regular file within its size limit.
+
+    Never blocks (a FIFO is refused, not waited on); raises InputFileError.
+    """
+    return open_regular(path, FAULT_SCHEDULE)
+
+
+def load_schedule(path, stream=None):
+    """
+    Read a fault schedule file once and return its checked events.
+
+    stream: the file as open_schedule(path) opened it (else it is opened here). Raises
+    InputFileError (the file: not readable, not a regular file, too large, not YAML
+    within input_files' limits) or ParameterError (its content, naming the event and
+    the parameter).
+    """
+    document = read_yaml(path, FAULT_SCHEDULE, stream)
+    return parse_schedule(document, f'fault schedule {path}')
+
+
+def event_lines(events):
+    """Yield each event as one line of JSON: [time_ns, {name: value}]."""
+    for event in events:
+        yield json.dumps([event.time_ns, event.changes]) + '\n'
+
+
+def event_from_line(line):
+    """Return the FaultEvent of one line of event_lines()."""
+    time_ns, changes = json.loads(line)
+    return FaultEvent(time_ns, changes)
+
+
+def main(argv=None):
+    """
+    Check the schedule open on descriptor FD (argv: FD PATH); print the outcome as JSON lines.
+
+    The first line is {"events": N} followed by N event lines, or {"error": message}.
+    """
+    descriptor, path = (sys.argv[1:] if argv is None else argv)[:2]
+    resource.setrlimit(resource.RLIMIT_AS, (CHECK_MEMORY, CHECK_MEMORY))
     try:
-        document = yaml.safe_load(path.read_text())
-    except OSError as error:
-        raise InputFileError(f'cannot read fault schedule {path}: {error.strerror}') from error
-    except yaml.YAMLError as error:
-        raise InputFileError(f'fault schedule {path} is not valid YAML: {error}') from error
-    return parse_schedule(document, str(path))
+        events = load_schedule(path, os.fdopen(int(descriptor), 'rb'))
+    except (InputFileError, ParameterError, MemoryError, RecursionError) as error:
+        print(json.dumps({'error': str(error) or type(error).__name__}))
+        return 1
+    sys.stdout.write(json.dumps({'events': len(events)}) + '\n')
+    sys.stdout.writelines(event_lines(events))
+    return 0
 
 
 def tick_index(time_ns, tick_ns):
@@ -119,3 +183,7 @@ class Schedule:
 
     def pending(self):
         return len(self.events) - self._next
+
+
+if __name__ == '__main__':
+    sys.exit(main())

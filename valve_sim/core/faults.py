@@ -33,7 +33,9 @@ model equations in valve_sim.core.model.coefficients; all zero/false is the heal
 
 from dataclasses import dataclass, fields, replace
 import math
+import sys
 
+from valve_sim.core.input_files import shown
 from valve_sim.core.parameters import ParameterError, ParameterSpec
 
 
@@ -178,7 +180,9 @@ def check_fault(name, value):
     """Return value checked for the fault parameter name; raise ParameterError naming it."""
     if name in FAULT_SWITCH_SPECS:
         if not isinstance(value, bool):
-            raise ParameterError(f"fault parameter '{name}' must be true or false, got {value!r}")
+            raise ParameterError(
+                f"fault parameter '{name}' must be true or false, got {shown(value)}"
+            )
         return value
     spec = FAULT_DOUBLE_SPECS.get(name)
     if spec is None:
@@ -200,8 +204,10 @@ def checked_number(spec, value, kind):
     label = f"{kind} '{spec.name}' ({spec.symbol})"
     unit = unit_suffix(spec)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f'{label} must be a number{unit and " in" + unit}, got {value!r}')
-    value = float(value)
+        raise ParameterError(
+            f'{label} must be a number{unit and " in" + unit}, got {shown(value)}'
+        )
+    value = float(value) if abs(value) <= sys.float_info.max else math.inf
     if not math.isfinite(value):
         raise ParameterError(f'{label} must be finite, got {value}')
     if not spec.minimum <= value <= spec.maximum:

@@ -26,16 +26,15 @@ from dataclasses import dataclass
 import logging
 import math
 from pathlib import Path
-import re
 import sys
 
+from valve_sim.core.input_files import InputFileError, PARAMETER_FILE, read_yaml, shown
 from valve_sim.core.parameter_sections import (
     describe_not_applied,
     node_fqn,
     parameters_for_node,
     SectionError,
 )
-import yaml
 
 
 PACKAGE = 'valve_sim'
@@ -519,9 +518,9 @@ def check_value(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) must be a number in {spec.unit}, "
-            f'got {value!r}'
+            f'got {shown(value)}'
         )
-    value = float(value)
+    value = float(value) if abs(value) <= sys.float_info.max else math.inf
     if not math.isfinite(value):
         raise ParameterError(
             f"parameter '{spec.name}' ({spec.symbol}) must be finite, got {value}"
@@ -604,26 +603,18 @@ def shipped_file(folder, filename):
     )
 
 
-class _RosYamlLoader(yaml.SafeLoader):
-    """SafeLoader that reads 1e-3 and 2.2e9 as floats, as ROS 2 parameter files do (YAML 1.2)."""
-
-
-_RosYamlLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$'),
-    list('-+0123456789.'),
-)
-
-
 def parameter_document(path):
-    """Return the parsed YAML of a ROS 2 parameter file, or raise ParameterError."""
-    path = Path(path)
+    """
+    Return the parsed YAML of a ROS 2 parameter file, or raise ParameterError.
+
+    The file is read once, within the limits of input_files.PARAMETER_FILE (a regular
+    file, bounded size, aliases and nesting, numbers that fit a float), and parsed as
+    ROS 2 reads it (YAML 1.2 floats: 1e-3 is a float).
+    """
     try:
-        return yaml.load(path.read_text(), Loader=_RosYamlLoader)
-    except OSError as error:
-        raise ParameterError(f'cannot read parameter file {path}: {error.strerror}') from error
-    except yaml.YAMLError as error:
-        raise ParameterError(f'parameter file {path} is not valid YAML: {error}') from error
+        return read_yaml(path, PARAMETER_FILE)
+    except InputFileError as error:
+        raise ParameterError(str(error)) from None
 
 
 def read_parameter_file(path, namespace=''):

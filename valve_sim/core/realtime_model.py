@@ -90,9 +90,17 @@ class RealTimeModel:
         self._step_ns = step_ns(step_size)
 
     def start(self, now_ns):
-        """Anchor the model time to the clock time now_ns [ns] without integrating."""
+        """
+        Anchor the model time to the clock time now_ns [ns] without integrating.
+
+        Called again after the clock jumped back, it starts a new time base: the time of
+        the last retune moves with the model time, so the roll-back window still counts
+        the model time integrated since that retune.
+        """
         if self.time_ns is None and self._retuned_ns is None and self._previous is not None:
             self._retuned_ns = now_ns
+        elif self.time_ns is not None and self._retuned_ns is not None:
+            self._retuned_ns += now_ns - self.time_ns
         self.time_ns = now_ns
 
     def advance_to(self, now_ns, inlet_flow, max_lag_ns, tank_pressure=0.0):
@@ -161,14 +169,15 @@ class RealTimeModel:
         faults: {name: value} of fault parameters changed too (None: none); a main
         valve that becomes stuck stops where it is. A retune that changes none of
         them (the node's sensor or publish-rate changes) is no change: the change
-        before it stays the one that roll_back() undoes.
+        before it stays the one that roll_back() undoes. Returns whether it was a change.
         """
         if params == self.params and step_size == self.step_size and not faults:
-            return
+            return False
         self._previous = (self.params, self.step_size, self.faults)
         self._retuned_ns = self.time_ns
         faults = self.faults if faults is None else apply_faults(self.state, self.faults, faults)
         self._use(params, step_size, faults)
+        return True
 
     def roll_back(self, failure_ns):
         """

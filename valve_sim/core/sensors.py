@@ -23,21 +23,27 @@ the absolute pressure u [Pa] of each published sample:
   bias        Pa   added offset
   noise_std   Pa   Gaussian noise, standard deviation (seeded: sensor.noise_seed)
   resolution  Pa   quantisation step, round to the nearest multiple; 0: none
-  range_min   Pa   lower end of the measuring range (absolute, >= 0): output saturates there
-  range_max   Pa   upper end of the measuring range (absolute); 0: no upper limit
   stuck       bool output frozen (sensor fault)
   stuck_at    Pa   the frozen value (absolute); negative: the last output before sticking
+  range_min   Pa   lower end of the measuring range (absolute, >= 0): output saturates there
+  range_max   Pa   upper end of the measuring range (absolute); 0: no upper limit
   dropout     bool nothing published (sensor fault)
 
 The defaults are an ideal transducer: the output is the model's pressure, never below
 0 Pa absolute (the model has no cavitation; below vacuum it publishes 0 Pa). The
-numbers run in one compiled kernel (sense) for the four topics.
+numbers run in one compiled kernel (sense) for the four topics. Whatever the settings,
+a reading is finite and within the range, in every mode (a stuck sensor too): a
+resolution is 0 or at least MIN_RESOLUTION (a finer step overflows the division), and a
+reading that is still not finite is replaced by the model's pressure. Without
+range_max a bias (or noise) can take a reading beyond burst_pressure, as a miscalibrated
+transducer reads beyond what the valve holds.
 """
 
 import math
 
 import numpy as np
 from valve_sim.core.faults import checked_number, SwitchSpec
+from valve_sim.core.input_files import shown
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 from valve_sim.core.parameters import ParameterError, ParameterSpec
@@ -47,6 +53,7 @@ PREFIX = 'sensor.'
 PRESSURE_NAMES = STATE_NAMES[P_S:P_C + 1]
 OURS = 'our transducer model, see docs/faults.md'
 NOISE_BLOCK = 1024  # standard normal draws taken from the generator at a time
+MIN_RESOLUTION = 1e-3  # [Pa] finest quantisation step; 1e-320 made every reading +inf
 SETTING_DOUBLES = (
     ParameterSpec(
         'bandwidth', 'f_c', 'Hz', 0.0, 1e6, 'first-order lag bandwidth; 0: no lag', OURS
@@ -56,7 +63,13 @@ SETTING_DOUBLES = (
         'noise_std', 'sigma', 'Pa', 0.0, 1e8, 'standard deviation of Gaussian noise', OURS
     ),
     ParameterSpec(
-        'resolution', 'q', 'Pa', 0.0, 1e8, 'quantisation step of the reading; 0: none', OURS
+        'resolution',
+        'q',
+        'Pa',
+        0.0,
+        1e8,
+        'quantisation step of the reading; 0: none, else at least 1e-3 Pa',
+        OURS,
     ),
     ParameterSpec(
         'range_min',
@@ -151,11 +164,15 @@ def check_sensor(name, value):
     """Return value checked for the sensor parameter name; raise ParameterError naming it."""
     if name in SENSOR_SWITCH_SPECS:
         if not isinstance(value, bool):
-            raise ParameterError(f"sensor parameter '{name}' must be true or false, got {value!r}")
+            raise ParameterError(
+                f"sensor parameter '{name}' must be true or false, got {shown(value)}"
+            )
         return value
     if name == NOISE_SEED.name:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ParameterError(f"sensor parameter '{name}' must be an integer, got {value!r}")
+            raise ParameterError(
+                f"sensor parameter '{name}' must be an integer, got {shown(value)}"
+            )
         if not NOISE_SEED.minimum <= value <= NOISE_SEED.maximum:
             raise ParameterError(
                 f"sensor parameter '{name}' = {value} is outside [0, {NOISE_SEED.maximum}]"
@@ -168,7 +185,13 @@ def check_sensor(name, value):
             f"{', '.join(PRESSURE_NAMES)} and setting in "
             f"{', '.join(DEFAULTS)}, and {NOISE_SEED.name}"
         )
-    return checked_number(spec, value, 'sensor parameter')
+    value = checked_number(spec, value, 'sensor parameter')
+    if name.endswith('.resolution') and 0.0 < value < MIN_RESOLUTION:
+        raise ParameterError(
+            f"sensor parameter '{name}' (q) = {value:g} Pa must be 0 (none) or at least "
+            f'{MIN_RESOLUTION:g} Pa'
+        )
+    return value
 
 
 def checked_settings(settings, changes):
@@ -223,14 +246,16 @@ def sense(pressures, time_ns, settings, memory, noise, out):
             state[NOISE_USED] += 1.0
         if row[RESOLUTION] > 0.0:
             value = np.round(value / row[RESOLUTION]) * row[RESOLUTION]
-        value = max(value, row[RANGE_MIN])
-        if row[RANGE_MAX] > 0.0:
-            value = min(value, row[RANGE_MAX])
         if row[STUCK] > 0.0:
             if row[STUCK_AT] >= 0.0:
                 value = row[STUCK_AT]
             elif state[OUTPUT] == state[OUTPUT]:  # not nan: there was a reading before
                 value = state[OUTPUT]
+        if value - value != 0.0:  # not finite: never published; the model's pressure is
+            value = pressures[i]
+        value = max(value, row[RANGE_MIN])
+        if row[RANGE_MAX] > 0.0:
+            value = min(value, row[RANGE_MAX])
         state[OUTPUT] = value
         out[i] = math.nan if row[DROPOUT] > 0.0 else value
 
@@ -309,6 +334,10 @@ class SensorStage:
             self._out,
         )
         return self._out.tolist()
+
+    def rebase(self, shift_ns):
+        """Move the time of the last sample by shift_ns [ns]: the clock jumped (new time base)."""
+        self._memory[:, TIME] += shift_ns
 
     def describe_faults(self):
         """Names of the sensor faults and non-ideal settings in effect, for diagnostics."""

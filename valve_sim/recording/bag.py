@@ -38,16 +38,14 @@ import json
 import os
 from pathlib import Path
 import re
-import struct
 import sys
 
-from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.output_files import create_new
 from valve_sim.recording import rosbag2_metadata
-from valve_sim.recording.recovery import diagnose
+from valve_sim.recording.recovery import Scan
 import yaml
 
 
@@ -77,15 +75,6 @@ PRIMITIVE_TYPES = frozenset(
 # A field's type at the start of a line, as rosbag2 finds nested types in .msg text.
 FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE [ns]
-# A damaged record, or one cut off by the end of the file.
-READ_ERRORS = (
-    EndOfFile,
-    CRCValidationError,
-    McapError,
-    struct.error,
-    ValueError,
-    UnicodeDecodeError,
-)
 
 # What DDS discovery reports for a publisher with the default reliable, volatile QoS
 # (history and depth are not part of a DDS offer): what valve_node offers.
@@ -190,18 +179,20 @@ class BagWriter:
     add_topic() once per topic, then write() serialized messages. path is the file,
     or with folder=True the bag folder (it must not exist yet, as for rosbag2);
     self.path is then the MCAP file in it. custom_data: {str: str} for the metadata.
+    new=True: path is a name the writer chose, not the user: nothing may be there yet,
+    not even a symbolic link (never followed).
     """
 
-    def __init__(self, path, chunk_size=CHUNK_SIZE, folder=False, custom_data=None):
+    def __init__(self, path, chunk_size=CHUNK_SIZE, folder=False, custom_data=None, new=False):
         self.folder = Path(path) if folder else None
         self.path = self.folder / f'{self.folder.name}_0.mcap' if folder else Path(path)
         try:
             if folder:
                 self.folder.mkdir(parents=True, exist_ok=False)
-            self._file = open(self.path, 'wb')
+            self._file = create_new(self.path) if new or folder else open(self.path, 'wb')
         except FileExistsError as error:
             raise InputFileError(
-                f'bag folder {self.folder} already exists; rosbag2 does not overwrite a bag'
+                f'{self.folder or self.path} already exists; rosbag2 does not overwrite a bag'
             ) from error
         except OSError as error:
             raise InputFileError(f'cannot write {self.path}: {error.strerror}') from error
@@ -317,7 +308,9 @@ class BagReader:
     Messages of an MCAP file in file order, tolerant of a missing end.
 
     Iterate messages() for (channel, schema, message) of mcap.records. After the
-    iteration, problem is None for a complete file, or says what was missing.
+    iteration, problem is None for a complete file, or says what was missing. The
+    records come from recovery.Scan, the reader `valve-sim repair` uses, so both give
+    one verdict on a damaged file, as fast (a sparse hole is skipped, not read).
     """
 
     def __init__(self, path):
@@ -329,46 +322,32 @@ class BagReader:
             raise InputFileError(
                 f'{self.path} is a directory; rosbag2_metadata.bag_files() gives its .mcap files'
             )
-        try:
-            with open(self.path, 'rb') as file:
-                magic = file.read(len(MCAP_MAGIC))
-        except OSError as error:
-            raise InputFileError(f'cannot read {self.path}: {error.strerror}') from error
-        if magic != MCAP_MAGIC:
-            raise InputFileError(
-                f'{self.path} is not an MCAP file' + (' (it is empty)' if not magic else '')
-            )
+        Scan(self.path)._file.close()  # a regular MCAP file, or InputFileError now
 
     def messages(self, topics=None):
         """Yield (channel, schema, message) for every message (of the given topics, if any)."""
-        size = self.path.stat().st_size
-        with open(self.path, 'rb') as file:
-            try:
-                for record in StreamReader(file, validate_crcs=True).records:
-                    if isinstance(record, Message):
-                        channel = self.channels.get(record.channel_id)
-                        if channel is None:
-                            raise McapError(
-                                f'a message refers to channel {record.channel_id}, never defined'
-                            )
-                        if topics is None or channel.topic in topics:
-                            yield channel, self.schemas.get(channel.schema_id), record
-                    elif isinstance(record, Channel):
-                        self.channels[record.id] = record
-                    elif isinstance(record, Schema):
-                        self.schemas[record.id] = record
-            except READ_ERRORS as error:
-                self._diagnose(error, file.tell() < size)
-
-    def _diagnose(self, error, before_the_end):
-        """Say where the file is truncated (then problem) or damaged (InputFileError)."""
-        scan = diagnose(self.path)
+        scan, undefined = Scan(self.path), None
+        for record in scan.records():
+            if isinstance(record, Message):
+                channel = self.channels.get(record.channel_id)
+                if channel is None:
+                    undefined = undefined or record.channel_id
+                elif topics is None or channel.topic in topics:
+                    yield channel, self.schemas.get(channel.schema_id), record
+            elif isinstance(record, Channel):
+                self.channels[record.id] = record
+            elif isinstance(record, Schema):
+                self.schemas[record.id] = record
         repair = f'`valve-sim repair {self.path}` writes a complete copy of what it holds'
-        if scan.truncated or scan.damage is None and not before_the_end:
+        if scan.damage and scan.truncated:
             self.problem = (
-                f'{scan.damage or self.path}: it ends before its footer (a recording that was '
-                f'not closed); read what its complete chunks hold; {repair}'
+                f'{scan.damage}: it ends before its footer (a recording that was not closed); '
+                f'read what its complete chunks hold; {repair}'
             )
-            return
-        where = scan.damage or f'{self.path}: {error or type(error).__name__}'
-        raise InputFileError(f'{where} (the file is damaged there); {repair}') from error
+        elif scan.damage:
+            raise InputFileError(f'{scan.damage} (the file is damaged there); {repair}')
+        elif undefined is not None:
+            raise InputFileError(
+                f'{self.path}: a message refers to channel {undefined}, never defined '
+                f'(the file is damaged); {repair}'
+            )

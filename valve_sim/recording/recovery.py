@@ -29,6 +29,7 @@ writes the new folder's metadata.yaml, as `ros2 bag reindex` does.
 
 from dataclasses import dataclass
 from io import BytesIO
+import os
 from pathlib import Path
 import struct
 import zlib
@@ -36,17 +37,36 @@ import zlib
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.records import (
+    Attachment,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    Header,
+    Message,
+    Metadata,
+    Schema,
+)
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import (
+    BAG_RECORD,
+    InputFileError,
+    MCAP_FILE,
+    open_regular,
+    parse_yaml,
+)
+from valve_sim.core.output_files import replacing
 from valve_sim.recording import rosbag2_metadata
-import yaml
 
 
 MAGIC = b'\x89MCAP0\r\n'
 RECORD_HEADER = struct.Struct('<BQ')  # opcode, content length
 CHUNK_FIXED = struct.Struct('<QQQI')  # message start and end time, uncompressed size and crc
+FOOTER = struct.Struct('<QQI')  # summary start, summary offset start, summary crc
+RESYNC_BLOCK = 1024 * 1024  # [bytes] read at a time looking for the next intact chunk
+MAX_RESYNC_CHUNK = 256 * 1024 * 1024  # [bytes] a candidate chunk longer is not read
+MAX_COMPRESSION_NAME = 64  # [bytes] 'zstd', 'lz4' or '': a longer name is damage
 CHUNK_SIZE = 768 * 1024  # [bytes] chunks of the repaired file: rosbag2's default
 NAMES = {opcode.value: opcode.name.lower() for opcode in Opcode}
 READERS = {
@@ -56,7 +76,7 @@ READERS = {
     Opcode.METADATA: Metadata.read,
     Opcode.ATTACHMENT: Attachment.read,
 }
-RECORD_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, EOFError)
+RECORD_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, EOFError, OverflowError)
 
 
 def _read(opcode, content):
@@ -69,14 +89,22 @@ def _read(opcode, content):
 
 class Scan:
     """
-    The records of an MCAP file in file order, read up to where it is damaged.
+    The records of an MCAP file in file order, read past damage wherever it can be.
 
     Iterate records() once: Header, Schema, Channel, Message, Metadata and Attachment
     records, those inside chunks included. Afterwards damage is None for a
-    complete file, or says where it is truncated or corrupt; complete_chunks,
-    partial_chunk_messages (from a chunk cut short) and corrupt_chunks (failed their
-    CRC, left out) count what was read; truncated says whether the damage is a
-    missing end (a recording that was not closed) rather than corrupt bytes.
+    complete file, or says where it is first truncated or corrupt; complete_chunks,
+    partial_chunk_messages (from a chunk cut short), corrupt_chunks (failed their CRC,
+    left out) and skipped (byte ranges passed over) count what was read; truncated
+    says whether the damage is a missing end (a recording that was not closed) rather
+    than corrupt bytes.
+
+    A file with its footer is complete in length: a record that runs past the end of
+    its data is corrupt (a damaged length field), not truncated; so is one that runs
+    past the end of a file without footer when an intact chunk follows it. After corrupt bytes
+    the scan resynchronises: on the next chunk of the summary's chunk index (its
+    schemas and channels first), or else on the next record that is an intact chunk
+    (its CRC checked); holes of a sparse file are skipped without being read.
     """
 
     def __init__(self, path):
@@ -86,27 +114,35 @@ class Scan:
         self.complete_chunks = 0
         self.partial_chunk_messages = 0
         self.corrupt_chunks = 0
-        try:
-            self._file = open(self.path, 'rb')
-        except OSError as error:
-            raise InputFileError(f'cannot read {self.path}: {error.strerror}') from error
-        self.size = self.path.stat().st_size
+        self.skipped = []  # (start, end) byte ranges passed over after corrupt bytes
+        self._file = open_regular(self.path, MCAP_FILE)
+        self.size = os.fstat(self._file.fileno()).st_size
         if self._file.read(len(MAGIC)) != MAGIC:
             self._file.close()
             raise InputFileError(
                 f'{self.path} is not an MCAP file' + ('' if self.size else ' (it is empty)')
             )
+        self.data_end, self._summary_start = self._footer()
+        self._summary_records = None  # ([schemas, channels], [chunk offsets]) of the summary
 
     def records(self):
-        """Yield the records in file order."""
+        """
+        Yield the records in file order.
+
+        A file with its summary yields the summary's schemas and channels right after
+        its header, so that the messages of every intact chunk have theirs, even when
+        the chunk that held them is damaged.
+        """
         with self._file as file:
-            offset = len(MAGIC)
+            offset, summary = len(MAGIC), self._summary(file)[0]
             while offset < self.size:
                 found = self._next(file, offset)
                 if found is None:
                     return
                 offset, records = found
                 yield from records
+                yield from summary
+                summary = ()
             self._say(f'is truncated: it ends at byte {self.size} without a footer')
 
     def _say(self, damage):
@@ -114,8 +150,24 @@ class Scan:
             self.damage = f'{self.path} {damage}'
             self.truncated = damage.startswith('is truncated')
 
+    def _footer(self):
+        """Return (end of the data, summary start) of a file with its footer, else (size, 0)."""
+        footer_at = self.size - len(MAGIC) - RECORD_HEADER.size - FOOTER.size
+        if footer_at < len(MAGIC):
+            return self.size, 0
+        self._file.seek(footer_at)
+        tail = self._file.read()
+        self._file.seek(len(MAGIC))
+        opcode, length = RECORD_HEADER.unpack_from(tail)
+        if opcode != Opcode.FOOTER or length != FOOTER.size or not tail.endswith(MAGIC):
+            return self.size, 0
+        summary_start = FOOTER.unpack_from(tail, RECORD_HEADER.size)[0]
+        if len(MAGIC) < summary_start <= footer_at:
+            return summary_start, summary_start
+        return footer_at, 0
+
     def _next(self, file, offset):
-        """Read the record at offset: (next offset, [records]) or None at the end or damage."""
+        """Read the record at offset: (next offset, [records]) or None at the end."""
         header = file.read(RECORD_HEADER.size)
         if len(header) < RECORD_HEADER.size:
             self._say(f'is truncated: it ends at byte {self.size} inside a record header')
@@ -124,7 +176,30 @@ class Scan:
         name, end = NAMES.get(opcode), offset + RECORD_HEADER.size + length
         if name is None:
             self._say(f'is corrupt at byte {offset}: no MCAP record starts there')
-            return None
+            return self._resync(file, offset)
+        limit = self.data_end if offset < self.data_end else self.size
+        if opcode == Opcode.CHUNK:
+            true_length = self._chunk_length(file, offset, limit)
+            if true_length is not None and true_length != length:
+                self._say(
+                    f'is corrupt at byte {offset}: its chunk record says it is {length} bytes '
+                    f'long, its content {true_length} (a damaged length field, read past)'
+                )
+                length, end = true_length, offset + RECORD_HEADER.size + true_length
+            file.seek(offset + RECORD_HEADER.size)
+        if end > limit and limit < self.size:
+            self._say(
+                f'is corrupt at byte {offset}: its {name} record says it is {length} bytes '
+                f'long, past the end of the data at byte {limit} (the file has its footer)'
+            )
+            return self._resync(file, offset)
+        if end > self.size and self._next_intact_chunk(file, offset):
+            self._say(
+                f'is corrupt at byte {offset}: its {name} record says it is {length} bytes '
+                f'long, past the end of the file at byte {self.size}, but intact chunks follow'
+            )
+            return self._resync(file, offset)
+        file.seek(offset + RECORD_HEADER.size)
         if end > self.size:
             self._say(
                 f'is truncated: it ends at byte {self.size} inside a {name} record that starts '
@@ -151,7 +226,7 @@ class Scan:
             return end, [_read(opcode, content)]
         except RECORD_ERRORS as error:
             self._say(f'is corrupt at byte {offset} (a {name} record): {error}')
-            return None
+            return self._resync(file, offset)
 
     def _chunk(self, content, offset):
         chunk = Chunk.read(ReadDataStream(BytesIO(content)))
@@ -195,6 +270,117 @@ class Scan:
                     break
         return records
 
+    def _chunk_length(self, file, offset, limit):
+        """
+        Return the length a chunk record at offset has by its content, or None.
+
+        A chunk's content says its own length (fixed fields, compression name, records
+        length, records), which must end by limit: a damaged length field is read past.
+        """
+        file.seek(offset + RECORD_HEADER.size + CHUNK_FIXED.size)
+        head = file.read(4)
+        if len(head) < 4:
+            return None
+        (name_length,) = struct.unpack('<I', head)
+        if name_length > MAX_COMPRESSION_NAME:
+            return None
+        file.seek(name_length, os.SEEK_CUR)
+        tail = file.read(8)
+        if len(tail) < 8:
+            return None
+        length = CHUNK_FIXED.size + 4 + name_length + 8 + struct.unpack('<Q', tail)[0]
+        return length if offset + RECORD_HEADER.size + length <= limit else None
+
+    # --- past corrupt bytes ---------------------------------------------------------------
+
+    def _resync(self, file, offset):
+        """After corrupt bytes at offset: (next offset, [records]) to go on from, or None."""
+        found = self._next_indexed_chunk(file, offset) or self._next_intact_chunk(file, offset)
+        if found is None:
+            self.skipped.append((offset, self.data_end))
+            return None
+        self.skipped.append((offset, found[0]))
+        file.seek(found[0])
+        return found
+
+    def _next_indexed_chunk(self, file, offset):
+        """(offset of the first indexed chunk after offset, []), or None."""
+        after = [start for start in self._summary(file)[1] if start > offset]
+        return (min(after), []) if after else None
+
+    def _summary(self, file):
+        """
+        Return ([schemas and channels], [chunk offsets]) of the summary section.
+
+        Empty without a summary, or with a damaged one; read once.
+        """
+        if self._summary_records is not None:
+            return self._summary_records
+        self._summary_records = [], []
+        if not self._summary_start:
+            return self._summary_records
+        position = file.tell()
+        file.seek(self._summary_start)
+        summary = file.read(self._summary_end() - self._summary_start)
+        file.seek(position)
+        records, chunks, start = [], [], 0
+        while start + RECORD_HEADER.size <= len(summary):
+            opcode, length = RECORD_HEADER.unpack_from(summary, start)
+            content = summary[start + RECORD_HEADER.size:start + RECORD_HEADER.size + length]
+            start += RECORD_HEADER.size + length
+            try:
+                if opcode == Opcode.CHUNK_INDEX:
+                    index = ChunkIndex.read(ReadDataStream(BytesIO(content)))
+                    chunks.append(index.chunk_start_offset)
+                elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+                    records.append(_read(opcode, content))
+            except RECORD_ERRORS:
+                return self._summary_records  # the summary is damaged too
+        self._summary_records = records, chunks
+        return self._summary_records
+
+    def _summary_end(self):
+        """Return the byte where the summary section ends (the footer record's start)."""
+        return self.size - len(MAGIC) - RECORD_HEADER.size - FOOTER.size
+
+    def _next_intact_chunk(self, file, offset):
+        """(offset of the next chunk record after offset whose CRC checks, []), or None."""
+        descriptor, position = file.fileno(), offset + 1
+        while position < self.data_end:
+            raw = os.lseek(descriptor, 0, os.SEEK_CUR)  # where the buffered file left it
+            try:
+                position = os.lseek(descriptor, position, os.SEEK_DATA)  # past a sparse hole
+            except OSError:  # ENXIO: nothing but a hole up to the end
+                return None
+            finally:
+                os.lseek(descriptor, raw, os.SEEK_SET)
+            block = os.pread(descriptor, min(RESYNC_BLOCK, self.data_end - position), position)
+            at = block.find(bytes([Opcode.CHUNK]))
+            while at >= 0:
+                if self._chunk_at(file, position + at):
+                    return position + at, []
+                at = block.find(bytes([Opcode.CHUNK]), at + 1)
+            position += max(len(block), 1)
+        return None
+
+    def _chunk_at(self, file, offset):
+        """Return whether an intact chunk record (uncompressed, CRC checked) starts at offset."""
+        file.seek(offset)
+        header = file.read(RECORD_HEADER.size)
+        if len(header) < RECORD_HEADER.size:
+            return False
+        length = RECORD_HEADER.unpack(header)[1]
+        if not CHUNK_FIXED.size + 12 <= length <= min(MAX_RESYNC_CHUNK, self.data_end - offset):
+            return False
+        try:
+            chunk = Chunk.read(ReadDataStream(BytesIO(file.read(length))))
+            stream, size = get_chunk_data_stream(chunk)
+            return bool(chunk.uncompressed_crc) and zlib.crc32(stream.read(size)) == (
+                chunk.uncompressed_crc
+            )
+        except (*RECORD_ERRORS, LookupError, MemoryError):
+            return False
+
 
 def diagnose(path):
     """
@@ -229,6 +415,7 @@ class RepairReport:
     start_ns: int
     end_ns: int
     custom_data: dict = None
+    skipped: tuple = ()  # (start, end) byte ranges of the source passed over as corrupt
 
     @property
     def messages(self):
@@ -242,19 +429,24 @@ class RepairReport:
             if self.partial_chunk_messages
             else ''
         )
+        passed = ', '.join(f'{start}-{end}' for start, end in self.skipped)
+        resynchronised = f'; passed over corrupt bytes {passed}' if passed else ''
         return (
-            f'{self.damage or f"{self.source} was complete"}\n'
+            f'{self.damage or f"{self.source} was complete"}{resynchronised}\n'
             f'kept {self.messages} messages ({topics or "no topics"}) from '
             f'{self.complete_chunks} complete chunk(s){partial}; wrote {self.target}'
         )
 
 
-def repair(source, target):
+def repair(source, target, explicit=False):
     """
     Write everything source still holds into target as a complete MCAP file.
 
-    Returns a RepairReport. Raises InputFileError for a file that is not MCAP or has
-    no header, or when target is source (a repair never overwrites what it reads).
+    The copy is written to a temporary file renamed to target when complete
+    (output_files.replacing): explicit says the user named target (a link there is
+    followed); else a link at target is replaced, never followed. Returns a
+    RepairReport. Raises InputFileError for a file that is not MCAP or has no header,
+    or when target is source (a repair never overwrites what it reads).
     """
     source, target = Path(source), Path(target)
     if target.exists() and target.resolve() == source.resolve():
@@ -265,16 +457,15 @@ def repair(source, target):
     if not isinstance(header, Header):
         raise InputFileError(f'{scan.damage or source}: no MCAP header, nothing to recover')
     try:
-        stream = open(target, 'wb')
+        with replacing(target, 'wb', explicit) as stream:
+            writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+            writer.start(profile=header.profile, library=header.library)
+            copied = _Copy(writer)
+            for record in records:
+                copied.add(record)
+            writer.finish()
     except OSError as error:
         raise InputFileError(f'cannot write {target}: {error.strerror}') from error
-    with stream:
-        writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
-        writer.start(profile=header.profile, library=header.library)
-        copied = _Copy(writer)
-        for record in records:
-            copied.add(record)
-        writer.finish()
     return RepairReport(
         source,
         target,
@@ -285,6 +476,7 @@ def repair(source, target):
         [tuple(topic_metadata) for topic_metadata in copied.topics.values()],
         *copied.log_times,
         copied.custom_data,
+        tuple(scan.skipped),
     )
 
 
@@ -293,7 +485,8 @@ def repair_folder(source, target):
     Repair every MCAP file of the bag folder source into the new folder target.
 
     Writes target/metadata.yaml for the repaired files, as `ros2 bag reindex` does.
-    Returns the RepairReports, one per file in the bag's order.
+    Returns the RepairReports, one per file in the bag's order. Each file is written
+    whole or not at all (repair()); links inside target are replaced, not followed.
     """
     target = Path(target)
     files = rosbag2_metadata.bag_files(source)
@@ -377,8 +570,8 @@ class _Copy:
 def _profiles(text):
     """Return the offered QoS profiles of a channel's metadata (YAML), [] if none is readable."""
     try:
-        profiles = yaml.safe_load(text)
-    except yaml.YAMLError:
+        profiles = parse_yaml(text, BAG_RECORD, 'offered_qos_profiles')
+    except InputFileError:
         return []
     return profiles if isinstance(profiles, list) else []
 
@@ -386,8 +579,10 @@ def _profiles(text):
 def _custom_data(metadata):
     """custom_data of a rosbag2 Metadata record's serialized BagMetadata, or None."""
     try:
-        bag = yaml.safe_load(metadata.get(rosbag2_metadata.RECORD_KEY, ''))
-    except yaml.YAMLError:
+        bag = parse_yaml(
+            metadata.get(rosbag2_metadata.RECORD_KEY, ''), BAG_RECORD, rosbag2_metadata.RECORD_KEY
+        )
+    except InputFileError:
         return None
     custom_data = bag.get('custom_data') if isinstance(bag, dict) else None
     return custom_data if isinstance(custom_data, dict) else None

@@ -28,7 +28,8 @@ import os
 from pathlib import Path
 import re
 
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import BAG_METADATA, InputFileError, read_yaml, shown
+from valve_sim.core.output_files import write_text
 import yaml
 
 
@@ -162,32 +163,32 @@ def dump(data):
 
 
 def write_metadata_file(folder, metadata):
-    """Write folder/metadata.yaml as rosbag2_storage::MetadataIo::write_metadata does."""
-    (Path(folder) / METADATA_FILE).write_text(dump({TOP_KEY: metadata}) + '\n')
+    """Write folder/metadata.yaml as rosbag2_storage::MetadataIo::write_metadata does (whole)."""
+    write_text(Path(folder) / METADATA_FILE, dump({TOP_KEY: metadata}) + '\n')
 
 
 def read_metadata_file(folder):
-    """Return the BagMetadata dict of folder/metadata.yaml; InputFileError if unreadable."""
+    """
+    Return the BagMetadata dict of folder/metadata.yaml, read once and checked.
+
+    InputFileError if it cannot be read (input_files.BAG_METADATA's limits), is not
+    rosbag2 bag metadata of an MCAP bag, or names its files other than as plain strings.
+    """
     path = Path(folder) / METADATA_FILE
-    try:
-        metadata = yaml.safe_load(path.read_text())[TOP_KEY]
-        paths = metadata['relative_file_paths']
-        storage = metadata['storage_identifier']
-    except OSError as error:
-        raise InputFileError(f'cannot read {path}: {error.strerror}') from error
-    except yaml.MarkedYAMLError as error:
+    document = read_yaml(path, BAG_METADATA)
+    metadata = document.get(TOP_KEY) if isinstance(document, dict) else None
+    if not isinstance(metadata, dict):
+        raise InputFileError(f'{path} is not rosbag2 bag metadata: it has no mapping {TOP_KEY}')
+    storage, paths = metadata.get('storage_identifier'), metadata.get('relative_file_paths')
+    if storage != STORAGE_IDENTIFIER:
         raise InputFileError(
-            f'{path} is not rosbag2 bag metadata: {error.problem} '
-            f'(line {error.problem_mark.line + 1})'
-        ) from error
-    except (yaml.YAMLError, TypeError, KeyError, UnicodeDecodeError) as error:
-        raise InputFileError(
-            f'{path} is not rosbag2 bag metadata ({type(error).__name__}: {error})'
-        ) from error
-    if storage != STORAGE_IDENTIFIER or not isinstance(paths, list) or not paths:
-        raise InputFileError(
-            f'{path}: a bag of storage {storage!r} with files {paths!r}; '
+            f'{path}: a bag of storage {shown(storage)} ({TOP_KEY}.storage_identifier); '
             f'valve_sim reads {STORAGE_IDENTIFIER} bags'
+        )
+    if not isinstance(paths, list) or not paths or not all(isinstance(p, str) for p in paths):
+        raise InputFileError(
+            f'{path} is not rosbag2 bag metadata: {TOP_KEY}.relative_file_paths must list '
+            f'the file names of the bag, got {shown(paths)}'
         )
     return metadata
 

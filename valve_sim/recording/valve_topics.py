@@ -225,11 +225,15 @@ def write_simulation_bag(
     delays = iter(transport_delays(len(indices) * (len(TICK_TOPICS) + 2)).tolist())
     try:
         prefix = namespace.rstrip('/') + '/'
-        for topic, type_name in TOPIC_TYPES.items():
-            bag.add_topic(prefix + topic, type_name)
         tanks = waveforms.tank_pressure
         tanks = np.zeros(len(waveforms.time)) if tanks is None else tanks
         commanded, commanded_tank, tank_commands = None, None, bool(np.any(tanks != 0.0))
+        # As a recording of valve_node: a topic nobody published is not in the bag.
+        unwritten = {'tank_pressure'} if not tank_commands else set()
+        unwritten |= {'relief_flow'} if relief is None else set()
+        for topic, type_name in TOPIC_TYPES.items():
+            if topic not in unwritten:
+                bag.add_topic(prefix + topic, type_name)
         for row, (previous, index) in enumerate(zip([None, *indices], indices)):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
             command_ns = (

@@ -31,9 +31,12 @@ It records as rosbag2 does.
        one publisher, the messages lost on the way (gaps in its publication
        sequence numbers), the QoS of each subscription ("qos /topic":
        reliable/volatile ...); ERROR once a wanted topic cannot be recorded (its type
-       is unknown here), else WARN while a topic has no message yet or once any was
-       lost, else OK. Names and hardware_id as diagnostic_updater has them
-       (valve_sim.ros.diagnostics).
+       is unknown here), else WARN while a topic has no message yet, once any was
+       lost, while a recorded topic also has publishers of another type ("other types
+       on /topic": those are not recorded; the type the analysis reads is), or once a
+       /clock message was refused ("refused /clock messages": a time the node cannot
+       represent, ignored), else OK. Names and hardware_id as diagnostic_updater has
+       them (valve_sim.ros.diagnostics).
 
 One recording per run: output_dir/valve_<date>-<time>.mcap, and beside it
 <same name>.measures.json ({"bag", "steps"}, step_analysis.MeasuresFile), to
@@ -60,6 +63,7 @@ publishes) the open steps on what it has, and closes the file.
 
 import argparse
 from dataclasses import dataclass
+import os
 from pathlib import Path
 import sys
 import textwrap
@@ -69,6 +73,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.callback_groups import CallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -76,7 +81,16 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.utilities import remove_ros_args
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.signals import Extractor, Joiner, REQUIRED, ROLE, SignalMap
+from valve_sim.analysis.signals import (
+    Extractor,
+    FLOAT64,
+    Joiner,
+    JOINT_STATE,
+    REQUIRED,
+    ROLE,
+    SignalMap,
+    TYPES,
+)
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import (
@@ -86,8 +100,9 @@ from valve_sim.core.parameters import (
     STANDARD_ATMOSPHERE,
 )
 from valve_sim.recording.bag import BagWriter
-from valve_sim.recording.valve_topics import message_class
+from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros import diagnostics, spinning
+from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.ros_parameters import declare_double
 
 
@@ -106,6 +121,8 @@ DEFAULT_TOPICS = [
     'applied_tank_pressure',
     'relief_flow',
 ]
+# Recorded once published, never waited for: only a bench with a back pressure sends it.
+OPTIONAL_TOPICS = ('tank_pressure',)
 # The signals measured: the required ones, and the tank's pressure where it is recorded (the
 # measures then take the supply pressure above the tank, step_analysis).
 ANALYSED = REQUIRED + ('tank_pressure',)
@@ -343,6 +360,7 @@ class ValveAnalyser(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self.clock_guard = GuardedTimeSource.install(self)
         settings = self._declare_parameters()
         self.signal_map = SignalMap(
             topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
@@ -353,11 +371,13 @@ class ValveAnalyser(Node):
             [self.resolve_topic_name(t) for t in settings['topics']]
             + list(self.signal_map.topics.values())
         )
+        self.optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
             folder=settings['bag_folder'],
             custom_data={'recorded_by': 'valve_sim analyser_node ' + self.hardware_id},
+            new=True,
         )
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
@@ -368,15 +388,18 @@ class ValveAnalyser(Node):
         self.last_flush = self.last_loss_warning = time.monotonic()
         self.recorded = {}
         self.unrecordable = {}  # topic -> why it cannot be recorded
+        self.other_types = {}  # recorded topic -> types of other publishers, not recorded
         self.queue_depth = settings['queue_depth']
         self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
             DiagnosticArray, 'step_measures', MEASURES_QOS
         )
         self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_timer(DISCOVERY_PERIOD, self._discover)
-        self.create_timer(settings['drain_period'], self.drain)
-        self.create_timer(1.0, self._publish_status)
+        # On the steady clock: recording must not stop while a simulation's /clock pauses.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(DISCOVERY_PERIOD, self._discover, clock=steady)
+        self.create_timer(settings['drain_period'], self.drain, clock=steady)
+        self.create_timer(1.0, self._publish_status, clock=steady)
         self.get_logger().info(f'recording {", ".join(self.wanted)} to {self.bag.path}')
 
     def _declare_parameters(self):
@@ -408,7 +431,7 @@ class ValveAnalyser(Node):
             ) from error
         stem, suffix = time.strftime('valve_%Y%m%d-%H%M%S'), '' if bag_folder else '.mcap'
         path, k = folder / f'{stem}{suffix}', 1
-        while path.exists():
+        while os.path.lexists(path):
             k += 1
             path = folder / f'{stem}_{k}{suffix}'
         return path
@@ -424,7 +447,7 @@ class ValveAnalyser(Node):
             offers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offers:
                 continue  # only subscribers so far: the publishers' QoS decides ours
-            type_name = types[topic][0]
+            type_name = self._type_to_record(topic, types[topic])
             try:
                 message_type = message_class(type_name)
             except (ImportError, AttributeError, ValueError) as error:
@@ -459,6 +482,30 @@ class ValveAnalyser(Node):
             )
         for topic, recorded in self.recorded.items():
             recorded.single_publisher = self.count_publishers(topic) == 1
+            others = sorted(set(types.get(topic, ())) - {recorded.type_name})
+            if others and others != self.other_types.get(topic):
+                self.get_logger().warn(
+                    f'{topic} also has publishers of {", ".join(others)}: recording '
+                    f'{recorded.type_name} only (rosbag2 would record neither: it records a '
+                    'topic of one type only)'
+                )
+            self.other_types[topic] = others
+
+    def _type_to_record(self, topic, type_names):
+        """
+        Return the type to record a topic with, of the types its publishers use.
+
+        Several types on one topic (a rogue publisher): the type the analysis reads for
+        the topic's roles, else valve_node's type of a topic of that name, else the first.
+        """
+        roles = self.signal_map.roles_of(topic)
+        readable = [
+            name for name in type_names
+            if all(name in TYPES.get(role, (JOINT_STATE, FLOAT64)) for role in roles)
+        ]
+        own = TOPIC_TYPES.get(topic.rsplit('/', 1)[-1])
+        preferred = [name for name in readable if name == own] + readable + list(type_names)
+        return preferred[0]
 
     def _extractor(self, topic, type_name):
         """
@@ -542,11 +589,13 @@ class ValveAnalyser(Node):
         Publish the recording status on /diagnostics.
 
         ERROR once a topic cannot be recorded; else WARN while a topic has no
-        message or when some were lost; else OK.
+        message or when some were lost; else OK. An optional topic (OPTIONAL_TOPICS)
+        counts once it has a publisher.
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
             for topic in self.wanted
+            if topic in self.recorded or topic not in self.optional
         }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
         waiting = [topic for topic, count in counts.items() if count == 0]
@@ -559,11 +608,19 @@ class ValveAnalyser(Node):
             **{f'lost {topic}': str(count) for topic, count in lost.items()},
         }
         values.update({f'cannot record {t}': why for t, why in self.unrecordable.items()})
+        mixed = {topic: others for topic, others in self.other_types.items() if others}
+        values.update(
+            {f'other types on {topic}': ', '.join(others) for topic, others in mixed.items()}
+        )
+        values['refused /clock messages'] = str(self.clock_guard.refused)
         message = (
             f'cannot record {", ".join(self.unrecordable)}'
             if self.unrecordable
             else f'no messages yet on {", ".join(waiting)}'
             if waiting
+            else 'publishers of other types on '
+            + ', '.join(f'{t} ({", ".join(o)}: not recorded)' for t, o in mixed.items())
+            if mixed
             else f'{sum(lost.values())} message(s) lost before reaching the analyser'
             if lost
             else f'recording to {self.bag.path.name}'
@@ -572,7 +629,7 @@ class ValveAnalyser(Node):
             DiagnosticStatus.ERROR
             if self.unrecordable
             else DiagnosticStatus.WARN
-            if waiting or lost
+            if waiting or lost or mixed or self.clock_guard.refused
             else DiagnosticStatus.OK
         )
         status = DiagnosticStatus(
@@ -612,11 +669,18 @@ class ValveAnalyser(Node):
 
 
 def record(stop):
-    """Run a ValveAnalyser until the event stop is set, then close its recording."""
+    """
+    Run a ValveAnalyser until the event stop is set, then close its recording.
+
+    The recording is closed whatever ends the spin; after a write error (OSError) it
+    is abandoned as it is on disk.
+    """
     node = ValveAnalyser()
     try:
-        spinning.spin_until(node, SingleThreadedExecutor(), stop)
-        node.close()
+        try:
+            spinning.spin_until(node, SingleThreadedExecutor(), stop)
+        finally:
+            node.close()
     except OSError as error:
         raise node.write_failure(error) from error
     finally:

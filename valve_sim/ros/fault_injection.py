@@ -20,13 +20,33 @@ fault_schedule (a schedule file, valve_sim.core.fault_schedule) are declared her
 FaultInjection holds the sensor stage, the schedule and the overpressure state, and
 says what the diagnostics report. The physics are in valve_sim.core (faults,
 sensors); valve_node only calls this.
+
+A schedule file set live is opened (not read) by the parameter check, so a missing
+file, a FIFO, a device or one beyond the size limit is refused at once; ScheduleLoader
+then reads and checks it on a thread of its own, never on the tick's, and the tick
+takes the checked events when they are ready (the file is read once: what was
+checked is what is applied).
 """
+
+from concurrent.futures import ThreadPoolExecutor
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from valve_sim.core.fault_schedule import load_schedule, Schedule
+from valve_sim.core.fault_schedule import (
+    event_from_line,
+    load_schedule,
+    open_schedule,
+    Schedule,
+)
 from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
+from valve_sim.core.input_files import InputFileError
 from valve_sim.core.model import P_C, P_S
 from valve_sim.core.parameters import FAULT_SCHEDULE
 from valve_sim.core.sensors import (
@@ -49,6 +69,7 @@ FAULT_STATUS_QOS = QoSProfile(
 )
 INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
 OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
+PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the folder holding valve_sim
 
 
 def declare_fault_parameters(node):
@@ -123,10 +144,20 @@ class FaultInjection:
         self.use_schedule(schedule_path)
 
     def use_schedule(self, path):
-        """Load a schedule file ('' for none); its t counts from the next tick."""
-        self.schedule = Schedule(load_schedule(path) if path else ())
+        """Load a schedule file ('' for none) now; its t counts from the next tick."""
+        self.use_events(load_schedule(path) if path else (), path)
+
+    def use_events(self, events, path):
+        """Use the checked events of the schedule file path; their t counts from the next tick."""
+        self.schedule = Schedule(events)
         self.schedule_path = path
         self.origin_ns = None
+
+    def rebase(self, shift_ns):
+        """Move what is timed by shift_ns [ns]: the clock jumped (a new time base)."""
+        if self.origin_ns is not None:
+            self.origin_ns += shift_ns
+        self.sensors.rebase(shift_ns)
 
     def due(self, time_ns):
         """Return the schedule's {name: value} changes due at the tick at time_ns [ns]."""
@@ -192,6 +223,80 @@ class FaultInjection:
                 text += f'; dropout: nothing published on {", ".join(dropped)}'
             conditions.append((DiagnosticStatus.WARN, text))
         return conditions
+
+
+class ScheduleLoader:
+    """
+    Reads and checks fault schedule files in a process of their own, one at a time.
+
+    opened(path) opens the file (InputFileError at once for one that cannot be a
+    schedule); start() hands it to a child process (python -m
+    valve_sim.core.fault_schedule), which reads, parses and checks it, and a thread of
+    the loader takes its events line by line; take() returns, once, the result:
+    (path, events) or (path, the error's text), else None while it runs. Parsing in
+    the node's own interpreter, even on another thread, held the tick up to 160 ms
+    (C parsing and garbage collection hold the GIL).
+    """
+
+    TIMEOUT = 60.0  # [s] a check that takes longer is stopped and refused
+
+    def __init__(self):
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='fault_schedule')
+        self.loading = ''  # the path being read, '' when none
+        self._future = None
+
+    def opened(self, path):
+        """Open path as a schedule (not read yet); raises InputFileError."""
+        return open_schedule(path)
+
+    def start(self, path, stream):
+        """Read and check the opened schedule path in a child process."""
+        self.loading = path
+        self._future = self._pool.submit(self._load, path, stream)
+
+    def take(self):
+        """Return (path, events or error text) of a finished load, once; else None."""
+        if self._future is None or not self._future.done():
+            return None
+        future, path, self._future, self.loading = self._future, self.loading, None, ''
+        error = future.exception()
+        return (path, future.result()) if error is None else (path, str(error))
+
+    def close(self):
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def _load(self, path, stream):
+        """Run the check in a child process; return the events or raise with its message."""
+        with stream:
+            descriptor = stream.fileno()
+            process = subprocess.Popen(
+                [sys.executable, '-m', 'valve_sim.core.fault_schedule', str(descriptor), path],
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                pass_fds=(descriptor,),
+                env={**os.environ, 'PYTHONPATH': os.pathsep.join(filter(None, (
+                    PACKAGE_ROOT, os.environ.get('PYTHONPATH')
+                )))},
+            )
+        watchdog = threading.Timer(self.TIMEOUT, process.kill)
+        watchdog.start()
+        try:
+            with process.stdout:
+                outcome = json.loads(process.stdout.readline() or '{}')
+                if 'events' not in outcome:
+                    raise InputFileError(outcome.get('error') or (
+                        f'fault schedule {path}: the check ended without an answer (stopped '
+                        f'after {self.TIMEOUT:g} s, or out of memory)'
+                    ))
+                events = [event_from_line(line) for line in process.stdout]
+        finally:
+            watchdog.cancel()
+            process.kill()
+            process.wait()
+        if len(events) != outcome['events']:
+            raise InputFileError(f'fault schedule {path}: the check ended early')
+        return events
 
 
 def _text(value):

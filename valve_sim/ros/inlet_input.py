@@ -132,6 +132,11 @@ class CheckedInput:
             self.received = False
             self.received_ns = now_ns
 
+    def rebase(self, shift_ns):
+        """Move received_ns by shift_ns [ns]: the clock jumped (a new time base)."""
+        if self.received_ns is not None:
+            self.received_ns += shift_ns
+
     def report(self):
         """Return (rejections since the last report, the last reason) and start a new count."""
         new = self.rejected - self.reported_rejected

@@ -50,10 +50,28 @@ def layout_path():
         return Path(__file__).resolve().parents[2] / 'foxglove' / LAYOUT
 
 
+def port_number(text):
+    """Parse a TCP port, 0 (any free port) to 65535 (argparse type)."""
+    from argparse import ArgumentTypeError
+
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= MAX_PORT:
+        raise ArgumentTypeError(f'a port must be in [0, {MAX_PORT}], got {text!r}')
+    return port
+
+
+MAX_PORT = 65535
+port_number.bounds = f'in [0, {MAX_PORT}]'
+
+
 def add_port_option(parser, help_text):
     """Add --foxglove [PORT] (DEFAULT_PORT when given without a number) to an argparse parser."""
     parser.add_argument(
-        '--foxglove', nargs='?', const=DEFAULT_PORT, type=int, metavar='PORT', help=help_text
+        '--foxglove', nargs='?', const=DEFAULT_PORT, type=port_number, metavar='PORT',
+        help=f'{help_text} (a port {port_number.bounds})'
     )
 
 

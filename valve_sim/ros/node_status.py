@@ -49,6 +49,9 @@ class Counters:
     integration_failures: int = 0  # numerical divergences
     overpressures: int = 0  # states beyond burst_pressure
     overpressure_alarms: int = 0  # p_s reached supply_pressure_limit
+    refused_fault_schedules: int = 0  # schedule files set live that the loader refused
+    refused_clock_messages: int = 0  # /clock messages the node cannot represent, ignored
+    clock_jumps_back: int = 0  # the clock went back: a new time base
 
 
 class Throttle:
@@ -87,6 +90,7 @@ class NodeStatus:
         self.counters = Counters()
         self.last_failure = ''
         self.halted = None  # why the model stopped advancing, or None while it runs
+        self.schedule_refused = ''  # why the last fault schedule set live was refused
         self.saturated = None  # [Pa gauge] p_s published at this limit while halted by it
         self._reported = Counters()
         self._durations_ns = []
@@ -207,6 +211,14 @@ class NodeStatus:
         if skipped:
             level = max(level, DiagnosticStatus.WARN)
             problems.append(f'{skipped} tick periods skipped (lag beyond the catch-up limit)')
+        refused = counters.refused_fault_schedules - previous.refused_fault_schedules
+        if refused:
+            level = max(level, DiagnosticStatus.WARN)
+            problems.append(f'fault schedule refused: {self.schedule_refused}')
+        clocks = counters.refused_clock_messages - previous.refused_clock_messages
+        if clocks:
+            level = max(level, DiagnosticStatus.WARN)
+            problems.append(f'{clocks} /clock messages ignored (a time the node cannot represent)')
         late = counters.late_ticks - previous.late_ticks
         if late:
             problems.append(f'{late} late ticks')

@@ -87,6 +87,12 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import (
+    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
+    MAX_ALIASES,
+    MAX_DEPTH,
+    MAX_EVENTS,
+)
 from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
@@ -110,6 +116,7 @@ from valve_sim.core.retuning import (
     dependent_change,
     merged_parameters,
 )
+from valve_sim.core.sensors import SENSOR_NAMES
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -117,6 +124,7 @@ from valve_sim.core.steady_state import (
 )
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
+from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
@@ -124,6 +132,7 @@ from valve_sim.ros.fault_injection import (
     FAULT_STATUS_TOPIC,
     FaultInjection,
     INJECTION_NAMES,
+    ScheduleLoader,
     split_changes,
 )
 from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
@@ -185,6 +194,7 @@ class ReliefValveNode(Node):
         self._inlet_subscription = None  # taken by the tick, left out of subscriptions
         self._tank_subscription = None  # likewise
         super().__init__(NODE_NAME, **kwargs)
+        self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
@@ -219,6 +229,10 @@ class ReliefValveNode(Node):
         self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
+        self.schedule_loader = ScheduleLoader()
+        self._opened_schedule = None  # the file a change being checked sets as fault_schedule
+        self._before_change = {}  # declared values of the change being checked, before it
+        self._undo = {}  # declared values before the last change that retuned the model
         self._create_outputs()
         input_qos = self._declare_inlet_flow_qos()
         self._inlet_subscription = self.create_subscription(
@@ -411,8 +425,6 @@ class ReliefValveNode(Node):
             faults, sensors = split_changes(changes)
             self.model.faults.changed(faults)
             self.injection.sensors.checked(sensors)
-            if FAULT_SCHEDULE in changes:
-                FaultInjection({}, changes[FAULT_SCHEDULE])
             tank = self._tank_pressure_with(settings)
             check_limits(
                 params, self.model.state, self.inlet_flow, tank, settings['ambient_pressure']
@@ -420,6 +432,8 @@ class ReliefValveNode(Node):
             self.model.trial(
                 params, settings['step_size'], self.inlet_flow, faults or None, tank
             )
+            if FAULT_SCHEDULE in changes:
+                self._open_schedule(changes[FAULT_SCHEDULE])
         except IntegrationError as error:
             return SetParametersResult(
                 successful=False,
@@ -430,20 +444,39 @@ class ReliefValveNode(Node):
             )
         except (ParameterError, SteadyStateError, InputFileError) as error:
             return SetParametersResult(successful=False, reason=str(error))
+        self._before_change = {
+            name: self.get_parameter(name).value
+            for name in changes
+            if name != FAULT_SCHEDULE
+        }
         return SetParametersResult(successful=True)
+
+    def _open_schedule(self, path):
+        """
+        Open (not read) a schedule file set live; '' sets none. Raises InputFileError.
+
+        The file is read and checked on the loader's thread (_take_schedule applies it).
+        """
+        if self.schedule_loader.loading:
+            raise ParameterError(
+                f'fault schedule {self.schedule_loader.loading} is still being read and '
+                'checked; set fault_schedule again once the log says it is in use'
+            )
+        self._opened_schedule = self.schedule_loader.opened(path) if path else None
 
     def _apply_parameter_change(self, parameters):
         """Post-set callback: the accepted change takes effect from the next tick."""
         changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
         if not changes or self._restoring:
             return
+        before, self._before_change = self._before_change, {}
         params, settings = self._merged(changes)
-        rate_changed = settings['publish_rate'] != self.settings['publish_rate']
         faults, sensors = split_changes(changes)
-        self.model.retune(params, settings['step_size'], faults or None)
+        if self.model.retune(params, settings['step_size'], faults or None):
+            self._undo = before  # what a roll-back of this change restores
         self.injection.sensors.change(sensors)
         if FAULT_SCHEDULE in changes:
-            self.injection.use_schedule(changes[FAULT_SCHEDULE])
+            self._load_schedule(changes[FAULT_SCHEDULE])
         if faults or sensors:
             self._publish_fault_status()
         self.input.max_inlet_flow = params['max_inlet_flow']
@@ -453,12 +486,64 @@ class ReliefValveNode(Node):
                 'tank_pressure set, but the tank_pressure topic sets the tank pressure '
                 f'({self.tank_input.gauge():g} Pa gauge): the topic takes precedence'
             )
-        self.settings = settings
+        self._use_settings(settings)
         self._resume('a parameter change')
+        self.get_logger().info(f'parameters set: {changes}')
+
+    def _use_settings(self, settings):
+        """Use the run-time settings; a new publish_rate recreates the tick timer."""
+        rate_changed = settings['publish_rate'] != self.settings['publish_rate']
+        self.settings = settings
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()
-        self.get_logger().info(f'parameters set: {changes}')
+
+    def _load_schedule(self, path):
+        """Read the schedule file opened by the check on the loader's thread ('': none, now)."""
+        stream, self._opened_schedule = self._opened_schedule, None
+        if not path:
+            self.injection.use_events((), '')
+            return
+        self.schedule_loader.start(path, stream)
+        self.get_logger().info(f'reading fault schedule {path}: in use once it is checked')
+
+    def _take_schedule(self):
+        """
+        At a tick: use a schedule the loader has read and checked, from this tick on.
+
+        A file the loader refused is logged, counted as a refused parameter change, shown
+        in the diagnostics (fault_schedule_refused), and fault_schedule is set back to
+        the file in use.
+        """
+        loaded = self.schedule_loader.take()
+        if loaded is None:
+            return
+        path, events = loaded
+        if not isinstance(events, str):
+            self.injection.use_events(events, path)
+            self.get_logger().info(
+                f'fault schedule {path} in use: {len(events)} events, t from this tick'
+            )
+            return
+        self.status.schedule_refused = f'{path}: {events}'
+        self.status.counters.refused_fault_schedules += 1
+        self._count_refusal(f'fault_schedule {path}: {events}')
+        self._set_declared({FAULT_SCHEDULE: self.injection.schedule_path})
+
+    def _set_declared(self, values):
+        """Set declared parameter values {name: value} that differ, without the callbacks."""
+        changed = [
+            Parameter(name, value=value)
+            for name, value in values.items()
+            if self.get_parameter(name).value != value
+        ]
+        if not changed:
+            return
+        self._restoring = True
+        try:
+            super().set_parameters_atomically(changed)
+        finally:
+            self._restoring = False
 
     def _tank_pressure_with(self, settings):
         """Return the tank pressure [Pa, gauge] under settings: the topic's, else the parameter."""
@@ -485,24 +570,29 @@ class ReliefValveNode(Node):
         return merged_parameters(self.model.params, changes), settings
 
     def _restore_parameters(self):
-        """Report the rolled-back model parameters and step size as the node's parameter values."""
-        in_use = {
-            **self.model.params,
-            'step_size': self.model.step_size,
-            **self.model.faults.as_parameters(),
-        }
-        changed = [
-            Parameter(name, value=value)
-            for name, value in in_use.items()
-            if self.get_parameter(name).value != value
-        ]
-        if not changed:
-            return
-        self._restoring = True
-        try:
-            super().set_parameters_atomically(changed)
-        finally:
-            self._restoring = False
+        """
+        After the model rolled back its last change: the rest of that change undone too.
+
+        Settings and sensor settings of the change return to their values before it,
+        and the node's declared parameters to what is in use (the model's parameters,
+        step size and faults, and every other value of the change): all agree again,
+        and a later change cannot bring back a part of the one undone.
+        """
+        undo, self._undo = self._undo, {}
+        sensors = {name: value for name, value in undo.items() if name in SENSOR_NAMES}
+        self.injection.sensors.change(sensors)
+        self._use_settings(
+            {**self.settings, **{n: v for n, v in undo.items() if n in SETTING_SPECS}}
+        )
+        self._set_declared(
+            {
+                **undo,
+                **self.model.params,
+                'step_size': self.model.step_size,
+                **self.model.faults.as_parameters(),
+            }
+        )
+        self._publish_fault_status()
 
     # --- stepping ---------------------------------------------------------------------------
 
@@ -515,28 +605,37 @@ class ReliefValveNode(Node):
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
         self._take_inputs(started)
+        starting = self.model.time_ns is None or now_ns < self.model.time_ns
+        if starting:
+            self._start(now_ns)
         self.input.stamp(now_ns)
         self.tank_input.stamp(now_ns)
-        if self.model.time_ns is None or now_ns < self.model.time_ns:
-            self._start(now_ns)
-            self._inject()
-            self._publish_state()
-        else:
+        if not starting:
             self._count_lateness(now_ns)
             self._advance(now_ns)
-            self._inject()
-            self._publish_state()
+        self._inject()
+        self._publish_state()
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
         if self._housekeeping_due:
             self._housekeeping()
 
     def _start(self, now_ns):
-        """Anchor the model time to the clock: at the first tick, or when the clock jumped back."""
+        """
+        Anchor the model time to the clock: at the first tick, or when the clock jumped back.
+
+        A jump back starts a new time base: everything timed (the roll-back window, the
+        schedule's origin, the sensors' lag, the input's age) moves with the model time.
+        """
         if self.model.time_ns is not None:
+            shift_ns = now_ns - self.model.time_ns
+            self.status.counters.clock_jumps_back += 1
             self.get_logger().warn(
-                f'clock jumped back by {(self.model.time_ns - now_ns) / NS_PER_S:g} s; '
-                'model time restarts from the clock'
+                f'clock jumped back by {-shift_ns / NS_PER_S:g} s; model time restarts from '
+                'the clock, in a new time base'
             )
+            self.injection.rebase(shift_ns)
+            self.input.rebase(shift_ns)
+            self.tank_input.rebase(shift_ns)
         self.model.start(now_ns)
         self.input.received_ns = self.input.received_ns or now_ns
         self.tank_input.received_ns = self.tank_input.received_ns or now_ns
@@ -587,6 +686,7 @@ class ReliefValveNode(Node):
 
     def _inject(self):
         """Apply the schedule's events due at this tick; watch for overpressure."""
+        self._take_schedule()
         changes = self.injection.due(self.model.time_ns)
         if changes:
             result = self.set_parameters_atomically(
@@ -802,6 +902,7 @@ class ReliefValveNode(Node):
         counters.accepted_inputs = self.input.accepted
         counters.rejected_inputs = self.input.rejected
         counters.lost_inputs = self.input.lost
+        counters.refused_clock_messages = self.clock_guard.refused
         self.input.single_publisher = self._inlet_subscription.get_publisher_count() == 1
         self.tank_input.single_publisher = self._tank_subscription.get_publisher_count() == 1
 
@@ -855,6 +956,9 @@ class ReliefValveNode(Node):
             'faults_active': self.model.faults.describe(),
             'sensor_dropout': ', '.join(self.injection.sensors.dropped_topics()),
             'overpressure': self.injection.overpressure,
+            'fault_schedule': self.injection.schedule_path,
+            'fault_schedule_loading': self.schedule_loader.loading,
+            'fault_schedule_refused': self.status.schedule_refused,
             'supply_pressure_saturated_at': self.status.saturated,
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
@@ -931,13 +1035,21 @@ class ReliefValveNode(Node):
         }
 
 
-STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException)
+STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)
 
 
 def parse_arguments(args):
     """valve_node's own command line (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
-        prog='valve_node', description='The virtual relief valve as a ROS 2 node.'
+        prog='valve_node',
+        description='The virtual relief valve as a ROS 2 node.',
+        epilog=(
+            f'fault_schedule: a regular file of {FAULT_SCHEDULE_FILE.limits()} and at most '
+            f'{MAX_EVENTS:,} events (YAML, UTF-8, at most {MAX_ALIASES} aliases, '
+            f'{MAX_DEPTH} levels deep), read in a process of its own when set live; a '
+            '/clock before 0 s or at or past 2^31 s is ignored and counted. '
+            'docs/valve_node.md, "Files it reads, and other hostile input".'
+        ),
     )
     parser.add_argument(
         '--executor',
@@ -1000,6 +1112,7 @@ def main(args=None):
     finally:
         if node.live_view is not None:
             node.live_view.close()
+        node.schedule_loader.close()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -1,0 +1,327 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Attack valve_node and the tools with every class of hostile input (issue 25); report.
+
+    python bench/attack.py [--json out/attack.json]      (bench/attack.sh runs it)
+
+Starts valve_node (wall clock, and one on /clock) and applies each class:
+  1 files      every hostile file of test/hostile_inputs.py set live as fault_schedule,
+               and given to every reader of the command line (--params, --faults,
+               --target-measures, a bag folder's metadata.yaml, --resume)
+  2 clock      /clock negative and past 2^31 s; a jump back, then an overpressure
+  3 roll-back  each kind of parameter changed, then rolled back by an overpressure
+  4 wire       a resolution of 1e-320, a stuck sensor beyond its range, inf samples
+  5 recordings a bit flip in a chunk length, a sparse hole, a full disk, a rogue type
+  6 options    meaningless numbers, huge --samples and --workers, --plot DIR, a link
+Each attack reports whether everything survived it (the node alive and publishing,
+its largest gap between published stamps; a command's one-line refusal and its time)
+and the table goes to stdout and --json. Exit code 0 only if everything survived.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+from common import isolated_environment, REPO, write_figures
+
+
+sys.path.insert(0, str(REPO / 'test'))  # the suite's probe and hostile inputs
+
+NS_PER_S = 1_000_000_000
+
+
+class Report:
+    """The attacks' outcomes: (class, attack, survived, detail) rows."""
+
+    def __init__(self):
+        self.rows = []
+
+    def add(self, klass, attack, survived, detail):
+        self.rows.append({'class': klass, 'attack': attack, 'survived': bool(survived),
+                          'detail': detail})
+        mark = 'survived' if survived else 'FAILED'
+        print(f'{klass:<11} {attack[:44]:<44} {mark:<9} {detail}', flush=True)
+
+    def table(self, figures):
+        failed = [row for row in self.rows if not row['survived']]
+        return (f'{len(self.rows) - len(failed)} of {len(self.rows)} attacks survived in '
+                f'{figures["seconds"]:.0f} s' + ''.join(
+                    f'\n  FAILED: {row["class"]}: {row["attack"]}: {row["detail"]}'
+                    for row in failed))
+
+
+def valve_sim(*arguments, timeout=120, cwd=None):
+    """Run `valve-sim ARGUMENTS`; return (exit code, stderr's last line, seconds)."""
+    started = time.monotonic()
+    try:
+        result = subprocess.run(
+            [sys.executable, '-m', 'valve_sim.commands.cli', *map(str, arguments)],
+            capture_output=True, text=True, timeout=timeout, cwd=cwd or REPO,
+        )
+    except subprocess.TimeoutExpired:
+        return None, f'no answer in {timeout} s', timeout
+    lines = result.stderr.strip().splitlines()
+    return result.returncode, lines[-1] if lines else '', time.monotonic() - started
+
+
+def refusal(report, klass, attack, *arguments, also='', within=60):
+    """
+    Run `valve-sim ARGUMENTS`; report whether it refused in one line of its own.
+
+    The line must name also, and come within `within` seconds.
+    """
+    code, line, seconds = valve_sim(*arguments)
+    refused = code in (1, 2) and 'Traceback' not in line and also in line and seconds < within
+    report.add(klass, attack, refused, f'{seconds:.2f} s: {line[-70:]}')
+
+
+def attack_live_schedules(report, context, folder):
+    """Class 1, live: each hostile schedule set on a running node."""
+    from test_hostile_node import BAD_SCHEDULES, largest_stamp_gap, schedule_in_effect
+    from hostile_inputs import make_file
+    from valve_harness import running_valve
+
+    with running_valve(context, folder / 'valve_node.log', namespace='/attack') as (
+        process, probe
+    ):
+        for number, (kind, content) in enumerate(BAD_SCHEDULES.items()):
+            path = folder / f'schedule_{number}.yaml'
+            make_file(path, content)
+            start, started = probe.count(), time.monotonic()
+            result = probe.set_parameters(fault_schedule=str(path))[0]
+            in_effect = schedule_in_effect(probe)
+            probe.wait_for_new_samples(200)
+            gap_ms = largest_stamp_gap(probe, start) / 1e6
+            report.add(
+                '1 files', f'fault_schedule: {kind}',
+                process.poll() is None and in_effect == '' and gap_ms < 100,
+                f'{"refused at once" if not result.successful else "refused once read"} in '
+                f'{time.monotonic() - started:.2f} s; largest gap {gap_ms:.1f} ms',
+            )
+
+
+def attack_readers(report, folder):
+    """Class 1, offline: every reader of the command line, each hostile input."""
+    from hostile_inputs import FILES, JSON_TEXTS, make_file, YAML_TEXTS
+
+    for kind, content in {**FILES, **YAML_TEXTS}.items():
+        for option in ('--params', '--faults'):
+            path = folder / f'reader_{option[2:]}_{len(os.listdir(folder))}.yaml'
+            make_file(path, content)
+            refusal(report, '1 files', f'simulate {option}: {kind}',
+                    'simulate', option, path, '--end-time', '0.3')
+        bag = folder / f'bag_{len(os.listdir(folder))}'
+        bag.mkdir()
+        make_file(bag / 'metadata.yaml', content)
+        refusal(report, '1 files', f'analyse BAG/metadata.yaml: {kind}', 'analyse', bag)
+    for kind, content in {**FILES, **JSON_TEXTS}.items():
+        path = folder / f'target_{len(os.listdir(folder))}.json'
+        make_file(path, content)
+        refusal(report, '1 files', f'calibrate --target-measures: {kind}', 'calibrate',
+                '--target-measures', path, '--fit', 'd_c', '--out', folder / 'calib')
+
+
+def attack_clock_and_roll_backs(report, context, folder):
+    """Classes 2 and 3 on a node driven by /clock."""
+    import test_hostile_node as hostile
+    from valve_harness import running_valve
+
+    defaults = hostile.reference_values()
+    with running_valve(context, folder / 'valve_node_sim.log', namespace='/attack_sim',
+                       use_sim_time=True) as (process, probe):
+        probe.start_clock(hostile.START_S * NS_PER_S, hostile.PERIOD_NS)
+        for sec, nanosec in ((-5, 0), (2**31 - 1, 4_000_000_000)):
+            probe.restore(defaults, hostile.FLOW)
+            stamp_ns, expected_ns = hostile.bad_clock_then_good(probe, sec, nanosec)
+            report.add('2 clock', f'/clock sec={sec} nanosec={nanosec}',
+                       process.poll() is None and stamp_ns == expected_ns,
+                       'ignored and counted; ticking on the good clock')
+        for kind, change in hostile.ROLL_BACK_CASES.items():
+            probe.restore(defaults, hostile.FLOW)
+            before = hostile.change_and_overpressure(probe, **change)
+            agree = probe.get_parameters(*before) == before
+            report.add('3 roll-back', kind, agree and process.poll() is None,
+                       'declared parameters as before the change' if agree else
+                       f'declared {probe.get_parameters(*before)} != {before}')
+        probe.restore(defaults, hostile.FLOW)
+        jumps, diagnostics = hostile.preset_change_jump_back_overpressure(probe)
+        kept = probe.get_parameters('preset_pressure')['preset_pressure']
+        report.add('2 clock', 'jump back 2000 s, then an overpressure',
+                   int(diagnostics['clock_jumps_back']) == jumps + 1 and abs(kept - 6.5e6) < 1.0,
+                   'the 1000 s old preset change kept (new time base)')
+        hostile.take_flow(probe, hostile.FLOW)
+
+
+def attack_wire(report, folder):
+    """Class 4."""
+    from hostile_inputs import bag_with_inf_pressure
+    from valve_sim.core.sensors import default_settings, SensorStage
+
+    refusal(report, '4 wire', 'resolution 1e-320', 'simulate', '--set',
+            'sensor.supply_pressure.resolution=1e-320', also='resolution')
+    stage = SensorStage({**default_settings(), 'sensor.supply_pressure.range_max': 1e7,
+                         'sensor.supply_pressure.stuck': True,
+                         'sensor.supply_pressure.stuck_at': 1e9})
+    reading = stage.read(0, [7e6] * 4)[0]
+    report.add('4 wire', 'stuck_at 1e9 Pa, range_max 1e7 Pa', reading == 1e7,
+               f'published {reading:g} Pa')
+    bag = folder / 'inf.mcap'
+    bag_with_inf_pressure(bag)
+    result = subprocess.run([sys.executable, '-m', 'valve_sim.commands.cli', 'analyse', str(bag),
+                             '--json'], capture_output=True, text=True, cwd=REPO, timeout=120)
+    try:
+        json.loads(result.stdout, parse_constant=lambda name: 1 / 0)
+        strict = True
+    except (ValueError, ZeroDivisionError):
+        strict = False
+    report.add('4 wire', 'analyse --json of a bag with inf samples', strict,
+               'strict JSON, null with reasons' if strict else result.stdout[-70:])
+
+
+def attack_recordings(report, folder):
+    """Class 5."""
+    from hostile_inputs import make_sparse_mcap
+    from test_hostile_options import FULL_DISK
+    from test_recovery import flipped_chunk_length, log_times
+
+    path = folder / 'flipped.mcap'
+    _, everything = flipped_chunk_length(path, bit=40)
+    code, line, seconds = valve_sim('repair', path, '-o', folder / 'flipped.repaired.mcap')
+    kept = len(log_times(folder / 'flipped.repaired.mcap')) if code == 0 else 0
+    report.add('5 recordings', 'bit flip in a chunk length (footer kept)',
+               kept == len(everything), f'repair kept {kept} of {len(everything)}')
+    hole = folder / 'hole.mcap'
+    make_sparse_mcap(hole)
+    refusal(report, '5 recordings', 'MCAP magic and a 2 GiB sparse hole', 'analyse', hole,
+            also='corrupt at byte 8', within=10)
+    measures = folder / 'bag.measures.json'
+    result = subprocess.run([sys.executable, '-c', FULL_DISK, str(measures)], cwd=REPO,
+                            capture_output=True, text=True, timeout=120)
+    try:
+        steps = len(json.loads(measures.read_text())['steps'])
+    except (OSError, ValueError, KeyError):
+        steps = None
+    report.add('5 recordings', 'disk full during a measures append',
+               'failed:' in result.stdout and steps == 3, f'file valid, {steps} steps kept')
+
+
+def attack_rogue_type(report, context, folder):
+    """Class 5: a rogue publisher of another type on supply_pressure, recorded by the analyser."""
+    import rclpy
+    from sensor_msgs.msg import FluidPressure
+    from test_analyser import ROGUE_PUBLISHER
+
+    analyser = subprocess.Popen(
+        [sys.executable, '-m', 'valve_sim.ros.analyser_node', '--ros-args', '-p',
+         f'output_dir:={folder / "rogue"}'],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=REPO,
+    )
+    rogue = subprocess.Popen([sys.executable, '-c', ROGUE_PUBLISHER])
+    node = rclpy.create_node('attack_pressure', context=context)
+    publisher = node.create_publisher(FluidPressure, 'supply_pressure', 10)
+    for _ in range(3000):
+        publisher.publish(FluidPressure(fluid_pressure=7e6))
+        time.sleep(0.002)
+    analyser.send_signal(signal.SIGINT)
+    analyser.wait(timeout=60)
+    rogue.kill()
+    rogue.wait()
+    node.destroy_node()
+    from valve_sim.recording.bag import BagReader
+
+    bag = next((folder / 'rogue').glob('*.mcap'))
+    recorded = sum(1 for _ in BagReader(bag).messages({'/supply_pressure'}))
+    report.add('5 recordings', 'a rogue type on /supply_pressure', recorded > 1000,
+               f'{recorded} of 3000 pressure messages recorded')
+
+
+def attack_options(report, folder):
+    """Class 6."""
+    from test_hostile_options import OPTIMISE, OPTIONS
+
+    for arguments, option, values in OPTIONS:
+        for value in values:
+            code, line, seconds = valve_sim(*arguments, f'{option}={value}', cwd=folder)
+            report.add('6 options', f'{arguments[0]} {option}={value}', code == 2,
+                       f'{seconds:.2f} s: {line[-60:]}')
+    for arguments in (['tolerance', '--vary', 'd_c=±2%', '--samples', '1000000000'],
+                      ['sensitivity', '--samples', '1073741824'],
+                      ['tolerance', '--vary', 'd_c=±2%', '--workers', '100000'],
+                      [*OPTIMISE[:-2], '--samples', '524288'],
+                      [*OPTIMISE[:-2], '--population', '10000', '--generations', '11']):
+        refusal(report, '6 options', f'{arguments[0]} {" ".join(arguments[-2:])}', *arguments,
+                '--out', folder / 'study', also='memory')
+    plots = folder / 'plots'
+    plots.mkdir()
+    code, line, _ = valve_sim('simulate', '--end-time', '0.4', '--step-time', '0.1',
+                              '--plot', plots)
+    report.add('6 options', 'simulate --plot EXISTING_DIR',
+               code == 0 and (plots / 'figure5.png').exists(), 'wrote DIR/figure5.png')
+    bag = folder / 'cut.mcap'
+    bag.write_bytes((REPO / 'bags/reference_step.mcap').read_bytes()[:600_000])
+    victim = folder / 'victim.txt'
+    victim.write_text('precious')
+    (folder / 'cut.repaired.mcap').symlink_to(victim)
+    code, line, _ = valve_sim('repair', bag)
+    report.add('6 options', 'repair with a planted link at BAG.repaired.mcap',
+               code == 0 and victim.read_text() == 'precious', 'the link replaced, not followed')
+
+
+def measure(args):
+    import rclpy
+
+    report, started = Report(), time.monotonic()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    with tempfile.TemporaryDirectory(prefix='valve_sim_attack_') as folder:
+        folder = Path(folder)
+        steps = {
+            'live': lambda path: attack_live_schedules(report, context, path),
+            'readers': lambda path: attack_readers(report, path),
+            'sim': lambda path: attack_clock_and_roll_backs(report, context, path),
+            'wire': lambda path: attack_wire(report, path),
+            'recordings': lambda path: attack_recordings(report, path),
+            'rogue_type': lambda path: attack_rogue_type(report, context, path),
+            'options': lambda path: attack_options(report, path),
+        }
+        for name, step in steps.items():
+            (folder / name).mkdir()
+            try:
+                step(folder / name)
+            except Exception as error:  # noqa: B902  (an attack that broke the bench failed)
+                report.add('error', name, False, f'{type(error).__name__}: {error}'[:200])
+    context.try_shutdown()
+    return {'seconds': time.monotonic() - started, 'attacks': report.rows}, report
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--json', type=Path, default=REPO / 'out' / 'attack.json')
+    args = parser.parse_args()
+    isolated_environment()
+    figures, report = measure(args)
+    write_figures(figures, report.table(figures), args.json)
+    return 0 if all(row['survived'] for row in report.rows) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
