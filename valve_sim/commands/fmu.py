@@ -57,24 +57,32 @@ def parameter_file(params, settings):
 
 
 def build(out, params, settings):
-    """Write the FMU to out (a path ending .fmu) with these defaults; returns its Path."""
+    """
+    Write the FMU to out (a path ending .fmu) with these defaults; returns its Path.
+
+    pythonfmu builds it in a temporary folder; it is then written whole (output_files).
+    """
     from importlib.util import find_spec
 
     from pythonfmu import FmuBuilder
+    from valve_sim.core.output_files import replacing
     from valve_sim.fmu.relief_valve_slave import PARAMETER_FILE
 
     out = Path(out)
     if out.suffix != '.fmu':
         raise ParameterError(f'--out must name a .fmu file, got {out}')
-    out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix='valve_sim_fmu_') as folder:
         defaults = Path(folder) / PARAMETER_FILE
         defaults.write_text(parameter_file(params, settings))
-        return FmuBuilder.build_FMU(
-            find_spec(SLAVE).origin, dest=out, project_files=[defaults],
-            needsExecutionTool=True, canHandleVariableCommunicationStepSize=True,
+        built = FmuBuilder.build_FMU(
+            find_spec(SLAVE).origin, dest=Path(folder) / 'build' / out.name,
+            project_files=[defaults], needsExecutionTool=True,
+            canHandleVariableCommunicationStepSize=True,
             canBeInstantiatedOnlyOncePerProcess=False,
         )
+        with replacing(out, 'wb', explicit=True) as stream:
+            stream.write(built.read_bytes())
+    return out
 
 
 def run(args):
