@@ -117,7 +117,15 @@ DEFAULT_TOPICS = [
     'joint_states',
     '/diagnostics',
     'fault_status',  # valve_node's faults and sensor settings, each change (docs/faults.md)
+    'tank_pressure',  # the second input, if a bench sends it, and what the valve applied
+    'applied_tank_pressure',
+    'relief_flow',
 ]
+# Recorded once published, never waited for: only a bench with a back pressure sends it.
+OPTIONAL_TOPICS = ('tank_pressure',)
+# The signals measured: the required ones, and the tank's pressure where it is recorded (the
+# measures then take the supply pressure above the tank, step_analysis).
+ANALYSED = REQUIRED + ('tank_pressure',)
 MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
 RECORDING_TASK = 'recording'
 MEASURES_QOS = QoSProfile(
@@ -196,7 +204,7 @@ PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
             f'{"topic" if kind == "topic" else "JointState joint"} of the {ROLE[name].meaning}',
             {},
         )
-        for name in REQUIRED
+        for name in ANALYSED
         for kind in ('topic', 'joint')
         if kind == 'topic' or ROLE[name].joint
     },
@@ -355,14 +363,15 @@ class ValveAnalyser(Node):
         self.clock_guard = GuardedTimeSource.install(self)
         settings = self._declare_parameters()
         self.signal_map = SignalMap(
-            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in REQUIRED},
-            joints={role: settings[f'{role}_joint'] for role in REQUIRED if ROLE[role].joint},
+            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
+            joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
             ambient_pressure=settings['ambient_pressure'],
         )
         self.wanted = dict.fromkeys(
             [self.resolve_topic_name(t) for t in settings['topics']]
             + list(self.signal_map.topics.values())
         )
+        self.optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
@@ -373,7 +382,7 @@ class ValveAnalyser(Node):
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
         )
-        self.joiner = Joiner()
+        self.joiner = Joiner(optional=('tank_pressure',))
         self.analysis = StepAnalysis(settings['step_threshold'], settings['step_merge_time'])
         self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
@@ -580,11 +589,13 @@ class ValveAnalyser(Node):
         Publish the recording status on /diagnostics.
 
         ERROR once a topic cannot be recorded; else WARN while a topic has no
-        message or when some were lost; else OK.
+        message or when some were lost; else OK. An optional topic (OPTIONAL_TOPICS)
+        counts once it has a publisher.
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
             for topic in self.wanted
+            if topic in self.recorded or topic not in self.optional
         }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
         waiting = [topic for topic, count in counts.items() if count == 0]
