@@ -132,6 +132,7 @@ MEASURES_QOS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
+READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
 SOURCE = 'valve_sim analyser_node'
 DOUBLE_PARAMETERS = (
     ParameterSpec(
@@ -389,6 +390,7 @@ class ValveAnalyser(Node):
         self.recorded = {}
         self.unrecordable = {}  # topic -> why it cannot be recorded
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
+        self.unreadable_since = {}  # topic -> when only unreadable types were first seen
         self.queue_depth = settings['queue_depth']
         self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
@@ -447,7 +449,9 @@ class ValveAnalyser(Node):
             offers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offers:
                 continue  # only subscribers so far: the publishers' QoS decides ours
-            type_name = self._type_to_record(topic, types[topic])
+            type_name, readable = self._type_to_record(topic, types[topic])
+            if not readable and self._still_waiting_for_a_readable_type(topic):
+                continue
             try:
                 message_type = message_class(type_name)
             except (ImportError, AttributeError, ValueError) as error:
@@ -497,6 +501,7 @@ class ValveAnalyser(Node):
 
         Several types on one topic (a rogue publisher): the type the analysis reads for
         the topic's roles, else valve_node's type of a topic of that name, else the first.
+        Returns (type name, whether the analysis can read it).
         """
         roles = self.signal_map.roles_of(topic)
         readable = [
@@ -505,7 +510,19 @@ class ValveAnalyser(Node):
         ]
         own = TOPIC_TYPES.get(topic.rsplit('/', 1)[-1])
         preferred = [name for name in readable if name == own] + readable + list(type_names)
-        return preferred[0]
+        return preferred[0], bool(readable)
+
+    def _still_waiting_for_a_readable_type(self, topic):
+        """
+        Whether to wait before recording an analysed topic of no type the analysis reads.
+
+        Discovery reports publishers in any order: a rogue publisher found first would
+        otherwise fix the recorded type before valve_node's is seen (only the rogue's
+        messages go unrecorded meanwhile). After READABLE_TYPE_GRACE s without a readable
+        publisher the other type is recorded, as rosbag2 would.
+        """
+        first_seen = self.unreadable_since.setdefault(topic, time.monotonic())
+        return time.monotonic() - first_seen < READABLE_TYPE_GRACE
 
     def _extractor(self, topic, type_name):
         """

@@ -692,9 +692,12 @@ class ReliefValveNode(Node):
             result = self.set_parameters_atomically(
                 [Parameter(name, value=value) for name, value in changes.items()]
             )
-            log = self.get_logger().info if result.successful else self.get_logger().error
-            log(f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
-                + ('' if result.successful else f' refused: {result.reason}'))
+            message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
+            # One logging call per severity: rclpy refuses a call site whose severity changes.
+            if result.successful:
+                self.get_logger().info(message)
+            else:
+                self.get_logger().error(f'{message} refused: {result.reason}')
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
         if overpressure and not self.injection.overpressure:
