@@ -51,7 +51,7 @@ def ensure_environment():
     )
     pip = [str(BIN / 'python'), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
     subprocess.run(pip + ['--upgrade', 'pip'], check=True)
-    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,studies,foxglove,test]'], check=True)
+    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,studies,foxglove,fmu,test]'], check=True)
     STAMP.write_text(wanted)
 
 

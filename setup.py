@@ -43,6 +43,8 @@ ROS_WHEELS = [
 # No rosdep keys exist for these: on a ROS install they are pip installs (README).
 STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib', 'pymoo>=0.6.2,<0.7']
 FOXGLOVE_DEPENDENCIES = ['foxglove-sdk']
+# valve-sim fmu builds with pythonfmu; FMPy is the independent master the tests use.
+FMU_DEPENDENCIES = ['pythonfmu>=0.7,<0.8', 'fmpy']
 # ament_flake8 checks for these plugins; colcon builds the package in test_colcon.
 TEST_DEPENDENCIES = [
     'pytest',
@@ -85,6 +87,7 @@ setup(
         'wheels': PYPI_DEPENDENCIES + ROS_WHEELS,
         'studies': STUDY_DEPENDENCIES,
         'foxglove': FOXGLOVE_DEPENDENCIES,
+        'fmu': FMU_DEPENDENCIES,
         'test': TEST_DEPENDENCIES,
     },
     zip_safe=True,

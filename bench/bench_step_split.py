@@ -46,6 +46,7 @@ def main():
     params, _ = load_parameters()
     c, flows = coefficients(params), step_flows(REFERENCE_SCENARIO, 1e-5)
     start = steady_state(params, REFERENCE_SCENARIO.initial_flow)
+    tanks = np.zeros(len(flows))  # the tank at ambient
     record = np.empty((0, 8))
     variants = {
         f'asked every {CHECK_EVERY} steps (as run)': (),
@@ -53,14 +54,14 @@ def main():
         'asked once (plain RK4)': (len(flows) + 1,),
     }
     for extra in variants.values():  # compile each variant
-        rk4_steps(start.copy(), flows[:10], c, 1e-5, 1, np.empty((10, 8)), *extra)
+        rk4_steps(start.copy(), flows[:10], tanks[:10], c, 1e-5, 1, np.empty((10, 8)), *extra)
     best = dict.fromkeys(variants, np.inf)
     finals = {}
     for _ in range(args.repeats):
         for name, extra in variants.items():
             state = start.copy()
             began = time.perf_counter()
-            rk4_steps(state, flows, c, 1e-5, len(flows) + 1, record, *extra)
+            rk4_steps(state, flows, tanks, c, 1e-5, len(flows) + 1, record, *extra)
             best[name] = min(best[name], time.perf_counter() - began)
             finals[name] = state
     baseline = best['asked once (plain RK4)']

@@ -37,6 +37,8 @@ from rclpy.parameter import Parameter
 from valve_harness import flushed
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.core.parameters import load_parameters
+from valve_sim.core.simulation import relief_flows
 from valve_sim.recording.bag import BagReader, message_definition
 from valve_sim.recording.replay import Replay
 from valve_sim.ros.analyser_node import (
@@ -60,6 +62,11 @@ while True:
     publisher.publish(KeyValue(key='rogue', value='x'))
     time.sleep(0.01)
 """
+
+
+def tick_relief(waveforms):
+    """Return the relief flow and its parts at each sample of the reference valve's run."""
+    return relief_flows(load_parameters()[0], waveforms)
 
 
 @contextmanager
@@ -104,7 +111,7 @@ def recording(node, tick_waveforms, tmp_path_factory):
     with running_analyser(folder) as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(tick_waveforms, time.time_ns(), every=1)
+        replay.publish(tick_waveforms, time.time_ns(), every=1, relief=tick_relief(tick_waveforms))
         deadline = time.monotonic() + TIMEOUT
         while not messages:
             executor.spin_once(timeout_sec=0.05)
@@ -182,7 +189,7 @@ def test_hard_kill_leaves_every_flushed_chunk_readable(node, tick_waveforms, tmp
     with running_analyser(tmp_path, 'flush_interval:=0.2') as analyser:
         replay = Replay(node)
         replay.wait_for_subscribers(timeout=TIMEOUT)
-        replay.publish(tick_waveforms, time.time_ns(), every=2)
+        replay.publish(tick_waveforms, time.time_ns(), every=2, relief=tick_relief(tick_waveforms))
         published, topics = (
             sum(replay.published.values()),
             {'/' + topic for topic in replay.published},

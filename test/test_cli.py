@@ -186,6 +186,7 @@ def test_operating_point_json_has_the_documented_keys_and_the_pilot_flow_is_smal
     )
     assert set(low) == {
         'inlet_flow',
+        'tank_pressure',
         'pressures',
         'openings',
         'flows',
@@ -193,10 +194,14 @@ def test_operating_point_json_has_the_documented_keys_and_the_pilot_flow_is_smal
         'poppet_forces',
         'modes',
     }
-    assert set(low['flows']) == {'main', 'pilot', 'bearings', 'damping_orifice', 'rod_leakage'}
+    assert set(low['flows']) == {
+        'main', 'pilot', 'bearings', 'damping_orifice', 'rod_leakage', 'relief'
+    }
+    assert set(low['main_valve_forces']) >= {'tank'} and set(low['poppet_forces']) >= {'tank'}
     for point in (low, high):
         flows = point['flows']
         assert flows['main'] + flows['pilot'] == pytest.approx(point['inlet_flow'], rel=1e-8)
+        assert flows['relief'] == pytest.approx(point['inlet_flow'], rel=1e-8)
         assert flows['pilot'] == pytest.approx(
             flows['damping_orifice'] + flows['rod_leakage'], rel=1e-8
         )

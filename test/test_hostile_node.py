@@ -189,6 +189,34 @@ def test_a_bad_schedule_at_start_is_one_fatal_line(tmp_path, content):
     assert len(lines) == 1 and '[FATAL]' in lines[0] and str(path) in lines[0], lines
 
 
+def test_a_scheduled_event_refused_after_one_applied_keeps_the_node_running(context, tmp_path):
+    """
+    A schedule whose first event is applied and whose second is refused (range_min > range_max).
+
+    The refusal is logged at ERROR after an INFO from the same place, which rclpy refuses
+    from one call site: the node died there.
+    """
+    schedule = tmp_path / 'schedule.yaml'
+    schedule.write_text(
+        'events:\n'
+        '  - t: 0.01\n'
+        '    set: {fault.damping_orifice_blockage: 0.1}\n'
+        '  - t: 0.02\n'
+        '    set: {sensor.pilot_pressure.range_max: 1.0e5,\n'
+        '          sensor.pilot_pressure.range_min: 2.0e5}\n'
+    )
+    log = tmp_path / 'valve_node.log'
+    with running_valve(
+        context, log, '-p', f'fault_schedule:={schedule}', namespace='/hostile_refused'
+    ) as (process, probe):
+        probe.wait_for(lambda: 'refused' in log.read_text(), 'the refused event logged')
+        probe.wait_for_new_samples(100)
+        assert process.poll() is None, log.read_text()
+    text = log.read_text()
+    assert '[INFO]' in text and 'damping_orifice_blockage' in text
+    assert '[ERROR]' in text and 'range_max' in text
+
+
 # --- on /clock ----------------------------------------------------------------------------------
 
 

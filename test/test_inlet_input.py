@@ -12,14 +12,16 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node's inlet-flow input: every message taken counted, the last good value kept."""
+"""valve_node's inputs (inlet flow, tank pressure): every message counted, the last good kept."""
 
 import math
 import time
 
+import pytest
 from rclpy.serialization import serialize_message
+from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
-from valve_sim.ros.inlet_input import InletFlowInput
+from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
 from valve_sim.ros.node_status import Throttle
 
 
@@ -114,3 +116,42 @@ def test_a_throttle_lets_one_event_through_per_interval_of_the_steady_clock():
     assert throttle.due(5_000_000_000)
     assert not throttle.due(5_000_000_001) and not throttle.due(5_999_999_999)
     assert throttle.due(6_000_000_000) and not throttle.due(6_500_000_000)
+
+
+AMBIENT = 101325.0  # [Pa] ambient_pressure of config/reference.yaml
+BURST = 35.0e6  # [Pa, gauge] burst_pressure of config/reference.yaml
+
+
+def fluid_pressure(absolute, frame_id='tank_port'):
+    message = FluidPressure(fluid_pressure=absolute, variance=0.0)
+    message.header.frame_id = frame_id
+    return serialize_message(message)
+
+
+@pytest.mark.parametrize('frame_id', ['', 'a', 'tank', 'rig/tank_port'])
+def test_a_tank_pressure_is_read_whatever_the_length_of_its_frame_id(frame_id):
+    received = TankPressureInput(AMBIENT, BURST)
+    assert received.gauge() is None, 'no tank pressure before the first message'
+    assert received.offer_cdr(fluid_pressure(AMBIENT + 3e5, frame_id))
+    assert received.value == AMBIENT + 3e5 and received.gauge() == pytest.approx(3e5)
+
+
+def test_bad_tank_pressures_are_refused_counted_and_never_held():
+    """NaN, infinities, below vacuum (absolute < 0), at or beyond burst: refused."""
+    received = TankPressureInput(AMBIENT, BURST)
+    received.offer_cdr(fluid_pressure(AMBIENT + 2e5))
+    bad = [math.nan, math.inf, -math.inf, -1.0, -1e5, AMBIENT + BURST, 1e300]
+    for value in bad:
+        assert not received.offer_cdr(fluid_pressure(value)), value
+    assert (received.accepted, received.rejected) == (1, len(bad))
+    assert received.gauge() == pytest.approx(2e5), 'the last good value is held'
+    assert 'burst_pressure' in received.last_rejection
+    assert not received.offer_cdr(b'\x00\x01\x00\x00' + bytes(8)), 'too short for a FluidPressure'
+    assert received.rejected == len(bad) + 1 and 'FluidPressure' in received.last_rejection
+
+
+def test_vacuum_is_judged_with_the_ambient_pressure_in_use():
+    received = TankPressureInput(AMBIENT, BURST)
+    assert received.offer_cdr(fluid_pressure(0.0)), 'absolute 0 is a (hard) vacuum, not below'
+    received.ambient_pressure = 2e5  # a node at altitude set otherwise: the gauge moves
+    assert received.gauge() == -2e5

@@ -38,7 +38,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import LITRE_PER_MINUTE, relief_flows, Scenario, simulate
 from valve_sim.recording.replay import Replay
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import analyser_node
@@ -258,7 +258,8 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert waiting.hardware_id == 'rig_7/recorder'
         run.replay.wait_for_subscribers(timeout=TIMEOUT)
         waveforms = simulate(load_parameters()[0], Scenario(step_time=0.05, end_time=0.2))
-        run.replay.publish(waveforms, time.time_ns(), every=10)
+        relief = relief_flows(load_parameters()[0], waveforms)
+        run.replay.publish(waveforms, time.time_ns(), every=10, relief=relief)
         recording = run.wait_for(DiagnosticStatus.OK[0], 'recording to')
         assert (recording.name, recording.hardware_id) == (waiting.name, waiting.hardware_id)
     finally:
@@ -300,5 +301,5 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
     # quiet, and the analysed signals (always wanted) of the replay's silent publishers
     assert counts == dict.fromkeys(
         ['/analysed/quiet', '/analysed/applied_inlet_flow', '/analysed/joint_states',
-         '/analysed/supply_pressure'], 0
+         '/analysed/supply_pressure', '/analysed/applied_tank_pressure'], 0
     )

@@ -31,7 +31,7 @@ from valve_sim.commands.analyse import analyse, read_recording
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.core.simulation import relief_flows, Scenario, simulate
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.rosbag2_metadata import bag_files
 from valve_sim.recording.valve_topics import (
@@ -117,7 +117,8 @@ def waveforms():
 @pytest.fixture(scope='module')
 def bag_folder(waveforms, tmp_path_factory):
     folder = tmp_path_factory.mktemp('bags') / 'step'
-    write_simulation_bag(folder, waveforms, start_time_ns=START_NS, folder=True)
+    relief = relief_flows(load_parameters()[0], waveforms)
+    write_simulation_bag(folder, waveforms, start_time_ns=START_NS, folder=True, relief=relief)
     return folder
 
 
@@ -161,7 +162,7 @@ def test_bag_folder_has_rosbag2_jazzy_metadata(bag_folder):
         }
     ]
     by_topic = {t['topic_metadata']['name']: t for t in metadata['topics_with_message_count']}
-    assert list(by_topic) == ['/' + topic for topic in TOPIC_TYPES]
+    assert list(by_topic) == ['/' + topic for topic in TOPIC_TYPES if topic != 'tank_pressure']
     for name, topic in by_topic.items():
         channel = channels[name]
         assert topic['message_count'] == statistics.channel_message_counts[channel.id]
@@ -189,7 +190,10 @@ def test_rosbags_reads_the_bag_folder_and_its_metadata(bag_folder, waveforms):
         custom_data = reader.storage.metadata.custom  # rosbags has no public accessor
         assert custom_data == {'source': 'valve-sim simulate (offline model run)'}
         assert {c.topic: c.msgcount for c in reader.connections} == {
-            **{'/' + t: len(waveforms.time[::10]) for t in TOPIC_TYPES if t != 'inlet_flow'},
+            **{
+                '/' + t: len(waveforms.time[::10])
+                for t in TOPIC_TYPES if t not in ('inlet_flow', 'tank_pressure')
+            },
             '/inlet_flow': 2,
         }
         assert sum(1 for _ in reader.messages()) == reader.message_count

@@ -24,6 +24,8 @@ from valve_sim.recording.valve_topics import (
     message_class,
     PRESSURE_FRAMES,
     PRESSURE_TOPICS,
+    RELIEF_JOINTS,
+    TANK_FRAME,
     TICK_TOPICS,
     TickMessages,
     TOPIC_TYPES,
@@ -33,11 +35,13 @@ from valve_sim.recording.valve_topics import (
 AMBIENT = 101325.0
 
 
-def tick(time_ns, state, flow):
+def tick(time_ns, state, flow, tank=0.0, relief=None):
     """{topic: (bytes, the message rclpy decodes from them)} of one filled tick."""
     return {
         topic: (data, deserialize_message(data, message_class(TOPIC_TYPES[topic])))
-        for topic, data in TickMessages().fill(time_ns, state, flow, AMBIENT)
+        for topic, data in TickMessages().fill(
+            time_ns, state, flow, AMBIENT, tank_pressure=tank, relief=relief
+        )
     }
 
 
@@ -49,7 +53,8 @@ def test_tick_bytes_decode_to_the_state_and_match_an_independent_encoder(seed):
         int(rng.integers(0, 2**31 * 1_000_000_000)),
         float(rng.uniform(0.0, 1e-3)),
     )  # sec: int32
-    messages = tick(time_ns, state, flow)
+    tank, relief = float(rng.uniform(-1e5, 1e7)), rng.uniform(0.0, 1e-3, 4).tolist()
+    messages = tick(time_ns, state, flow, tank, relief)
     assert list(messages) == list(TICK_TOPICS)
     for topic, (data, message) in messages.items():
         type_name = TOPIC_TYPES[topic]
@@ -57,8 +62,9 @@ def test_tick_bytes_decode_to_the_state_and_match_an_independent_encoder(seed):
             serialize_dynamic(type_name, message_definition(type_name))[type_name](message) == data
         ), topic
         assert message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec == time_ns
+        places = {**PRESSURE_FRAMES, 'applied_tank_pressure': TANK_FRAME}
         assert message.header.frame_id == (
-            f'relief_valve/{PRESSURE_FRAMES[topic]}' if topic in PRESSURE_TOPICS else ''
+            f'relief_valve/{places[topic]}' if topic in places else ''
         )
     for index, topic in enumerate(PRESSURE_TOPICS):
         pressure = messages[topic][1]
@@ -73,6 +79,18 @@ def test_tick_bytes_decode_to_the_state_and_match_an_independent_encoder(seed):
     applied = messages['applied_inlet_flow'][1]
     assert list(applied.name) == ['inlet_flow'] and list(applied.velocity) == [flow]
     assert len(applied.position) == 0 and len(applied.effort) == 0
+    tank_message = messages['applied_tank_pressure'][1]
+    assert tank_message.fluid_pressure == tank + AMBIENT and tank_message.variance == 0.0
+    flows = messages['relief_flow'][1]
+    assert list(flows.name) == list(RELIEF_JOINTS) == [
+        'relief_flow', 'main_stage', 'pilot_stage', 'seat_leakage'
+    ]
+    assert list(flows.velocity) == relief
+    assert len(flows.position) == 0 and len(flows.effort) == 0
+
+
+def test_without_relief_flows_the_relief_topic_publishes_nothing():
+    assert 'relief_flow' not in tick(0, np.zeros(8), 0.0)
 
 
 def test_refilling_changes_only_stamp_and_values():

@@ -166,7 +166,30 @@ def stamp_time(time_ns):
     return Time(sec=time_ns // 1_000_000_000, nanosec=time_ns % 1_000_000_000)
 
 
-class Probe:
+class SpinningNode:
+    """A test-side node whose executor spins it in a background thread until close()."""
+
+    def spin_in_background(self, context, executor):
+        """Add self.node to a new executor (a class) and spin it in a daemon thread."""
+        self.executor = executor(context=context)
+        self.executor.add_node(self.node)
+        self.closing = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while not self.closing.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self):
+        """Stop the spin thread, then the executor and the node (shutdown under a spin fails)."""
+        self.closing.set()
+        self.thread.join(TIMEOUT)
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+class Probe(SpinningNode):
     """
     Test-side node: records the valve's outputs and drives its inputs and services.
 
@@ -197,22 +220,7 @@ class Probe:
         self.clock = self.node.create_publisher(Clock, '/clock', 10)
         self.parameters = AsyncParameterClient(self.node, self.valve_name)
         self.reset_client = self.node.create_client(Trigger, f'{self.valve_name}/reset')
-        self.executor = executor(context=context)
-        self.executor.add_node(self.node)
-        self.closing = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        while not self.closing.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self):
-        """Stop the spin thread, then the executor and the node (shutdown under a spin fails)."""
-        self.closing.set()
-        self.thread.join(TIMEOUT)
-        self.executor.shutdown()
-        self.node.destroy_node()
+        self.spin_in_background(context, executor)
 
     # --- recording --------------------------------------------------------------------------
 

@@ -18,6 +18,7 @@ valve_sim: a virtual direct-pressure-sensing water-hydraulic relief valve for RO
 The package is built in wings, each importing only the wings below it:
 
     core       the model: parameters, Eqs. (1)-(16), integrator, steady state (numpy, scipy)
+    fmu        the model as an FMI 2.0 co-simulation FMU's slave (pythonfmu)
     analysis   step-response measures, signal handling, reference data, plots
     recording  MCAP bags as rosbag2 writes them, CDR tick messages, replay
     ros        the nodes (valve_node, analyser_node): thin rclpy adapters

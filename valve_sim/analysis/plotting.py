@@ -86,6 +86,8 @@ def plot_step_response(
     t_step,
     measures=None,
     title='Step response (paper Figure 5)',
+    flows=None,
+    pressure='p_s',
 ):
     """
     Figure 5: p_s, x and y against time, each divided by its value at the step; writes a PNG.
@@ -93,14 +95,23 @@ def plot_step_response(
     time [s], pressures [Pa], displacements [m]; t_step [s]; measures: the dict of
     StepMeasures.as_dict() to print beside the curves (optional). A signal that is
     zero (or undefined) at the step, as from a closed valve, cannot be divided by
-    it: its panel shows it in MPa or mm instead, and says why.
+    it: its panel shows it in MPa or mm instead, and says why. flows: {label: flow
+    [m^3/s]} drawn in L/min in a fourth panel (the inlet and the relief flow);
+    pressure: the name of the pressure drawn ('p_s - p_t' above a tank).
     """
     time = np.asarray(time, dtype=float)
     before = int(np.searchsorted(time, t_step, side='right')) - 1
     before = max(before, 0)
-    figure, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8), constrained_layout=True)
+    panels = 3 + bool(flows)
+    figure, axes = plt.subplots(
+        panels, 1, sharex=True, figsize=(8, 8 + 2 * (panels - 3)), constrained_layout=True
+    )
+    shown = f'({pressure})' if ' ' in pressure else pressure
     curves = (
-        (supply_pressure, 'P = p_s / p_s(t_step) [-]', 'p_s [MPa]', 1e-6, 'tab:blue'),
+        (
+            supply_pressure, f'P = {shown} / {shown}(t_step) [-]', f'{pressure} [MPa]', 1e-6,
+            'tab:blue',
+        ),
         (main_valve_displacement, 'X = x / x(t_step) [-]', 'x [mm]', 1e3, 'tab:red'),
         (poppet_displacement, 'Y = y / y(t_step) [-]', 'y [mm]', 1e3, 'tab:green'),
     )
@@ -115,6 +126,13 @@ def plot_step_response(
         axis.axvline(t_step, color='0.6', linestyle=':', linewidth=0.8)
         axis.set_ylabel(label)
         axis.grid(True, alpha=0.3)
+    for (name, flow), colour in zip((flows or {}).items(), ('0.4', 'tab:purple', 'tab:orange')):
+        axes[3].plot(time, np.asarray(flow) * 6e4, color=colour, linewidth=0.9, label=name)
+    if flows:
+        axes[3].axvline(t_step, color='0.6', linestyle=':', linewidth=0.8)
+        axes[3].set_ylabel('flow [L/min]')
+        axes[3].grid(True, alpha=0.3)
+        axes[3].legend(loc='lower right')
     axes[-1].set_xlabel('time [s]')
     axes[0].set_title(title)
     if measures:

@@ -15,7 +15,7 @@
 """
 The signals of a step test in recorded messages, sampled on one time axis.
 
-Four roles, each carried by a topic (valve_node's by default, any other by mapping):
+Six roles, each carried by a topic (valve_node's by default, any other by mapping):
 
   role            default topic        supported types (value taken)
   supply_pressure supply_pressure      sensor_msgs/msg/FluidPressure (fluid_pressure),
@@ -25,9 +25,15 @@ Four roles, each carried by a topic (valve_node's by default, any other by mappi
   pilot_poppet    joint_states         JointState (position of joint pilot_poppet),
                                        Float64 (data); optional
   inlet_flow      applied_inlet_flow   JointState (velocity of joint inlet_flow), Float64 (data)
+  tank_pressure   applied_tank_pressure  FluidPressure (fluid_pressure), Float64 (data);
+                                       optional
+  relief_flow     relief_flow          JointState (velocity of joint relief_flow), Float64
+                                       (data); optional
 
 Pressures on the wire are absolute [Pa]; ambient_pressure [Pa] is subtracted to get
-the model's gauge pressure (0 for a gauge sensor). Displacements [m], flow [m^3/s].
+the model's gauge pressure (0 for a gauge sensor). Displacements [m], flows [m^3/s].
+Where the tank's pressure is known, the step measures take the supply pressure above
+it, p_s - p_t (valve_sim.analysis.step_analysis).
 
 Time: clock "header" takes header.stamp (valve_node stamps every message of a tick
 with the model time); clock "receive" takes each message's receive time (the bag's
@@ -92,10 +98,19 @@ ROLES = (
         'velocity',
         'applied inlet flow q_in [m^3/s]',
     ),
+    Role(
+        'tank_pressure',
+        'applied_tank_pressure',
+        '',
+        '',
+        'tank pressure p_t [Pa, absolute on the wire]',
+    ),
+    Role('relief_flow', 'relief_flow', 'relief_flow', 'velocity', 'relief flow q_r [m^3/s]'),
 )
 ROLE = {role.name: role for role in ROLES}
 REQUIRED = ('supply_pressure', 'main_valve', 'inlet_flow')  # what the measures need
-TYPES = {'supply_pressure': (FLUID_PRESSURE, FLOAT64)}  # others: JOINT_STATE or FLOAT64
+PRESSURES = ('supply_pressure', 'tank_pressure')  # absolute on the wire
+TYPES = dict.fromkeys(PRESSURES, (FLUID_PRESSURE, FLOAT64))  # others: JOINT_STATE or FLOAT64
 
 
 @dataclass
@@ -158,7 +173,7 @@ class Extractor:
                 value = getattr(message, ROLE[role].joint_field)[list(message.name).index(joint)]
             except (ValueError, IndexError):
                 return None
-        return value - self.map.ambient_pressure if role == 'supply_pressure' else value
+        return value - self.map.ambient_pressure if role in PRESSURES else value
 
     def samples(self, message, receive_time_ns):
         """

@@ -17,13 +17,17 @@ The six measures of every inlet-flow step in a stream of samples, and their JSON
 
 StepAnalysis is fed joined rows (valve_sim.analysis.signals) in time order: time t [s],
 supply pressure p_s [Pa, gauge], main-valve displacement x [m], applied inlet
-flow q [m^3/s] and the time [s] of the flow sample q came from. valve_sim.analysis.measures.
-StepDetector finds the steps (up and down, any number); a step between two flow samples
-further apart than 1.5 pressure sample intervals (a coarse flowmeter) is located inside
-them from the pressure (measures.locate_step). Once a step's window (measures.WINDOW
-after it) is complete, valve_sim.analysis.measures.step_measures gives its six measures.
-Only the rows from measures.PRE_STEP_SPAN before the oldest open step on are kept, so
-memory stays bounded however long the stream.
+flow q [m^3/s], the time [s] of the flow sample q came from and, where known, the
+tank pressure p_t [Pa, gauge]. The measures are taken on the pressure across the
+valve, p_s - p_t: the supply pressure above the tank, which is p_s itself with the
+tank at ambient (a back pressure then moves no measure of the valve's own response).
+valve_sim.analysis.measures.StepDetector finds the steps (up and down, any number); a
+step between two flow samples further apart than 1.5 pressure sample intervals (a coarse
+flowmeter) is located inside them from the pressure (measures.locate_step). Once a
+step's window (measures.WINDOW after it) is complete,
+valve_sim.analysis.measures.step_measures gives its six measures. Only the rows from
+measures.PRE_STEP_SPAN before the oldest open step on are kept, so memory stays bounded
+however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
@@ -33,6 +37,8 @@ direction (+1 up, -1 down), flow_before [m^3/s], then the six measures
 A step between coarse flow samples adds to its details 't_step_bracket' [s, s] (those
 samples), 't_step_from' ('supply_pressure' where located, else
 'last_row_before_new_flow': the pressure did not show it) and 't_step_uncertainty_s'.
+A step whose rows had the tank pressure adds 'pressure': 'supply above the tank' and
+'tank_pressure_pa' [Pa, gauge], the tank's pressure at the step.
 """
 
 from collections import deque
@@ -72,16 +78,17 @@ class StepAnalysis:
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
-        self.rows = deque()  # (t, p_s, x) from PRE_STEP_SPAN before the oldest open step on
+        self.rows = deque()  # (t, p_s - p_t, x, p_t), PRE_STEP_SPAN before the oldest open step on
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row
 
-    def add(self, t, supply_pressure, main_valve, inlet_flow, flow_time=None):
+    def add(self, t, supply_pressure, main_valve, inlet_flow, flow_time=None, tank_pressure=None):
         """
         Feed one row; returns the records of the steps whose window it completes.
 
-        flow_time [s]: when the flow sample inlet_flow was taken (None: at t).
+        flow_time [s]: when the flow sample inlet_flow was taken (None: at t);
+        tank_pressure [Pa, gauge]: the tank's pressure (None or nan: not known).
         """
         records = []
         self.first_time = t if self.first_time is None else self.first_time
@@ -94,7 +101,11 @@ class StepAnalysis:
             if self.flow_time is not None:
                 self.brackets[step[0]] = (self.flow_time, flow_time)
         self.flow_time = flow_time
-        self.rows.append((t, supply_pressure, main_valve))
+        known = tank_pressure is not None and tank_pressure == tank_pressure
+        self.rows.append(
+            (t, supply_pressure - tank_pressure if known else supply_pressure, main_valve,
+             tank_pressure if known else np.nan)
+        )
         complete = [step for step in self.open_steps if t >= step[0] + self.window]
         for step in complete:
             self.open_steps.remove(step)
@@ -117,6 +128,7 @@ class StepAnalysis:
                 row['main_valve'],
                 row['inlet_flow'],
                 seconds(row['times'].get('inlet_flow', time_ns)),
+                row.get('tank_pressure'),
             )
         ]
 
@@ -145,7 +157,7 @@ class StepAnalysis:
 
     def _measure(self, step):
         t_step, flow_before, direction = step
-        t, p, x = np.array(self.rows, dtype=float).T
+        t, p, x, tank = np.array(self.rows, dtype=float).T
         bracket, timing = self.brackets.pop(t_step, None), {}
         if bracket and _coarser_than_rows(bracket, t):
             located = locate_step(t, p, bracket, direction)
@@ -157,7 +169,20 @@ class StepAnalysis:
             }
         measures = step_measures(t, p, x, t_step, direction, self.window)
         measures.details.update(timing)
+        measures.details.update(tank_details(t, tank, t_step))
         return step_record(t_step, flow_before, direction, measures)
+
+
+def tank_details(time, tank_pressure, t_step):
+    """
+    Return the details a step's record gets from the tank's pressure, {} where it is not known.
+
+    time [s], tank_pressure [Pa, gauge] (nan: not known) per row; t_step [s].
+    """
+    at_step = tank_pressure[max(int(np.searchsorted(time, t_step, side='right')) - 1, 0)]
+    if at_step != at_step:
+        return {}
+    return {'pressure': 'supply above the tank', 'tank_pressure_pa': float(at_step)}
 
 
 def _coarser_than_rows(bracket, t):

@@ -25,6 +25,11 @@ With --characteristic the bag is a slow flow ramp up and down instead (as
 valve-sim characteristic makes one): only supply pressure and inlet flow are
 needed, and valve_sim.analysis.characteristic finds cracking and reseat from the
 pressure-flow curve (a bag holds no main-stage flow; docs/characteristic.md).
+
+Where the bag holds the tank's pressure (valve_node's applied_tank_pressure, or a rig's
+topic by --topic-tank-pressure), the measures and the characteristic take the supply
+pressure above the tank, p_s - p_t (valve_sim.analysis.step_analysis); the relief flow,
+where recorded, is reported beside the inlet flow and drawn under the pressures.
 """
 
 from dataclasses import dataclass
@@ -43,7 +48,7 @@ from valve_sim.analysis.signals import (
     seconds,
     SignalMap,
 )
-from valve_sim.analysis.step_analysis import step_record, StepAnalysis
+from valve_sim.analysis.step_analysis import step_record, StepAnalysis, tank_details
 from valve_sim.commands.options import (
     add_options,
     flow_value,
@@ -77,6 +82,18 @@ class Recording:
     inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
     problem: str = None
     inlet_flow_time: np.ndarray = None  # [s] time of each row's flow sample (None: the row's)
+    tank_pressure: np.ndarray = None  # [Pa] gauge, NaN where the bag has none
+    relief_flow: np.ndarray = None  # [m^3/s], NaN where the bag has none
+
+    def valve_pressure(self):
+        """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
+        if self.tank_pressure is None:
+            return self.supply_pressure
+        return np.where(
+            np.isnan(self.tank_pressure),
+            self.supply_pressure,
+            self.supply_pressure - self.tank_pressure,
+        )
 
 
 def read_recording(path, signal_map=None, required=BAG_REQUIRED):
@@ -135,7 +152,10 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED):
         )
     column = {
         role: np.array([np.nan if row.get(role) is None else row[role] for _, row in rows])
-        for role in ('supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow')
+        for role in (
+            'supply_pressure', 'main_valve', 'pilot_poppet', 'inlet_flow', 'tank_pressure',
+            'relief_flow',
+        )
     }
     flow_times = [row['times'].get('inlet_flow', time_ns) for time_ns, row in rows]
     return Recording(
@@ -169,6 +189,8 @@ def analyse(recording, threshold=1e-6, merge_time=0.05):
         recording.main_valve,
         recording.inlet_flow,
         flow_time,
+        np.full(len(recording.time), np.nan)
+        if recording.tank_pressure is None else recording.tank_pressure,
     ):
         records += analysis.add(*row)
     return records + analysis.finish()
@@ -177,8 +199,10 @@ def analyse(recording, threshold=1e-6, merge_time=0.05):
 def analyse_step(recording, t_step, direction):
     """Step record of a step at a given time t_step [s] (no detection)."""
     measures = step_measures(
-        recording.time, recording.supply_pressure, recording.main_valve, t_step, direction
+        recording.time, recording.valve_pressure(), recording.main_valve, t_step, direction
     )
+    if recording.tank_pressure is not None:
+        measures.details.update(tank_details(recording.time, recording.tank_pressure, t_step))
     return step_record(t_step, None, direction, measures)
 
 
@@ -196,14 +220,23 @@ def plot_steps(path, recording, records, first_number=1):
     from valve_sim.analysis.plotting import plot_step_response
 
     path, written = Path(path), []
+    pressure = recording.valve_pressure()
+    above_tank = recording.tank_pressure is not None and bool(
+        np.any(np.isfinite(recording.tank_pressure))
+    )
     for k, record in enumerate(records, start=first_number):
         target = path if len(records) == 1 else path.with_name(f'{path.stem}_step{k}{path.suffix}')
         t_step = record['t_step']
         shown = (recording.time >= t_step - PLOT_LEAD) & (recording.time <= t_step + WINDOW)
+        flows = {
+            name: flow[shown]
+            for name, flow in (('inlet', recording.inlet_flow), ('relief', recording.relief_flow))
+            if flow is not None and np.any(np.isfinite(flow[shown]))
+        }
         plot_step_response(
             target,
             recording.time[shown] - t_step + PLOT_LEAD,
-            recording.supply_pressure[shown],
+            pressure[shown],
             recording.main_valve[shown],
             recording.pilot_poppet[shown],
             PLOT_LEAD,
@@ -212,6 +245,8 @@ def plot_steps(path, recording, records, first_number=1):
                 f'Recorded step {k}, {t_step - recording.time[0]:.4f} s after the first '
                 f'sample, shown at {PLOT_LEAD:g} s'
             ),
+            flows=flows if 'relief' in flows else None,
+            pressure='p_s - p_t' if above_tank else 'p_s',
         )
         written.append(target)
     return written
@@ -258,6 +293,35 @@ def print_steps(records, recording, first_number=1, paper=False):
             )
         if 'note' in record['details']:
             print(f'  note: {record["details"]["note"]}')
+        if 'tank_pressure_pa' in details:
+            print(
+                '  pressure: the supply above the tank; tank at '
+                f'{details["tank_pressure_pa"]:.6g} Pa (gauge) at the step'
+            )
+        relief = flows_around(recording, record['t_step'])
+        if relief:
+            print(
+                '  flows [L/min] before the step / at the end of its window: inlet '
+                f'{relief[0] * 6e4:.4g} / {relief[1] * 6e4:.4g}, relief (to the tank) '
+                f'{relief[2] * 6e4:.4g} / {relief[3] * 6e4:.4g}'
+            )
+
+
+def flows_around(recording, t_step):
+    """
+    (inlet, inlet, relief, relief) flow [m^3/s] just before t_step and at the window's end.
+
+    None where the recording has no relief flow there.
+    """
+    if recording.relief_flow is None:
+        return None
+    before = max(int(np.searchsorted(recording.time, t_step, side='right')) - 1, 0)
+    end = max(int(np.searchsorted(recording.time, t_step + WINDOW, side='right')) - 1, 0)
+    values = (
+        recording.inlet_flow[before], recording.inlet_flow[end],
+        recording.relief_flow[before], recording.relief_flow[end],
+    )
+    return values if np.all(np.isfinite(values[2:])) else None
 
 
 def add_signal_arguments(parser):
@@ -396,7 +460,7 @@ def run_characteristic(args):
     if not rated > 0.0:
         raise InputFileError(f'{args.bag}: the inlet flow is never above 0 (no ramp)')
     try:
-        marks = characteristic(recording.supply_pressure, recording.inlet_flow, rated)
+        marks = characteristic(recording.valve_pressure(), recording.inlet_flow, rated)
     except ValueError as error:
         raise InputFileError(f'{args.bag}: {error}') from error
     if args.plot:
@@ -406,17 +470,24 @@ def run_characteristic(args):
         plot_characteristic(
             plot,
             recording.inlet_flow,
-            recording.supply_pressure,
+            recording.valve_pressure(),
             marks,
             title=f'Static characteristic of {args.bag}',
         )
         print(f'wrote {plot}', file=sys.stderr)
+    above_tank = bool(np.any(np.isfinite(recording.tank_pressure)))
     if args.json:
-        print(json_text({'bag': str(args.bag), 'characteristic': marks.as_dict()}))
+        document = {'bag': str(args.bag), 'characteristic': marks.as_dict()}
+        if above_tank:
+            document['pressure'] = 'supply above the tank'
+        print(json_text(document))
     else:
         from valve_sim.commands.characteristic import print_marks
 
-        print(f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}')
+        print(
+            f'{args.bag}: static characteristic, cracking and reseat from {marks.basis}'
+            + (' (pressures: the supply above the recorded tank pressure)' if above_tank else '')
+        )
         print_marks(marks)
     return 0
 

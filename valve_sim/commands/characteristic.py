@@ -195,7 +195,12 @@ def run(args):
         write_outputs(Path(args.out), params, waveforms, main, marks['main_stage_flow'], steady,
                       report, args.max_flow)
     if args.mcap:
-        write_bag(args, waveforms, settings['ambient_pressure'], args.record_interval)
+        from valve_sim.core.simulation import relief_flows
+
+        write_bag(
+            args, waveforms, settings['ambient_pressure'], args.record_interval,
+            relief=relief_flows(params, waveforms),
+        )
     if args.json:
         print(json_text(report))
     else:

@@ -16,7 +16,7 @@
 The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
 Subcommands: simulate, study, tolerance, sensitivity, optimise, operating-point,
-characteristic, analyse, calibrate, repair, demo, scenario.
+characteristic, analyse, calibrate, repair, fmu, demo, scenario.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -66,6 +66,10 @@ SUBCOMMANDS = {
     'repair': (
         'valve_sim.commands.repair',
         'rewrite a truncated or crash-ended MCAP file complete (as `mcap recover`)',
+    ),
+    'fmu': (
+        'valve_sim.commands.fmu',
+        'build the valve as an FMI 2.0 co-simulation FMU (pythonfmu)',
     ),
     'demo': (
         'valve_sim.commands.demo',

@@ -16,6 +16,8 @@
 Report the exact steady state at an inlet flow: pressures, openings, flows, forces and modes.
 
 The numbers behind docs/model.md's force and flow balances and stability margins.
+--tank-pressure puts the valve's outlet on a pressurised tank (gauge): every pressure
+and the cracking pressure rise by it (docs/model.md, "Back pressure").
 --mode-sensitivity adds how each linear mode's frequency and decay rate move per +1 %
 of each parameter (preset held). --json prints the same as one JSON document under
 the stable key names of docs/model.md ("operating-point --json"), all SI.
@@ -28,7 +30,7 @@ from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def add_arguments(parser):
-    add_options(parser, '--params', '--set', '--preset-pressure')
+    add_options(parser, '--params', '--set', '--preset-pressure', '--tank-pressure')
     parser.add_argument('--flow', type=flow_value, action='append', metavar='Q',
                         help='inlet flow (e.g. 5L/min); repeatable (default 5L/min and 20L/min)')
     parser.add_argument('--mode-sensitivity', action='store_true',
@@ -37,27 +39,28 @@ def add_arguments(parser):
     add_options(parser, '--json', help='print the operating points as JSON (SI units)')
 
 
-def operating_point(params, inlet_flow):
+def operating_point(params, inlet_flow, tank_pressure=0.0):
     """
     Return the steady state at inlet_flow [m^3/s] as a JSON-ready dict (SI units).
 
-    Keys (stable, documented in docs/model.md): inlet_flow, pressures {supply,
-    intermediate, pilot, poppet_chamber} [Pa gauge], openings {main_valve,
-    first_throttle, poppet} [m], flows {main, pilot, bearings, damping_orifice,
-    rod_leakage} [m^3/s], main_valve_forces and poppet_forces [N], modes
-    [{frequency_hz, damping_ratio, decay_rate, name}] of the oscillatory modes,
-    slowest first.
+    Keys (stable, documented in docs/model.md): inlet_flow, tank_pressure [Pa gauge],
+    pressures {supply, intermediate, pilot, poppet_chamber} [Pa gauge], openings
+    {main_valve, first_throttle, poppet} [m], flows {main, pilot, bearings,
+    damping_orifice, rod_leakage, relief} [m^3/s], main_valve_forces and
+    poppet_forces [N], modes [{frequency_hz, damping_ratio, decay_rate, name}] of the
+    oscillatory modes, slowest first.
     """
     from valve_sim.core.linear import modes
-    from valve_sim.core.model import coefficients, flows
+    from valve_sim.core.model import coefficients, flows, relief_flows
     from valve_sim.core.steady_state import steady_state
 
     c = coefficients(params)
-    state = steady_state(params, inlet_flow)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
     p_s, p_m, p_p, p_c, x, _, y, _ = (float(v) for v in state)
-    _, q_m2, q_n, q_c, q_s, q_p = (float(q) for q in flows(state, c))
+    _, q_m2, q_n, q_c, q_s, q_p = (float(q) for q in flows(state, c, tank_pressure))
     return {
         'inlet_flow': inlet_flow,
+        'tank_pressure': tank_pressure,
         'pressures': {
             'supply': p_s,
             'intermediate': p_m,
@@ -75,20 +78,27 @@ def operating_point(params, inlet_flow):
             'bearings': q_n,
             'damping_orifice': q_c,
             'rod_leakage': q_s,
+            'relief': float(sum(relief_flows(state, c, tank_pressure))),
         },
         'main_valve_forces': {
             'supply': c.supply_force_area * p_s,
             'intermediate': c.intermediate_force_area * p_m,
             'pilot': -c.back_area * p_p,
             'spring': -c.main_spring_stiffness * (x + c.main_spring_preload),
+            'tank': c.tank_force_area * tank_pressure,
         },
         'poppet_forces': {
             'rod': c.rod_area * p_s,
             'poppet_chamber': c.poppet_chamber_area * p_c,
             'spring': -c.pilot_spring_stiffness * (y + c.pilot_spring_preload),
-            'flow': -c.flow_force_gain * y * p_c,
+            'flow': -c.flow_force_gain * y * (p_c - tank_pressure),
+            'tank': -c.seat_area * tank_pressure,
         },
-        'modes': [mode_entry(mode) for mode in modes(params, inlet_flow) if mode.frequency_hz > 0],
+        'modes': [
+            mode_entry(mode)
+            for mode in modes(params, inlet_flow, tank_pressure)
+            if mode.frequency_hz > 0
+        ],
     }
 
 
@@ -102,19 +112,21 @@ def mode_entry(mode):
     }
 
 
-def sensitivity(params, inlet_flow, preset_pressure):
+def sensitivity(params, inlet_flow, preset_pressure, tank_pressure=0.0):
     """
     Return the mode sensitivity at inlet_flow [m^3/s] as a JSON-ready dict (SI units).
 
     Keys: modes [mode_entry, with states] (every mode, oscillatory or not, slowest
     first), parameters [{name, symbol, value, frequency_hz, decay_rate}]: per
     parameter the change of each mode's frequency [Hz] and decay rate [1/s] per +1 %
-    of it, in the order of modes; preset_pressure [Pa] held.
+    of it, in the order of modes; preset_pressure [Pa] held; at tank_pressure [Pa gauge].
     """
     from valve_sim.core.linear import mode_sensitivity
     from valve_sim.core.parameters import SPECS
 
-    base, table = mode_sensitivity(params, inlet_flow, preset_pressure)
+    base, table = mode_sensitivity(
+        params, inlet_flow, preset_pressure, tank_pressure=tank_pressure
+    )
     return {
         'per_percent': 1.0,
         'preset_pressure': preset_pressure,
@@ -140,6 +152,7 @@ def report(point):
     print(
         f'inlet flow {point["inlet_flow"] / LITRE_PER_MINUTE:.3f} L/min '
         f'({point["inlet_flow"]:.4e} m^3/s)'
+        + (f', tank at {point["tank_pressure"] / 1e6:.4f} MPa' if point['tank_pressure'] else '')
     )
     print(
         f'  pressures [MPa]  p_s {pressure["supply"] / 1e6:.4f}  '
@@ -160,10 +173,13 @@ def report(point):
         f'  main valve [N]   alpha_s p_s {main["supply"]:.2f}  '
         f'alpha_m p_m {main["intermediate"]:.2f}  -A_p p_p {main["pilot"]:.2f}  '
         f'-k_m (x + x_0) {main["spring"]:.2f}'
+        + (f'  A_t p_t {main["tank"]:.2f}' if point['tank_pressure'] else '')
     )
     print(
         f'  poppet [N]       A_s p_s {poppet["rod"]:.2f}  -k_p (y + y_0) {poppet["spring"]:.2f}  '
-        f'-K_f y p_c {poppet["flow"]:.3f}  A_c p_c {poppet["poppet_chamber"]:.3f}'
+        f'-K_f y {"(p_c - p_t)" if point["tank_pressure"] else "p_c"} {poppet["flow"]:.3f}  '
+        f'A_c p_c {poppet["poppet_chamber"]:.3f}'
+        + (f'  -A_v p_t {poppet["tank"]:.2f}' if point['tank_pressure'] else '')
     )
     modes = ', '.join(
         f'{mode["frequency_hz"]:.1f} Hz (zeta {mode["damping_ratio"]:.4f}, '
@@ -201,24 +217,31 @@ def report_sensitivity(table):
 def run(args):
     from valve_sim.core.steady_state import cracking_pressure
 
-    params, _ = load_from_arguments(args)
+    params, settings = load_from_arguments(args)
+    tank = settings['tank_pressure']
     inlet_flows = args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE)
-    cracking = cracking_pressure(params)
+    preset = cracking_pressure(params)  # the valve's setting: the tank at ambient
+    cracking = cracking_pressure(params, tank_pressure=tank)
 
     def point(inlet_flow):
-        entry = operating_point(params, inlet_flow)
+        entry = operating_point(params, inlet_flow, tank)
         if args.mode_sensitivity:
-            entry['mode_sensitivity'] = sensitivity(params, inlet_flow, cracking)
+            entry['mode_sensitivity'] = sensitivity(params, inlet_flow, preset, tank)
         return entry
 
     if args.json:
         document = {
             'cracking_pressure': cracking,
+            'tank_pressure': tank,
             'operating_points': [point(q) for q in inlet_flows],
         }
         print(json_text(document))
         return 0
-    print(f'main valve cracking pressure: {cracking / 1e6:.4f} MPa')
+    print(
+        f'main valve cracking pressure: {cracking / 1e6:.4f} MPa'
+        + (f' (gauge; the tank at {tank / 1e6:.4f} MPa, the setting {preset / 1e6:.4f} MPa '
+           'above it)' if tank else '')
+    )
     for inlet_flow in inlet_flows:
         report(point(inlet_flow))
     return 0

@@ -29,6 +29,7 @@ from argparse import ArgumentTypeError
 from datetime import datetime, timezone
 import math
 from pathlib import Path
+import sys
 
 from valve_sim.core.input_files import PARAMETER_FILE
 from valve_sim.core.parameters import (
@@ -110,6 +111,18 @@ def pressure_value(text):
 pressure_value.bounds = 'finite, > 0 Pa'
 
 
+def gauge_pressure_value(text):
+    """Parse a gauge pressure, 0 or below too: '1e6', '-0.5bar', '1MPa' -> Pa (argparse type)."""
+    units = {'MPa': 1e6, 'kPa': 1e3, 'bar': 1e5, 'Pa': 1.0}
+    value = quantity(text, units, 'pressure', '1MPa or 1e6')
+    if not math.isfinite(value):
+        raise ArgumentTypeError(f'pressure must be finite, got {text!r}')
+    return value
+
+
+gauge_pressure_value.bounds = 'finite Pa (gauge), not below vacuum, below burst_pressure'
+
+
 def start_time(text):
     """ISO 8601 time (UTC unless it says otherwise) -> ns since the epoch (argparse type)."""
     try:
@@ -159,6 +172,13 @@ OPTIONS = {
         'like the adjusting screw, after --params and --set (also preset_pressure in a file '
         'or --set)',
     },
+    '--tank-pressure': {
+        'type': gauge_pressure_value,
+        'metavar': 'P',
+        'help': "the tank's (return line's) pressure, gauge (e.g. 1MPa; default: tank_pressure "
+        'of the parameter file or --set, 0: the tank at ambient); the valve cracks that much '
+        'higher (docs/model.md, "Back pressure")',
+    },
     '--step-size': {
         'type': number('a step size', 's', 1e-7, 1e-4),
         'metavar': 'S',
@@ -202,13 +222,14 @@ def add_options(parser, *flags, **changes):
 
 def load_from_arguments(args, injection=None):
     """
-    Return (params, settings) from --params, --set, --preset-pressure and --step-size.
+    Return (params, settings) from the model's options, --params to --step-size.
 
     The sections of --params that apply are those rcl applies to valve_node in the
     command's --namespace, if it has one (else the root namespace). --step-size
-    overrides settings["step_size"]; fault and sensor settings go into the dict
-    injection (without one they are refused). A preset pressure (--preset-pressure,
-    else preset_pressure of --set or the file) sets the pilot spring preload last.
+    overrides settings["step_size"], --tank-pressure settings["tank_pressure"]; fault
+    and sensor settings go into the dict injection (without one they are refused). A
+    preset pressure (--preset-pressure, else preset_pressure of --set or the file) sets
+    the pilot spring preload last.
     """
     from valve_sim.core.steady_state import with_preset_pressure
 
@@ -218,11 +239,32 @@ def load_from_arguments(args, injection=None):
     preset = getattr(args, 'preset_pressure', None) or preset
     if preset is not None:
         params = with_preset_pressure(params, check_value('preset_pressure', preset))
+    if getattr(args, 'tank_pressure', None) is not None:
+        settings['tank_pressure'] = args.tank_pressure
+    check_tank_pressure(settings['tank_pressure'], params, settings)
+    if settings['tank_pressure'] and not hasattr(args, 'tank_pressure'):
+        print(
+            f"valve-sim: tank_pressure = {settings['tank_pressure']:g} Pa of the parameters is "
+            'not used here: this command takes the valve with the tank at ambient '
+            '(simulate and operating-point take --tank-pressure)',
+            file=sys.stderr,
+        )
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size
     if not 1e-7 <= settings['step_size'] <= 1e-4:
         raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
     return params, settings
+
+
+def check_tank_pressure(pressure, params, settings):
+    """Raise ParameterError unless pressure [Pa, gauge] is a valid tank pressure for the valve."""
+    from valve_sim.core.limits import tank_pressure_problem
+
+    problem = tank_pressure_problem(
+        pressure, params['burst_pressure'], settings['ambient_pressure']
+    )
+    if problem:
+        raise ParameterError(problem)
 
 
 def plot_path(value, default_name):

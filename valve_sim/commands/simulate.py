@@ -19,8 +19,11 @@ Default: the paper's test (exact steady state at 5 L/min, +15 L/min step at
 0.25 s, end at 1.25 s) with config/reference.yaml. Flows accept a unit suffix
 (5L/min) and are m^3/s otherwise; times are seconds. Faults and sensor settings
 (fault.*, sensor.*: docs/faults.md) come from --set and --params; --faults FILE
-schedules them at valve_node's ticks. The measures are taken on the model's p_s; the
-sensor readings are what --mcap records on the pressure topics.
+schedules them at valve_node's ticks. The tank's pressure (gauge) is held at
+--tank-pressure, or stepped to --final-tank-pressure at --tank-step-time (over
+--tank-ramp-time), as the inlet flow is. The measures are taken on the model's supply
+pressure above the tank, p_s - p_t (p_s itself with the tank at ambient); the sensor
+readings are what --mcap records on the pressure topics.
 """
 
 import csv
@@ -28,12 +31,15 @@ import math
 import sys
 import time
 
+import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
 from valve_sim.commands.options import (
     add_options,
     check_bag_arguments,
+    check_tank_pressure,
     flow_value,
+    gauge_pressure_value,
     load_from_arguments,
     namespace_name,
     number,
@@ -43,7 +49,7 @@ from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.output_files import json_text, replacing
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
-from valve_sim.core.scenario import Scenario
+from valve_sim.core.scenario import Scenario, TankPressure
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim simulate --help` stays quick.
@@ -69,6 +75,16 @@ def add_arguments(parser):
                         help='change the flow linearly over this time instead of at once [s]')
     parser.add_argument('--end-time', type=TIME, default=s.end_time, metavar='S',
                         help=f'end of the run [s] (default {s.end_time:g})')
+    add_options(parser, '--tank-pressure', help="the tank's (return line's) pressure from the "
+                'start, gauge (e.g. 1MPa; default: tank_pressure of the parameter file or --set, '
+                '0: at ambient): the run starts at its steady state')
+    parser.add_argument('--final-tank-pressure', type=gauge_pressure_value, metavar='P',
+                        help="the tank's pressure after --tank-step-time, gauge: a back-pressure "
+                        'step (default: held at --tank-pressure)')
+    parser.add_argument('--tank-step-time', type=TIME, metavar='S',
+                        help="time of the tank's step [s] (default: --step-time)")
+    parser.add_argument('--tank-ramp-time', type=TIME, default=0.0, metavar='S',
+                        help="change the tank's pressure linearly over this time instead [s]")
     add_options(parser, '--step-size')
     parser.add_argument('--record-interval', default=1e-4, metavar='S', type=INTERVAL,
                         help='sample interval of the output waveforms [s] (default 1e-4, '
@@ -104,12 +120,13 @@ def add_arguments(parser):
                         'below it (default: the root namespace)')
 
 
-def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None):
+def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None, relief=None):
     """
     Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag).
 
     With --rig-topics (simulate only): what a rig records (valve_topics.write_rig_bag).
-    readings: the sensor stage's pressures per tick (nan: nothing published), if any.
+    readings: the sensor stage's pressures per tick (nan: nothing published), if any;
+    relief: the relief flows per sample (simulation.relief_flows), if any.
     """
     from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
@@ -145,6 +162,7 @@ def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None
         folder=args.bag_folder,
         readings=readings,
         namespace=namespace_name(getattr(args, 'namespace', None)),
+        relief=relief,
     )
 
 
@@ -166,18 +184,46 @@ def _scenario(args):
     )
 
 
-def write_csv(path, waveforms):
-    """Waveforms as CSV: time, applied inlet flow and the eight states, SI units in the header."""
-    from valve_sim.core.model import STATE_NAMES
+def tank_profile(args, params, settings):
+    """Return the TankPressure of --tank-pressure (settings), --final-tank-pressure, its times."""
+    step_time = args.step_time if args.tank_step_time is None else args.tank_step_time
+    if not 0.0 <= step_time <= args.end_time or not args.tank_ramp_time >= 0.0:
+        raise ParameterError('need 0 <= --tank-step-time <= --end-time and --tank-ramp-time >= 0')
+    if args.final_tank_pressure is not None:
+        check_tank_pressure(args.final_tank_pressure, params, settings)
+    return TankPressure(
+        settings['tank_pressure'], args.final_tank_pressure, step_time, args.tank_ramp_time
+    )
 
-    header = ['time_s', 'inlet_flow_m3_s'] + [
-        f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)
-    ]
+
+def write_csv(path, waveforms, relief):
+    """
+    Waveforms as CSV, SI units in the header.
+
+    Time, the applied inlet flow, the eight states, the applied tank pressure (gauge)
+    and the flows to the tank (relief: simulation.relief_flows); the columns before
+    the tank's are those of the runs before it existed.
+    """
+    from valve_sim.core.model import STATE_NAMES
+    from valve_sim.core.simulation import RELIEF_COLUMNS
+
+    header = (
+        ['time_s', 'inlet_flow_m3_s']
+        + [f'{name}_{unit}' for name, unit in zip(STATE_NAMES, STATE_UNITS)]
+        + ['tank_pressure_Pa']
+        + [f'{name}_m3_s' for name in RELIEF_COLUMNS]
+    )
     with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
-        for t, q, state in zip(waveforms.time, waveforms.inlet_flow, waveforms.states):
-            writer.writerow([f'{t:.7f}', f'{q:.9e}'] + [f'{v:.9e}' for v in state])
+        for t, q, p_t, state, flows in zip(
+            waveforms.time, waveforms.inlet_flow, waveforms.tank_pressure, waveforms.states,
+            relief,
+        ):
+            writer.writerow(
+                [f'{t:.7f}', f'{q:.9e}']
+                + [f'{v:.9e}' for v in (*state, p_t, *flows)]
+            )
 
 
 def print_table(measures, paper=False):
@@ -219,8 +265,9 @@ def is_papers_run(params, scenario):
 
 
 def run(args):
+    from valve_sim.analysis.step_analysis import tank_details
     from valve_sim.core.sensors import read_waveforms
-    from valve_sim.core.simulation import simulate
+    from valve_sim.core.simulation import relief_flows, simulate
 
     check_bag_arguments(args)
     if args.flow_interval is not None and not (args.mcap and args.rig_topics):
@@ -230,6 +277,7 @@ def run(args):
     faults, sensors, schedule = load_injection(args, injection)
     step_size = settings['step_size']
     scenario = _scenario(args)
+    tank = tank_profile(args, params, settings)
     if args.record_interval < step_size:
         raise ParameterError(f'--record-interval must be >= the step size ({step_size:g} s)')
     waveforms = simulate(
@@ -241,15 +289,21 @@ def run(args):
         schedule,
         1.0 / settings['publish_rate'],
         halt_on_overpressure=True,
+        tank=tank,
     )
     direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
     measures = step_measures(
         waveforms.time,
-        waveforms['supply_pressure'],
+        waveforms['supply_pressure'] - waveforms.tank_pressure,
         waveforms['main_valve_displacement'],
         scenario.step_time,
         direction,
     )
+    above_tank = bool(np.any(waveforms.tank_pressure != 0.0))
+    if above_tank:
+        measures.details.update(
+            tank_details(waveforms.time, waveforms.tank_pressure, scenario.step_time)
+        )
     faulty = bool(faults.active() or waveforms.events)
     if faulty:
         cause = '; '.join(
@@ -272,19 +326,23 @@ def run(args):
             '(details.overpressure; stderr)',
         )
         measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
+    written = args.csv or args.plot or args.mcap
+    relief = relief_flows(params, waveforms, faults) if written else None
     if args.csv:
-        write_csv(args.csv, waveforms)
+        write_csv(args.csv, waveforms, relief)
     if args.plot:
         from valve_sim.analysis.plotting import plot_step_response
 
         plot_step_response(
             plot_path(args.plot, 'figure5.png'),
             waveforms.time,
-            waveforms['supply_pressure'],
+            waveforms['supply_pressure'] - waveforms.tank_pressure,
             waveforms['main_valve_displacement'],
             waveforms['poppet_displacement'],
             scenario.step_time,
             measures.as_dict(),
+            flows={'inlet': waveforms.inlet_flow, 'relief': relief[:, 0]},
+            pressure='p_s - p_t' if above_tank else 'p_s',
         )
     if args.mcap:
         # valve_node's 1 kHz ticks where the samples allow it, else every sample.
@@ -293,11 +351,20 @@ def run(args):
             1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
         )
         _, readings = read_waveforms(waveforms, sensors, interval, settings['ambient_pressure'])
-        write_bag(args, waveforms, settings['ambient_pressure'], interval, readings)
+        write_bag(args, waveforms, settings['ambient_pressure'], interval, readings, relief)
     if args.json:
         print(json_text(measures.as_dict()))
     else:
-        print_table(measures, paper=is_papers_run(params, scenario) and not faulty)
+        print_table(
+            measures, paper=is_papers_run(params, scenario) and not faulty and not above_tank
+        )
+        if above_tank:
+            print(
+                f'tank pressure {tank.initial:g} Pa (gauge)'
+                + (f', {tank.final:g} Pa from t = {tank.step_time:g} s' if tank.final is not None
+                   else '')
+                + '; measures of the supply pressure above the tank, p_s - p_t'
+            )
         if faults.active():
             print(f'faults from the start: {faults.describe()}')
         for applied_at, changes in waveforms.events:

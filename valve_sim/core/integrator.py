@@ -31,8 +31,10 @@ the paper's operating points that never happens.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
+Its two inputs, the inlet flow and the tank pressure, are held over a step; the
+kernels take both as arrays with one value per step.
 rk4_steps takes it for one valve; rk4_lanes takes it for LANES independent valves
-(lanes: parameter sets and states) through the same inlet-flow schedule at once,
+(lanes: parameter sets and states) through the same input schedules at once,
 in one loop over the lanes that the compiler vectorises (SIMD: four lanes per
 instruction on AVX2). The same function in the same order of operations: each
 lane's result is bit-identical to rk4_steps (no fast-math), docs/speed.md.
@@ -106,9 +108,10 @@ def on_stops(state, c):
 
 
 @jit
-def splits_needed(state, c, step):
+def splits_needed(state, c, step, tank_pressure=0.0):
     """Return the number of equal sub-steps that keep RK4 stable on the stiffest chamber."""
-    return min(int(step * fastest_chamber_rate(state, c) / STEP_RATE_LIMIT) + 1, MAX_SPLITS)
+    rate = fastest_chamber_rate(state, c, tank_pressure)
+    return min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS)
 
 
 @jit
@@ -142,12 +145,16 @@ def rk4_rate(k1, k2, k3, k4):
 
 
 @jit
-def rk4_step(state, q, c, h):
-    """Return the state (an 8-tuple) after one classical RK4 step of size h [s] at inlet flow q."""
-    k1 = derivatives(state, q, c)
-    k2 = derivatives(moved(state, 0.5 * h, k1), q, c)
-    k3 = derivatives(moved(state, 0.5 * h, k2), q, c)
-    k4 = derivatives(moved(state, h, k3), q, c)
+def rk4_step(state, q, p_t, c, h):
+    """
+    Return the state (an 8-tuple) after one classical RK4 step of size h [s].
+
+    The inputs are held over the step: inlet flow q [m^3/s], tank pressure p_t [Pa, gauge].
+    """
+    k1 = derivatives(state, q, c, p_t)
+    k2 = derivatives(moved(state, 0.5 * h, k1), q, c, p_t)
+    k3 = derivatives(moved(state, 0.5 * h, k2), q, c, p_t)
+    k4 = derivatives(moved(state, h, k3), q, c, p_t)
     return on_stops(moved(state, h / 6.0, rk4_rate(k1, k2, k3, k4)), c)
 
 
@@ -158,11 +165,14 @@ def as_tuple(state):
 
 
 @jit
-def rk4_steps(state, inlet_flows, c, step, record_every, record, check_every=CHECK_EVERY):
+def rk4_steps(
+    state, inlet_flows, tank_pressures, c, step, record_every, record, check_every=CHECK_EVERY
+):
     """
     Advance state in place by len(inlet_flows) RK4 steps of size step [s].
 
-    inlet_flows[k] [m^3/s] is held during step k; a step is split where
+    inlet_flows[k] [m^3/s] and tank_pressures[k] [Pa, gauge] are held during step k
+    (tank_pressures as long as inlet_flows); a step is split where
     splits_needed() asks for it (asked every check_every steps: CHECK_EVERY, a
     constant of the compiled kernel unless given; bench/bench_step_split.py varies it). Every
     record_every steps the state is copied into the next row of record. Returns
@@ -175,12 +185,12 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record, check_every=CHE
     until_record = record_every
     splits = 1
     for k in range(inlet_flows.shape[0]):
-        q = inlet_flows[k]
+        q, p_t = inlet_flows[k], tank_pressures[k]
         if k % check_every == 0:
-            splits = splits_needed(current, c, step)
+            splits = splits_needed(current, c, step, p_t)
         h = step / splits
         for _ in range(splits):
-            current = rk4_step(current, q, c, h)
+            current = rk4_step(current, q, p_t, c, h)
         verdict = state_check(current, c.burst_pressure)
         if verdict != STATE_OK:
             state[:] = current
@@ -196,26 +206,31 @@ def rk4_steps(state, inlet_flows, c, step, record_every, record, check_every=CHE
     return inlet_flows.shape[0], STATE_OK
 
 
-def crossing_is_accurate(start, inlet_flows, done, c, step):
+def crossing_is_accurate(start, inlet_flows, done, c, step, tank_pressures=0.0):
     """
     Check that step done from start (the first to cross burst_pressure) was accurate.
 
     Repeats the steps before it, then compares that step with two half steps,
     with the limit lifted: a physical pressure rise is resolved by the step and
-    both agree; an instability is not.
+    both agree; an instability is not. tank_pressures: as for advance().
     """
+    inlet_flows, tank_pressures = step_inputs(inlet_flows, tank_pressures)
     unlimited = c._replace(burst_pressure=NUMERICAL_CEILING)
     before = start.copy()
-    rk4_steps(before, inlet_flows[:done], unlimited, step, 1, np.empty((0, 8)))
-    q = inlet_flows[slice(done, done + 1)]
+    rk4_steps(
+        before, inlet_flows[:done], tank_pressures[:done], unlimited, step, 1, np.empty((0, 8))
+    )
+    q, p_t = inlet_flows[slice(done, done + 1)], tank_pressures[slice(done, done + 1)]
     full, halves = before.copy(), before.copy()
-    rk4_steps(full, q, unlimited, step, 1, np.empty((0, 8)))
-    rk4_steps(halves, np.repeat(q, 2), unlimited, 0.5 * step, 1, np.empty((0, 8)))
+    rk4_steps(full, q, p_t, unlimited, step, 1, np.empty((0, 8)))
+    rk4_steps(
+        halves, np.repeat(q, 2), np.repeat(p_t, 2), unlimited, 0.5 * step, 1, np.empty((0, 8))
+    )
     gap = abs(full[P_S] - halves[P_S])  # the supply: the pressure the limit is about
     return bool(gap <= CROSSING_TOLERANCE * c.burst_pressure)
 
 
-def _failure(start, reached, inlet_flows, done, c, step, time, verdict):
+def _failure(start, reached, inlet_flows, done, c, step, time, verdict, tank_pressures):
     """
     Return the error of a run that left the limits at step done (0-based) of this call.
 
@@ -223,12 +238,15 @@ def _failure(start, reached, inlet_flows, done, c, step, time, verdict):
     produced; verdict: state_check's. OverpressureError if the step that crossed
     burst_pressure was accurate, else IntegrationError; steps_done set.
     """
+    tank = tank_pressures[done]
     where = (
         f'at t = {time + (done + 1) * step:.6f} s (step {done + 1} of this call, '
-        f'step size {step:g} s, inlet flow {inlet_flows[done]:g} m^3/s)'
+        f'step size {step:g} s, inlet flow {inlet_flows[done]:g} m^3/s'
+        + (f', tank pressure {tank:g} Pa gauge' if tank else '')
+        + ')'
     )
     if verdict == STATE_OVERPRESSURE and crossing_is_accurate(
-        start, inlet_flows, done, c, float(step)
+        start, inlet_flows, done, c, float(step), tank_pressures
     ):
         error = OverpressureError(
             f'{state_problem(reached, c.burst_pressure)} {where}; '
@@ -243,26 +261,47 @@ def _failure(start, reached, inlet_flows, done, c, step, time, verdict):
     return error
 
 
-def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0):
+def step_inputs(inlet_flows, tank_pressures):
+    """
+    Return (inlet flows, tank pressures) as contiguous float arrays of one length.
+
+    tank_pressures: an array with one value per step, or one value for every step.
+    """
+    inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
+    if np.ndim(tank_pressures) == 0:
+        return inlet_flows, np.full(len(inlet_flows), float(tank_pressures))
+    tank_pressures = np.ascontiguousarray(tank_pressures, dtype=float)
+    if tank_pressures.shape != inlet_flows.shape:
+        raise ValueError(
+            f'{len(tank_pressures)} tank pressures for {len(inlet_flows)} inlet flows'
+        )
+    return inlet_flows, tank_pressures
+
+
+def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0, tank_pressures=0.0):
     """
     Advance state (modified in place) through inlet_flows, one RK4 step each.
 
     state: float64 array of 8; inlet_flows: array of q_in [m^3/s] per step;
     step: step size [s]; record_every: record the state every so many steps (0: no record);
-    time: model time at the start [s], only used for error messages.
+    time: model time at the start [s], only used for error messages; tank_pressures:
+    p_t [Pa, gauge] per step, or one value for all (0: the tank at ambient).
     Returns the recorded states (rows). When a state leaves the limits raises
     OverpressureError (beyond burst_pressure) or IntegrationError (diverged) and
     leaves state as it was before the call.
     """
-    inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
+    inlet_flows, tank_pressures = step_inputs(inlet_flows, tank_pressures)
     rows = len(inlet_flows) // record_every if record_every else 0
     record = np.empty((rows, 8))
     start = state.copy()
     done, verdict = rk4_steps(
-        state, inlet_flows, coefficients, float(step), max(record_every, 1), record
+        state, inlet_flows, tank_pressures, coefficients, float(step), max(record_every, 1), record
     )
     if done < len(inlet_flows):
-        error = _failure(start, state.copy(), inlet_flows, done, coefficients, step, time, verdict)
+        error = _failure(
+            start, state.copy(), inlet_flows, done, coefficients, step, time, verdict,
+            tank_pressures,
+        )
         state[:] = start
         raise error
     return record
@@ -314,10 +353,11 @@ def set_lane_state(states, lane, state):
 
 @jit
 def rk4_lanes(
-    states, inlet_flows, table, faulty, step, record_every, records, completed, verdicts
+    states, inlet_flows, tank_pressures, table, faulty, step, record_every, records, completed,
+    verdicts,
 ):
     """
-    Advance LANES valves by len(inlet_flows) RK4 steps together.
+    Advance LANES valves by len(inlet_flows) RK4 steps together, the same inputs for all.
 
     states [8 x LANES] and table [fields x LANES] (each lane's Coefficients) are flat
     arrays in rows: a state or coefficient of every lane side by side, so that the
@@ -341,18 +381,18 @@ def rk4_lanes(
     row = 0
     until_record = record_every
     for k in range(steps):
-        q = inlet_flows[k]
+        q, p_t = inlet_flows[k], tank_pressures[k]
         if k % CHECK_EVERY == 0:
             for j in range(LANES):
                 if completed[j] == steps:
                     state, c = lane_state(states, j), lane_coefficients(table, j)
-                    splits[j] = splits_needed(state, c, step)
+                    splits[j] = splits_needed(state, c, step, p_t)
                     alone[j] = faulty[j] or splits[j] > 1
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):
             c = healthy_lane_coefficients(table, j)
             state = lane_state(states, j)
-            stepped = rk4_step(state, q, c, step)
+            stepped = rk4_step(state, q, p_t, c, step)
             set_lane_state(states, j, state if alone[j] else stepped)
             checked[j] = state_check(stepped, c.burst_pressure)
         for j in range(LANES):
@@ -362,7 +402,7 @@ def rk4_lanes(
                 c = lane_coefficients(table, j)
                 state = lane_state(states, j)
                 for _ in range(splits[j]):
-                    state = rk4_step(state, q, c, step / splits[j])
+                    state = rk4_step(state, q, p_t, c, step / splits[j])
                 set_lane_state(states, j, state)
                 checked[j] = state_check(state, c.burst_pressure)
             if checked[j] != STATE_OK:
@@ -379,7 +419,9 @@ def rk4_lanes(
                 row += 1
 
 
-def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, time=0.0):
+def advance_lanes(
+    states, inlet_flows, coefficient_sets, step, record_every=0, time=0.0, tank_pressures=0.0
+):
     """
     Advance several valves (rows of states, modified in place) through the same inlet_flows.
 
@@ -391,7 +433,7 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
     state is then left as it was before the call. The valves do not affect each
     other, and each gives exactly what advance() gives it alone.
     """
-    inlet_flows = np.ascontiguousarray(inlet_flows, dtype=float)
+    inlet_flows, tank_pressures = step_inputs(inlet_flows, tank_pressures)
     count = len(states)
     rows = len(inlet_flows) // record_every if record_every else 0
     records = np.empty((count, rows, 8))
@@ -414,6 +456,7 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
         rk4_lanes(
             columns,
             inlet_flows,
+            tank_pressures,
             np.ascontiguousarray(table[lanes].T).reshape(-1),
             faulty[lanes],
             float(step),
@@ -436,6 +479,7 @@ def advance_lanes(states, inlet_flows, coefficient_sets, step, record_every=0, t
                         step,
                         time,
                         verdicts[lane],
+                        tank_pressures,
                     )
                 )
                 states[valve] = start[valve]

@@ -20,7 +20,8 @@ Two parameters bound what the model may be asked and what it may report
 
 - max_inlet_flow [m^3/s]: a larger inlet flow is not an input this valve can be
   given (valve_node rejects and counts it, the steady-state solver refuses it);
-- burst_pressure [Pa, gauge]: no chamber of the real valve gets beyond it.
+- burst_pressure [Pa, gauge]: no chamber of the real valve gets beyond it, and no
+  tank pressure at or beyond it is an input (the tank port is part of the body).
 
 A state is judged by state_check(): OK; OVERPRESSURE, a finite state whose supply
 pressure is beyond burst_pressure (physics: a fault or a flow the valve cannot
@@ -75,6 +76,33 @@ def inlet_flow_problem(flow, max_inlet_flow):
         return (
             f'inlet flow {flow:g} m^3/s exceeds max_inlet_flow (q_in,max) = '
             f'{max_inlet_flow:g} m^3/s'
+        )
+    return None
+
+
+def tank_pressure_problem(pressure, burst_pressure, ambient_pressure=None):
+    """
+    Return why a tank pressure [Pa, gauge] is not a valid input, or None if it is.
+
+    Valid: a finite number below burst_pressure [Pa, gauge] and not below vacuum:
+    absolute (pressure + ambient_pressure [Pa]) at least 0 where the ambient pressure
+    is known, else not below PRESSURE_FLOOR.
+    """
+    if isinstance(pressure, bool) or not isinstance(pressure, (int, float)):
+        return f'tank pressure must be a number in Pa, got {pressure!r}'
+    if not math.isfinite(pressure):
+        return f'tank pressure must be finite, got {pressure!r}'
+    if ambient_pressure is not None and pressure + ambient_pressure < 0.0:
+        return (
+            f'tank pressure {pressure + ambient_pressure:g} Pa absolute ({pressure:g} Pa gauge) '
+            'is below vacuum'
+        )
+    if pressure < PRESSURE_FLOOR:
+        return f'tank pressure {pressure:g} Pa (gauge) is below {PRESSURE_FLOOR:g} Pa'
+    if pressure >= burst_pressure:
+        return (
+            f'tank pressure {pressure:g} Pa (gauge) is not below burst_pressure (p_burst) = '
+            f'{burst_pressure:g} Pa'
         )
     return None
 

@@ -37,16 +37,16 @@ from valve_sim.core.steady_state import steady_state, with_preset_pressure
 STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])  # typical size of each state
 
 
-def jacobian(params, state, inlet_flow, relative_step=1e-6):
-    """d(state_dot)/d(state) [8 x 8] at state for inlet flow [m^3/s]."""
+def jacobian(params, state, inlet_flow, relative_step=1e-6, tank_pressure=0.0):
+    """d(state_dot)/d(state) [8 x 8] at state for inlet flow [m^3/s] and tank pressure [Pa]."""
     c = coefficients(params)
     matrix = np.empty((8, 8))
     for j in range(8):
         delta = np.zeros(8)
         delta[j] = STATE_SCALE[j] * relative_step
         matrix[:, j] = (
-            state_derivative(state + delta, inlet_flow, c)
-            - state_derivative(state - delta, inlet_flow, c)
+            state_derivative(state + delta, inlet_flow, c, tank_pressure)
+            - state_derivative(state - delta, inlet_flow, c, tank_pressure)
         ) / (2.0 * delta[j])
     return matrix
 
@@ -97,15 +97,16 @@ def mode_name(states):
     return 'chamber ' + ', '.join(states)
 
 
-def modes(params, inlet_flow):
+def modes(params, inlet_flow, tank_pressure=0.0):
     """
     Return every linear mode [Mode] at the steady state of inlet_flow [m^3/s].
 
-    One Mode per real eigenvalue and per complex pair, slowest (smallest |lambda|) first.
+    tank_pressure: the back pressure [Pa, gauge]. One Mode per real eigenvalue and per
+    complex pair, slowest (smallest |lambda|) first.
     """
-    state = steady_state(params, inlet_flow)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
     eigenvalues, left, right = scipy.linalg.eig(
-        jacobian(params, state, inlet_flow), left=True, right=True
+        jacobian(params, state, inlet_flow, tank_pressure=tank_pressure), left=True, right=True
     )
     found = []
     for k in np.argsort(np.abs(eigenvalues)):
@@ -138,7 +139,9 @@ def sensitivity_parameters(params, preset_held=True):
     return [spec.name for spec in PARAMETERS if spec.name not in skip and params[spec.name]]
 
 
-def mode_sensitivity(params, inlet_flow, preset_pressure=None, names=None, percent=1.0):
+def mode_sensitivity(
+    params, inlet_flow, preset_pressure=None, names=None, percent=1.0, tank_pressure=0.0
+):
     """
     Return (modes, {name: [(d frequency [Hz], d decay rate [1/s]) per mode]}) per +1 %.
 
@@ -147,9 +150,9 @@ def mode_sensitivity(params, inlet_flow, preset_pressure=None, names=None, perce
     central difference (f(+) - f(-)) / (2 percent) of the mode nearest to it.
     preset_pressure [Pa]: held (the pilot preload re-solved, as for the study's
     cases) when given; otherwise the preload stays. names: parameters to vary
-    (default sensitivity_parameters()).
+    (default sensitivity_parameters()); tank_pressure: the back pressure [Pa, gauge].
     """
-    base = modes(params, inlet_flow)
+    base = modes(params, inlet_flow, tank_pressure)
     names = names or sensitivity_parameters(params, preset_pressure is not None)
     table = {}
     for name in names:
@@ -158,7 +161,7 @@ def mode_sensitivity(params, inlet_flow, preset_pressure=None, names=None, perce
             case = {**params, name: params[name] * (1.0 + sign * percent / 100.0)}
             if preset_pressure is not None:
                 case = with_preset_pressure(case, preset_pressure)
-            moved.append(_matched(base, modes(case, inlet_flow)))
+            moved.append(_matched(base, modes(case, inlet_flow, tank_pressure)))
         table[name] = [
             (
                 (up.frequency_hz - down.frequency_hz) / (2.0 * percent),

@@ -15,7 +15,7 @@
 """
 Equations (1)-(16) of the paper: the right-hand side of the valve model.
 
-State vector (SI units, pressures gauge, i.e. relative to the tank):
+State vector (SI units, pressures gauge, i.e. relative to the ambient pressure):
 
     index  name                        symbol  unit
     0      supply_pressure             p_s     Pa
@@ -42,6 +42,15 @@ Departures from the printed equations, each explained in docs/model.md:
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
 - The supply may be pressure-limited: at supply_pressure_limit (if set) its own relief
   (the bench pump's) takes the inflow the valve does not pass, so p_s stops rising there.
+
+The tank pressure p_t [Pa, gauge] is an input beside the inlet flow (0: the tank at ambient,
+the paper's case). It acts wherever the tank does: the flows to tank q_m2 (Eq. 11) and q_p
+(Eq. 15), the seat leakage, the flow force on the poppet, and the tank's pressure on the
+tank-facing areas A_t (main valve) and A_v (poppet). Eq. (12) is normalised by the upstream
+pressure above the tank. So every force and flow depends on pressures relative to the tank
+only: a constant back pressure shifts every pressure of a steady state by p_t, and the
+cracking pressure with it (docs/model.md, "Back pressure"). relief_flows() is the flow the
+valve passes to the tank. With p_t = 0 every term is computed exactly as without it.
 
 Valve faults (valve_sim.core.faults, docs/faults.md) enter as physical terms here and
 nowhere else: orifice blockage and spring weakening scale K_c, K_b and k_p in
@@ -101,6 +110,8 @@ Coefficients = namedtuple(
         'supply_force_area',  # alpha_s, Eq. (8) = A_m1, swept out of V_s  [m^2]
         'intermediate_force_area',  # alpha_m, Eq. (8), swept out of V_m  [m^2]
         'poppet_chamber_area',  # A_c = pi/4 (d_v^2 - d_s^2), swept out of V_c  [m^2]
+        'tank_force_area',  # A_t = A_p - alpha_s - alpha_m: the tank on the main valve  [m^2]
+        'seat_area',  # A_v = A_s + A_c = pi/4 d_v^2: the tank (spring side) on the poppet  [m^2]
         'flow_force_gain',  # K_f, Eq. (9)            [m]
         'first_throttle_gain',  # pi C_d D_1 sqrt(2/rho)  [m^2/s/sqrt(Pa) per m]
         'second_throttle_gain',  # pi C_d D_2 sqrt(2/rho)
@@ -153,16 +164,24 @@ def coefficients(p, faults=HEALTHY):
     d_p, theta = p['main_valve_back_diameter'], p['poppet_half_angle']
     c_d, d_v = p['discharge_coefficient'], p['pilot_seat_diameter']
     d_s = p['sensing_rod_diameter']
+    back_area = math.pi / 4.0 * d_p**2
+    supply_force_area = math.pi / 4.0 * (d_p**2 - land_1 / 2.0)
+    intermediate_force_area = math.pi / 8.0 * (land_1 - land_2)
+    rod_area = math.pi / 4.0 * d_s**2
+    poppet_chamber_area = math.pi / 4.0 * (d_v**2 - d_s**2)
     c = Coefficients(
         supply_compliance_inv=p['bulk_modulus'] / p['supply_volume'],
         intermediate_compliance_inv=p['bulk_modulus'] / p['intermediate_volume'],
         pilot_compliance_inv=p['bulk_modulus'] / p['pilot_volume'],
         poppet_chamber_compliance_inv=p['bulk_modulus'] / p['poppet_chamber_volume'],
-        rod_area=math.pi / 4.0 * d_s**2,
-        back_area=math.pi / 4.0 * d_p**2,
-        supply_force_area=math.pi / 4.0 * (d_p**2 - land_1 / 2.0),
-        intermediate_force_area=math.pi / 8.0 * (land_1 - land_2),
-        poppet_chamber_area=math.pi / 4.0 * (d_v**2 - d_s**2),
+        rod_area=rod_area,
+        back_area=back_area,
+        supply_force_area=supply_force_area,
+        intermediate_force_area=intermediate_force_area,
+        poppet_chamber_area=poppet_chamber_area,
+        # Each body's areas add up to zero (a closed body): what the others leave is the tank's.
+        tank_force_area=back_area - supply_force_area - intermediate_force_area,
+        seat_area=rod_area + poppet_chamber_area,
         flow_force_gain=math.pi * c_d * d_v * math.sin(2.0 * theta),
         first_throttle_gain=math.pi * c_d * p['first_throttle_outer_diameter'] * root,
         second_throttle_gain=math.pi * c_d * p['second_throttle_outer_diameter'] * root,
@@ -251,9 +270,11 @@ def orifice_root_slope(dp, transition):
 
 
 @jit
-def fastest_chamber_rate(state, c):
+def fastest_chamber_rate(state, c, tank_pressure=0.0):
     """
     Return a bound [1/s] on the fastest decay rate of the four chamber pressures.
+
+    tank_pressure: p_t [Pa, gauge], where the flows to tank go.
 
     Near the state the pressures relax as d p / dt = -C G p, C = beta / V of each
     chamber, G the orifices' conductances |dq / dp|. C G is similar to the symmetric
@@ -273,16 +294,16 @@ def fastest_chamber_rate(state, c):
     throttle_1 = c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root_slope(
         p_s - p_m, tr
     )
-    throttle_2 = c.second_throttle_gain * x * orifice_root_slope(p_m, tr)
+    throttle_2 = c.second_throttle_gain * x * orifice_root_slope(p_m - tank_pressure, tr)
     orifice = c.damping_orifice_gain * orifice_root_slope(p_p - p_c, tr)
-    poppet = c.poppet_gain * y * orifice_root_slope(p_c, tr)
-    upstream = max(p_s, p_p, tr)
+    poppet = c.poppet_gain * y * orifice_root_slope(p_c - tank_pressure, tr)
+    upstream = max(p_s - tank_pressure, p_p - tank_pressure, tr)
     z = abs(p_s - p_p) / upstream
     bearing = c.bearing_gain * (
         c.bearing_k1 + z * (2.0 * c.bearing_k2 + 3.0 * z * c.bearing_k3)
     ) / math.sqrt(upstream)
     bearing, leak = abs(bearing), c.rod_leakage_conductance
-    seat = c.seat_leakage_gain * orifice_root_slope(p_s, tr)  # a leaking seat (fault)
+    seat = c.seat_leakage_gain * orifice_root_slope(p_s - tank_pressure, tr)  # worn seat (fault)
     c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
     c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
     k_sm, k_sp = math.sqrt(c_s * c_m), math.sqrt(c_s * c_p)  # couplings sqrt(C_i C_j)
@@ -297,13 +318,16 @@ def fastest_chamber_rate(state, c):
 
 
 @jit
-def flows(state, c):
+def flows(state, c, tank_pressure=0.0):
     """
     Flows of Eqs. (10)-(15) [m^3/s] as (q_m1, q_m2, q_n, q_c, q_s, q_p).
 
     q_m1 first main throttle p_s -> p_m, q_m2 second main throttle p_m -> tank,
     q_n hydrostatic bearings p_s -> p_p, q_c damping orifice p_p -> p_c,
-    q_s rod clearance p_s -> p_c, q_p pilot poppet p_c -> tank.
+    q_s rod clearance p_s -> p_c, q_p pilot poppet p_c -> tank; the tank at
+    tank_pressure p_t [Pa, gauge]. Eq. (12) is normalised by the upstream pressure
+    above the tank, max(p_s, p_p) - p_t: the bearing's flow depends on its pressure
+    drop alone, and its fit holds at the supply's pressure above the tank.
     """
     p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
     x = min(max(state[X], 0.0), c.main_valve_stroke)
@@ -312,30 +336,34 @@ def flows(state, c):
     q_m1 = (
         c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root(p_s - p_m, tr)
     )  # (10)
-    q_m2 = c.second_throttle_gain * x * orifice_root(p_m, tr)  # (11)
-    upstream = max(p_s, p_p, tr)
+    q_m2 = c.second_throttle_gain * x * orifice_root(p_m - tank_pressure, tr)  # (11)
+    upstream = max(p_s - tank_pressure, p_p - tank_pressure, tr)
     z = abs(p_s - p_p) / upstream
     bearing = z * (c.bearing_k1 + z * (c.bearing_k2 + z * c.bearing_k3))
     q_n = math.copysign(1.0, p_s - p_p) * c.bearing_gain * math.sqrt(upstream) * bearing  # (12)
     q_c = c.damping_orifice_gain * orifice_root(p_p - p_c, tr)  # (13)
     q_s = c.rod_leakage_conductance * (p_s - p_c)  # (14)
-    q_p = c.poppet_gain * y * orifice_root(p_c, tr)  # (15)
+    q_p = c.poppet_gain * y * orifice_root(p_c - tank_pressure, tr)  # (15)
     return q_m1, q_m2, q_n, q_c, q_s, q_p
 
 
 @jit
-def net_forces(state, c):
+def net_forces(state, c, tank_pressure=0.0):
     """
     Net forces on the main valve and the poppet [N], Eqs. (6)-(7) without inertia.
 
     The poppet's A_c p_c is the poppet chamber's pressure on the seat area less the
-    rod's (zero for the paper's balanced poppet).
+    rod's (zero for the paper's balanced poppet). The tank's pressure p_t
+    (tank_pressure [Pa, gauge]) pushes the main valve open on A_t and the poppet shut
+    on its seat area A_v (its spring chamber drains to the tank); the flow force
+    grows with the poppet's pressure drop p_c - p_t.
     """
     p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
     x, x_dot, y, y_dot = state[X], state[X_DOT], state[Y], state[Y_DOT]
     force_x = (
         c.supply_force_area * p_s
         + c.intermediate_force_area * p_m
+        + c.tank_force_area * tank_pressure
         - c.back_area * p_p
         - c.main_spring_stiffness * (x + c.main_spring_preload)
         - c.main_valve_damping * x_dot
@@ -343,7 +371,8 @@ def net_forces(state, c):
     force_y = (
         c.rod_area * p_s
         + c.poppet_chamber_area * p_c
-        - c.flow_force_gain * max(y, 0.0) * p_c
+        - c.seat_area * tank_pressure
+        - c.flow_force_gain * max(y, 0.0) * (p_c - tank_pressure)
         - c.pilot_spring_stiffness * (y + c.pilot_spring_preload)
         - c.pilot_poppet_damping * y_dot
     )
@@ -369,9 +398,26 @@ def bearing_friction(velocity, force, c):
 
 
 @jit
-def seat_leakage_flow(p_s, c):
-    """Leakage past a worn main seat, supply to tank [m^3/s] (fault): q_l = K_l sgn sqrt(p_s)."""
-    return c.seat_leakage_gain * orifice_root(p_s, c.transition_pressure)
+def seat_leakage_flow(p_s, c, tank_pressure=0.0):
+    """Leakage past a worn main seat, supply to tank [m^3/s] (fault): K_l sgn sqrt(p_s - p_t)."""
+    return c.seat_leakage_gain * orifice_root(p_s - tank_pressure, c.transition_pressure)
+
+
+@jit
+def relief_flows(state, c, tank_pressure=0.0):
+    """
+    Flows into the tank [m^3/s] as (main stage q_m2, pilot stage q_p, seat leakage q_l).
+
+    Their sum is the relief flow: all the valve passes to the tank at tank_pressure
+    p_t [Pa, gauge]. The rod leakage q_s and the bearings' flow stay inside the valve
+    (they join the pilot flow q_p). The inlet flow equals the relief flow plus the
+    rate at which the valve stores volume: its chambers' compression
+    sum(V_i / beta dp_i / dt) and the volume its bodies give the tank,
+    -A_t x_dot + A_v y_dot (docs/model.md, "The flow balance").
+    """
+    _, q_m2, _, _, _, q_p = flows(state, c, tank_pressure)
+    q_l = seat_leakage_flow(state[P_S], c, tank_pressure) if c.seat_leakage_gain > 0.0 else 0.0
+    return q_m2, q_p, q_l
 
 
 @jit
@@ -389,20 +435,21 @@ def stop_acceleration(position, velocity, force, mass, stroke):
 
 
 @jit
-def derivatives(state, inlet_flow, c):
+def derivatives(state, inlet_flow, c, tank_pressure=0.0):
     """
     Return d(state)/dt (an 8-tuple, SI) at inlet flow q_in [m^3/s], Eqs. (1)-(7).
 
-    state: the 8 states as a tuple or an array. A pure function of scalars, so that
-    the integrator can evaluate it for many valves at once in vector registers.
+    state: the 8 states as a tuple or an array; tank_pressure: p_t [Pa, gauge], the
+    second input. A pure function of scalars, so that the integrator can evaluate it
+    for many valves at once in vector registers.
     """
-    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c)
+    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c, tank_pressure)
     x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
     supply = c.supply_compliance_inv * (
         inlet_flow - q_m1 - q_n - q_s - c.supply_force_area * x_dot - c.rod_area * y_dot
     )  # (1), A_m1 = alpha_s
     if c.seat_leakage_gain > 0.0:
-        supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c)
+        supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c, tank_pressure)
     if state[P_S] >= c.supply_pressure_limit and supply > 0.0:
         supply = 0.0  # the supply's relief takes the rest of the inflow
     intermediate = c.intermediate_compliance_inv * (
@@ -412,7 +459,7 @@ def derivatives(state, inlet_flow, c):
     poppet_chamber = c.poppet_chamber_compliance_inv * (
         q_c + q_s - q_p - c.poppet_chamber_area * y_dot
     )  # (4) with its swept term
-    force_x, force_y = net_forces(state, c)
+    force_x, force_y = net_forces(state, c, tank_pressure)
     if c.static_friction > 0.0:
         force_x += bearing_friction(x_dot, force_x, c)
     main_valve = (
@@ -425,6 +472,8 @@ def derivatives(state, inlet_flow, c):
     return supply, intermediate, pilot, poppet_chamber, x_dot, main_valve, y_dot, poppet
 
 
-def state_derivative(state, inlet_flow, c):
-    """d(state)/dt as a new array (convenience for analysis and tests)."""
-    return np.array(derivatives(np.asarray(state, dtype=float), float(inlet_flow), c))
+def state_derivative(state, inlet_flow, c, tank_pressure=0.0):
+    """d(state)/dt as a new array at inlet_flow [m^3/s] and tank_pressure [Pa, gauge]."""
+    return np.array(
+        derivatives(np.asarray(state, dtype=float), float(inlet_flow), c, float(tank_pressure))
+    )

@@ -382,8 +382,9 @@ PARAMETERS = (
     ),
 )
 
-# [Pa] the tank's absolute pressure by default: the ambient_pressure of config/reference.yaml,
-# and the default of every reader and writer of absolute pressures on the wire.
+# [Pa] the ambient (atmospheric) absolute pressure by default: the ambient_pressure of
+# config/reference.yaml, the zero of the model's gauge pressures, and the default of every
+# reader and writer of absolute pressures on the wire.
 STANDARD_ATMOSPHERE = 101325.0
 
 # Run-time settings that share the parameter files with the model parameters.
@@ -424,8 +425,20 @@ SETTINGS = (
         'Pa',
         0.0,
         2e5,
-        "absolute tank pressure, added to the model's gauge pressures on the wire",
+        "absolute ambient pressure: the zero of the model's gauge pressures, added to them on "
+        'the wire; the tank is at it unless tank_pressure says otherwise',
         OURS,
+    ),
+    ParameterSpec(
+        'tank_pressure',
+        'p_t',
+        'Pa',
+        -2e5,
+        1e9,
+        'gauge pressure of the tank (return line) the valve relieves into, for a pressurised '
+        'tank; the tank_pressure topic, once a message came, takes precedence. 0: the tank at '
+        'ambient_pressure. Not below vacuum, below burst_pressure',
+        'our addition, see docs/model.md ("Back pressure")',
     ),
 )
 

@@ -21,6 +21,9 @@ model time and the clock, and carries the rest (less than one step) into the nex
 call, so the model time never drifts from the clock. A lag beyond the catch-up
 limit is skipped: the model time jumps and the state is held over that stretch.
 
+Two inputs drive it, held over each call: the inlet flow and the tank pressure. Out come
+the state and the relief flow (relief_flows()), what the valve passes to the tank.
+
 When the state leaves the physical limits (valve_sim.core.limits: an overpressure,
 or a divergence) the model keeps its last good state. If a parameter change took
 effect within the trial window (TRIAL_STEPS steps) before, that change can have
@@ -34,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance, IntegrationError
-from valve_sim.core.model import coefficients
+from valve_sim.core.model import coefficients, relief_flows
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 
@@ -64,13 +67,15 @@ class RealTimeModel:
     """
     The valve state, its parameters and its model time [ns].
 
-    params: validated parameter dict; step_size [s]; inlet_flow [m^3/s]: the
-    flow whose exact steady state is the initial state; faults: the FaultSet in
-    effect. The model time is None until start() anchors it to the clock.
+    params: validated parameter dict; step_size [s]; inlet_flow [m^3/s] and
+    tank_pressure [Pa, gauge]: the inputs whose exact steady state is the initial
+    state; faults: the FaultSet in effect. The model time is None until start()
+    anchors it to the clock. tank_pressure: the tank pressure applied last.
     """
 
-    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY):
-        self.state = steady_state(params, inlet_flow, faults)
+    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
+        self.state = steady_state(params, inlet_flow, faults, tank_pressure)
+        self.tank_pressure = tank_pressure
         self.time_ns = None
         self._use(params, step_size, faults)
         self._previous = None  # (params, step_size, faults) before the last retune
@@ -98,9 +103,9 @@ class RealTimeModel:
             self._retuned_ns += now_ns - self.time_ns
         self.time_ns = now_ns
 
-    def advance_to(self, now_ns, inlet_flow, max_lag_ns):
+    def advance_to(self, now_ns, inlet_flow, max_lag_ns, tank_pressure=0.0):
         """
-        Integrate with inlet_flow [m^3/s] held, up to the clock time now_ns [ns].
+        Integrate with inlet_flow [m^3/s] and tank_pressure [Pa, gauge] held, up to now_ns [ns].
 
         Clock time beyond max_lag_ns [ns] behind now_ns is skipped first. Returns
         Progress. When the state leaves the limits raises IntegrationError (or its
@@ -119,10 +124,12 @@ class RealTimeModel:
                 self._coefficients,
                 self._step_ns / NS_PER_S,
                 time=(self.time_ns + skipped_ns) / NS_PER_S,
+                tank_pressures=tank_pressure,
             )
         except IntegrationError as error:
             error.failure_ns = self.time_ns + skipped_ns + (error.steps_done + 1) * self._step_ns
             raise
+        self.tank_pressure = tank_pressure
         self.time_ns += skipped_ns + steps * self._step_ns
         return Progress(steps, skipped_ns)
 
@@ -138,10 +145,11 @@ class RealTimeModel:
         """Move the model time to the last step boundary before now_ns [ns], holding the state."""
         self.time_ns += (now_ns - self.time_ns) // self._step_ns * self._step_ns
 
-    def trial(self, params, step_size, inlet_flow, faults=None):
+    def trial(self, params, step_size, inlet_flow, faults=None, tank_pressure=None):
         """
         Integrate TRIAL_STEPS steps from a copy of the state with new parameters (and faults).
 
+        tank_pressure [Pa, gauge]: held during the trial (None: the one applied last).
         Raises IntegrationError if they diverge; the model itself is not touched.
         """
         state = self.state.copy()
@@ -151,6 +159,7 @@ class RealTimeModel:
             np.full(TRIAL_STEPS, float(inlet_flow)),
             coefficients(params, faults),
             step_ns(step_size) / NS_PER_S,
+            tank_pressures=self.tank_pressure if tank_pressure is None else tank_pressure,
         )
 
     def retune(self, params, step_size, faults=None):
@@ -187,12 +196,20 @@ class RealTimeModel:
         self._previous = None
         return True
 
-    def reset(self, inlet_flow):
+    def reset(self, inlet_flow, tank_pressure=None):
         """
         Re-initialise at the exact steady state for inlet_flow [m^3/s] with the faults in effect.
 
-        Raises SteadyStateError (the state is then unchanged): among others for a flow or
-        a steady state beyond the physical limits. A reset resumes a halted model.
+        tank_pressure [Pa, gauge]: the tank's (None: the one applied last). Raises
+        SteadyStateError (the state is then unchanged): among others for an input or a
+        steady state beyond the physical limits. A reset resumes a halted model.
         """
-        self.state = steady_state(self.params, inlet_flow, self.faults)
+        tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
+        self.state = steady_state(self.params, inlet_flow, self.faults, tank_pressure)
+        self.tank_pressure = tank_pressure
         self.resume()
+
+    def relief_flows(self):
+        """Return the flows into the tank [m^3/s]: (relief, main stage, pilot, seat leakage)."""
+        main, pilot, leakage = relief_flows(self.state, self._coefficients, self.tank_pressure)
+        return main + pilot + leakage, main, pilot, leakage

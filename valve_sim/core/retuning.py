@@ -26,7 +26,7 @@ check_limits() that the running valve stays within its physical limits.
 
 import math
 
-from valve_sim.core.limits import inlet_flow_problem, state_problem
+from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
 from valve_sim.core.parameters import ParameterError, SPECS, validate
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
@@ -89,23 +89,28 @@ def check_preset(params, changes):
         )
 
 
-def check_limits(params, state, inlet_flow):
+def check_limits(params, state, inlet_flow, tank_pressure=0.0, ambient_pressure=None):
     """
     Raise ParameterError unless params keep the running valve within its physical limits.
 
-    The current inlet flow [m^3/s] must stay a valid input (max_inlet_flow), the
+    The current inputs, inlet flow [m^3/s] and tank pressure [Pa, gauge, above vacuum
+    at ambient_pressure if given], must stay valid (max_inlet_flow, burst_pressure), the
     current state below burst_pressure, and the valve must crack below burst_pressure
-    (a relief valve that cannot open before its body bursts relieves nothing).
+    at that back pressure (a relief valve that cannot open before its body bursts
+    relieves nothing).
     """
-    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow'])
+    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow']) or tank_pressure_problem(
+        tank_pressure, params['burst_pressure'], ambient_pressure
+    )
     if problem:
         raise ParameterError(f'the current input would be refused: {problem}')
     problem = state_problem(state, params['burst_pressure'])
     if problem:
         raise ParameterError(f'the current state would be refused: {problem}')
-    cracking = cracking_pressure(params)
+    cracking = cracking_pressure(params, tank_pressure=tank_pressure)
     if cracking >= params['burst_pressure']:
         raise ParameterError(
             f'the valve would crack at {cracking:g} Pa, not below burst_pressure (p_burst) = '
             f'{params["burst_pressure"]:g} Pa'
+            + (f' (tank pressure {tank_pressure:g} Pa)' if tank_pressure else '')
         )

@@ -15,8 +15,9 @@
 """
 The paper's test as data: an inlet-flow step (or ramp) from one steady flow to another.
 
-Kept apart from the simulation so that the command line and the paper's reference
-data can name scenarios without loading the integrator (numba) or scipy.
+TankPressure is the second input's profile the same way: the tank's (back) pressure held,
+stepped or ramped. Kept apart from the simulation so that the command line and the
+paper's reference data can name scenarios without loading the integrator (numba) or scipy.
 """
 
 from dataclasses import dataclass
@@ -39,9 +40,34 @@ class Scenario:
 
     def inlet_flow(self, t):
         """q_in(t) [m^3/s] (vectorised)."""
-        t = np.asarray(t, dtype=float)
-        if self.ramp_time > 0.0:
-            progress = np.clip((t - self.step_time) / self.ramp_time, 0.0, 1.0)
-        else:
-            progress = (t >= self.step_time).astype(float)
-        return self.initial_flow + (self.final_flow - self.initial_flow) * progress
+        return stepped(t, self.initial_flow, self.final_flow, self.step_time, self.ramp_time)
+
+
+@dataclass(frozen=True)
+class TankPressure:
+    """
+    The tank's pressure p_t [Pa, gauge]: initial, changed to final at step_time [s].
+
+    At once, or linearly over ramp_time [s]; final None: held at initial. The default
+    is the tank at ambient, the paper's case.
+    """
+
+    initial: float = 0.0
+    final: float = None
+    step_time: float = 0.0
+    ramp_time: float = 0.0
+
+    def at(self, t):
+        """p_t(t) [Pa, gauge] (vectorised)."""
+        final = self.initial if self.final is None else self.final
+        return stepped(t, self.initial, final, self.step_time, self.ramp_time)
+
+
+def stepped(t, initial, final, step_time, ramp_time):
+    """Return initial before step_time, final from then on (or a ramp over ramp_time), at t."""
+    t = np.asarray(t, dtype=float)
+    if ramp_time > 0.0:
+        progress = np.clip((t - step_time) / ramp_time, 0.0, 1.0)
+    else:
+        progress = (t >= step_time).astype(float)
+    return initial + (final - initial) * progress

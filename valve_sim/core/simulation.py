@@ -18,8 +18,10 @@ Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms ou
 A Scenario (valve_sim.core.scenario) is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
-empty, closed valve. Faults (a FaultSet) hold from the start; a fault schedule
-(valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
+empty, closed valve. The tank's pressure, the second input, is a TankPressure profile
+(held, stepped or ramped; the tank at ambient by default), and relief_flows() gives what
+the valve passed to the tank at each sample. Faults (a FaultSet) hold from the start; a
+fault schedule (valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 
 simulate() integrates the whole run. simulate_batch(), for studies, runs many
 parameter sets through one scenario on the lanes kernel and does not integrate
@@ -38,12 +40,24 @@ import numpy as np
 from valve_sim.core.errors import OverpressureError
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
-from valve_sim.core.integrator import advance, advance_lanes
-from valve_sim.core.limits import schedule_problem
+from valve_sim.core.integrator import advance, advance_lanes, step_inputs
+from valve_sim.core.jit import jit
+from valve_sim.core.limits import schedule_problem, tank_pressure_problem
 from valve_sim.core.linear import jacobian
-from valve_sim.core.model import coefficients, flows as model_flows, P_S, STATE_NAMES, X_DOT
+from valve_sim.core.model import (
+    coefficients,
+    flows as model_flows,
+    P_S,
+    relief_flows as model_relief_flows,
+    STATE_NAMES,
+    X_DOT,
+)
 from valve_sim.core.parameters import ParameterError
-from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario  # noqa: F401 (also offered here)
+from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
+    LITRE_PER_MINUTE,
+    Scenario,
+    TankPressure,
+)
 from valve_sim.core.steady_state import steady_state, SteadyStateError
 
 
@@ -53,9 +67,10 @@ LANES = 16  # valves simulate_batch advances together (more gives no further gai
 @dataclass
 class Waveforms:
     """
-    Sampled run: time [s], states (rows of the 8 model states, SI), and inlet flow.
+    Sampled run: time [s], states (rows of the 8 model states, SI), and the inputs.
 
-    inlet_flow [m^3/s] is the flow applied over the interval that ends at each sample.
+    inlet_flow [m^3/s] and tank_pressure [Pa, gauge] are the inputs applied over the
+    interval that ends at each sample (tank_pressure None: the tank at ambient).
     halted: (time [s], reason) of an overpressure the run halted at (run_flows'
     halt_on_overpressure), else None.
     """
@@ -65,6 +80,7 @@ class Waveforms:
     inlet_flow: np.ndarray
     events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
     halted: tuple = None
+    tank_pressure: np.ndarray = None
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
@@ -109,6 +125,44 @@ def main_stage_flow(params, states):
     return np.array([model_flows(state, c)[1] for state in np.asarray(states, dtype=float)])
 
 
+RELIEF_COLUMNS = ('relief_flow', 'main_stage_flow', 'pilot_flow', 'seat_leakage_flow')
+
+
+@jit
+def _relief_rows(states, tank_pressures, c, rows, out):
+    """Write the relief flow and its parts (RELIEF_COLUMNS) of the rows of states into out."""
+    for i in rows:
+        main, pilot, leakage = model_relief_flows(states[i], c, tank_pressures[i])
+        out[i, 0] = main + pilot + leakage
+        out[i, 1] = main
+        out[i, 2] = pilot
+        out[i, 3] = leakage
+
+
+def relief_flows(params, waveforms, faults=HEALTHY):
+    """
+    Flows into the tank [m^3/s] at each sample of waveforms, columns RELIEF_COLUMNS.
+
+    The relief flow (all the valve passes to the tank) and its parts: main stage q_m2,
+    pilot stage q_p, seat leakage q_l, at each sample's state and tank pressure, with
+    faults (the run's FaultSet from the start) changed by the waveforms' events from
+    their times on, as the run applied them.
+    """
+    states = np.ascontiguousarray(waveforms.states, dtype=float)
+    tank = waveforms.tank_pressure
+    tank = np.zeros(len(states)) if tank is None else np.ascontiguousarray(tank, dtype=float)
+    out = np.empty((len(states), len(RELIEF_COLUMNS)))
+    start = 0
+    for applied_at, changes in [*waveforms.events, (np.inf, {})]:
+        stop = int(np.searchsorted(waveforms.time, applied_at - 1e-12))
+        if stop > start:
+            rows = np.arange(start, stop)
+            _relief_rows(states, tank, coefficients(params, faults), rows, out)
+        faults = faults.changed({n: v for n, v in changes.items() if n in FAULT_NAMES})
+        start = max(start, stop)
+    return out
+
+
 def step_flows(scenario, step_size):
     """
     Inlet flow [m^3/s] held during each RK4 step of a run.
@@ -120,10 +174,26 @@ def step_flows(scenario, step_size):
     return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
 
 
+def step_tank_pressures(tank, steps, step_size):
+    """
+    Tank pressure [Pa, gauge] of a TankPressure held during each of steps RK4 steps.
+
+    Midpoints, as step_flows; one number where the tank's pressure is held throughout.
+    """
+    if tank.final is None or tank.final == tank.initial:
+        return float(tank.initial)
+    return tank.at((np.arange(steps) + 0.5) * step_size)
+
+
 def _waveforms(
-    initial, record, flows, record_every, step_size, initial_flow, held=0, events=()
+    initial, record, flows, record_every, step_size, initial_flow, held=0, events=(),
+    tanks=None,
 ):
-    """Waveforms of a run: the initial state, held rows of it, then the recorded rows."""
+    """
+    Waveforms of a run: the initial state, held rows of it, then the recorded rows.
+
+    tanks: the tank pressure per step [Pa, gauge], the initial one first (None: at ambient).
+    """
     rows = held + len(record)
     states = np.empty((rows + 1, len(initial)))
     states[: held + 1] = initial
@@ -134,14 +204,26 @@ def _waveforms(
         states=states,
         inlet_flow=np.concatenate([[initial_flow], flows[sample_steps - 1]]),
         events=list(events),
+        tank_pressure=None if tanks is None else np.concatenate(
+            [tanks[:1], tanks[1:][sample_steps - 1]]
+        ),
     )
 
 
-def check_schedule(params, flows):
-    """Raise ParameterError if a flow of the schedule [m^3/s] is not a valid inlet flow."""
+def check_schedule(params, flows, tank_pressures=()):
+    """
+    Raise ParameterError if an input of the schedules is not valid.
+
+    flows [m^3/s]: inlet flows; tank_pressures [Pa, gauge]: tank pressures.
+    """
     problem = schedule_problem(flows, params['max_inlet_flow'])
     if problem:
         raise ParameterError(f'inlet flow schedule: {problem}')
+    extremes = (np.min(tank_pressures), np.max(tank_pressures)) if len(tank_pressures) else ()
+    for pressure in extremes:
+        problem = tank_pressure_problem(float(pressure), params['burst_pressure'])
+        if problem:
+            raise ParameterError(f'tank pressure schedule: {problem}')
 
 
 def ramp_flows(max_flow, ramp_time, hold_time, step_size):
@@ -166,12 +248,17 @@ def run_flows(
     schedule=(),
     tick_interval=1e-3,
     halt_on_overpressure=False,
+    tank_pressures=0.0,
+    initial_tank_pressure=None,
 ):
     """
     Integrate through a schedule: flows[k] [m^3/s] held during step k, from the steady state.
 
-    The run starts at the exact steady state of initial_flow [m^3/s] (0: the empty,
-    closed valve) with faults (a FaultSet). schedule: FaultEvents, each applied at the
+    tank_pressures: the tank pressure [Pa, gauge] held during each step (an array as
+    long as flows), or one for all (0: the tank at ambient). The run starts at the
+    exact steady state of initial_flow [m^3/s] (0: the empty, closed valve) and
+    initial_tank_pressure [Pa, gauge] (None: the first step's) with faults (a
+    FaultSet). schedule: FaultEvents, each applied at the
     first tick (every tick_interval [s], valve_node's publish period) at or after its
     time. Returns Waveforms sampled every record_interval [s]; their events list what
     was applied when (sensor settings included, for the sensor stage). Raises
@@ -182,9 +269,11 @@ def run_flows(
     (what valve_node publishes), and Waveforms.halted says when and why.
     """
     record_every = max(1, int(round(record_interval / step_size)))
-    flows = np.ascontiguousarray(flows, dtype=float)
-    state = steady_state(params, initial_flow, faults)
-    check_schedule(params, flows)
+    flows, tanks = step_inputs(flows, tank_pressures)
+    if initial_tank_pressure is None:
+        initial_tank_pressure = float(tanks[0]) if len(tanks) else float(tank_pressures)
+    state = steady_state(params, initial_flow, faults, initial_tank_pressure)
+    check_schedule(params, flows, tanks)
     initial = state.copy()
     records, events, start, halted = [], [], 0, None
     events_at = _event_steps(schedule, len(flows), step_size, record_every, tick_interval)
@@ -192,17 +281,22 @@ def run_flows(
     def run(stop):
         """Advance from step start to stop; after an overpressure hold to the end."""
         nonlocal halted
-        chunk = flows[start:stop]
+        chunk, tank = flows[start:stop], tanks[start:stop]
         c = coefficients(params, faults)
         try:
-            return advance(state, chunk, c, step_size, record_every, start * step_size)
+            return advance(state, chunk, c, step_size, record_every, start * step_size, tank)
         except OverpressureError as error:
             if not halt_on_overpressure:
                 raise
             done = error.steps_done  # the steps before the failing one, from the last good state
             whole = done // record_every * record_every
-            good = advance(state, chunk[:whole], c, step_size, record_every, start * step_size)
-            advance(state, chunk[whole:done], c, step_size, 0, (start + whole) * step_size)
+            good = advance(
+                state, chunk[:whole], c, step_size, record_every, start * step_size, tank[:whole]
+            )
+            advance(
+                state, chunk[whole:done], c, step_size, 0, (start + whole) * step_size,
+                tank[whole:done],
+            )
             held = state.copy()
             held[P_S] = params['burst_pressure']
             rows = (len(flows) - start) // record_every - len(good)
@@ -223,7 +317,8 @@ def run_flows(
     if not halted:
         records.append(run(len(flows)))
     waveforms = _waveforms(
-        initial, np.vstack(records), flows, record_every, step_size, initial_flow, events=events
+        initial, np.vstack(records), flows, record_every, step_size, initial_flow, events=events,
+        tanks=np.concatenate([[initial_tank_pressure], tanks]),
     )
     waveforms.halted = halted
     return waveforms
@@ -238,12 +333,15 @@ def simulate(
     schedule=(),
     tick_interval=1e-3,
     halt_on_overpressure=False,
+    tank=TankPressure(),
 ):
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
-    faults, schedule, tick_interval, halt_on_overpressure: as run_flows. Raises
-    IntegrationError if the run diverges, SteadyStateError if the start fails.
+    tank: the tank's pressure, a TankPressure (default: at ambient); the run starts
+    at the steady state of its initial value. faults, schedule, tick_interval,
+    halt_on_overpressure: as run_flows. Raises IntegrationError if the run diverges,
+    SteadyStateError if the start fails.
     """
     flows = step_flows(scenario, step_size)
     return run_flows(
@@ -256,6 +354,8 @@ def simulate(
         schedule,
         tick_interval,
         halt_on_overpressure,
+        step_tank_pressures(tank, len(flows), step_size),
+        tank.initial,
     )
 
 

@@ -25,6 +25,12 @@ volume V_s and added valve damping, which change how fast the valve settles but
 not where. Either valve may rest on its seat or end stop; then its
 position is fixed there and its force balance is replaced by the contact condition.
 
+A tank pressure p_t [Pa, gauge] enters the balances as it enters the model; the
+estimates are made relative to the tank and shifted by it. Since every force and flow
+depends on pressures relative to the tank, a steady state at p_t has the pressures of
+the one at the tank at ambient, each raised by p_t (docs/model.md, "Back pressure");
+the solver does not assume it, the tests check it.
+
 Faults (valve_sim.core.faults) change the balances as they change the model; a stuck
 main valve is solved as free (it then sticks where the solution puts it), and friction
 is left out: the frictionless rest state is one of the states friction holds.
@@ -38,7 +44,7 @@ from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.jit import jit
-from valve_sim.core.limits import inlet_flow_problem, state_problem
+from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
 from valve_sim.core.model import (
     coefficients,
     derivatives,
@@ -66,10 +72,10 @@ TINY_FLOW = 1e-12
 
 
 @jit
-def _balances(state, inlet_flow, c):
+def _balances(state, inlet_flow, c, tank_pressure):
     """Net flows into chambers s, m, p, c [m^3/s] and net forces on x, y [N], in one call."""
-    rates = derivatives(state, inlet_flow, c)
-    force_x, force_y = net_forces(state, c)
+    rates = derivatives(state, inlet_flow, c, tank_pressure)
+    force_x, force_y = net_forces(state, c, tank_pressure)
     return (
         rates[P_S] / c.supply_compliance_inv,
         rates[P_M] / c.intermediate_compliance_inv,
@@ -80,15 +86,15 @@ def _balances(state, inlet_flow, c):
     )
 
 
-def _residuals(state, inlet_flow, c, flow_scale, force_scale):
+def _residuals(state, inlet_flow, c, flow_scale, force_scale, tank_pressure):
     """Scaled flow imbalances of chambers s, m, p, c and net forces on x and y."""
-    residuals = np.array(_balances(state, inlet_flow, c))
+    residuals = np.array(_balances(state, inlet_flow, c, tank_pressure))
     residuals[:4] /= flow_scale
     residuals[4:] /= force_scale
     return residuals
 
 
-def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow=False):
+def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tiny_flow=False):
     """
     Solve the balances from guess; a valve whose fixed position is not None rests there.
 
@@ -96,7 +102,7 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow=False):
     tiny_flow, by the inlet flow and the guessed position (a poppet open by 1e-15 m at
     1e-15 m^3/s is lost in the usual scales).
     """
-    pressure_scale = max(guess[P_S], 1e5)
+    pressure_scale = max(guess[P_S] - tank_pressure, 1e5)
     flow_scale = inlet_flow if tiny_flow else max(inlet_flow, 1e-7)
     force_scale = c.back_area * pressure_scale
     free, equations, scale = [P_S, P_M, P_P, P_C], [0, 1, 2, 3], [pressure_scale] * 4
@@ -119,7 +125,8 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow=False):
         return state
 
     def residual(u):
-        return _residuals(compose(u), inlet_flow, c, flow_scale, force_scale)[equations]
+        state = compose(u)
+        return _residuals(state, inlet_flow, c, flow_scale, force_scale, tank_pressure)[equations]
 
     solution = root(
         residual, np.asarray(guess)[free] / scale, method='hybr', options={'xtol': 1e-13}
@@ -135,10 +142,10 @@ def _contacts(position, stroke):
     return [likely] + modes
 
 
-def _contact_is_consistent(state, c):
+def _contact_is_consistent(state, c, tank_pressure):
     """Check that a valve inside its stroke is free and one at a stop is pushed into it."""
-    force_x, force_y = net_forces(state, c)
-    slack = 1e-9 * c.back_area * max(state[P_S], 1.0)
+    force_x, force_y = net_forces(state, c, tank_pressure)
+    slack = 1e-9 * c.back_area * max(state[P_S] - tank_pressure, 1.0)
     for position, force, stroke in (
         (state[X], force_x, c.main_valve_stroke),
         (state[Y], force_y, c.poppet_stroke),
@@ -150,8 +157,14 @@ def _contact_is_consistent(state, c):
     return True
 
 
+def _above_tank(state, tank_pressure):
+    """Return a state estimated relative to the tank with its pressures raised by tank_pressure."""
+    state[[P_S, P_M, P_P, P_C]] += tank_pressure
+    return state
+
+
 def _estimate(inlet_flow, c):
-    """Open-valve estimate of the steady state from the valve's design logic."""
+    """Open-valve estimate of the steady state from the valve's design logic, tank at 0."""
     state = np.zeros(8)
     p_s = c.pilot_spring_stiffness * c.pilot_spring_preload / c.rod_area
     p_m = 0.6 * p_s
@@ -175,7 +188,7 @@ def _estimate(inlet_flow, c):
 
 def _pilot_opening_estimate(inlet_flow, c):
     """
-    Estimate for a flow the pilot alone passes, barely open: the limit of a tiny flow.
+    Estimate for a flow the pilot alone passes, barely open (tank at 0): a tiny flow's limit.
 
     All chambers at the pilot's opening pressure k_p y_0 / A_s, the main valve seated,
     the poppet open just enough for the flow.
@@ -186,23 +199,26 @@ def _pilot_opening_estimate(inlet_flow, c):
     return state
 
 
-def _pseudo_transient(params, inlet_flow, c):
+def _pseudo_transient(params, inlet_flow, c, tank_pressure):
     """State after integrating a fast-settling, damped copy of the model from the empty valve."""
     fast = c._replace(
         supply_compliance_inv=params['bulk_modulus'] / PSEUDO_TRANSIENT_SUPPLY_VOLUME,
         main_valve_damping=c.main_valve_damping + PSEUDO_TRANSIENT_DAMPING[0],
         pilot_poppet_damping=c.pilot_poppet_damping + PSEUDO_TRANSIENT_DAMPING[1],
     )
-    state = np.zeros(8)
+    state = empty_valve(tank_pressure)
     steps = int(round(PSEUDO_TRANSIENT_TIME / PSEUDO_TRANSIENT_STEP))
     try:
-        advance(state, np.full(steps, float(inlet_flow)), fast, PSEUDO_TRANSIENT_STEP)
+        advance(
+            state, np.full(steps, float(inlet_flow)), fast, PSEUDO_TRANSIENT_STEP,
+            tank_pressures=tank_pressure,
+        )
     except IntegrationError as error:
         raise SteadyStateError(f'no steady state at {inlet_flow:g} m^3/s: {error}') from error
     return state
 
 
-def _solve_from(guess, inlet_flow, c, tiny_flow=False):
+def _solve_from(guess, inlet_flow, c, tank_pressure, tiny_flow=False):
     """
     Newton from guess over the contact modes; (state, residual), state None if none fits.
 
@@ -214,9 +230,9 @@ def _solve_from(guess, inlet_flow, c, tiny_flow=False):
     for fixed_x in _contacts(guess[X], c.main_valve_stroke):
         for fixed_y in _contacts(guess[Y], c.poppet_stroke):
             candidate, error = _newton(
-                guess, inlet_flow, c, fixed_x, fixed_y, tiny_flow
+                guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tiny_flow
             )
-            if error < tolerance and _contact_is_consistent(candidate, c):
+            if error < tolerance and _contact_is_consistent(candidate, c, tank_pressure):
                 return candidate, error
             best = (None, min(best[1], error))
     return best
@@ -240,41 +256,55 @@ def steady_coefficients(params, faults):
     )._replace(supply_pressure_limit=np.inf)
 
 
-def steady_state(params, inlet_flow, faults=HEALTHY):
+def empty_valve(tank_pressure=0.0):
+    """Return the closed valve without inflow: every chamber at the tank's pressure."""
+    state = np.zeros(8)
+    state[[P_S, P_M, P_P, P_C]] = tank_pressure
+    return state
+
+
+def steady_state(params, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
     """
     Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
 
-    params: validated parameter dict; faults: FaultSet. inlet_flow = 0 gives the
-    empty, closed valve; any flow above 0, however small, the valve held at its
-    pilot's opening pressure. Raises SteadyStateError when the flow is not a valid
+    params: validated parameter dict; faults: FaultSet; tank_pressure: p_t [Pa,
+    gauge], the tank's (return line's) pressure. inlet_flow = 0 gives the empty,
+    closed valve, its chambers at the tank's pressure; any flow above 0, however
+    small, the valve held at its pilot's opening pressure above the tank. Raises
+    SteadyStateError when the flow or the tank pressure is not a valid
     input (above max_inlet_flow), when no consistent steady state is found, or when
     the steady state is beyond the physical limits (burst_pressure) or the bench's
     supply_pressure_limit: a steady state is never an impossible state.
     """
-    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow'])
+    problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow']) or tank_pressure_problem(
+        tank_pressure, params['burst_pressure']
+    )
     if problem:
         raise SteadyStateError(f'no steady state: {problem}')
     if inlet_flow == 0.0:
-        return np.zeros(8)
+        return empty_valve(tank_pressure)
     if inlet_flow < TINY_FLOW:
         # The balances are linear in the flow down here (every orifice laminar, the
         # poppet opening proportional to it): extrapolate from two resolvable flows.
-        low = steady_state(params, TINY_FLOW, faults)
-        high = steady_state(params, 2.0 * TINY_FLOW, faults)
+        low = steady_state(params, TINY_FLOW, faults, tank_pressure)
+        high = steady_state(params, 2.0 * TINY_FLOW, faults, tank_pressure)
         state = low + (high - low) * (inlet_flow - TINY_FLOW) / TINY_FLOW
         state[Y] = max(state[Y], 0.0)
         return state
     c = steady_coefficients(params, faults)
-    estimate = _estimate(inlet_flow, c)
-    state, error = _solve_from(estimate, inlet_flow, c)
+    estimate = _above_tank(_estimate(inlet_flow, c), tank_pressure)
+    state, error = _solve_from(estimate, inlet_flow, c, tank_pressure)
     if state is None:
-        state, error = _solve_from(_pseudo_transient(params, inlet_flow, c), inlet_flow, c)
+        transient = _pseudo_transient(params, inlet_flow, c, tank_pressure)
+        state, error = _solve_from(transient, inlet_flow, c, tank_pressure)
     if state is None:
-        state, error = _solve_from(_pilot_opening_estimate(inlet_flow, c), inlet_flow, c, True)
+        opening = _above_tank(_pilot_opening_estimate(inlet_flow, c), tank_pressure)
+        state, error = _solve_from(opening, inlet_flow, c, tank_pressure, True)
     if state is None:
         raise SteadyStateError(
             f'no consistent steady state at inlet flow {inlet_flow:g} m^3/s '
-            f'(smallest relative residual {error:.2e}); check the parameters'
+            + (f'and tank pressure {tank_pressure:g} Pa ' if tank_pressure else '')
+            + f'(smallest relative residual {error:.2e}); check the parameters'
         )
     problem = state_problem(state, params['burst_pressure'])
     if problem:
@@ -314,11 +344,12 @@ def _cracking_problem(state, error, poppet_stroke):
     return None
 
 
-def cracking_pressure(params, faults=HEALTHY):
+def cracking_pressure(params, faults=HEALTHY, tank_pressure=0.0):
     """
-    Supply pressure [Pa] at which the main valve lifts off its seat (steady state).
+    Supply pressure [Pa, gauge] at which the main valve lifts off its seat (steady state).
 
-    faults: FaultSet (e.g. a weakened pilot spring lowers it).
+    faults: FaultSet (e.g. a weakened pilot spring lowers it); tank_pressure: p_t [Pa,
+    gauge], the back pressure, which raises it by p_t (docs/model.md, "Back pressure").
 
     At that point the main valve rests at x = 0 with zero net force, no flow
     passes the main throttles (so p_m = p_s) and all inlet flow goes through the
@@ -326,8 +357,8 @@ def cracking_pressure(params, faults=HEALTHY):
     balances and the two force balances, in p_s, p_p, p_c and y.
     """
     c = steady_coefficients(params, faults)
-    guess = _estimate(1e-5, c)
-    pressure_scale = max(guess[P_S], 1e5)
+    guess = _above_tank(_estimate(1e-5, c), tank_pressure)
+    pressure_scale = max(guess[P_S] - tank_pressure, 1e5)
     scale = np.array([pressure_scale, pressure_scale, pressure_scale, c.poppet_stroke])
 
     def compose(u):
@@ -337,7 +368,9 @@ def cracking_pressure(params, faults=HEALTHY):
         return state
 
     def residual(u):
-        return _residuals(compose(u), 0.0, c, 1e-5, c.back_area * pressure_scale)[[2, 3, 4, 5]]
+        return _residuals(
+            compose(u), 0.0, c, 1e-5, c.back_area * pressure_scale, tank_pressure
+        )[[2, 3, 4, 5]]
 
     solution = root(
         residual, guess[[P_S, P_P, P_C, Y]] / scale, method='hybr', options={'xtol': 1e-13}
@@ -354,7 +387,9 @@ def preset_preload(params, pressure):
     Return (pilot spring preload y_0 [m], cracking pressure [Pa]) for the preset pressure [Pa].
 
     What a technician does with the adjusting screw: y_0 that makes the main valve
-    crack at pressure, and the cracking pressure that y_0 gives (within 1e-9 of it).
+    crack at pressure, and the cracking pressure that y_0 gives (within 1e-9 of it),
+    with the tank at ambient: the preset is the valve's setting, the pressure above
+    the tank at which it cracks, whatever the back pressure in a circuit.
     The cracking pressure rises almost linearly with y_0 (poppet balance
     A_s p_s ~ k_p (y + y_0)), so a few secant steps from that estimate converge;
     raises ParameterError if the preload would leave its limits.

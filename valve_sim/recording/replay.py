@@ -73,11 +73,12 @@ class Replay:
             if not publisher.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))):
                 raise TimeoutError(f'{topic}: not every message acknowledged within {timeout:g} s')
 
-    def publish(self, waveforms, start_time_ns, period=1e-3, every=10):
+    def publish(self, waveforms, start_time_ns, period=1e-3, every=10, relief=None):
         """
         Publish every every-th sample of waveforms, one tick each period [s].
 
-        Each tick is stamped start_time_ns + its model time.
+        Each tick is stamped start_time_ns + its model time. relief: the relief flow and
+        its parts per sample (simulation.relief_flows); None: relief_flow publishes nothing.
         """
         started = time.monotonic()
         messages = TickMessages()
@@ -91,6 +92,9 @@ class Replay:
                 waveforms.states[index],
                 waveforms.inlet_flow[index],
                 self.ambient_pressure,
+                tank_pressure=0.0 if waveforms.tank_pressure is None
+                else waveforms.tank_pressure[index],
+                relief=None if relief is None else relief[index].tolist(),
             ):
                 self.publishers[topic].publish(data)
                 self.published[topic] += 1

@@ -18,10 +18,14 @@ valve_node's topics and messages, for writing offline runs as bags and for test 
 The layout (names relative, types, contents) is valve_node's wire interface:
 each tick publishes the four chamber pressures as sensor_msgs/msg/FluidPressure
 in absolute Pa (model gauge pressure + ambient_pressure), joint_states
-(main_valve, pilot_poppet: position [m], velocity [m/s]) and applied_inlet_flow
+(main_valve, pilot_poppet: position [m], velocity [m/s]), applied_inlet_flow
 (inlet_flow: velocity = the inlet flow [m^3/s] applied over the interval ending at
-the stamp), all stamped with the model time. The inlet_flow command is
-std_msgs/msg/Float64 [m^3/s].
+the stamp), applied_tank_pressure (FluidPressure, absolute Pa: the tank pressure
+applied over that interval) and relief_flow (sensor_msgs/msg/JointState, velocity of
+relief_flow = all the valve passes to the tank [m^3/s] at the stamp's state, and of
+its parts main_stage, pilot_stage, seat_leakage), all stamped with the model time.
+The commands are inlet_flow, std_msgs/msg/Float64 [m^3/s], and tank_pressure,
+sensor_msgs/msg/FluidPressure (absolute Pa).
 
 Frames: each pressure is measured at a place of the valve, its header.frame_id
 frame_prefix + PRESSURE_FRAMES[topic] (valve_node's frame_prefix parameter, by
@@ -32,6 +36,7 @@ states carry no frame (frame_id ''), as joint_state_publisher's do.
 import importlib
 
 import numpy as np
+from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
 from valve_sim.core.parameters import NODE_NAME, ParameterError, STANDARD_ATMOSPHERE
@@ -39,13 +44,20 @@ from valve_sim.recording.cdr import CdrMessage
 
 
 PRESSURE_TOPICS = STATE_NAMES[P_S:P_C + 1]
-TICK_TOPICS = PRESSURE_TOPICS + ('joint_states', 'applied_inlet_flow')
+TICK_TOPICS = PRESSURE_TOPICS + (
+    'joint_states', 'applied_inlet_flow', 'applied_tank_pressure', 'relief_flow'
+)
 JOINT_NAMES = ('main_valve', 'pilot_poppet')  # joint_states: x and y
+# relief_flow's joints: the whole flow to the tank, then its parts (simulation.RELIEF_COLUMNS)
+RELIEF_JOINTS = ('relief_flow', 'main_stage', 'pilot_stage', 'seat_leakage')
 TOPIC_TYPES = {
     **dict.fromkeys(PRESSURE_TOPICS, 'sensor_msgs/msg/FluidPressure'),
     'joint_states': 'sensor_msgs/msg/JointState',
     'applied_inlet_flow': 'sensor_msgs/msg/JointState',
+    'applied_tank_pressure': 'sensor_msgs/msg/FluidPressure',
+    'relief_flow': 'sensor_msgs/msg/JointState',
     'inlet_flow': 'std_msgs/msg/Float64',
+    'tank_pressure': 'sensor_msgs/msg/FluidPressure',
 }
 PRESSURE_FRAMES = dict(  # where each pressure is measured
     zip(
@@ -53,6 +65,7 @@ PRESSURE_FRAMES = dict(  # where each pressure is measured
         ('supply_port', 'intermediate_chamber', 'pilot_chamber', 'poppet_chamber'),
     )
 )
+TANK_FRAME = 'tank_port'  # applied_tank_pressure's place (and an offline bag's tank_pressure)
 DEFAULT_FRAME_PREFIX = NODE_NAME + '/'
 NS_PER_S = 1_000_000_000
 # Receive time - send time of an offline bag's messages: one hop of the bench's bare echo
@@ -78,7 +91,8 @@ class TickMessages:
     fill() writes the state (8 model states, SI, gauge pressures) at time_ns [ns]
     into them and returns [(topic, CDR bytes)]. valve_node publishes these; the
     offline bag writer and the replay publisher write them: one layout for all.
-    A pressure's header.frame_id is frame_prefix + its PRESSURE_FRAMES name.
+    A pressure's header.frame_id is frame_prefix + its PRESSURE_FRAMES name
+    (applied_tank_pressure's: + TANK_FRAME).
     """
 
     def __init__(self, frame_prefix=DEFAULT_FRAME_PREFIX):
@@ -99,14 +113,32 @@ class TickMessages:
         self._applied.float64s(0)  # position
         self._applied_velocity = self._applied.float64s(1)
         self._applied.float64s(0)  # effort
-        self._messages += [('joint_states', self._joints), ('applied_inlet_flow', self._applied)]
+        self._tank = CdrMessage(frame_id=frame_prefix + TANK_FRAME)  # FluidPressure
+        self._tank_offset = self._tank.float64()
+        self._tank.float64()  # variance: 0, unknown
+        self._relief = CdrMessage(frame_id='')  # sensor_msgs/JointState
+        self._relief.strings(RELIEF_JOINTS)
+        self._relief.float64s(0)  # position
+        self._relief_velocity = self._relief.float64s(len(RELIEF_JOINTS))
+        self._relief.float64s(0)  # effort
+        self._messages += [
+            ('joint_states', self._joints),
+            ('applied_inlet_flow', self._applied),
+            ('applied_tank_pressure', self._tank),
+            ('relief_flow', self._relief),
+        ]
 
-    def fill(self, time_ns, state, applied_flow, ambient_pressure, readings=None):
+    def fill(
+        self, time_ns, state, applied_flow, ambient_pressure, readings=None, tank_pressure=0.0,
+        relief=None,
+    ):
         """
         Return the tick's [(topic, CDR bytes)]; applied_flow [m^3/s], ambient_pressure [Pa].
 
         readings: the published pressures [Pa absolute] (a sensor stage's), nan for a
         topic that publishes nothing; default: the state's pressures + ambient_pressure.
+        tank_pressure: the applied tank pressure [Pa, gauge]. relief: the relief flow
+        and its parts [m^3/s] (RELIEF_JOINTS); None: relief_flow publishes nothing.
         """
         if readings is None:
             readings = [pressure + ambient_pressure for pressure in state[P_S:P_C + 1]]
@@ -118,11 +150,16 @@ class TickMessages:
         self._joints.set_float64s(self._joint_positions, state[X], state[Y])
         self._joints.set_float64s(self._joint_velocities, state[X_DOT], state[Y_DOT])
         self._applied.set_float64s(self._applied_velocity, applied_flow)
+        self._tank.set_float64s(self._tank_offset, tank_pressure + ambient_pressure)
+        if relief is not None:
+            self._relief.set_float64s(self._relief_velocity, *relief)
         sec, nanosec = divmod(time_ns, NS_PER_S)
         tick = []
         for index, (topic, message) in enumerate(self._messages):
             if index < len(readings) and readings[index] != readings[index]:
                 continue  # nan: this topic publishes nothing
+            if message is self._relief and relief is None:
+                continue
             message.set_stamp(sec, nanosec)
             tick.append((topic, message.bytes()))
         return tick
@@ -157,6 +194,7 @@ def write_simulation_bag(
     frame_prefix=DEFAULT_FRAME_PREFIX,
     readings=None,
     namespace='',
+    relief=None,
 ):
     """
     Write an offline run as the MCAP bag valve_node and the analyser would have recorded.
@@ -165,7 +203,10 @@ def write_simulation_bag(
     whole multiple of the waveforms' sample interval) becomes one tick, stamped
     start_time_ns [ns since the epoch] + its model time, sent (publish_time) at its
     stamp. inlet_flow carries the command: the first flow at the start and each
-    change at the last tick before it was applied. Each message is received
+    change at the last tick before it was applied; tank_pressure likewise, where the
+    run's tank was not at ambient throughout (absolute: + ambient_pressure). relief:
+    the relief flow and its parts per sample (simulation.relief_flows; None: no
+    relief_flow messages). Each message is received
     (log_time) after a transport delay (transport_delays()). folder: write a
     rosbag2 bag folder at path instead of a file. readings: the pressure topics'
     values per tick [Pa absolute] (sensors.read_waveforms; nan: nothing published);
@@ -181,29 +222,46 @@ def write_simulation_bag(
     )
     tick = TickMessages(frame_prefix)
     indices = range(0, len(waveforms.time), every)
-    delays = iter(transport_delays(len(indices) * (len(TICK_TOPICS) + 1)).tolist())
+    delays = iter(transport_delays(len(indices) * (len(TICK_TOPICS) + 2)).tolist())
     try:
         prefix = namespace.rstrip('/') + '/'
+        tanks = waveforms.tank_pressure
+        tanks = np.zeros(len(waveforms.time)) if tanks is None else tanks
+        commanded, commanded_tank, tank_commands = None, None, bool(np.any(tanks != 0.0))
+        # As a recording of valve_node: a topic nobody published is not in the bag.
+        unwritten = {'tank_pressure'} if not tank_commands else set()
+        unwritten |= {'relief_flow'} if relief is None else set()
         for topic, type_name in TOPIC_TYPES.items():
-            bag.add_topic(prefix + topic, type_name)
-        commanded = None
+            if topic not in unwritten:
+                bag.add_topic(prefix + topic, type_name)
         for row, (previous, index) in enumerate(zip([None, *indices], indices)):
             time_ns = start_time_ns + round(waveforms.time[index] * NS_PER_S)
-            flow = float(waveforms.inlet_flow[index])
+            command_ns = (
+                time_ns
+                if previous is None
+                else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
+            )
+            flow, tank = float(waveforms.inlet_flow[index]), float(tanks[index])
             if flow != commanded:
-                command_ns = (
-                    time_ns
-                    if previous is None
-                    else start_time_ns + round(waveforms.time[previous] * NS_PER_S)
-                )
                 bag.write_message(
                     prefix + 'inlet_flow', Float64(data=flow), command_ns + next(delays),
                     command_ns,
                 )
                 commanded = flow
+            if tank_commands and tank != commanded_tank:
+                message = FluidPressure(fluid_pressure=tank + ambient_pressure)
+                message.header.stamp.sec, message.header.stamp.nanosec = divmod(
+                    command_ns, NS_PER_S
+                )
+                message.header.frame_id = frame_prefix + TANK_FRAME
+                bag.write_message(
+                    prefix + 'tank_pressure', message, command_ns + next(delays), command_ns
+                )
+                commanded_tank = tank
             published = None if readings is None else readings[row].tolist()
             for topic, data in tick.fill(
-                time_ns, waveforms.states[index], flow, ambient_pressure, published
+                time_ns, waveforms.states[index], flow, ambient_pressure, published, tank,
+                None if relief is None else relief[index].tolist(),
             ):
                 bag.write(bag.channels[prefix + topic], data, time_ns + next(delays), time_ns)
         return len(indices)

@@ -117,13 +117,22 @@ DEFAULT_TOPICS = [
     'joint_states',
     '/diagnostics',
     'fault_status',  # valve_node's faults and sensor settings, each change (docs/faults.md)
+    'tank_pressure',  # the second input, if a bench sends it, and what the valve applied
+    'applied_tank_pressure',
+    'relief_flow',
 ]
+# Recorded once published, never waited for: only a bench with a back pressure sends it.
+OPTIONAL_TOPICS = ('tank_pressure',)
+# The signals measured: the required ones, and the tank's pressure where it is recorded (the
+# measures then take the supply pressure above the tank, step_analysis).
+ANALYSED = REQUIRED + ('tank_pressure',)
 MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
 RECORDING_TASK = 'recording'
 MEASURES_QOS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
+READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
 SOURCE = 'valve_sim analyser_node'
 DOUBLE_PARAMETERS = (
     ParameterSpec(
@@ -196,7 +205,7 @@ PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
             f'{"topic" if kind == "topic" else "JointState joint"} of the {ROLE[name].meaning}',
             {},
         )
-        for name in REQUIRED
+        for name in ANALYSED
         for kind in ('topic', 'joint')
         if kind == 'topic' or ROLE[name].joint
     },
@@ -355,14 +364,15 @@ class ValveAnalyser(Node):
         self.clock_guard = GuardedTimeSource.install(self)
         settings = self._declare_parameters()
         self.signal_map = SignalMap(
-            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in REQUIRED},
-            joints={role: settings[f'{role}_joint'] for role in REQUIRED if ROLE[role].joint},
+            topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
+            joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
             ambient_pressure=settings['ambient_pressure'],
         )
         self.wanted = dict.fromkeys(
             [self.resolve_topic_name(t) for t in settings['topics']]
             + list(self.signal_map.topics.values())
         )
+        self.optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
@@ -373,13 +383,14 @@ class ValveAnalyser(Node):
         self.measures = MeasuresFile(
             self.bag.path.with_suffix('.measures.json'), self.bag.path.name
         )
-        self.joiner = Joiner()
+        self.joiner = Joiner(optional=('tank_pressure',))
         self.analysis = StepAnalysis(settings['step_threshold'], settings['step_merge_time'])
         self.flush_interval = settings['flush_interval']
         self.last_flush = self.last_loss_warning = time.monotonic()
         self.recorded = {}
         self.unrecordable = {}  # topic -> why it cannot be recorded
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
+        self.unreadable_since = {}  # topic -> when only unreadable types were first seen
         self.queue_depth = settings['queue_depth']
         self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
@@ -438,7 +449,9 @@ class ValveAnalyser(Node):
             offers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offers:
                 continue  # only subscribers so far: the publishers' QoS decides ours
-            type_name = self._type_to_record(topic, types[topic])
+            type_name, readable = self._type_to_record(topic, types[topic])
+            if not readable and self._still_waiting_for_a_readable_type(topic):
+                continue
             try:
                 message_type = message_class(type_name)
             except (ImportError, AttributeError, ValueError) as error:
@@ -488,6 +501,7 @@ class ValveAnalyser(Node):
 
         Several types on one topic (a rogue publisher): the type the analysis reads for
         the topic's roles, else valve_node's type of a topic of that name, else the first.
+        Returns (type name, whether the analysis can read it).
         """
         roles = self.signal_map.roles_of(topic)
         readable = [
@@ -496,7 +510,19 @@ class ValveAnalyser(Node):
         ]
         own = TOPIC_TYPES.get(topic.rsplit('/', 1)[-1])
         preferred = [name for name in readable if name == own] + readable + list(type_names)
-        return preferred[0]
+        return preferred[0], bool(readable)
+
+    def _still_waiting_for_a_readable_type(self, topic):
+        """
+        Whether to wait before recording an analysed topic of no type the analysis reads.
+
+        Discovery reports publishers in any order: a rogue publisher found first would
+        otherwise fix the recorded type before valve_node's is seen (only the rogue's
+        messages go unrecorded meanwhile). After READABLE_TYPE_GRACE s without a readable
+        publisher the other type is recorded, as rosbag2 would.
+        """
+        first_seen = self.unreadable_since.setdefault(topic, time.monotonic())
+        return time.monotonic() - first_seen < READABLE_TYPE_GRACE
 
     def _extractor(self, topic, type_name):
         """
@@ -580,11 +606,13 @@ class ValveAnalyser(Node):
         Publish the recording status on /diagnostics.
 
         ERROR once a topic cannot be recorded; else WARN while a topic has no
-        message or when some were lost; else OK.
+        message or when some were lost; else OK. An optional topic (OPTIONAL_TOPICS)
+        counts once it has a publisher.
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
             for topic in self.wanted
+            if topic in self.recorded or topic not in self.optional
         }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
         waiting = [topic for topic, count in counts.items() if count == 0]

@@ -13,10 +13,10 @@
 # limitations under the License.
 
 """
-valve_node's inlet-flow input: every message taken is counted, the last good one kept.
+valve_node's inputs: every message taken is counted, the last good one kept.
 
-The node takes inlet_flow messages itself, at the start of each tick, from a
-subscription no executor runs (ReliefValveNode.subscriptions leaves it out): a flood
+The node takes the input messages itself, at the start of each tick, from
+subscriptions no executor runs (ReliefValveNode.subscriptions leaves them out): a flood
 never wakes the executor, so it cannot queue callbacks ahead of the tick timer.
 take() reads at most a few queued messages per tick, and none after its deadline:
 each take locks the middleware's reader, which a flood keeps busy, so the tick
@@ -27,32 +27,37 @@ value matters to the tick. What the middleware dropped before the node took it
 shows, for a single publisher, as gaps in its publication sequence numbers (lost).
 Nothing is logged per message: report() gives the rejections since the last report,
 for one rate-limited warning.
+
+CheckedInput is that taking, checking and counting, once; InletFlowInput (std_msgs/Float64,
+m^3/s) and TankPressureInput (sensor_msgs/FluidPressure, absolute Pa) say only how their
+message is read and which values are valid.
 """
 
 import struct
 import time
 
-from valve_sim.core.limits import inlet_flow_problem
+from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 
 
 FLOAT64_CDR = struct.Struct('<d')  # std_msgs/Float64 data after the 4-byte CDR header
 CDR_HEADER = 4
+STRING_LENGTH = struct.Struct('<I')
+FRAME_ID_OFFSET = CDR_HEADER + 8  # std_msgs/Header: stamp (int32 sec, uint32 nanosec), frame_id
 
 
-class InletFlowInput:
+class CheckedInput:
     """
-    The inlet flow [m^3/s]: the last good value and counts of what was received.
+    One input topic: the last good value and counts of what was received.
 
-    flow: the flow held until a good message comes; max_inlet_flow [m^3/s]: the limit.
-    accepted and rejected count every message offered, lost the messages a single
-    publisher sent that never came (single_publisher, set by the node); changed is
-    set by a good value that differs from the one held (cleared by the node when it
-    used it).
+    value: the value held until a good message comes. accepted and rejected count
+    every message offered, lost the messages a single publisher sent that never came
+    (single_publisher, set by the node); changed is set by a good value that differs
+    from the one held (cleared by the node when it used it). A subclass says how a
+    message is read (decode) and which values are valid (problem).
     """
 
-    def __init__(self, flow, max_inlet_flow):
-        self.flow = flow
-        self.max_inlet_flow = max_inlet_flow
+    def __init__(self, value):
+        self.value = value
         self.accepted = 0
         self.rejected = 0
         self.lost = 0
@@ -64,13 +69,21 @@ class InletFlowInput:
         self.reported_rejected = 0  # rejected at the last report()
         self._last_sequence = None
 
-    def offer(self, flow):
-        """Take a received value: keep it if it is a valid inlet flow, count it either way."""
-        problem = inlet_flow_problem(flow, self.max_inlet_flow)
+    def problem(self, value):
+        """Return why value is not a valid input, or None."""
+        raise NotImplementedError
+
+    def decode(self, data):
+        """Return the value of a serialized message, or None if the bytes are not one."""
+        raise NotImplementedError
+
+    def offer(self, value):
+        """Take a received value: keep it if it is valid, count it either way."""
+        problem = self.problem(value)
         if problem is None:
             self.accepted += 1
-            self.changed = self.changed or flow != self.flow
-            self.flow = flow
+            self.changed = self.changed or value != self.value
+            self.value = value
             self.received = True
             return True
         self.rejected += 1
@@ -78,12 +91,13 @@ class InletFlowInput:
         return False
 
     def offer_cdr(self, data):
-        """Take a serialized std_msgs/Float64 (little-endian CDR, as ROS 2 sends it)."""
-        if len(data) < CDR_HEADER + FLOAT64_CDR.size or data[1] != 1:
+        """Take a serialized message (little-endian CDR, as ROS 2 sends it)."""
+        value = self.decode(data) if len(data) > CDR_HEADER and data[1] == 1 else None
+        if value is None:
             self.rejected += 1
-            self.last_rejection = f'not a little-endian std_msgs/Float64 ({len(data)} bytes)'
+            self.last_rejection = f'not a little-endian {self.MESSAGE_TYPE} ({len(data)} bytes)'
             return False
-        return self.offer(FLOAT64_CDR.unpack_from(data, CDR_HEADER)[0])
+        return self.offer(value)
 
     def take(self, subscription, limit, deadline_ns):
         """
@@ -128,3 +142,72 @@ class InletFlowInput:
         new = self.rejected - self.reported_rejected
         self.reported_rejected = self.rejected
         return new, self.last_rejection
+
+
+class InletFlowInput(CheckedInput):
+    """
+    The inlet flow [m^3/s] from std_msgs/Float64: 0 to max_inlet_flow [m^3/s].
+
+    flow: the flow held until a good message comes.
+    """
+
+    MESSAGE_TYPE = 'std_msgs/Float64'
+
+    def __init__(self, flow, max_inlet_flow):
+        super().__init__(flow)
+        self.max_inlet_flow = max_inlet_flow
+
+    @property
+    def flow(self):
+        """Return the inlet flow held [m^3/s]."""
+        return self.value
+
+    def problem(self, value):
+        """Return why value is not a valid inlet flow [m^3/s], or None."""
+        return inlet_flow_problem(value, self.max_inlet_flow)
+
+    def decode(self, data):
+        """Return the data of a std_msgs/Float64, or None if too short."""
+        if len(data) < CDR_HEADER + FLOAT64_CDR.size:
+            return None
+        return FLOAT64_CDR.unpack_from(data, CDR_HEADER)[0]
+
+
+class TankPressureInput(CheckedInput):
+    """
+    The tank's pressure from sensor_msgs/FluidPressure: absolute [Pa], as the message defines it.
+
+    value: the last good absolute pressure, None until one came; gauge(): it less
+    ambient_pressure [Pa], the model's tank pressure. Valid: finite, not below vacuum,
+    and below burst_pressure [Pa, gauge] (limits.tank_pressure_problem); both limits
+    are the node's, set again when they change.
+    """
+
+    MESSAGE_TYPE = 'sensor_msgs/FluidPressure'
+
+    def __init__(self, ambient_pressure, burst_pressure):
+        super().__init__(None)
+        self.ambient_pressure = ambient_pressure
+        self.burst_pressure = burst_pressure
+
+    def gauge(self):
+        """Return the tank pressure held [Pa, gauge], or None before the first good message."""
+        return None if self.value is None else self.value - self.ambient_pressure
+
+    def problem(self, value):
+        """Return why value [Pa, absolute] is not a valid tank pressure, or None."""
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = value - self.ambient_pressure
+        return tank_pressure_problem(value, self.burst_pressure, self.ambient_pressure)
+
+    def decode(self, data):
+        """fluid_pressure of a FluidPressure: after the header's stamp and frame_id, 8-aligned."""
+        if len(data) < FRAME_ID_OFFSET + STRING_LENGTH.size:
+            return None
+        end = FRAME_ID_OFFSET + STRING_LENGTH.size + STRING_LENGTH.unpack_from(
+            data, FRAME_ID_OFFSET
+        )[0]
+        offset = end + (-(end - CDR_HEADER) % FLOAT64_CDR.size)
+        if offset + 2 * FLOAT64_CDR.size > len(data):
+            return None
+        return FLOAT64_CDR.unpack_from(data, offset)[0]

@@ -23,6 +23,11 @@ Topic and service names are relative, so namespaces and remapping work:
                                                             SensorDataQoS publishers) or
                                                             reliable: inlet_flow_reliability;
                                                             taken by the tick itself
+  sub  tank_pressure            sensor_msgs/FluidPressure   the tank's (return line's) ABSOLUTE
+                                                            pressure [Pa]; once one came it
+                                                            overrides the tank_pressure
+                                                            parameter (gauge); taken, checked
+                                                            and counted as inlet_flow
   pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
                                 sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
                                                             gauge pressure + ambient_pressure
@@ -31,6 +36,13 @@ Topic and service names are relative, so namespaces and remapping work:
   pub  applied_inlet_flow       sensor_msgs/JointState      inlet_flow: velocity = q_in [m^3/s]
                                                             applied over the tick ending at
                                                             the stamp
+  pub  applied_tank_pressure    sensor_msgs/FluidPressure   the tank pressure applied over that
+                                                            tick, ABSOLUTE [Pa]
+  pub  relief_flow              sensor_msgs/JointState      relief_flow: velocity = all the
+                                                            valve passes to the tank [m^3/s]
+                                                            at the stamp; then its parts
+                                                            main_stage, pilot_stage,
+                                                            seat_leakage
   pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
   pub  fault_status             diagnostic_msgs/DiagnosticArray, latched: every fault and sensor
                                 setting, on start and on each change, stamped from when they hold
@@ -61,7 +73,7 @@ import sys
 import time
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
@@ -71,6 +83,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError
@@ -122,7 +135,7 @@ from valve_sim.ros.fault_injection import (
     ScheduleLoader,
     split_changes,
 )
-from valve_sim.ros.inlet_input import InletFlowInput
+from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
 from valve_sim.ros.node_status import InputReport, NodeStatus, Throttle
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
 from valve_sim.ros.ros_parameters import (
@@ -179,6 +192,7 @@ class ReliefValveNode(Node):
 
     def __init__(self, argv=(), **kwargs):
         self._inlet_subscription = None  # taken by the tick, left out of subscriptions
+        self._tank_subscription = None  # likewise
         super().__init__(NODE_NAME, **kwargs)
         self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
@@ -189,8 +203,15 @@ class ReliefValveNode(Node):
         self.frame_prefix = self._declare_frame_prefix()
         faults, sensors, schedule = declare_fault_parameters(self)
         self.injection = FaultInjection(sensors, schedule)
+        self.tank_input = TankPressureInput(
+            self.settings['ambient_pressure'], params['burst_pressure']
+        )
+        problem = self.tank_input.problem(self.settings['tank_pressure'] + self.ambient_pressure)
+        if problem:
+            raise ParameterError(f"parameter 'tank_pressure' (p_t): {problem}")
         self.model = RealTimeModel(
-            params, self.settings['step_size'], self.settings['initial_inlet_flow'], faults
+            params, self.settings['step_size'], self.settings['initial_inlet_flow'], faults,
+            self.tank_pressure,
         )
         # Compile (or load from numba's cache) the integration kernel before the tick timer
         # exists: compiled in the first tick, it would stall the clock for seconds.
@@ -199,9 +220,12 @@ class ReliefValveNode(Node):
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
         self.input_stale = False
+        self.tank_stale = False
+        self.tank_from_topic = False  # said once in the log
         self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
         self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
         self._rejection_warnings = Throttle(WARNING_INTERVAL_NS)
+        self._tank_rejection_warnings = Throttle(WARNING_INTERVAL_NS)
         self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
@@ -210,8 +234,12 @@ class ReliefValveNode(Node):
         self._before_change = {}  # declared values of the change being checked, before it
         self._undo = {}  # declared values before the last change that retuned the model
         self._create_outputs()
+        input_qos = self._declare_inlet_flow_qos()
         self._inlet_subscription = self.create_subscription(
-            Float64, 'inlet_flow', self.input.offer_cdr, self._declare_inlet_flow_qos(), raw=True
+            Float64, 'inlet_flow', self.input.offer_cdr, input_qos, raw=True
+        )
+        self._tank_subscription = self.create_subscription(
+            FluidPressure, 'tank_pressure', self.tank_input.offer_cdr, input_qos, raw=True
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.live_view = None  # a LiveView once serve_live_view() started one
@@ -226,8 +254,9 @@ class ReliefValveNode(Node):
         self.add_on_set_parameters_callback(self._check_parameter_change)
         self.add_post_set_parameters_callback(self._apply_parameter_change)
         self.get_logger().info(
-            f'valve at the steady state of {self.inlet_flow:g} m^3/s: '
-            f'p_s = {self.model.state[P_S]:.6g} Pa (gauge); '
+            f'valve at the steady state of {self.inlet_flow:g} m^3/s'
+            + (f' into a tank at {self.tank_pressure:g} Pa (gauge)' if self.tank_pressure else '')
+            + f': p_s = {self.model.state[P_S]:.6g} Pa (gauge); '
             f'{self.settings["publish_rate"]:g} Hz, steps of {self.settings["step_size"]:g} s'
         )
         self.get_logger().info(
@@ -241,15 +270,31 @@ class ReliefValveNode(Node):
         return self.input.flow
 
     @property
+    def ambient_pressure(self):
+        """Return the ambient pressure [Pa absolute]: the zero of the gauge pressures."""
+        return self.settings['ambient_pressure']
+
+    @property
+    def tank_pressure(self):
+        """
+        Return the tank pressure [Pa, gauge] the next tick applies.
+
+        The tank_pressure topic's last good value once one came, else the parameter.
+        """
+        gauge = self.tank_input.gauge()
+        return self.settings['tank_pressure'] if gauge is None else gauge
+
+    @property
     def subscriptions(self):
         """
-        Return the subscriptions an executor runs: all but inlet_flow's, the tick takes it.
+        Return the subscriptions an executor runs: all but the inputs', the tick takes them.
 
         Both executors ask the node for these (the EventsExecutor ignores callback
-        groups), so a flood of inlet_flow never wakes the executor and never queues
-        callbacks ahead of the tick (_take_inputs).
+        groups), so a flood of inlet_flow or tank_pressure never wakes the executor and
+        never queues callbacks ahead of the tick (_take_inputs).
         """
-        return (s for s in super().subscriptions if s is not self._inlet_subscription)
+        taken = (self._inlet_subscription, self._tank_subscription)
+        return (s for s in super().subscriptions if s not in taken)
 
     # --- parameters -------------------------------------------------------------------------
 
@@ -279,9 +324,9 @@ class ReliefValveNode(Node):
         descriptor = ParameterDescriptor(
             name='inlet_flow_reliability',
             description=(
-                "inlet_flow subscription: 'best_effort' (default; hears every publisher, "
-                f'keeps the last {INPUTS_PER_TICK} messages for the next tick) or '
-                "'reliable' (reliable publishers only; keeps a burst of "
+                "inlet_flow and tank_pressure subscriptions: 'best_effort' (default; hears "
+                f'every publisher, keeps the last {INPUTS_PER_TICK} messages for the next '
+                "tick) or 'reliable' (reliable publishers only; keeps a burst of "
                 f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
             ),
             read_only=True,
@@ -380,8 +425,13 @@ class ReliefValveNode(Node):
             faults, sensors = split_changes(changes)
             self.model.faults.changed(faults)
             self.injection.sensors.checked(sensors)
-            check_limits(params, self.model.state, self.inlet_flow)
-            self.model.trial(params, settings['step_size'], self.inlet_flow, faults or None)
+            tank = self._tank_pressure_with(settings)
+            check_limits(
+                params, self.model.state, self.inlet_flow, tank, settings['ambient_pressure']
+            )
+            self.model.trial(
+                params, settings['step_size'], self.inlet_flow, faults or None, tank
+            )
             if FAULT_SCHEDULE in changes:
                 self._open_schedule(changes[FAULT_SCHEDULE])
         except IntegrationError as error:
@@ -430,6 +480,12 @@ class ReliefValveNode(Node):
         if faults or sensors:
             self._publish_fault_status()
         self.input.max_inlet_flow = params['max_inlet_flow']
+        self._use_tank_limits(params, settings)
+        if 'tank_pressure' in changes and self.tank_input.value is not None:
+            self.get_logger().warn(
+                'tank_pressure set, but the tank_pressure topic sets the tank pressure '
+                f'({self.tank_input.gauge():g} Pa gauge): the topic takes precedence'
+            )
         self._use_settings(settings)
         self._resume('a parameter change')
         self.get_logger().info(f'parameters set: {changes}')
@@ -489,6 +545,18 @@ class ReliefValveNode(Node):
         finally:
             self._restoring = False
 
+    def _tank_pressure_with(self, settings):
+        """Return the tank pressure [Pa, gauge] under settings: the topic's, else the parameter."""
+        absolute = self.tank_input.value
+        if absolute is None:
+            return settings['tank_pressure']
+        return absolute - settings['ambient_pressure']
+
+    def _use_tank_limits(self, params, settings):
+        """Check tank_pressure messages against these parameters' limits from now on."""
+        self.tank_input.ambient_pressure = settings['ambient_pressure']
+        self.tank_input.burst_pressure = params['burst_pressure']
+
     def _merged(self, changes):
         """(params, settings) with changes applied, checked; raises ParameterError."""
         settings = {
@@ -541,6 +609,7 @@ class ReliefValveNode(Node):
         if starting:
             self._start(now_ns)
         self.input.stamp(now_ns)
+        self.tank_input.stamp(now_ns)
         if not starting:
             self._count_lateness(now_ns)
             self._advance(now_ns)
@@ -566,8 +635,10 @@ class ReliefValveNode(Node):
             )
             self.injection.rebase(shift_ns)
             self.input.rebase(shift_ns)
+            self.tank_input.rebase(shift_ns)
         self.model.start(now_ns)
         self.input.received_ns = self.input.received_ns or now_ns
+        self.tank_input.received_ns = self.tank_input.received_ns or now_ns
         self.status.previous_slot_ns = None
 
     def _count_lateness(self, now_ns):
@@ -582,9 +653,12 @@ class ReliefValveNode(Node):
         if self.input.changed:
             self.input.changed = False
             self._resume('a new inlet flow')
+        if self.tank_input.changed:
+            self.tank_input.changed = False
+            self._resume('a new tank pressure')
         try:
             progress = self.model.advance_to(
-                now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns
+                now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns, self.tank_pressure
             )
         except IntegrationError as error:
             self._recover(now_ns, error)
@@ -618,9 +692,12 @@ class ReliefValveNode(Node):
             result = self.set_parameters_atomically(
                 [Parameter(name, value=value) for name, value in changes.items()]
             )
-            log = self.get_logger().info if result.successful else self.get_logger().error
-            log(f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
-                + ('' if result.successful else f' refused: {result.reason}'))
+            message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
+            # One logging call per severity: rclpy refuses a call site whose severity changes.
+            if result.successful:
+                self.get_logger().info(message)
+            else:
+                self.get_logger().error(f'{message} refused: {result.reason}')
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
         if overpressure and not self.injection.overpressure:
@@ -657,6 +734,7 @@ class ReliefValveNode(Node):
             )
             self._restore_parameters()
             self.input.max_inlet_flow = self.model.params['max_inlet_flow']
+            self.tank_input.burst_pressure = self.model.params['burst_pressure']
             if self.inlet_flow <= self.input.max_inlet_flow:
                 return
         self.model.halt(str(error))
@@ -734,6 +812,8 @@ class ReliefValveNode(Node):
             self.applied_flow,
             ambient,
             self.injection.readings(self.model.time_ns, state, ambient),
+            self.model.tank_pressure,
+            self.model.relief_flows(),
         )
         for topic, data in tick:
             self._tick_publishers[topic].publish(data)
@@ -758,18 +838,16 @@ class ReliefValveNode(Node):
         )
 
     def _take_inputs(self, started_ns):
-        """Take queued inlet_flow messages: INPUTS_PER_TICK, within INPUT_SHARE of a period."""
-        self.input.take(
-            self._inlet_subscription,
-            INPUTS_PER_TICK,
-            started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns,
-        )
+        """Take queued input messages: INPUTS_PER_TICK each, within INPUT_SHARE of a period."""
+        deadline_ns = started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns
+        self.input.take(self._inlet_subscription, INPUTS_PER_TICK, deadline_ns)
+        self.tank_input.take(self._tank_subscription, INPUTS_PER_TICK, deadline_ns)
 
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
         self._take_inputs(time.perf_counter_ns())  # a flow sent just before the reset counts
         try:
-            self.model.reset(self.inlet_flow)
+            self.model.reset(self.inlet_flow, self.tank_pressure)
         except SteadyStateError as error:
             response.success = False
             response.message = f'reset refused, the state is kept: {error}'
@@ -781,8 +859,9 @@ class ReliefValveNode(Node):
         response.success = True
         response.message = (
             f're-initialised at model time {time_ns // NS_PER_S}.{time_ns % NS_PER_S:09d} s '
-            f'at the steady state of {self.inlet_flow:g} m^3/s: '
-            f'p_s = {self.model.state[P_S]:.6g} Pa (gauge)'
+            f'at the steady state of {self.inlet_flow:g} m^3/s'
+            + (f' and tank pressure {self.tank_pressure:g} Pa' if self.tank_pressure else '')
+            + f': p_s = {self.model.state[P_S]:.6g} Pa (gauge)'
         )
         self.get_logger().info(response.message)
         return response
@@ -828,18 +907,25 @@ class ReliefValveNode(Node):
         counters.lost_inputs = self.input.lost
         counters.refused_clock_messages = self.clock_guard.refused
         self.input.single_publisher = self._inlet_subscription.get_publisher_count() == 1
+        self.tank_input.single_publisher = self._tank_subscription.get_publisher_count() == 1
 
     def _warn_rejected_inputs(self):
-        """At most once a second (steady clock): how many inlet_flow messages were rejected."""
-        if self.input.rejected == self.input.reported_rejected:
-            return
-        if self._rejection_warnings.due(time.monotonic_ns()):
-            new, reason = self.input.report()
-            self.get_logger().warn(
-                f'{new} inlet_flow message(s) rejected since the last report '
-                f'({self.input.rejected} since start), the last: {reason}; '
-                f'holding {self.inlet_flow:g} m^3/s'
-            )
+        """At most once a second per input (steady clock): how many messages were rejected."""
+        for topic, received, throttle, holding in (
+            ('inlet_flow', self.input, self._rejection_warnings, f'{self.inlet_flow:g} m^3/s'),
+            (
+                'tank_pressure', self.tank_input, self._tank_rejection_warnings,
+                f'{self.tank_pressure:g} Pa (gauge)',
+            ),
+        ):
+            if received.rejected == received.reported_rejected:
+                continue
+            if throttle.due(time.monotonic_ns()):
+                new, reason = received.report()
+                self.get_logger().warn(
+                    f'{new} {topic} message(s) rejected since the last report '
+                    f'({received.rejected} since start), the last: {reason}; holding {holding}'
+                )
 
     def use_receive_thread_policy(self, policy):
         """Put the middleware's receive threads under policy (a POLICIES key), now and later."""
@@ -865,6 +951,7 @@ class ReliefValveNode(Node):
         elif self.input_stale and not inputs.stale:
             self.get_logger().info('inlet_flow received again: input fresh')
         self.input_stale = inputs.stale
+        tank = self._tank_report(now.nanoseconds)
         settings = {
             'publish_rate_hz': self.settings['publish_rate'],
             'step_size_s': self.model.step_size,
@@ -879,10 +966,16 @@ class ReliefValveNode(Node):
             'fault_schedule_events_pending': self.injection.schedule.pending(),
             'startup_kernels_s': self.kernels_seconds,
             'receive_threads': self.receive_threads.describe(),
+            **tank,
         }
         conditions = self.injection.conditions(
             self.model.faults, self.model.state[P_S], self.model.params['supply_pressure_limit']
         )
+        if tank['tank_pressure_stale']:
+            conditions.append((DiagnosticStatus.WARN, (
+                f'tank_pressure stale: none for {tank["seconds_since_tank_pressure"]:.1f} s, '
+                f'holding {self.tank_pressure:g} Pa (gauge)'
+            )))
         report = self.status.report(
             now.to_msg(),
             self._status_name,
@@ -906,6 +999,43 @@ class ReliefValveNode(Node):
         age = 0.0 if received_ns is None else max(now_ns - received_ns, 0) / NS_PER_S
         timeout = self.settings['input_timeout']
         return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
+
+    def _tank_report(self, now_ns):
+        """
+        Return the tank input's diagnostics values: pressure, source, counts, age, staleness.
+
+        Stale as inlet_flow is (input_timeout), once the topic has set the tank pressure.
+        """
+        received, timeout = self.tank_input, self.settings['input_timeout']
+        received.stamp(now_ns)
+        from_topic = received.value is not None
+        age = max(now_ns - received.received_ns, 0) / NS_PER_S if from_topic else None
+        stale = from_topic and timeout > 0.0 and age > timeout
+        # One logging call per severity: rclpy refuses a call site whose severity changes.
+        if stale and not self.tank_stale:
+            self.get_logger().warn(
+                f'no tank_pressure for {age:.1f} s: input stale, holding '
+                f'{self.tank_pressure:g} Pa (gauge)'
+            )
+        elif self.tank_stale and not stale:
+            self.get_logger().info('tank_pressure received again: input fresh')
+        self.tank_stale = stale
+        if from_topic and not self.tank_from_topic:
+            self.get_logger().info(
+                f'the tank_pressure topic sets the tank pressure from now on: '
+                f'{self.tank_pressure:g} Pa (gauge), over the tank_pressure parameter '
+                f'({self.settings["tank_pressure"]:g} Pa)'
+            )
+        self.tank_from_topic = from_topic
+        return {
+            'tank_pressure_pa': self.tank_pressure,
+            'tank_pressure_source': 'topic' if from_topic else 'parameter',
+            'accepted_tank_pressures': received.accepted,
+            'rejected_tank_pressures': received.rejected,
+            'lost_tank_pressures': received.lost,
+            'seconds_since_tank_pressure': age,
+            'tank_pressure_stale': stale,
+        }
 
 
 STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)

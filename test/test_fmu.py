@@ -1,0 +1,429 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+The FMU of `valve-sim fmu`, checked by an independent master: FMPy.
+
+The FMU is built once for the module by the command itself. FMPy validates it, runs
+the paper's step through it at a 1 ms communication step against `valve-sim simulate`
+recording every 1 ms, and drives instances of it directly through FMI 2.0 calls:
+two at once, bad inputs, refused parameter changes, an overpressure and a divergence.
+"""
+
+import csv
+from ctypes import byref
+import json
+import math
+import os
+from pathlib import Path
+import shutil
+import site
+import subprocess
+import sysconfig
+
+import numpy as np
+import pytest
+from test_cli import valve_sim
+import valve_sim as valve_sim_package
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.model import P_S, X
+from valve_sim.core.parameters import PARAMETERS, SPECS
+from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
+
+fmpy = pytest.importorskip('fmpy')
+from fmpy.fmi1 import calloc, FMICallException, free  # noqa: E402, I100 (only with fmpy)
+from fmpy.fmi2 import (  # noqa: E402
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    fmi2Discard,
+    fmi2Error,
+    fmi2Warning,
+    FMU2Slave,
+)
+from fmpy.logging import addLoggerProxy  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+
+# The paper's step, simulate's default: 5 -> 20 L/min at 0.25 s, to 1.25 s; 1 ms steps.
+Q0, Q1 = REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow
+STEP_TIME, END_TIME = REFERENCE_SCENARIO.step_time, REFERENCE_SCENARIO.end_time
+INTERVAL = 1e-3
+OUTPUTS = ('supply_pressure', 'main_valve_displacement', 'relief_flow', 'halted')
+
+
+@pytest.fixture(scope='module')
+def fmu(tmp_path_factory):
+    """Build the FMU with `valve-sim fmu`; return its path."""
+    path = tmp_path_factory.mktemp('fmu') / 'valve.fmu'
+    result = valve_sim('fmu', '--out', str(path))
+    assert path.is_file() and 'ReliefValve' in result.stderr
+    return path
+
+
+@pytest.fixture(scope='module')
+def unzipped(fmu, tmp_path_factory):
+    """Extract the FMU once; return the folder and its model description (direct FMI calls)."""
+    folder = tmp_path_factory.mktemp('unzipped')
+    fmpy.extract(str(fmu), str(folder))
+    return folder, fmpy.read_model_description(str(fmu))
+
+
+LOGS = {}  # instance name: [(status, message)] it logged
+
+
+def _logged(_environment, instance, status, _category, message):
+    LOGS[instance.decode()].append((status, message.decode()))
+
+
+# One set for all instances: FMPy's logger proxy (which formats the message as a C
+# master would) keeps one logger for the process.
+CALLBACKS = fmi2CallbackFunctions(
+    logger=fmi2CallbackLoggerTYPE(_logged),
+    allocateMemory=fmi2CallbackAllocateMemoryTYPE(calloc),
+    freeMemory=fmi2CallbackFreeMemoryTYPE(free),
+)
+addLoggerProxy(byref(CALLBACKS))
+
+
+class Valve:
+    """One FMU instance driven by FMI 2.0 calls through FMPy, its log kept."""
+
+    def __init__(self, unzipped, name, parameters=None, strings=None):
+        folder, self.description = unzipped
+        self.refs = {v.name: v.valueReference for v in self.description.modelVariables}
+        assert name not in LOGS, 'one name per instance: the log is kept by name'
+        self.log = LOGS[name] = []
+        self.fmu = FMU2Slave(
+            guid=self.description.guid, unzipDirectory=str(folder),
+            modelIdentifier=self.description.coSimulation.modelIdentifier, instanceName=name,
+        )
+        self.fmu.instantiate(callbacks=CALLBACKS, loggingOn=True)
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        self.set_values(**(parameters or {}))
+        for key, value in (strings or {}).items():
+            self.fmu.setString([self.refs[key]], [value])
+        self.time = 0.0
+
+    def initialise(self):
+        self.fmu.exitInitializationMode()
+        return self
+
+    def set_values(self, **values):
+        for name, value in values.items():
+            self.fmu.setReal([self.refs[name]], [value])
+
+    def get(self, *names):
+        return self.fmu.getReal([self.refs[name] for name in names])
+
+    def step(self, size=INTERVAL):
+        self.fmu.doStep(currentCommunicationPoint=self.time, communicationStepSize=size)
+        self.time += size
+
+    def close(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def test_fmpy_validates_the_fmu_and_its_variables_carry_units_and_sources(fmu, reference):
+    assert validate_fmu(str(fmu)) == []
+    description = fmpy.read_model_description(str(fmu), validate=True)
+    assert description.fmiVersion == '2.0' and description.coSimulation is not None
+    variables = {v.name: v for v in description.modelVariables}
+    for spec in PARAMETERS:
+        variable = variables[spec.name]
+        assert (variable.causality, variable.variability) == ('parameter', 'tunable')
+        assert variable.unit == spec.unit and spec.source in variable.description
+        assert float(variable.min) == spec.minimum and float(variable.max) == spec.maximum
+    assert {n: float(variables[n].start) for n in SPECS} == reference
+    assert float(variables['preset_pressure'].start) == cracking_pressure(reference)
+    assert variables['step_size'].variability == 'tunable'
+    assert variables['initial_state'].variability == 'fixed'
+    assert (variables['inlet_flow'].causality, variables['inlet_flow'].unit) == (
+        'input', 'm^3/s')
+    assert (variables['tank_pressure'].causality, variables['tank_pressure'].unit) == (
+        'input', 'Pa')
+    for name in ('supply_pressure', 'intermediate_pressure', 'pilot_pressure',
+                 'poppet_chamber_pressure'):
+        assert (variables[name].causality, variables[name].unit) == ('output', 'Pa')
+        assert 'gauge' in variables[name].description
+    for name in ('main_valve_displacement', 'poppet_displacement'):
+        assert (variables[name].causality, variables[name].unit) == ('output', 'm')
+    assert (variables['relief_flow'].causality, variables['relief_flow'].unit) == (
+        'output', 'm^3/s')
+
+
+@pytest.fixture(scope='module')
+def offline(tmp_path_factory):
+    """`valve-sim simulate` of the paper's step recording every 1 ms: (CSV rows, measures)."""
+    path = tmp_path_factory.mktemp('simulate') / 'step.csv'
+    result = valve_sim('simulate', '--record-interval', str(INTERVAL), '--csv', str(path),
+                       '--json')
+    with open(path) as stream:
+        rows = list(csv.DictReader(stream))
+    return rows, json.loads(result.stdout)
+
+
+def test_fmpy_runs_the_papers_step_as_simulate_does(fmu, offline):
+    signal = np.array(
+        [(0.0, Q0, 0.0), (STEP_TIME, Q0, 0.0), (STEP_TIME, Q1, 0.0), (END_TIME, Q1, 0.0)],
+        dtype=[('time', float), ('inlet_flow', float), ('tank_pressure', float)],
+    )
+    result = fmpy.simulate_fmu(
+        str(fmu), start_time=0.0, stop_time=END_TIME, output_interval=INTERVAL, input=signal,
+        output=list(OUTPUTS),
+    )
+    rows, measures = offline
+    assert len(result) == len(rows) == round(END_TIME / INTERVAL) + 1
+    time = np.array([float(row['time_s']) for row in rows])
+    np.testing.assert_allclose(result['time'], time, rtol=0, atol=1e-9)
+    for name in ('supply_pressure', 'main_valve_displacement', 'relief_flow'):
+        column = next(key for key in rows[0] if key.startswith(name + '_'))
+        expected = np.array([float(row[column]) for row in rows])
+        # The CSV holds 10 significant digits: 5e-10 relative of rounding at most.
+        np.testing.assert_allclose(result[name], expected, rtol=1e-9, atol=0)
+    assert not result['halted'].any()
+    fmu_measures = step_measures(
+        result['time'], result['supply_pressure'], result['main_valve_displacement'],
+        STEP_TIME, 1,
+    ).as_dict()
+    assert measures['reasons'] == fmu_measures['reasons'] == {}
+    assert {name: fmu_measures[name] for name in MEASURE_NAMES} == {
+        name: measures[name] for name in MEASURE_NAMES
+    }
+
+
+def trace(valve, steps, size=INTERVAL):
+    """Step valve steps times; return the supply pressure after each step."""
+    pressures = []
+    for _ in range(steps):
+        valve.step(size)
+        pressures.append(valve.get('supply_pressure')[0])
+    return np.array(pressures)
+
+
+def test_two_instances_with_different_parameters_do_not_interfere(unzipped, reference):
+    lower = with_preset_pressure(reference, 6e6)
+    first = Valve(unzipped, 'first', {'preset_pressure': 6e6}).initialise()
+    second = Valve(unzipped, 'second').initialise()
+    assert first.get('pilot_spring_preload') == [lower['pilot_spring_preload']]
+    assert first.get('supply_pressure') == [steady_state(lower, Q0)[P_S]]
+    assert second.get('supply_pressure') == [steady_state(reference, Q0)[P_S]]
+    first.set_values(inlet_flow=Q1)
+    second.set_values(inlet_flow=Q1)
+    traces = {first: [], second: []}
+    for _ in range(200):  # interleaved, as a master steps two valves
+        for valve in (first, second):
+            traces[valve] += trace(valve, 1).tolist()
+    for valve in (first, second):
+        valve.close()
+    for valve, params in ((first, lower), (second, reference)):  # each as if alone
+        offline = simulate(params, Scenario(Q0, Q1, 0.0, 0.2), record_interval=INTERVAL)
+        np.testing.assert_allclose(traces[valve], offline['supply_pressure'][1:], rtol=1e-12)
+    assert abs(traces[first][-1] - traces[second][-1]) > 5e5  # 1 MPa lower preset
+
+
+def test_any_communication_step_carries_the_remainder_over(unzipped):
+    """1 ms steps, 0.3333 ms steps, 1 us steps: the same state at the same time."""
+    valves = [Valve(unzipped, f'valve{i}').initialise() for i in range(3)]
+    for valve in valves:
+        valve.set_values(inlet_flow=Q1)
+    trace(valves[0], 50)
+    while valves[1].time + 3.333e-4 < 0.05:
+        valves[1].step(3.333e-4)
+    valves[1].step(0.05 - valves[1].time)
+    trace(valves[2], 100, 1e-6)
+    valves[2].step(0.05 - valves[2].time)
+    names = ('supply_pressure', 'pilot_pressure', 'main_valve_displacement', 'relief_flow')
+    results = [valve.get(*names) for valve in valves]
+    for valve in valves:
+        valve.close()
+    assert results[1] == results[0] and results[2] == results[0]
+
+
+def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on(
+    unzipped, reference
+):
+    valve = Valve(unzipped, 'refusing').initialise()
+    good = Valve(unzipped, 'good').initialise()
+    trace(valve, 5)
+    held = valve.get(*OUTPUTS[:3])
+    bad = [
+        {'inlet_flow': math.nan}, {'inlet_flow': -1e-4}, {'inlet_flow': 1.0},
+        {'tank_pressure': math.inf}, {'main_valve_mass': math.nan},
+        {'preset_pressure': 1e9}, {'step_size': 1.0},
+    ]
+    for values in bad:
+        valve.set_values(**values)
+        with pytest.raises(FMICallException) as refusal:
+            valve.step()
+        assert refusal.value.status == fmi2Discard  # not fmi2OK, and no crash
+        status, message = valve.log[-1]
+        assert status == fmi2Error and 'refused' in message, values
+        assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
+        valve.set_values(inlet_flow=Q0, tank_pressure=0.0)
+    assert valve.get('main_valve_mass', 'preset_pressure', 'step_size') == [
+        reference['main_valve_mass'], cracking_pressure(reference), 1e-5
+    ]  # the refused parameters are back at the values in use
+    trace(good, 5)
+    valve.set_values(inlet_flow=Q1)
+    good.set_values(inlet_flow=Q1)
+    assert np.array_equal(trace(valve, 20), trace(good, 20))  # as if nothing bad came
+    valve.close()
+    good.close()
+
+
+def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, reference):
+    valve = Valve(unzipped, 'overpressure', {'max_inlet_flow': 10.0}).initialise()
+    valve.set_values(inlet_flow=1.0)
+    trace(valve, 3)  # fmi2OK throughout: no exception
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
+    assert valve.get('supply_pressure') == [reference['burst_pressure']]
+    warnings = [message for status, message in valve.log if status == fmi2Warning]
+    assert len(warnings) == 1 and 'overpressure' in warnings[0]
+    valve.set_values(inlet_flow=Q0)  # a new input: the valve advances again
+    pressures = trace(valve, 50)
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
+    assert np.all(pressures < reference['burst_pressure'])
+    valve.close()
+
+
+def test_a_divergence_is_discarded_with_its_reason_until_a_parameter_changes(
+    unzipped, reference
+):
+    too_small = {'step_size': 5e-5, 'poppet_chamber_volume': 1e-9}  # RK4 unstable there
+    valve = Valve(unzipped, 'diverging', too_small).initialise()
+    start = valve.get(*OUTPUTS[:3])
+    for _ in range(2):
+        with pytest.raises(FMICallException) as discard:
+            valve.step()
+        assert discard.value.status == fmi2Discard
+    assert valve.log[0][0] == fmi2Discard and 'diverged' in valve.log[0][1]
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
+    assert valve.get(*OUTPUTS[:3]) == start  # the last good state, finite
+    valve.set_values(poppet_chamber_volume=reference['poppet_chamber_volume'])
+    assert np.all(np.isfinite(trace(valve, 10)))
+    assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
+    valve.close()
+
+
+def test_the_start_closed_or_at_the_steady_state_of_the_inputs(unzipped, reference):
+    names = ('supply_pressure', 'intermediate_pressure', 'pilot_pressure',
+             'poppet_chamber_pressure', 'main_valve_displacement', 'poppet_displacement')
+    closed = Valve(unzipped, 'closed', strings={'initial_state': 'closed'}).initialise()
+    assert closed.get(*names) == [steady_state(reference, 0.0)[i] for i in (0, 1, 2, 3, X, 6)]
+    filling = trace(closed, 5)  # from the inlet flow
+    assert filling[0] > 0.0 and np.all(np.diff(filling) > 0.0)
+    tank = 1e6
+    steady = Valve(unzipped, 'steady', {'tank_pressure': tank}).initialise()
+    assert steady.get(*names) == [steady_state(reference, Q0, tank_pressure=tank)[i]
+                                  for i in (0, 1, 2, 3, X, 6)]
+    main, pilot, leakage = steady.get('main_stage_flow', 'pilot_flow', 'seat_leakage_flow')
+    assert steady.get('relief_flow') == [main + pilot + leakage]
+    assert main + pilot + leakage == pytest.approx(Q0, rel=1e-9)  # steady: all flow relieved
+    wrong = Valve(unzipped, 'wrong', strings={'initial_state': 'open'}).initialise()
+    with pytest.raises(FMICallException) as refusal:
+        wrong.step()
+    assert refusal.value.status == fmi2Discard
+    assert any(status == fmi2Error and 'initial_state must be one of steady, closed' in message
+               for status, message in wrong.log)
+    for valve in (closed, steady, wrong):
+        valve.close()
+
+
+def test_preset_pressure_and_the_model_parameters_are_tunable_as_in_valve_node(
+    unzipped, reference
+):
+    valve = Valve(unzipped, 'tuned').initialise()
+    valve.set_values(preset_pressure=6.5e6)
+    trace(valve, 1)
+    assert valve.get('pilot_spring_preload') == [
+        with_preset_pressure(reference, 6.5e6)['pilot_spring_preload']
+    ]
+    valve.set_values(main_spring_stiffness=reference['main_spring_stiffness'] * 1.1)
+    trace(valve, 1)
+    retuned = {
+        **with_preset_pressure(reference, 6.5e6),
+        'main_spring_stiffness': reference['main_spring_stiffness'] * 1.1,
+    }
+    assert valve.get('preset_pressure') == [pytest.approx(cracking_pressure(retuned), rel=1e-12)]
+    assert trace(valve, 300)[-1] == pytest.approx(steady_state(retuned, Q0)[P_S], rel=1e-3)
+    valve.close()
+
+
+def test_fmpy_ends_a_run_at_a_nan_input_with_what_came_before(fmu):
+    signal = np.array(
+        [(0.0, Q0, 0.0), (0.01, Q0, 0.0), (0.01, math.nan, 0.0), (0.02, math.nan, 0.0)],
+        dtype=[('time', float), ('inlet_flow', float), ('tank_pressure', float)],
+    )
+    result = fmpy.simulate_fmu(str(fmu), stop_time=0.02, output_interval=INTERVAL,
+                               input=signal, output=['supply_pressure'])
+    assert result['time'][-1] == pytest.approx(0.01)  # the step that met the NaN refused
+    assert np.all(np.isfinite(result['supply_pressure']))
+
+
+def test_a_c_master_runs_the_papers_step_with_libpython_preloaded(unzipped, offline, tmp_path):
+    """
+    The FMU loaded as OpenModelica, Hopsan and fmi_adapter load it: dlopen from C.
+
+    The binary needs libpython loaded first (LD_PRELOAD) and valve_sim on PYTHONPATH
+    (docs/fmu.md). Not asserted: the exit status. The process ends with SIGSEGV or
+    SIGABRT after fmi2FreeInstance, when pythonfmu finalises the embedded interpreter:
+    any pythonfmu slave that imports numpy does (docs/fmu.md), the results are complete.
+    """
+    compiler = shutil.which('cc') or shutil.which('gcc')
+    if compiler is None:
+        pytest.skip('no C compiler')
+    folder, description = unzipped
+    master = tmp_path / 'fmu_c_master'
+    headers = Path(fmpy.__file__).parent / 'c-code'
+    subprocess.run([compiler, '-O1', f'-I{headers}', '-o', str(master),
+                    str(Path(__file__).parent / 'fmu_c_master.c'), '-ldl', '-lm'], check=True)
+    refs = {v.name: v.valueReference for v in description.modelVariables}
+    library = Path(sysconfig.get_config_var('LIBDIR')) / sysconfig.get_config_var('LDLIBRARY')
+    paths = [str(Path(valve_sim_package.__file__).parents[1]), *site.getsitepackages()]
+    result = subprocess.run(
+        [str(master), str(folder / 'binaries' / 'linux64' / 'ReliefValve.so'),
+         (folder / 'resources').as_uri(), description.guid, str(refs['inlet_flow']),
+         str(refs['supply_pressure']), repr(Q0), repr(Q1), repr(STEP_TIME), repr(END_TIME),
+         repr(INTERVAL)],
+        env={**os.environ, 'LD_PRELOAD': str(library), 'PYTHONPATH': os.pathsep.join(paths)},
+        capture_output=True, text=True, timeout=300,
+    )
+    assert 'fmi2Terminate: status 0; fmi2FreeInstance returned' in result.stderr, result.stderr
+    pressures = np.array([float(line.split()[1]) for line in result.stdout.splitlines()])
+    rows, _ = offline
+    expected = np.array([float(row['supply_pressure_Pa']) for row in rows[1:]])
+    np.testing.assert_allclose(pressures, expected, rtol=1e-9, atol=0)
+
+
+def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
+    path = tmp_path / 'tuned.fmu'
+    valve_sim('fmu', '--out', str(path), '--set', 'd_c=1.2e-3', '--preset-pressure', '6.5e6',
+              '--step-size', '5e-6')
+    variables = {v.name: v for v in fmpy.read_model_description(str(path)).modelVariables}
+    params = with_preset_pressure({**reference, 'damping_orifice_diameter': 1.2e-3}, 6.5e6)
+    assert {name: float(variables[name].start) for name in SPECS} == params
+    assert float(variables['preset_pressure'].start) == pytest.approx(6.5e6, rel=1e-9)
+    assert float(variables['step_size'].start) == 5e-6
+    result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
+                               output=['supply_pressure'])
+    assert result['supply_pressure'][0] == steady_state(params, Q0)[P_S]
+    refused = valve_sim('fmu', '--out', str(tmp_path / 'valve.zip'), check=False)
+    assert refused.returncode == 1 and '--out must name a .fmu file' in refused.stderr

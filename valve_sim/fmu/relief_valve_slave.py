@@ -1,0 +1,395 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+ReliefValve: the FMU's slave, valve_sim.core's RealTimeModel behind FMI 2.0 co-simulation.
+
+pythonfmu copies this file into the FMU (resources/) and the FMU's binary runs it in an
+embedded Python, which must have valve_sim installed (docs/fmu.md). The parameter file
+the FMU was built with, resources/parameters.yaml, gives the defaults.
+
+Variables (SI; pressures gauge, above the ambient pressure, as `valve-sim simulate`):
+  inputs      inlet_flow q_in [m^3/s], tank_pressure p_t [Pa, gauge]
+  outputs     supply_pressure p_s, intermediate_pressure p_m, pilot_pressure p_p,
+              poppet_chamber_pressure p_c [Pa, gauge]; main_valve_displacement x,
+              poppet_displacement y [m]; relief_flow (all the valve passes to the tank)
+              and its parts main_stage_flow q_m2, pilot_flow q_p, seat_leakage_flow q_l
+              [m^3/s]; halted (the model holds its last good state)
+  parameters  every model parameter of the catalogue and preset_pressure (tunable),
+              step_size (the internal RK4 step [s], tunable), initial_state (fixed)
+
+doStep integrates the whole internal steps that fit up to the communication point and
+carries the remainder into the next step, as valve_node does (RealTimeModel), so any
+communication step works. A parameter change between steps is checked and trial-run
+as valve_node checks it. An overpressure halts the model as it halts valve_node
+(supply_pressure at burst_pressure, the rest held): fmi2OK with a logged warning. A
+divergence keeps the last good state: fmi2Discard with the reason logged, until an input
+or a parameter changes. An invalid input (NaN, negative, beyond the limits), a refused
+parameter change or a failed start: fmi2Discard, nothing integrated, the reason logged
+with status error; the instance stays usable. No call lets an exception out: pythonfmu
+0.7 returns fmi2Fatal for one and releases the slave object, which ends the instance.
+"""
+
+from pathlib import Path
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
+from pythonfmu.enums import Fmi2Status
+from valve_sim import __version__
+from valve_sim.core.errors import IntegrationError, OverpressureError, SteadyStateError
+from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
+from valve_sim.core.model import STATE_NAMES
+from valve_sim.core.parameters import (
+    check_value,
+    load_parameters,
+    ParameterError,
+    PARAMETERS,
+    PRESET_PRESSURE,
+    SETTING_SPECS,
+    SPECS,
+)
+from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
+from valve_sim.core.retuning import (
+    check_limits,
+    check_preset,
+    dependent_change,
+    merged_parameters,
+)
+from valve_sim.core.steady_state import cracking_pressure
+
+
+PARAMETER_FILE = 'parameters.yaml'  # in the FMU's resources/: the defaults it was built with
+INITIAL_STATES = ('steady', 'closed')
+NEVER_SKIP_NS = 2**62  # the master's clock is the model's: no lag is ever skipped
+REFUSED = (ParameterError, SteadyStateError, IntegrationError)  # what a start or change meets
+
+# The SI base-unit exponents of each unit used (FMI 2.0 UnitDefinitions).
+BASE_UNITS = {
+    'm': {'m': 1},
+    'm^3': {'m': 3},
+    'm^3/s': {'m': 3, 's': -1},
+    'Pa': {'kg': 1, 'm': -1, 's': -2},
+    'Pa*s': {'kg': 1, 'm': -1, 's': -1},
+    'kg': {'kg': 1},
+    'kg/m^3': {'kg': 1, 'm': -3},
+    'N*s/m': {'kg': 1, 's': -1},
+    'N/m': {'kg': 1, 's': -2},
+    'rad': {'rad': 1},
+    's': {'s': 1},
+    '1': {},
+}
+OUTPUT_STATES = {  # the states that are outputs: description
+    'supply_pressure': 'p_s: supply pressure at the inlet port, gauge',
+    'intermediate_pressure': 'p_m: pressure between the main throttles, gauge',
+    'pilot_pressure': 'p_p: pilot (back) chamber pressure, gauge',
+    'poppet_chamber_pressure': 'p_c: poppet chamber pressure, gauge',
+    'main_valve_displacement': 'x: main valve opening from its seat',
+    'poppet_displacement': 'y: pilot poppet opening from its seat',
+}
+OUTPUT_FLOWS = {  # RealTimeModel.relief_flows(), in its order: description
+    'relief_flow': 'all the valve passes to the tank: main stage + pilot + seat leakage',
+    'main_stage_flow': 'q_m2: flow through the second main throttle to the tank (Eq. 11)',
+    'pilot_flow': 'q_p: flow past the pilot poppet to the tank (Eq. 15)',
+    'seat_leakage_flow': 'q_l: leakage past the main valve seat (a fault; 0 when healthy)',
+}
+
+
+class Quantity(Real):
+    """A Real with its unit and range in modelDescription.xml, its start to full precision."""
+
+    def __init__(self, name, unit, minimum=None, maximum=None, **kwargs):
+        super().__init__(name, **kwargs)
+        self.unit, self.minimum, self.maximum = unit, minimum, maximum
+
+    def to_xml(self):
+        element = super().to_xml()
+        real = element.find('Real')
+        real.set('unit', self.unit)
+        if self.start is not None:
+            real.set('start', repr(float(self.start)))
+        for key, value in (('min', self.minimum), ('max', self.maximum)):
+            if value is not None:
+                real.set(key, repr(float(value)))
+        return element
+
+
+def parameter_description(spec):
+    """Return a catalogue spec as one description line: meaning, symbol, unit and source."""
+    return f'{spec.describe()}; source: {spec.source}'
+
+
+class ReliefValve(Fmi2Slave):
+    """The direct-pressure-sensing water-hydraulic relief valve of valve_sim (one instance)."""
+
+    author = 'valve_sim developers'
+    license = 'Apache-2.0'  # noqa: A003 (pythonfmu's attribute)
+    version = __version__
+    description = (
+        'valve_sim relief valve: inlet flow and tank pressure in; chamber pressures (gauge), '
+        'valve positions and the relief flow out. Needs Python with valve_sim installed.'
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = 'ReliefValve'
+        path = Path(self.resources or '.') / PARAMETER_FILE
+        self._defaults, settings = load_parameters(path if path.is_file() else None)
+        self._default_preset = cracking_pressure(self._defaults)
+        self.model = None
+        self._start_ns = 0
+        self._clock_ns = None
+        self._applied = None  # (inlet flow, tank pressure) of the last step
+        self._saturated = False  # halted by an overpressure: p_s shown at burst_pressure
+        self._failed = None  # why the start failed
+        for spec in PARAMETERS:
+            setattr(self, spec.name, self._defaults[spec.name])
+            self._parameter(spec)
+        self.preset_pressure = self._default_preset
+        self._parameter(PRESET_PRESSURE)
+        self.step_size = settings['step_size']
+        self._parameter(SETTING_SPECS['step_size'])
+        self.initial_state = 'steady'
+        self.register_variable(String(
+            'initial_state', causality=Fmi2Causality.parameter,
+            variability=Fmi2Variability.fixed,
+            description="start: 'steady' (the exact steady state at the initial inlet_flow and "
+            "tank_pressure, as valve_node starts) or 'closed' (the empty, closed valve)",
+        ))
+        self.inlet_flow = settings['initial_inlet_flow']
+        self.tank_pressure = settings['tank_pressure']
+        self.register_variable(Quantity(
+            'inlet_flow', 'm^3/s', 0.0,  # no max: max_inlet_flow is tunable
+            causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+            description='q_in: inlet flow into the supply port, 0 to max_inlet_flow',
+        ))
+        self.register_variable(Quantity(
+            'tank_pressure', 'Pa', causality=Fmi2Causality.input,
+            variability=Fmi2Variability.continuous,
+            description='p_t: pressure of the tank (return line), gauge: 0 is ambient; '
+            'below burst_pressure',
+        ))
+        for name in OUTPUT_STATES:
+            setattr(self, name, 0.0)
+            self._output(name, 'Pa' if name.endswith('pressure') else 'm', OUTPUT_STATES)
+        for name in OUTPUT_FLOWS:
+            setattr(self, name, 0.0)
+            self._output(name, 'm^3/s', OUTPUT_FLOWS)
+        self.halted = False
+        self.register_variable(Boolean(
+            'halted', causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+            description='the model holds its last good state after an overpressure or a '
+            'divergence, until an input or a parameter changes',
+        ))
+
+    def _parameter(self, spec):
+        self.register_variable(Quantity(
+            spec.name, spec.unit, spec.minimum, spec.maximum,
+            causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable,
+            description=parameter_description(spec),
+        ))
+
+    def _output(self, name, unit, descriptions):
+        self.register_variable(Quantity(
+            name, unit, causality=Fmi2Causality.output,
+            variability=Fmi2Variability.continuous, description=descriptions[name],
+        ))
+
+    def to_xml(self, model_options=None):
+        """
+        Return pythonfmu's XML with the units and the initial unknowns FMI 2.0 asks for.
+
+        UnitDefinitions (after CoSimulation) with SI base units; the outputs, calculated
+        at initialisation, as ModelStructure/InitialUnknowns.
+        """
+        root = super().to_xml(model_options or {})
+        structure = root.find('ModelStructure')
+        initial = SubElement(structure, 'InitialUnknowns')
+        for element in structure.find('Outputs'):
+            SubElement(initial, 'Unknown', index=element.get('index'))
+        used = sorted({v.unit for v in self.vars.values() if isinstance(v, Quantity)})
+        units = Element('UnitDefinitions')
+        for name in used:
+            unit = SubElement(units, 'Unit', name=name)
+            SubElement(unit, 'BaseUnit', {k: str(v) for k, v in BASE_UNITS[name].items()})
+        root.insert(list(root).index(root.find('CoSimulation')) + 1, units)
+        return root
+
+    # --- FMI calls: none lets an exception out (pythonfmu would end the instance) ------------
+
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._start_ns = round(start_time * NS_PER_S)
+
+    def exit_initialization_mode(self):
+        """Start the model: the steady state at the inputs, or the closed valve."""
+        try:
+            if self.initial_state not in INITIAL_STATES:
+                raise ParameterError(
+                    f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
+                    f'got {self.initial_state!r}'
+                )
+            params, preset = self._requested(self._defaults, self._default_preset)
+            step_size = check_value('step_size', self.step_size)
+            inlet_flow, tank_pressure = self._inputs(params)
+            start_flow = inlet_flow if self.initial_state == 'steady' else 0.0
+            model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
+        except REFUSED as error:
+            self._failed = f'the FMU could not start: {error}'
+            self.log(self._failed, Fmi2Status.error)
+            return
+        self.model = model
+        model.start(self._start_ns)
+        self._clock_ns = self._start_ns
+        self._applied = (start_flow, tank_pressure)
+        self._show(params, preset)
+        self._update_outputs()
+
+    def do_step(self, current_time, step_size):
+        """
+        Integrate from current_time over step_size [s]; True: fmi2OK, False: fmi2Discard.
+
+        Discarded, with the reason logged: a step refused (an invalid input, a refused
+        parameter change, a start that failed, a step not from the FMU's time), of which
+        nothing is integrated, and a divergence, of which the last good state is kept.
+        Either way the FMU stays at current_time; the master may redo the step.
+        """
+        try:
+            self._step(current_time, step_size)
+        except IntegrationError as error:
+            self.log(f'{error} The last good state is held; the step is discarded, as are '
+                     'the next until an input or a parameter changes.', Fmi2Status.discard)
+            return False
+        except REFUSED as error:
+            self.log(f'doStep at t = {current_time!r} s refused, nothing integrated: {error}',
+                     Fmi2Status.error)
+            return False
+        return True
+
+    def _step(self, current_time, step_size):
+        """do_step's work; raises what refuses the step or IntegrationError."""
+        model = self.model
+        if model is None:
+            raise ParameterError(self._failed or 'doStep before the FMU was initialised')
+        begin_ns = round(current_time * NS_PER_S)
+        if begin_ns != self._clock_ns or not step_size >= 0.0:
+            raise ParameterError(
+                f'a step over {step_size!r} s from t = {current_time!r} s: the FMU is at '
+                f't = {self._clock_ns / NS_PER_S!r} s and steps forward from there only'
+            )
+        inlet_flow, tank_pressure = self._inputs(model.params)
+        retuned = self._retune(inlet_flow, tank_pressure)
+        if retuned or (inlet_flow, tank_pressure) != self._applied:
+            self._resume('a parameter change' if retuned else 'a new input')
+        self._applied = (inlet_flow, tank_pressure)
+        if model.halted is not None and not self._saturated:
+            raise IntegrationError('The model is halted after a divergence (logged before).')
+        now_ns = round((current_time + step_size) * NS_PER_S)
+        try:
+            model.advance_to(now_ns, inlet_flow, NEVER_SKIP_NS, tank_pressure)
+        except OverpressureError as error:
+            model.hold_until(now_ns)
+            model.halt(str(error))
+            self._saturated = True
+            self.log(
+                f'{error} The model halts there, as valve_node does: it holds its last good '
+                'state and supply_pressure is reported at burst_pressure = '
+                f"{model.params['burst_pressure']:g} Pa (gauge), the limit it passed, until "
+                'an input or a parameter changes', Fmi2Status.warning,
+            )
+        except IntegrationError as error:
+            model.halt(str(error))
+            self._update_outputs()
+            raise
+        self._clock_ns = now_ns
+        self._update_outputs()
+
+    # --- the adapter -------------------------------------------------------------------------
+
+    def _inputs(self, params):
+        """Return the inputs (inlet flow, tank pressure) as floats; ParameterError if invalid."""
+        flow, tank = self.inlet_flow, self.tank_pressure
+        problem = inlet_flow_problem(flow, params['max_inlet_flow']) or tank_pressure_problem(
+            tank, params['burst_pressure']
+        )
+        if problem:
+            raise ParameterError(f'input refused: {problem}')
+        return float(flow), float(tank)
+
+    def _requested(self, params, preset):
+        """
+        Return (params, preset_pressure) as the parameter variables now ask, checked.
+
+        params, preset: those in use. Setting preset_pressure sets pilot_spring_preload,
+        changing a model parameter moves preset_pressure, as in valve_node; setting both
+        inconsistently is refused (ParameterError).
+        """
+        changes = {
+            name: getattr(self, name) for name in SPECS if getattr(self, name) != params[name]
+        }
+        if self.preset_pressure != preset:
+            changes['preset_pressure'] = check_value('preset_pressure', self.preset_pressure)
+        if not changes:
+            return params, preset
+        for name, value in changes.items():
+            check_value(name, value)
+        changes.update(dependent_change(params, changes))
+        new = merged_parameters(params, changes)
+        check_preset(new, changes)
+        return new, changes.get('preset_pressure', preset)
+
+    def _retune(self, inlet_flow, tank_pressure):
+        """Apply changed parameters or step size as valve_node would; True if any changed."""
+        model = self.model
+        preset = self._preset
+        step_size = self.step_size
+        try:
+            params, preset = self._requested(model.params, preset)
+            if params is model.params and step_size == model.step_size:
+                return False
+            step_size = check_value('step_size', step_size)
+            check_limits(params, model.state, inlet_flow, tank_pressure)
+            model.trial(params, step_size, inlet_flow, tank_pressure=tank_pressure)
+        except REFUSED as error:
+            self._show(model.params, self._preset)
+            self.step_size = model.step_size
+            raise ParameterError(
+                f'parameter change refused, the parameters in use are kept: {error}'
+            ) from None
+        model.retune(params, step_size)
+        self._show(params, preset)
+        return True
+
+    def _show(self, params, preset):
+        """Set the parameter variables to the parameters in use."""
+        for name in SPECS:
+            setattr(self, name, params[name])
+        self.preset_pressure = self._preset = preset
+
+    def _resume(self, cause):
+        if self.model.halted is not None:
+            self.model.resume()
+            self._saturated = False
+            self.log(f'the model advances again after {cause}')
+
+    def _update_outputs(self):
+        state = self.model.state
+        for index, name in enumerate(STATE_NAMES):
+            if name in OUTPUT_STATES:
+                setattr(self, name, float(state[index]))
+        if self._saturated:
+            self.supply_pressure = self.model.params['burst_pressure']
+        flows = self.model.relief_flows()
+        for name, value in zip(OUTPUT_FLOWS, flows):
+            setattr(self, name, float(value))
+        self.halted = self.model.halted is not None
