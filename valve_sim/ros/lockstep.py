@@ -22,9 +22,10 @@ such as a controller under test, publish once per tick); only then does the next
 tick go. Inputs and parameter changes go between ticks, so they act from the tick
 after the state just received: the same run twice gives the same states, bit for bit.
 
-The handshake topic is applied_inlet_flow, the last of the tick topics valve_node
-publishes (valve_topics.TICK_TOPICS), so once its message has come, every topic of
-the tick was published. It also carries the flow the tick applied: a flow that was
+A tick is complete when the last of the tick topics valve_node publishes
+(valve_topics.TICK_TOPICS) has come with its stamp, so every topic of the tick was
+published, and applied_inlet_flow (the handshake), which carries the flow the tick
+applied, has come too: a flow that was
 published before the tick but not applied (the message had not arrived) is an
 error, never a silent difference. /clock is subscribed best effort by rclpy's time
 source, so a time whose state does not come within RESEND is published again.
@@ -54,8 +55,8 @@ from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
 
-HANDSHAKE = 'applied_inlet_flow'
-assert TICK_TOPICS[-1] == HANDSHAKE, 'the handshake must be the last topic of a tick'
+HANDSHAKE = 'applied_inlet_flow'  # the flow the tick applied
+LAST_TOPIC = TICK_TOPICS[-1]  # published last in a tick: once it is here, the tick is
 FLOW_AT_END = struct.Struct('<d')  # applied_inlet_flow: velocity[0], then an empty effort
 NS_PER_S = 1_000_000_000
 START_NS = NS_PER_S  # /clock of the first tick: past any timer's first period (up to 1 s)
@@ -134,20 +135,37 @@ class Lockstep:
         self.clock_ns = None  # last /clock published
         self.flow = None  # last flow published [m^3/s]: what the next tick applies
         self._paced_from = None  # (wall time, clock) pacing starts from
+        self._applied_ns = self._last_ns = None
         self.subscriptions = [self.node.create_subscription(
-            JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True)]
+            JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True),
+            self.node.create_subscription(
+                message_class(TOPIC_TYPES[LAST_TOPIC]), LAST_TOPIC, self._on_last, RELIABLE,
+                raw=True)]
         for topic in record_topics:
-            if topic != HANDSHAKE:
+            if topic not in (HANDSHAKE, LAST_TOPIC):
                 self.subscriptions.append(self.node.create_subscription(
                     message_class(TOPIC_TYPES[topic]), topic,
                     lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True))
-        self.on_state = on_state if HANDSHAKE in record_topics else None
+        self.on_state = on_state
+        self.record_topics = set(record_topics)
 
     def _on_handshake(self, data):
-        self.time_ns = stamp_ns(data)
+        self._applied_ns = stamp_ns(data)
         self.applied = FLOW_AT_END.unpack_from(data, len(data) - 12)[0]
-        if self.on_state is not None:
+        self._update_time()
+        if HANDSHAKE in self.record_topics:
             self.on_state(HANDSHAKE, data)
+
+    def _on_last(self, data):
+        self._last_ns = stamp_ns(data)
+        self._update_time()
+        if LAST_TOPIC in self.record_topics:
+            self.on_state(LAST_TOPIC, data)
+
+    def _update_time(self):
+        """time_ns: the latest tick both the applied flow and the tick's last topic came for."""
+        if self._applied_ns is not None and self._last_ns is not None:
+            self.time_ns = min(self._applied_ns, self._last_ns)
 
     def spin_until(self, condition, what, timeout=TIMEOUT):
         spin_until(self.executor, condition, timeout, what, self.processes, period=RESEND)
