@@ -23,8 +23,9 @@
 # - model: valve_node's RealTimeModel advanced tick by tick (1 ms, 100 RK4 steps) in
 #   this process, the paper step's flows: the model alone;
 # - round trip: a bare rclpy node (on valve_node's executor) that answers each /clock
-#   with one handshake message (applied_inlet_flow), driven by valve_sim.ros.lockstep.
-#   Lockstep: the DDS round trip and the driver, the floor any lockstep run here has;
+#   with the two messages that end a tick (applied_inlet_flow, relief_flow), driven by
+#   valve_sim.ros.lockstep.Lockstep: the DDS round trip and the driver, the floor any
+#   lockstep run here has;
 # - lockstep: valve_node alone in lockstep (every tick topic published at 1 kHz, no
 #   recorder): model + publishing + round trip;
 # - scenario: `scenario run` of scenarios/paper_step.yaml, analyser_node recording
@@ -55,12 +56,14 @@ BARE_RESPONDER = (
     'from sensor_msgs.msg import JointState\n'
     'rclpy.init()\n'
     "node = rclpy.create_node('bare_responder')\n"
-    "publisher = node.create_publisher(JointState, 'applied_inlet_flow',\n"
-    '    QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))\n'
+    'qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)\n'
+    "publishers = [node.create_publisher(JointState, topic, qos)  # as a tick's handshake\n"
+    "              for topic in ('applied_inlet_flow', 'relief_flow')]  # and its last topic\n"
     'message = JointState(velocity=[0.0])\n'
     'def answer(clock):\n'
     '    message.header.stamp = clock.clock\n'
-    '    publisher.publish(message)\n'
+    '    for publisher in publishers:\n'
+    '        publisher.publish(message)\n'
     "node.create_subscription(Clock, '/clock', answer, 10)\n"
     'from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS\n'
     'executor = EXECUTORS[DEFAULT_EXECUTOR]()  # the executor valve_node spins\n'
