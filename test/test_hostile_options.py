@@ -24,6 +24,7 @@ Options, sizes and outputs bounded; what goes on the wire finite and physical.
   analyse --json writes null with a reason, never NaN or Infinity.
 """
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -112,15 +113,19 @@ def test_every_numeric_option_is_bounded_and_its_help_gives_the_bounds():
     for command in SUBCOMMANDS:
         parser = build_parser([command])
         sub = parser._subparsers._group_actions[0].choices[command]
-        text = ' '.join(sub.format_help().split())
         row = next((line for line in docs.splitlines() if line.startswith(f'| `{command}` |')), '')
-        for action in sub._actions:
-            assert action.type not in (int, float), (command, action.option_strings)
-            bounds = getattr(action.type, 'bounds', None)
-            if bounds:
-                assert ' '.join(bounds.split()) in text, (command, action.option_strings)
-                assert f'`{action.option_strings[-1]}` {bounds}' in row, (command, bounds)
-        numeric = [a for a in sub._actions if getattr(a.type, 'bounds', None)]
+        nested = [choice for action in sub._actions if action.choices and isinstance(
+            action, argparse._SubParsersAction) for choice in action.choices.values()]
+        numeric = []
+        for each in [sub, *nested]:  # a command's actions (scenario run, check) too
+            text = ' '.join(each.format_help().split())
+            for action in each._actions:
+                assert action.type not in (int, float), (command, action.option_strings)
+                bounds = getattr(action.type, 'bounds', None)
+                if bounds:
+                    assert ' '.join(bounds.split()) in text, (command, action.option_strings)
+                    assert f'`{action.option_strings[-1]}` {bounds}' in row, (command, bounds)
+            numeric += [a for a in each._actions if getattr(a.type, 'bounds', None)]
         assert numeric or command in ('repair',), command
 
 

@@ -31,6 +31,7 @@ from hostile_inputs import FILES, JSON_TEXTS, make_file, mutations, YAML_TEXTS
 import pytest
 from valve_sim.analysis.calibration import CalibrationError
 from valve_sim.analysis.robust_yield import check_candidate_row
+from valve_sim.analysis.scenario_file import load_scenario
 from valve_sim.analysis.study_runner import read_results
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError, StudyError
@@ -91,6 +92,7 @@ YAML_READERS = {
     'fault schedule': read_schedule,
     'parameter file': read_parameters,
     'bag metadata': read_metadata,
+    'scenario': load_scenario,
 }
 JSON_READERS = {'study results': read_study_results, 'optimise results': read_optimise_results}
 RUNNER_ROW = {
@@ -112,6 +114,8 @@ VALID = {
     'fault schedule': config_path('fault_schedule_example.yaml').read_bytes(),
     'parameter file': config_path('reference.yaml').read_bytes(),
     'bag metadata': METADATA.encode(),
+    'scenario': (Path(__file__).resolve().parents[1] / 'scenarios'
+                 / 'stuck_main_valve.yaml').read_bytes(),
     'study results': json.dumps(RUNNER_ROW).encode(),
     'optimise results': json.dumps(CANDIDATE_ROW).encode(),
 }

@@ -26,7 +26,7 @@ import pytest
 
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'valve_sim'
-WINGS = ['core', 'fmu', 'analysis', 'recording', 'ros', 'commands']
+WINGS = ['core', 'fmu', 'analysis', 'recording', 'ros', 'commands', 'testing']
 NO_RCLPY = {'core', 'fmu', 'analysis', 'recording'}
 # recording may use rclpy inside functions that need a live context, never at import time
 RCLPY_INSIDE_FUNCTIONS = {'recording'}

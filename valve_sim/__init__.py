@@ -23,6 +23,7 @@ The package is built in wings, each importing only the wings below it:
     recording  MCAP bags as rosbag2 writes them, CDR tick messages, replay
     ros        the nodes (valve_node, analyser_node): thin rclpy adapters
     commands   the `valve-sim` command line, one module per subcommand
+    testing    the test kit for users' suites: a valve_node in lockstep, a pytest fixture
 
 test/test_layering.py keeps it so.
 """

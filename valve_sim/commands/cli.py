@@ -16,7 +16,7 @@
 The `valve-sim` command line: simulate, study, operating-point, analyse, calibrate and more.
 
 Subcommands: simulate, study, tolerance, sensitivity, optimise, operating-point,
-characteristic, analyse, calibrate, repair, fmu, demo.
+characteristic, analyse, calibrate, repair, fmu, demo, scenario.
 
 Each subcommand lives in its own module with add_arguments(parser) and
 run(args) -> exit code; this file only wires them together and turns the
@@ -74,6 +74,10 @@ SUBCOMMANDS = {
     'demo': (
         'valve_sim.commands.demo',
         "valve_node + analyser_node over DDS: the paper's step, recorded and measured",
+    ),
+    'scenario': (
+        'valve_sim.commands.scenario',
+        'bench tests as files: run one on valve_node in lockstep and judge it (or check it)',
     ),
 }
 

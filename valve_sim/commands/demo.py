@@ -31,8 +31,6 @@ one line saying what is missing if any measure, the bag or the figure is.
 import math
 from pathlib import Path
 import re
-import signal
-import subprocess
 import time
 
 import numpy as np
@@ -57,7 +55,6 @@ AFTER_MEASURES = 0.2  # [s] still recorded after the measures arrived
 COMMAND_PERIOD = 0.02  # [s] inlet_flow is published at 50 Hz (valve_node's input timeout is 1 s)
 READY_TIMEOUT = 180.0  # [s] for start-up (a cold kernel compile on a loaded machine) and discovery
 MEASURES_TIMEOUT = 60.0  # [s] from the step to the analyser's measures
-STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
 # [s] Sampling the measures need (docs/analyser.md, "The demo"). Each peak is refined by
 # a parabola through the samples near it, so close to a peak (within T_d / 8) states may
 # be at most PEAK_GAP_LIMIT apart, elsewhere in the window WINDOW_GAP_LIMIT (longer is
@@ -67,56 +64,10 @@ STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
 PEAK_GAP_LIMIT = 0.003
 WINDOW_GAP_LIMIT = 0.01
 ATTEMPTS = 20  # steps tried (some 5 s each) before the demo gives up: load often passes
-NODES = ('valve_node', 'analyser_node')
 
 
 def progress(text):
     print(f'demo: {text}', flush=True)
-
-
-def start_nodes(folder, foxglove_port=None):
-    """
-    Start valve_node and analyser_node (recording into folder), logs in folder.
-
-    foxglove_port: valve_node serves its live view there. Returns {name: Popen}.
-    """
-    from valve_sim.ros import node_command
-
-    commands = {
-        'valve_node': node_command(
-            'valve_node', [] if foxglove_port is None else ['--foxglove', str(foxglove_port)]
-        ),
-        'analyser_node': node_command('analyser_node', parameters={'output_dir': folder}),
-    }
-    processes = {}
-    for name in NODES:
-        with open(folder / f'{name}.log', 'wb') as log:
-            processes[name] = subprocess.Popen(
-                commands[name], stdout=log, stderr=subprocess.STDOUT
-            )
-    return processes
-
-
-def stop_nodes(processes, folder):
-    """SIGINT each running node and wait; raises ChildProcessError if one does not end cleanly."""
-    for process in processes.values():
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-    failures = []
-    for name, process in processes.items():
-        try:
-            code = process.wait(STOP_TIMEOUT)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            code = process.wait()
-            failures.append(
-                f'{name} did not stop within {STOP_TIMEOUT:g} s of SIGINT and was killed'
-            )
-            continue
-        if code != 0:
-            failures.append(f'{name} exited with code {code}')
-    if failures:
-        raise ChildProcessError('; '.join(failures) + f' (logs in {folder})')
 
 
 class Driver:
@@ -170,17 +121,9 @@ class Driver:
 
     def spin_until(self, condition, timeout, what):
         """Spin until condition() holds; raises TimeoutError or ChildProcessError (a node died)."""
-        deadline = time.monotonic() + timeout
-        while not condition():
-            self.executor.spin_once(timeout_sec=0.02)
-            for name, process in self.processes.items():
-                if process.poll() is not None:
-                    raise ChildProcessError(
-                        f'{name} ended with code {process.returncode} while waiting for '
-                        f'{what} (log: {self.folder / (name + ".log")})'
-                    )
-            if time.monotonic() > deadline:
-                raise TimeoutError(f'no {what} within {timeout:g} s (logs in {self.folder})')
+        from valve_sim.ros.node_processes import spin_until
+
+        spin_until(self.executor, condition, timeout, what, self.processes)
 
     def run_step(self):
         """
@@ -411,12 +354,15 @@ def run(args):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
     from valve_sim.ros.isolation import claim_domain
+    from valve_sim.ros.node_processes import start_valve_and_analyser
 
     folder = Path(args.out) if args.out else Path.cwd() / time.strftime('demo_%Y%m%d-%H%M%S')
     folder = make_folder(folder).resolve()
     progress(f'output folder {folder}; ROS_DOMAIN_ID={claim_domain()}')
     progress('starting valve_node and analyser_node')
-    processes = start_nodes(folder, args.foxglove)
+    processes = start_valve_and_analyser(
+        folder, [] if args.foxglove is None else ['--foxglove', str(args.foxglove)]
+    )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     driver = None
     try:
@@ -427,7 +373,7 @@ def run(args):
             driver.close()
         rclpy.try_shutdown()
         progress('stopping both nodes (SIGINT)')
-        stop_nodes(processes, folder)
+        processes.stop()
     progress('both nodes stopped cleanly')
     report(folder, bag, driver.attempts)
     return 0

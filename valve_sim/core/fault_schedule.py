@@ -80,8 +80,12 @@ def check_change(name, value):
     )
 
 
-def parse_schedule(document, source='schedule'):
-    """Events of a parsed schedule document, sorted by time (stable); raises ParameterError."""
+def parse_schedule(document, source='schedule', check=check_change):
+    """
+    Events of a parsed schedule document, sorted by time (stable); raises ParameterError.
+
+    check(name, value) returns a change's value checked (default: fault and sensor settings).
+    """
     if not isinstance(document, dict) or not isinstance(document.get('events'), list):
         raise ParameterError(f"{source}: expected a mapping with a list 'events'")
     if len(document['events']) > MAX_EVENTS:
@@ -102,7 +106,7 @@ def parse_schedule(document, source='schedule'):
         if not isinstance(event['set'], dict) or not event['set']:
             raise ParameterError(f"{where}: 'set' must map parameter names to values")
         try:
-            changes = {name: check_change(name, value) for name, value in event['set'].items()}
+            changes = {name: check(name, value) for name, value in event['set'].items()}
         except ParameterError as error:
             raise ParameterError(f'{where}: {error}') from None
         events.append(FaultEvent(round(t * NS_PER_S), changes))

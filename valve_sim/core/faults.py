@@ -216,3 +216,13 @@ def checked_number(spec, value, kind):
             f'[{spec.minimum:g}, {spec.maximum:g}]{unit}'
         )
     return value
+
+
+# The bench supply's relief: p_s within this fraction of supply_pressure_limit is there,
+# and valve_node raises its overpressure alarm (docs/faults.md).
+OVERPRESSURE_MARGIN = 1e-6
+
+
+def at_supply_limit(supply_pressure, limit):
+    """Return whether p_s [Pa, gauge] has reached supply_pressure_limit [Pa] (0: no limit)."""
+    return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= supply_pressure)

@@ -88,6 +88,8 @@ STUDY_RESULTS = FileKind('study results file', 4096 * MiB)  # JSON lines, STUDY_
 STUDY_ROW = FileKind('study results row', 64 * MiB, 2_000_000)
 MEASURES_FILE = FileKind('step measures file', 64 * MiB, 2_000_000)
 MCAP_FILE = FileKind('MCAP file')
+SCENARIO_FILE = FileKind('scenario', 1 * MiB, 200_000)  # valve-sim scenario (docs/scenarios.md)
+INPUT_CSV = FileKind('input CSV file', 64 * MiB)  # a scenario input's recorded column
 KINDS = (
     PARAMETER_FILE,
     FAULT_SCHEDULE,
@@ -98,6 +100,8 @@ KINDS = (
     STUDY_ROW,
     MEASURES_FILE,
     MCAP_FILE,
+    SCENARIO_FILE,
+    INPUT_CSV,
 )
 FILE_TYPES = (
     (stat.S_ISDIR, 'a directory'),

@@ -45,7 +45,13 @@ from valve_sim.core.fault_schedule import (
     open_schedule,
     Schedule,
 )
-from valve_sim.core.faults import FAULT_DOUBLE_SPECS, FAULT_NAMES, FAULT_SWITCH_SPECS, HEALTHY
+from valve_sim.core.faults import (
+    at_supply_limit,
+    FAULT_DOUBLE_SPECS,
+    FAULT_NAMES,
+    FAULT_SWITCH_SPECS,
+    HEALTHY,
+)
 from valve_sim.core.input_files import InputFileError
 from valve_sim.core.model import P_C, P_S
 from valve_sim.core.parameters import FAULT_SCHEDULE
@@ -68,7 +74,6 @@ FAULT_STATUS_QOS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
-OVERPRESSURE_MARGIN = 1e-6  # p_s within this fraction of supply_pressure_limit counts as there
 PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the folder holding valve_sim
 
 
@@ -171,7 +176,7 @@ class FaultInjection:
 
     def at_supply_limit(self, state, limit):
         """Return whether p_s [Pa gauge] of state has reached the supply's limit [Pa]."""
-        return bool(0.0 < limit * (1.0 - OVERPRESSURE_MARGIN) <= state[P_S])
+        return at_supply_limit(state[P_S], limit)
 
     def status_message(self, faults, stamp, name, hardware_id):
         """

@@ -1,0 +1,169 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A bench scenario's verdict: report.txt, report.json, junit.xml and scenario.png.
+
+Each expectation's limit is one check with what was measured (valve_sim.analysis.
+expectations.Check). The JUnit file has one test case per check (a failure with the
+measured value for one that does not hold, the measured value as its system-out for
+one that holds; one error case for a run that could not complete), so any CI shows
+the result. The figure draws p_s, the valve positions and the inlet flow over the
+run, the events and the limits of the checks that bound a signal.
+"""
+
+from datetime import datetime, timezone
+import json
+import socket
+import xml.etree.ElementTree as ElementTree
+
+import numpy as np
+from valve_sim.analysis.measures import MEASURE_NAMES
+
+
+STEP_KEYS = ('t_step', 'direction', 'flow_before', *MEASURE_NAMES, 'reasons')
+
+
+def verdict(checks):
+    failed = sum(not check.passed for check in checks)
+    return 'PASSED' if checks and not failed else 'FAILED', failed
+
+
+def report_text(run):
+    """Return the report as text: the verdict, how the run went, one line per check."""
+    scenario = run.scenario
+    word, failed = verdict(run.checks)
+    lines = [
+        f'scenario {scenario.name} ({scenario.path}): {word}, '
+        f'{len(run.checks) - failed} of {len(run.checks)} checks hold',
+        f'  {scenario.duration:g} s of model time, {len(run.series)} states of valve_node in '
+        f'lockstep in {run.wall_s:.2f} s ({run.speed:.2f}x real time)',
+        f'  bag {run.bag}',
+    ]
+    if scenario.description:
+        lines.insert(1, f'  {scenario.description}')
+    width = max(len(check.name) for check in run.checks)
+    for check in run.checks:
+        lines.append(f'  {"PASS" if check.passed else "FAIL"}  {check.name:<{width}}  '
+                     f'measured {check.shown}  ({check.detail})')
+    return '\n'.join(lines) + '\n'
+
+
+def report_document(run):
+    """Return the report as a JSON-ready dict: the checks (measured values), run and steps."""
+    scenario = run.scenario
+    return {
+        'scenario': scenario.name,
+        'file': str(scenario.path),
+        'passed': run.passed,
+        'checks': [check.as_dict() for check in run.checks],
+        'run': {
+            'duration_s': scenario.duration,
+            'states': len(run.series),
+            'period_s': scenario.period_ns / 1e9,
+            'first_stamp_ns': run.start_ns,
+            'wall_s': run.wall_s,
+            'real_time_factor': run.speed,
+            'bag': str(run.bag),
+        },
+        'steps': [{key: record[key] for key in STEP_KEYS} for record in run.steps],
+    }
+
+
+def junit_document(scenario, checks, wall_s=0.0, error=None):
+    """Return the JUnit XML of a run as bytes: a test case per check, or the error's case."""
+    word, failed = verdict(checks)
+    tests = len(checks) + (error is not None)
+    counts = {'tests': str(tests), 'failures': str(failed if error is None else 0),
+              'errors': str(int(error is not None)), 'skipped': '0', 'time': f'{wall_s:.3f}'}
+    suites = ElementTree.Element('testsuites', name='valve-sim scenario', **counts)
+    suite = ElementTree.SubElement(
+        suites, 'testsuite', name=scenario.name, hostname=socket.gethostname(),
+        timestamp=datetime.now(timezone.utc).isoformat(timespec='seconds'), **counts)
+    properties = ElementTree.SubElement(suite, 'properties')
+    ElementTree.SubElement(properties, 'property', name='file', value=str(scenario.path))
+    for check in checks if error is None else ():
+        case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
+                                      name=check.name, time='0')
+        if not check.passed:
+            failure = ElementTree.SubElement(
+                case, 'failure', message=f'measured {check.shown}, expected {check.limit}')
+            failure.text = check.detail
+        else:  # CI shows it beside the case: what a passing check measured
+            ElementTree.SubElement(case, 'system-out').text = (
+                f'measured {check.shown}, expected {check.limit} ({check.detail})')
+    if error is not None:
+        case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
+                                      name='run', time=f'{wall_s:.3f}')
+        ElementTree.SubElement(case, 'error', message=error).text = error
+    ElementTree.indent(suites)
+    return ElementTree.tostring(suites, encoding='utf-8', xml_declaration=True) + b'\n'
+
+
+def plot_run(path, run):
+    """Draw p_s, x and y, and the inlet flow over the run, with events and signal limits."""
+    from valve_sim.analysis.expectations import Bound
+    from valve_sim.analysis.plotting import plt
+
+    series, scenario = run.series, run.scenario
+    figure, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 8), constrained_layout=True)
+    axes[0].plot(series.time, series['supply_pressure'] * 1e-6, color='tab:blue', linewidth=0.9)
+    axes[0].set_ylabel('p_s [MPa, gauge]')
+    for expectation in scenario.expectations:
+        if isinstance(expectation, Bound) and expectation.signal == 'supply_pressure':
+            axes[0].axhline(expectation.value * 1e-6, color='tab:red', linestyle='--',
+                            linewidth=0.8)
+    limits = scenario.supply_pressure_limits()
+    if np.any(limits > 0):
+        axes[0].step(series.time, np.where(limits > 0, limits, np.nan) * 1e-6, where='pre',
+                     color='0.4', linestyle=':', linewidth=0.8, label='supply_pressure_limit')
+        axes[0].legend(loc='best', fontsize='small')
+    axes[1].plot(series.time, series['main_valve'] * 1e3, color='tab:red', linewidth=0.9,
+                 label='x, main valve')
+    axes[1].plot(series.time, series['pilot_poppet'] * 1e3, color='tab:green', linewidth=0.9,
+                 label='y, pilot poppet')
+    axes[1].set_ylabel('position [mm]')
+    axes[1].legend(loc='best', fontsize='small')
+    axes[2].plot(series.time, series['inlet_flow'] * 6e4, color='tab:purple', linewidth=0.9)
+    axes[2].set_ylabel('applied q_in [L/min]')
+    axes[2].set_xlabel('time from the first tick [s]')
+    for event in scenario.events:
+        for axis in axes:
+            axis.axvline(event.time_ns / 1e9, color='tab:orange', linestyle='--', linewidth=0.8)
+        axes[0].annotate(', '.join(event.changes), (event.time_ns / 1e9, 1.0),
+                         xycoords=('data', 'axes fraction'), fontsize='x-small',
+                         rotation=90, va='top', ha='right', color='tab:orange')
+    for axis in axes:
+        axis.grid(True, alpha=0.3)
+    word, failed = verdict(run.checks)
+    axes[0].set_title(f'scenario {scenario.name}: {word} '
+                      f'({len(run.checks) - failed} of {len(run.checks)} checks hold)')
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def write_reports(run, junit_path=None):
+    """Write report.txt, report.json, scenario.png and junit.xml (or junit_path); return paths."""
+    folder = run.folder
+    paths = {
+        'report': folder / 'report.txt',
+        'json': folder / 'report.json',
+        'figure': folder / 'scenario.png',
+        'junit': junit_path or folder / 'junit.xml',
+    }
+    paths['report'].write_text(report_text(run))
+    paths['json'].write_text(json.dumps(report_document(run), indent=2) + '\n')
+    plot_run(paths['figure'], run)
+    paths['junit'].write_bytes(junit_document(run.scenario, run.checks, run.wall_s))
+    return paths

@@ -1,0 +1,102 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Bench tests as files: run a scenario on valve_node in lockstep and judge it, or check one.
+
+`valve-sim scenario run FILE.yaml` starts valve_node and analyser_node over DDS (in
+ROS_DOMAIN_ID if set, else a domain of its own; with --wait-topic in the environment's
+domain as it is, where the user's other nodes run), drives /clock tick by tick as fast
+as the nodes go (--rate: at most that many times real time), feeds the scenario's inputs
+and events, and judges its expectations on the recording. Into --out it writes the bag,
+report.txt, report.json, scenario.png, junit.xml and both nodes' logs; it exits 0 only
+if every expectation holds. `valve-sim scenario check FILE.yaml` reads and checks a file
+without running it. The file format: docs/scenarios.md.
+"""
+
+import os
+from pathlib import Path
+import time
+
+from valve_sim.commands.cli import make_folder
+from valve_sim.commands.options import number
+
+
+def progress(text):
+    print(f'scenario: {text}', flush=True)
+
+
+def add_arguments(parser):
+    actions = parser.add_subparsers(dest='action', required=True, metavar='ACTION')
+    run_parser = actions.add_parser('run', help='run a scenario and judge it',
+                                    formatter_class=parser.formatter_class,
+                                    description='run a scenario on valve_node in lockstep and '
+                                    'judge its expectations (exit 0 only if all hold)')
+    run_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
+    run_parser.add_argument('--out', metavar='DIR', help='folder for the bag, reports, figure '
+                            'and logs (default: a new scenario_<name>_<date>-<time> folder here)')
+    run_parser.add_argument('--rate', type=number('a rate', '', 0.0, 1000.0, low_open=True),
+                            metavar='R',
+                            help='at most R times real time (1: real time, 0.5: half speed; '
+                            'default: as fast as the nodes go)')
+    run_parser.add_argument('--wait-topic', action='append', default=[], metavar='TOPIC',
+                            help='a topic another use_sim_time node (your controller) publishes '
+                            'once per tick: each tick waits for its message (repeatable)')
+    run_parser.add_argument('--junit', type=Path, metavar='FILE.xml',
+                            help='write the JUnit report here instead of DIR/junit.xml')
+    check_parser = actions.add_parser('check', help='read and check a scenario without running',
+                                      formatter_class=parser.formatter_class,
+                                      description='read and check a scenario file; prints what '
+                                      'it runs')
+    check_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
+
+
+def describe(scenario):
+    """Return what a checked scenario runs, in a few lines."""
+    lines = [f'scenario {scenario.name} ({scenario.path}): {scenario.duration:g} s, '
+             f'{scenario.ticks + 1} ticks at {scenario.publish_rate:g} Hz']
+    lines += [f'  input {name}: starts at {profile.initial:g}, {len(profile.changes)} change(s)'
+              for name, profile in scenario.inputs.items()]
+    lines += [f'  event at {event.time_ns / 1e9:g} s: {event.changes}'
+              for event in scenario.events]
+    lines.append(f'  {len(scenario.expectations)} expectation(s)')
+    return '\n'.join(lines)
+
+
+def run(args):
+    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.recording.tick_bags import bag_column
+
+    scenario = load_scenario(args.file, bag_column)
+    if args.action == 'check':
+        print(describe(scenario))
+        return 0
+    from valve_sim.ros.isolation import claim_domain
+    from valve_sim.ros.scenario_runner import run_and_report
+
+    stamp = time.strftime('%Y%m%d-%H%M%S')
+    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{scenario.name}_{stamp}'
+    folder = make_folder(folder).resolve()
+    if args.wait_topic:  # the user's nodes are in the environment's domain: join them
+        domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')
+    else:
+        domain = claim_domain()
+    progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={domain}')
+    record, paths = run_and_report(scenario, folder, args.rate, args.wait_topic, args.junit,
+                                   progress)
+    print()
+    print(paths['report'].read_text(), end='')
+    for path in (record.bag, *paths.values()):
+        progress(f'wrote {path}')
+    return 0 if record.passed else 1

@@ -1,0 +1,115 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A bag's valve_node states as a TickSeries, and one recorded column of a bag as an input.
+
+tick_series() reads the six tick topics of a valve (in a namespace) by header stamp:
+a lockstep run records every topic at every tick, so its rows are exact.
+bag_column() gives the times and values of one topic's field, for a scenario that
+replays a rig's recorded flow (valve_sim.core.input_profile, series).
+"""
+
+import numpy as np
+from valve_sim.analysis.tick_series import TickSeries
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
+from valve_sim.recording.bag import BagReader
+from valve_sim.recording.rosbag2_metadata import bag_files
+from valve_sim.recording.valve_topics import JOINT_NAMES, PRESSURE_TOPICS, TICK_TOPICS
+
+
+def _decoded(path, topics):
+    """Yield (topic, decoded message, log_time [ns]) of the topics in a bag (file or folder)."""
+    from mcap_ros2.decoder import DecoderFactory
+
+    factory, decoders = DecoderFactory(), {}
+    for file in bag_files(path):
+        for channel, schema, message in BagReader(file).messages(set(topics)):
+            if channel.id not in decoders:
+                decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+                if decoders[channel.id] is None:
+                    raise InputFileError(f'{file}: {channel.topic} is not a ROS 2 message')
+            yield channel.topic, decoders[channel.id](message.data), message.log_time
+
+
+def _stamp_ns(message):
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
+def state_values(topic, message, ambient_pressure=STANDARD_ATMOSPHERE):
+    """
+    Return {signal: value} (tick_series.SIGNALS) of one tick message of valve_node.
+
+    topic: its name without namespace; message: decoded (rclpy or mcap_ros2); pressures
+    become gauge (minus ambient_pressure [Pa]).
+    """
+    if topic in PRESSURE_TOPICS:
+        return {topic: message.fluid_pressure - ambient_pressure}
+    if topic == 'applied_inlet_flow':
+        return {'inlet_flow': message.velocity[0]}
+    if topic not in ('joint_states',):  # the tank's and the relief flow's: not in SIGNALS
+        return {}
+    values = {}
+    for joint, position, velocity in zip(message.name, message.position, message.velocity):
+        if joint in JOINT_NAMES:
+            values[joint], values[f'{joint}_velocity'] = position, velocity
+    return values
+
+
+def tick_series(path, namespace='', start_ns=None, ambient_pressure=STANDARD_ATMOSPHERE):
+    """
+    Return the TickSeries of the valve in namespace ('' or '/rig1') recorded in a bag.
+
+    Pressures become gauge (minus ambient_pressure [Pa]); start_ns: the stamp of t = 0
+    (default: the first state's).
+    """
+    prefix = namespace.rstrip('/')
+    topics = {f'{prefix}/{name}': name for name in TICK_TOPICS}
+    rows = {}
+    for topic, message, _ in _decoded(path, topics):
+        rows.setdefault(_stamp_ns(message), {}).update(
+            state_values(topics[topic], message, ambient_pressure))
+    if not rows:
+        raise InputFileError(f'{path} holds no state of the valve {prefix or "/"}')
+    return TickSeries.from_rows(rows, start_ns)
+
+
+def bag_column(path, topic, joint=None, field=None, clock='header'):
+    """
+    Return (times [s], values) of one field of a topic in a bag.
+
+    std_msgs/Float64: data; sensor_msgs/FluidPressure: fluid_pressure (as recorded);
+    sensor_msgs/JointState: field (position, velocity or effort) of joint. Times from
+    header stamps (clock 'header') or receive times ('receive', also for Float64).
+    """
+    if clock not in ('header', 'receive'):
+        raise InputFileError(f"clock must be 'header' or 'receive', got {clock!r}")
+    times, values = [], []
+    for _, message, log_time in _decoded(path, {topic}):
+        header = hasattr(message, 'header') and clock == 'header'
+        times.append((_stamp_ns(message) if header else log_time) / 1e9)
+        if hasattr(message, 'data'):
+            values.append(message.data)
+        elif hasattr(message, 'fluid_pressure'):
+            values.append(message.fluid_pressure)
+        elif hasattr(message, 'name') and joint in message.name and field in (
+                'position', 'velocity', 'effort'):
+            values.append(getattr(message, field)[list(message.name).index(joint)])
+        else:
+            raise InputFileError(f'{path}: {topic} has no value to take (a JointState needs '
+                                 'joint: NAME and field: position, velocity or effort)')
+    if not times:
+        raise InputFileError(f'{path} has no message on {topic}')
+    return np.array(times), np.array(values, float)

@@ -1,0 +1,284 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+valve_node on /clock in lockstep: publish a time, wait for the states stamped with it, go on.
+
+Lockstep drives a valve_node that runs with use_sim_time. tick() publishes /clock one
+tick period on and waits until the valve's state of that time has arrived here, and
+a message of that tick on each wait topic (the topics that other use_sim_time nodes,
+such as a controller under test, publish once per tick); only then does the next
+tick go. Inputs and parameter changes go between ticks, so they act from the tick
+after the state just received: the same run twice gives the same states, bit for bit.
+
+A tick is complete when the last of the tick topics valve_node publishes
+(valve_topics.TICK_TOPICS) has come with its stamp, so every topic of the tick was
+published, and applied_inlet_flow (the handshake), which carries the flow the tick
+applied, has come too: a flow that was
+published before the tick but not applied (the message had not arrived) is an
+error, never a silent difference. /clock is subscribed best effort by rclpy's time
+source, so a time whose state does not come within RESEND is published again.
+
+The driver spins its own node on the calling thread (rclpy's EventsExecutor where
+there is one), so waiting costs no thread hand-over; as fast as the node can by
+default, or paced to rate times real time.
+"""
+
+import struct
+import time
+
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import Parameter as ParameterMessage
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.parameter_sections import node_fqn
+from valve_sim.core.parameters import NODE_NAME
+from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
+from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
+from valve_sim.ros.node_processes import spin_until
+from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
+
+
+HANDSHAKE = 'applied_inlet_flow'  # the flow the tick applied
+LAST_TOPIC = TICK_TOPICS[-1]  # published last in a tick: once it is here, the tick is
+FLOW_AT_END = struct.Struct('<d')  # applied_inlet_flow: velocity[0], then an empty effort
+NS_PER_S = 1_000_000_000
+START_NS = NS_PER_S  # /clock of the first tick: past any timer's first period (up to 1 s)
+RESEND = 0.5  # [s] without the state: publish the same /clock again (it is best effort)
+TIMEOUT = 60.0  # [s] for a tick's state, a service answer, discovery
+QUEUE_DEPTH = 1000
+RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class LateInputError(IncompleteRunError):
+    """A tick applied another inlet flow than the one published before it."""
+
+
+def stamp_ns(data):
+    """Return the header stamp [ns] of a message's CDR bytes (every tick message has one)."""
+    sec, nanosec = STAMP.unpack_from(data, STAMP_OFFSET)
+    return sec * NS_PER_S + nanosec
+
+
+def clock_message(time_ns):
+    return Clock(clock=Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S))
+
+
+class WaitTopic:
+    """A topic another node publishes once per tick: stamped (header) or counted."""
+
+    def __init__(self, node, topic, type_name):
+        message_type = message_class(type_name)
+        fields = list(message_type.get_fields_and_field_types().items())
+        self.topic = topic
+        self.stamped = bool(fields) and fields[0] == ('header', 'std_msgs/Header')
+        self.latest_ns, self.count, self.count_before = None, 0, 0
+        self.subscription = node.create_subscription(message_type, topic, self._on_message,
+                                                     RELIABLE, raw=True)
+
+    def _on_message(self, data):
+        self.count += 1
+        if self.stamped:
+            self.latest_ns = stamp_ns(data)
+
+    def mark(self):
+        """Note that a tick's /clock goes out: an unstamped topic's next message is that tick's."""
+        self.count_before = self.count
+
+    def has(self, time_ns):
+        """Whether the message of the tick at time_ns has come (unstamped: one since mark())."""
+        if self.stamped:
+            return self.latest_ns is not None and self.latest_ns >= time_ns
+        return self.count > self.count_before
+
+
+class Lockstep:
+    """
+    Drives one valve_node on /clock, tick by tick, with its inlet flow and parameters.
+
+    context: the rclpy context; namespace: the valve's; processes: the NodeProcesses
+    whose death ends a wait with an error; on_state(topic, data) receives every tick
+    message of the valve when record_topics names it (bytes as published).
+    """
+
+    def __init__(self, context, namespace='', processes=None, rate=None, on_state=None,
+                 record_topics=()):
+        import rclpy
+
+        self.node = rclpy.create_node('valve_lockstep', namespace=namespace or '/',
+                                      context=context)
+        self.executor = EXECUTORS[DEFAULT_EXECUTOR](context=context)
+        self.executor.add_node(self.node)
+        self.processes, self.rate = processes, rate
+        self.clock = self.node.create_publisher(Clock, '/clock', 10)
+        self.inlet = self.node.create_publisher(Float64, 'inlet_flow', RELIABLE)
+        self.parameters = AsyncParameterClient(self.node, node_fqn(namespace, NODE_NAME))
+        self.wait_topics = []
+        self.time_ns = None  # stamp of the valve's latest state
+        self.applied = None  # the flow applied over the tick ending at time_ns [m^3/s]
+        self.clock_ns = None  # last /clock published
+        self.flow = None  # last flow published [m^3/s]: what the next tick applies
+        self._paced_from = None  # (wall time, clock) pacing starts from
+        self._applied_ns = self._last_ns = None
+        self.subscriptions = [self.node.create_subscription(
+            JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True),
+            self.node.create_subscription(
+                message_class(TOPIC_TYPES[LAST_TOPIC]), LAST_TOPIC, self._on_last, RELIABLE,
+                raw=True)]
+        for topic in record_topics:
+            if topic not in (HANDSHAKE, LAST_TOPIC):
+                self.subscriptions.append(self.node.create_subscription(
+                    message_class(TOPIC_TYPES[topic]), topic,
+                    lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True))
+        self.on_state = on_state
+        self.record_topics = set(record_topics)
+
+    def _on_handshake(self, data):
+        self._applied_ns = stamp_ns(data)
+        self.applied = FLOW_AT_END.unpack_from(data, len(data) - 12)[0]
+        self._update_time()
+        if HANDSHAKE in self.record_topics:
+            self.on_state(HANDSHAKE, data)
+
+    def _on_last(self, data):
+        self._last_ns = stamp_ns(data)
+        self._update_time()
+        if LAST_TOPIC in self.record_topics:
+            self.on_state(LAST_TOPIC, data)
+
+    def _update_time(self):
+        """time_ns: the latest tick both the applied flow and the tick's last topic came for."""
+        if self._applied_ns is not None and self._last_ns is not None:
+            self.time_ns = min(self._applied_ns, self._last_ns)
+
+    def spin_until(self, condition, what, timeout=TIMEOUT):
+        spin_until(self.executor, condition, timeout, what, self.processes, period=RESEND)
+
+    def connect(self, wait_topics=(), timeout=TIMEOUT):
+        """
+        Wait until the valve hears /clock and inlet_flow and its services answer.
+
+        Also until each wait topic has a publisher (its type is taken from the graph), and
+        until each subscription here is matched with its publisher: a state published
+        before that would be lost, and the lockstep would wait for it in vain.
+        """
+        self.spin_until(lambda: self.clock.get_subscription_count() > 0
+                        and self.inlet.get_subscription_count() > 0,
+                        'valve_node subscribing /clock and inlet_flow', timeout)
+        self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subscriptions),
+                        'valve_node publishing its states to this driver', timeout)
+        if not self.parameters.wait_for_services(timeout_sec=timeout):
+            raise TimeoutError(f'no parameter services of valve_node within {timeout:g} s')
+        for topic in wait_topics:
+            name = self.node.resolve_topic_name(topic)
+            self.spin_until(lambda: self.node.count_publishers(name) > 0,
+                            f'a publisher of the wait topic {name}', timeout)
+            types = dict(self.node.get_topic_names_and_types())[name]
+            topic = WaitTopic(self.node, name, types[0])
+            self.spin_until(lambda: topic.subscription.get_publisher_count() > 0,
+                            f'the wait topic {name} matched', timeout)
+            self.wait_topics.append(topic)
+
+    def start(self, start_ns=START_NS, period_ns=1_000_000):
+        """
+        Publish /clock = start_ns until the valve's first state (its model time's anchor) comes.
+
+        Returns its stamp. Later ticks are period_ns apart.
+        """
+        self.period_ns = period_ns
+        self._publish_clock(start_ns)
+        self._wait_for(start_ns, 'the first state of valve_node on /clock', ())
+        self._paced_from = (time.monotonic(), start_ns)
+        return self.time_ns
+
+    def set_flow(self, flow):
+        """Publish the inlet flow [m^3/s]; the next tick applies it."""
+        self.inlet.publish(Float64(data=float(flow)))
+        self.flow = float(flow)
+
+    def tick(self):
+        """Advance the valve by one tick period; returns the new state's stamp [ns]."""
+        time_ns = self.clock_ns + self.period_ns
+        if self.rate:
+            wall, clock = self._paced_from
+            delay = wall + (time_ns - clock) / NS_PER_S / self.rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        for topic in self.wait_topics:
+            topic.mark()
+        self._publish_clock(time_ns)
+        self._wait_for(time_ns, f'the state of valve_node at {time_ns / NS_PER_S:.6f} s',
+                       self.wait_topics)
+        if self.flow is not None and self.applied != self.flow:
+            raise LateInputError(
+                f'valve_node applied {self.applied:g} m^3/s over the tick ending at '
+                f'{time_ns / NS_PER_S:.6f} s, not the {self.flow:g} m^3/s published before it '
+                '(the message came late, valve_node rejected it, or its model is halted: see '
+                'its log); the run would not repeat'
+            )
+        return time_ns
+
+    def _publish_clock(self, time_ns):
+        self.clock_ns = time_ns
+        self.clock.publish(clock_message(time_ns))
+
+    def _ready(self, time_ns, wait_topics):
+        return self.time_ns is not None and self.time_ns >= time_ns and all(
+            topic.has(time_ns) for topic in wait_topics)
+
+    def _wait_for(self, time_ns, what, wait_topics):
+        """Spin until the state at time_ns (and the wait topics' messages) came; resend /clock."""
+        deadline = time.monotonic() + TIMEOUT
+        while not self._ready(time_ns, wait_topics):
+            resend = time.monotonic() + RESEND
+            while not self._ready(time_ns, wait_topics) and time.monotonic() < resend:
+                self.executor.spin_once(timeout_sec=RESEND)
+            if self._ready(time_ns, wait_topics):
+                return
+            if self.processes is not None:
+                self.processes.check(what)
+            if time.monotonic() > deadline:
+                missing = [t.topic for t in wait_topics if not t.has(time_ns)]
+                raise TimeoutError(f'no {what} within {TIMEOUT:g} s' + (
+                    f' (waiting for {", ".join(missing)})' if missing else ''))
+            self.clock.publish(clock_message(time_ns))
+
+    def set_parameters(self, changes):
+        """
+        Set valve_node parameters {name: value} at once, between ticks.
+
+        Raises ValueError with valve_node's reason if it refuses them.
+        """
+        future = self.parameters.set_parameters_atomically(
+            [Parameter(name, value=value) for name, value in changes.items()])
+        self.spin_until(future.done, 'the answer of valve_node to a parameter change')
+        result = future.result().result
+        if not result.successful:
+            raise ValueError(f'valve_node refused {changes}: {result.reason}')
+
+    def get_parameters(self, names):
+        """Return valve_node's values of names, as a dict."""
+        future = self.parameters.get_parameters(list(names))
+        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
+        return {name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
+                for name, value in zip(names, future.result().values)}
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()

@@ -1,0 +1,220 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A valve_node in lockstep for a test: advance it, set its flow and parameters, read it back.
+
+LockstepValve starts valve_node on use_sim_time in a process of its own (its log in
+folder/valve_node.log) and drives its /clock from the calling thread with
+valve_sim.ros.lockstep.Lockstep, as `valve-sim scenario run` does: advance(seconds)
+returns once the valve's state of that time has arrived, every state of the way
+kept. Flows and parameter changes act from the next tick, so a test repeats exactly.
+Values are SI, or text with a unit ('20 L/min', '21 MPa'); parameters by ROS name or
+paper symbol. Pressures read back are gauge [Pa], as the model's (tick_series).
+
+The nodes run in the environment's ROS_DOMAIN_ID, or in a domain of their own that
+this claims (valve_sim.ros.isolation): a node of the test that talks to the valve
+(a controller under test) must be created after the valve, in the same process.
+"""
+
+from contextlib import contextmanager
+from pathlib import Path
+import tempfile
+import time
+
+from valve_sim.analysis.scenario_file import live_change, start_parameter
+from valve_sim.analysis.tick_series import SIGNALS, TickSeries
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.faults import PREFIX as FAULT_PREFIX
+from valve_sim.core.input_profile import ProfileError
+from valve_sim.core.parameters import ParameterError, STANDARD_ATMOSPHERE
+from valve_sim.core.quantities import FLOW, parse_quantity
+from valve_sim.recording.tick_bags import state_values
+from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
+from valve_sim.ros import node_command
+from valve_sim.ros.isolation import claim_domain
+from valve_sim.ros.lockstep import Lockstep, NS_PER_S, START_NS
+from valve_sim.ros.node_processes import NodeProcesses
+from valve_sim.ros.scenario_runner import ros_value
+
+
+START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
+STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
+
+
+class LockstepValve:
+    """
+    valve_node on /clock, advanced by the test; every state kept.
+
+    parameters: {name: value} valve_node starts with (ROS name or paper symbol, SI or
+    with a unit); initial_flow: the inlet flow it starts at the steady state of;
+    params_file: its --params-file; namespace: the valve's; folder: where its log goes
+    (default: a temporary folder). Call close() (or use lockstep_valve()) to stop it.
+    """
+
+    def __init__(self, parameters=None, initial_flow='5 L/min', params_file=None,
+                 namespace='', folder=None):
+        import rclpy
+
+        given = dict(parameters or {})
+        try:
+            start = dict(start_parameter(name, value, name) for name, value in given.items())
+            flow = parse_quantity(initial_flow, FLOW)
+        except (ProfileError, ValueError) as error:
+            raise ValueError(f'lockstep valve: {error}') from None
+        self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
+        self._temporary = None if folder else tempfile.TemporaryDirectory(prefix='valve_')
+        self.folder = Path(folder or self._temporary.name)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        claim_domain()
+        ros_args = ['--params-file', str(params_file)] if params_file else []
+        if namespace:
+            ros_args += ['-r', f'__ns:={namespace}']
+        values = {'use_sim_time': 'true', 'initial_inlet_flow': repr(flow),
+                  **{name: ros_value(value) for name, value in start.items()}}
+        self.processes = NodeProcesses(self.folder, {
+            'valve_node': node_command('valve_node', parameters=values, ros_args=ros_args)})
+        self._rows, self._latest = {}, {}
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self._driver = None
+        try:
+            self._driver = Lockstep(self.context, namespace, self.processes,
+                                    on_state=self._on_state, record_topics=TICK_TOPICS)
+            self._driver.connect(timeout=START_TIMEOUT)
+            self._driver.set_flow(flow)
+            self._driver.start(START_NS)
+            self._await_row(START_NS)
+        except BaseException:
+            self.close()
+            raise
+
+    def _on_state(self, topic, data):
+        from rclpy.serialization import deserialize_message
+
+        message = deserialize_message(data, message_class(TOPIC_TYPES[topic]))
+        stamp = message.header.stamp.sec * NS_PER_S + message.header.stamp.nanosec
+        values = state_values(topic, message, self.ambient_pressure)
+        self._rows.setdefault(stamp, {}).update(values)
+        self._latest.update(values)
+
+    @property
+    def time(self):
+        """Return the model time [s] since the first state (t = 0)."""
+        return (self._driver.time_ns - START_NS) / NS_PER_S
+
+    @property
+    def period(self):
+        """Return the tick period [s] (valve_node's publish_rate)."""
+        return self._driver.period_ns / NS_PER_S
+
+    def advance(self, seconds):
+        """Run the valve on by seconds of model time (whole ticks); returns the new time [s]."""
+        ticks = round(float(seconds) / self.period)
+        if ticks < 0:
+            raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
+        for _ in range(ticks):
+            self._driver.tick()
+        self._await_row(self._driver.time_ns)
+        return self.time
+
+    def _await_row(self, time_ns):
+        """
+        Spin until every topic's message of the tick at time_ns has come (or STRAGGLER_WAIT).
+
+        The handshake is the last topic published, but topics may arrive out of order;
+        a pressure sensor in dropout publishes nothing, hence the bound.
+        """
+        deadline = time.monotonic() + STRAGGLER_WAIT
+        while len(self._rows.get(time_ns, ())) < len(SIGNALS) and time.monotonic() < deadline:
+            self._driver.executor.spin_once(timeout_sec=0.01)
+
+    def set_flow(self, flow):
+        """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
+        self._driver.set_flow(parse_quantity(flow, FLOW))
+
+    def set_parameters(self, changes=None, **named):
+        """
+        Change valve_node's live parameters at once, from the next tick on.
+
+        changes/named: {name: value}, by ROS name or paper symbol, SI or with a unit;
+        fault.* and sensor.* settings too. ValueError if a value is wrong or the node
+        refuses it.
+        """
+        try:
+            resolved = dict(live_change(name, value)
+                            for name, value in {**(changes or {}), **named}.items())
+        except (ParameterError, ProfileError, InputFileError) as error:
+            raise ValueError(str(error)) from None
+        self._driver.set_parameters(resolved)
+
+    def inject(self, fault, value=True):
+        """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
+        name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
+        self.set_parameters({name: value})
+
+    def get_parameters(self, *names):
+        """Return valve_node's current values of names (ROS names), as a dict."""
+        return self._driver.get_parameters(names)
+
+    @property
+    def state(self):
+        """Return the latest state: {signal: value} of tick_series.SIGNALS (SI, gauge [Pa])."""
+        return dict(self._latest)
+
+    @property
+    def series(self):
+        """Return every state so far as a TickSeries (time [s] from the first state)."""
+        return TickSeries.from_rows(self._rows, START_NS)
+
+    def measures(self, at=None):
+        """
+        Return the analyser's step records of the run so far (docs/measures.md).
+
+        at: the time [s] of one step; then that step's record, or LookupError.
+        """
+        steps = self.series.steps()
+        if at is None:
+            return steps
+        near = [step for step in steps if abs(step['t_step'] - at) <= 1.5 * self.period]
+        if not near:
+            found = ', '.join(f'{step["t_step"]:g} s' for step in steps) or 'none'
+            raise LookupError(f'no step at {at:g} s (steps at: {found})')
+        return near[0]
+
+    def close(self):
+        """Stop valve_node (SIGINT) and the driver; ChildProcessError if the node failed."""
+        try:
+            if self._driver is not None:
+                self._driver.close()
+                self._driver = None
+            self.context.try_shutdown()
+        finally:
+            try:
+                self.processes.stop()
+            finally:
+                if self._temporary is not None:
+                    self._temporary.cleanup()
+                    self._temporary = None
+
+
+@contextmanager
+def lockstep_valve(parameters=None, initial_flow='5 L/min', params_file=None, namespace='',
+                   folder=None):
+    """Start a LockstepValve for a with block; stop it after (see LockstepValve)."""
+    valve = LockstepValve(parameters, initial_flow, params_file, namespace, folder)
+    try:
+        yield valve
+    finally:
+        valve.close()

@@ -1,0 +1,49 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The pytest fixture `lockstep_valve`: a LockstepValve per test, its log in the test's tmp_path.
+
+In the root conftest.py of a suite:  pytest_plugins = ['valve_sim.testing.pytest_plugin']
+(in a test module it works too, but pytest reads the module's marks before it loads
+the plugin, and warns that the mark is unknown).
+
+    @pytest.mark.lockstep_valve(parameters={'supply_pressure_limit': '21 MPa'})
+    def test_relief(lockstep_valve):
+        lockstep_valve.set_flow('20 L/min')
+        lockstep_valve.advance(0.5)
+        assert lockstep_valve.state['supply_pressure'] < 7.5e6
+
+The mark's keywords are LockstepValve's (parameters, initial_flow, params_file,
+namespace); without it, the reference valve at 5 L/min.
+"""
+
+import pytest
+
+
+def pytest_configure(config):
+    config.addinivalue_line('markers', 'lockstep_valve(**options): how the lockstep_valve '
+                            'fixture starts valve_node (valve_sim.testing.LockstepValve)')
+
+
+@pytest.fixture
+def lockstep_valve(request, tmp_path):
+    """Start a valve_node in lockstep for one test (a LockstepValve); stop it after."""
+    from valve_sim.testing.lockstep_valve import LockstepValve
+
+    mark = request.node.get_closest_marker('lockstep_valve')
+    options = dict(mark.kwargs) if mark else {}
+    valve = LockstepValve(folder=tmp_path / 'lockstep_valve', **options)
+    yield valve
+    valve.close()
