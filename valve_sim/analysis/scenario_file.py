@@ -23,7 +23,7 @@ A bench test as a file: the valve, its inputs, events and duration, and what is 
       parameters: {supply_pressure_limit: 21 MPa}
     inputs:
       inlet_flow: {initial: 5 L/min, changes: [{at: 0.3, step: 20 L/min}]}
-      tank_pressure: {initial: 0 bar, changes: [{at: 0.5, step: 5 bar}]}  # gauge (optional)
+      tank_pressure: {initial: 0 bar, changes: [{at: 0.5, step: 5 bar}]}  # gauge, optional
     events:                               # the fault schedule's vocabulary, and parameters
       - t: 0.2
         set: {fault.main_valve_stuck: true}
@@ -32,11 +32,12 @@ A bench test as a file: the valve, its inputs, events and duration, and what is 
 
 Inputs: valve_sim.core.input_profile (INPUTS names those the valve takes; a file
 that names none of a later one keeps working): inlet_flow [m^3/s], and tank_pressure
-[Pa, gauge], optional (without it the tank stays at valve_node's tank_pressure parameter). Events: valve_sim.core.fault_schedule's
-format; `set` takes fault.* and sensor.* settings and valve_node's live parameters
-(ROS name or paper symbol, a number in SI units or with a unit). Expectations:
-valve_sim.analysis.expectations. Every problem is one line naming the file, the key
-and what is wrong (ProfileError, an InputFileError).
+[Pa, gauge], optional (without it the tank stays at valve_node's tank_pressure
+parameter). Events: valve_sim.core.fault_schedule's format; `set` takes fault.* and
+sensor.* settings and valve_node's live parameters (ROS name or paper symbol, a
+number in SI units or with a unit). Expectations: valve_sim.analysis.expectations.
+Every problem is one line naming the file, the key and what is wrong (ProfileError,
+an InputFileError).
 """
 
 from dataclasses import dataclass
