@@ -204,6 +204,7 @@ def test_a_use_sim_time_controller_advances_in_lockstep_via_wait_topic(
     assert stamps == ticks, 'the controller missed or repeated a tick'
 
 
+TANK = 'duration: 1\nexpect: [{no_alarm: {}}]\ninputs:\n  inlet_flow: 5 L/min\n'
 MALFORMED = [
     ('duration: -1\ninputs: {inlet_flow: {initial: 5 L/min}}\nexpect: [{no_alarm: {}}]\n',
      'duration'),
@@ -221,6 +222,17 @@ MALFORMED = [
      'inputs.inlet_flow'),
     ('duration: 1\nexpect: [{no_alarm: {}}]\n', 'inputs'),
     ('duration: [1\n', 'line 2'),
+    # the optional tank_pressure input (issue 30)
+    (TANK + '  tank_pressure: {initial: 5 furlongs}\n', 'inputs.tank_pressure.initial'),
+    (TANK + '  tank_pressure: {initial: 0, changes: [{at: 0.5, step: 400 bar}]}\n',
+     'inputs.tank_pressure: at 0.5 s: tank pressure 4e+07'),
+    (TANK + '  tank_pressure: -2 bar\n', 'inputs.tank_pressure: at 0 s: tank pressure'),
+    (TANK + '  tank_pressure: {initial: 0, changes: [{at: 0.2, ramp: 3 bar}]}\n',
+     'inputs.tank_pressure.changes[0]'),
+    (TANK + '  tank_pressure: 1 bar\nvalve: {parameters: {tank_pressure: 2 bar}}\n',
+     'valve.parameters.tank_pressure'),
+    (TANK + '  tank_pressure: 1 bar\nevents: [{t: 0.2, set: {ambient_pressure: 0.9 bar}}]\n',
+     'events.set.ambient_pressure'),
 ]
 
 

@@ -23,6 +23,7 @@ A bench test as a file: the valve, its inputs, events and duration, and what is 
       parameters: {supply_pressure_limit: 21 MPa}
     inputs:
       inlet_flow: {initial: 5 L/min, changes: [{at: 0.3, step: 20 L/min}]}
+      tank_pressure: {initial: 0 bar, changes: [{at: 0.5, step: 5 bar}]}  # gauge, optional
     events:                               # the fault schedule's vocabulary, and parameters
       - t: 0.2
         set: {fault.main_valve_stuck: true}
@@ -30,11 +31,13 @@ A bench test as a file: the valve, its inputs, events and duration, and what is 
       - alarm: {after: 0.3, within: 0.5}
 
 Inputs: valve_sim.core.input_profile (INPUTS names those the valve takes; a file
-that names none of a later one keeps working). Events: valve_sim.core.fault_schedule's
-format; `set` takes fault.* and sensor.* settings and valve_node's live parameters
-(ROS name or paper symbol, a number in SI units or with a unit). Expectations:
-valve_sim.analysis.expectations. Every problem is one line naming the file, the key
-and what is wrong (ProfileError, an InputFileError).
+that names none of a later one keeps working): inlet_flow [m^3/s], and tank_pressure
+[Pa, gauge], optional (without it the tank stays at valve_node's tank_pressure
+parameter). Events: valve_sim.core.fault_schedule's format; `set` takes fault.* and
+sensor.* settings and valve_node's live parameters (ROS name or paper symbol, a
+number in SI units or with a unit). Expectations: valve_sim.analysis.expectations.
+Every problem is one line naming the file, the key and what is wrong (ProfileError,
+an InputFileError).
 """
 
 from dataclasses import dataclass
@@ -50,6 +53,7 @@ from valve_sim.core.fault_schedule import (
 )
 from valve_sim.core.input_files import InputFileError, read_yaml, SCENARIO_FILE
 from valve_sim.core.input_profile import parse_profile, ProfileError
+from valve_sim.core.limits import tank_pressure_problem
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
@@ -65,10 +69,17 @@ from valve_sim.core.quantities import FLOW, LENGTH, NUMBER, parse_quantity, PRES
 
 
 TOP_KEYS = ('scenario', 'description', 'duration', 'valve', 'inputs', 'events', 'expect')
-INPUTS = {'inlet_flow': FLOW}  # input: its dimension; each a topic valve_node takes
+INPUTS = {'inlet_flow': FLOW, 'tank_pressure': PRESSURE}  # input: its dimension (tank: gauge)
+INPUT_UNITS = {'inlet_flow': 'm^3/s', 'tank_pressure': 'Pa (gauge)'}
 MAX_DURATION = 3600.0  # [s] of model time
 NS_PER_S = 1_000_000_000
 DIMENSIONS = {'Pa': PRESSURE, 'm^3/s': FLOW, 'm': LENGTH, 's': TIME}  # parameters' units
+# With a tank_pressure input: the parameters it sets, and the ambient pressure the runner
+# adds to it (the topic is absolute), which must hold for the whole run.
+TANK_FIXED = {
+    'tank_pressure': 'inputs.tank_pressure sets the tank pressure (its initial value at start)',
+    'ambient_pressure': 'the runner publishes inputs.tank_pressure as gauge + ambient_pressure',
+}
 # Parameters a scenario does not change while it runs (valve_node refuses the read-only
 # ones; the lockstep runner steps by the tick period it started with).
 FIXED = {
@@ -90,6 +101,7 @@ class BenchScenario:
     parameters: dict  # ROS name: value, set at valve_node's start
     publish_rate: float  # [Hz] the tick rate valve_node starts with
     supply_pressure_limit: float  # [Pa] at start (0: none)
+    ambient_pressure: float  # [Pa] absolute, valve_node's for the whole run
     inputs: dict  # input name: core.input_profile.Profile
     events: list  # core.fault_schedule.FaultEvent, names resolved
     expectations: list
@@ -163,6 +175,9 @@ def _scenario(document, path, read_bag_column):
             raise ProfileError(f'valve.parameters.{name}', FIXED[name])
     parameters['initial_inlet_flow'] = inputs['inlet_flow'].initial
     events = _events(document.get('events') or [], path)
+    if 'tank_pressure' in inputs:
+        _check_tank_fixed(parameters, events)
+        parameters['tank_pressure'] = inputs['tank_pressure'].initial
     scenario = BenchScenario(
         name=str(document.get('scenario') or path.stem),
         description=str(document.get('description') or '').strip(),
@@ -172,11 +187,12 @@ def _scenario(document, path, read_bag_column):
         parameters=parameters,
         publish_rate=settings['publish_rate'],
         supply_pressure_limit=params['supply_pressure_limit'],
+        ambient_pressure=settings['ambient_pressure'],
         inputs=inputs,
         events=events,
         expectations=parse_expectations(document['expect']),
     )
-    _check_inputs(scenario, params['max_inlet_flow'])
+    _check_inputs(scenario, params['max_inlet_flow'], params['burst_pressure'])
     return scenario
 
 
@@ -279,11 +295,34 @@ def _events(items, path):
             for event in events]
 
 
-def _check_inputs(scenario, max_inlet_flow):
-    """Every tick's inlet flow must be one valve_node takes: 0 .. max_inlet_flow [m^3/s]."""
-    flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
+def _check_tank_fixed(parameters, events):
+    """With a tank_pressure input, neither it nor ambient_pressure may be set elsewhere."""
+    for name, reason in TANK_FIXED.items():
+        if name in parameters:
+            raise ProfileError(f'valve.parameters.{name}', reason)
+        for event in events:
+            if name in event.changes:
+                raise ProfileError(f'events.set.{name}',
+                                   f'at {event.time_ns / NS_PER_S:g} s: {reason}')
+
+
+def _check_inputs(scenario, max_inlet_flow, burst_pressure):
+    """
+    Every tick's inputs must be ones valve_node takes.
+
+    The inlet flow 0 .. max_inlet_flow [m^3/s]; the tank pressure [Pa, gauge] not below
+    vacuum and below burst_pressure (limits.tank_pressure_problem).
+    """
+    times = scenario.tick_times()
+    flows = scenario.inputs['inlet_flow'].sample(times)
     bad = np.flatnonzero((flows < 0.0) | (flows > max_inlet_flow))
     if bad.size:
-        t = scenario.tick_times()[bad[0]]
-        raise ProfileError('inputs.inlet_flow', f'{flows[bad[0]]:.6g} m^3/s at {t:g} s is '
-                           f'outside 0 .. max_inlet_flow ({max_inlet_flow:g} m^3/s)')
+        raise ProfileError('inputs.inlet_flow', f'{flows[bad[0]]:.6g} m^3/s at {times[bad[0]]:g} '
+                           f's is outside 0 .. max_inlet_flow ({max_inlet_flow:g} m^3/s)')
+    if 'tank_pressure' in scenario.inputs:
+        pressures = scenario.inputs['tank_pressure'].sample(times)
+        for tick in (np.argmin(pressures), np.argmax(pressures)):  # the extremes say it all
+            problem = tank_pressure_problem(float(pressures[tick]), burst_pressure,
+                                            scenario.ambient_pressure)
+            if problem:
+                raise ProfileError('inputs.tank_pressure', f'at {times[tick]:g} s: {problem}')

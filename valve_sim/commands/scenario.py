@@ -64,10 +64,12 @@ def add_arguments(parser):
 
 def describe(scenario):
     """Return what a checked scenario runs, in a few lines."""
+    from valve_sim.analysis.scenario_file import INPUT_UNITS
+
     lines = [f'scenario {scenario.name} ({scenario.path}): {scenario.duration:g} s, '
              f'{scenario.ticks + 1} ticks at {scenario.publish_rate:g} Hz']
-    lines += [f'  input {name}: starts at {profile.initial:g}, {len(profile.changes)} change(s)'
-              for name, profile in scenario.inputs.items()]
+    lines += [f'  input {name}: starts at {profile.initial:g} {INPUT_UNITS[name]}, '
+              f'{len(profile.changes)} change(s)' for name, profile in scenario.inputs.items()]
     lines += [f'  event at {event.time_ns / 1e9:g} s: {event.changes}'
               for event in scenario.events]
     lines.append(f'  {len(scenario.expectations)} expectation(s)')

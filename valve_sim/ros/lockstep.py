@@ -27,7 +27,9 @@ A tick is complete when the last of the tick topics valve_node publishes
 published, and applied_inlet_flow (the handshake), which carries the flow the tick
 applied, has come too: a flow that was
 published before the tick but not applied (the message had not arrived) is an
-error, never a silent difference. /clock is subscribed best effort by rclpy's time
+error, never a silent difference. With tank=True the driver also sends tank_pressure
+(set_tank_pressure) and a tick is complete only once applied_tank_pressure of it has
+come too, checked the same way. /clock is subscribed best effort by rclpy's time
 source, so a time whose state does not come within RESEND is published again.
 
 The driver spins its own node on the calling thread (rclpy's EventsExecutor where
@@ -44,7 +46,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.core.parameter_sections import node_fqn
@@ -56,6 +58,9 @@ from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
 
 HANDSHAKE = 'applied_inlet_flow'  # the flow the tick applied
+TANK_HANDSHAKE = 'applied_tank_pressure'  # the tank pressure it applied (absolute)
+TANK_AT_END = struct.Struct('<dd')  # FluidPressure: fluid_pressure, variance, at its end
+TANK_TOLERANCE = 1e-6  # [Pa]: the node's gauge and back to absolute may round
 LAST_TOPIC = TICK_TOPICS[-1]  # published last in a tick: once it is here, the tick is
 FLOW_AT_END = struct.Struct('<d')  # applied_inlet_flow: velocity[0], then an empty effort
 NS_PER_S = 1_000_000_000
@@ -114,11 +119,12 @@ class Lockstep:
 
     context: the rclpy context; namespace: the valve's; processes: the NodeProcesses
     whose death ends a wait with an error; on_state(topic, data) receives every tick
-    message of the valve when record_topics names it (bytes as published).
+    message of the valve when record_topics names it (bytes as published); tank: the
+    driver sends tank_pressure too (set_tank_pressure).
     """
 
     def __init__(self, context, namespace='', processes=None, rate=None, on_state=None,
-                 record_topics=()):
+                 record_topics=(), tank=False):
         import rclpy
 
         self.node = rclpy.create_node('valve_lockstep', namespace=namespace or '/',
@@ -136,13 +142,24 @@ class Lockstep:
         self.flow = None  # last flow published [m^3/s]: what the next tick applies
         self._paced_from = None  # (wall time, clock) pacing starts from
         self._applied_ns = self._last_ns = None
+        self.tank = None  # last tank pressure published [Pa absolute]
+        self.applied_tank = None  # the tank pressure applied over the tick ending at time_ns
+        self._tank_ns = None
+        self.tank_publisher = None
         self.subscriptions = [self.node.create_subscription(
             JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True),
             self.node.create_subscription(
                 message_class(TOPIC_TYPES[LAST_TOPIC]), LAST_TOPIC, self._on_last, RELIABLE,
                 raw=True)]
+        handshakes = (HANDSHAKE, LAST_TOPIC)
+        if tank:
+            self.tank_publisher = self.node.create_publisher(FluidPressure, 'tank_pressure',
+                                                             RELIABLE)
+            self.subscriptions.append(self.node.create_subscription(
+                FluidPressure, TANK_HANDSHAKE, self._on_tank, RELIABLE, raw=True))
+            handshakes += (TANK_HANDSHAKE,)
         for topic in record_topics:
-            if topic not in (HANDSHAKE, LAST_TOPIC):
+            if topic not in handshakes:
                 self.subscriptions.append(self.node.create_subscription(
                     message_class(TOPIC_TYPES[topic]), topic,
                     lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True))
@@ -162,10 +179,19 @@ class Lockstep:
         if LAST_TOPIC in self.record_topics:
             self.on_state(LAST_TOPIC, data)
 
+    def _on_tank(self, data):
+        self._tank_ns = stamp_ns(data)
+        self.applied_tank = TANK_AT_END.unpack_from(data, len(data) - TANK_AT_END.size)[0]
+        self._update_time()
+        if TANK_HANDSHAKE in self.record_topics:
+            self.on_state(TANK_HANDSHAKE, data)
+
     def _update_time(self):
-        """time_ns: the latest tick both the applied flow and the tick's last topic came for."""
-        if self._applied_ns is not None and self._last_ns is not None:
-            self.time_ns = min(self._applied_ns, self._last_ns)
+        """time_ns: the latest tick the applied inputs and the tick's last topic came for."""
+        stamps = (self._applied_ns, self._last_ns) + (
+            (self._tank_ns,) if self.tank_publisher else ())
+        if None not in stamps:
+            self.time_ns = min(stamps)
 
     def spin_until(self, condition, what, timeout=TIMEOUT):
         spin_until(self.executor, condition, timeout, what, self.processes, period=RESEND)
@@ -179,8 +205,10 @@ class Lockstep:
         before that would be lost, and the lockstep would wait for it in vain.
         """
         self.spin_until(lambda: self.clock.get_subscription_count() > 0
-                        and self.inlet.get_subscription_count() > 0,
-                        'valve_node subscribing /clock and inlet_flow', timeout)
+                        and self.inlet.get_subscription_count() > 0
+                        and (self.tank_publisher is None
+                             or self.tank_publisher.get_subscription_count() > 0),
+                        'valve_node subscribing /clock and its inputs', timeout)
         self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subscriptions),
                         'valve_node publishing its states to this driver', timeout)
         if not self.parameters.wait_for_services(timeout_sec=timeout):
@@ -212,6 +240,13 @@ class Lockstep:
         self.inlet.publish(Float64(data=float(flow)))
         self.flow = float(flow)
 
+    def set_tank_pressure(self, absolute, stamp_ns):
+        """Publish the tank pressure [Pa absolute], stamped stamp_ns; the next tick applies it."""
+        message = FluidPressure(fluid_pressure=float(absolute))
+        message.header.stamp = Time(sec=stamp_ns // NS_PER_S, nanosec=stamp_ns % NS_PER_S)
+        self.tank_publisher.publish(message)
+        self.tank = float(absolute)
+
     def tick(self):
         """Advance the valve by one tick period; returns the new state's stamp [ns]."""
         time_ns = self.clock_ns + self.period_ns
@@ -231,6 +266,12 @@ class Lockstep:
                 f'{time_ns / NS_PER_S:.6f} s, not the {self.flow:g} m^3/s published before it '
                 '(the message came late, valve_node rejected it, or its model is halted: see '
                 'its log); the run would not repeat'
+            )
+        if self.tank is not None and abs(self.applied_tank - self.tank) > TANK_TOLERANCE:
+            raise LateInputError(
+                f'valve_node applied the tank pressure {self.applied_tank:g} Pa over the tick '
+                f'ending at {time_ns / NS_PER_S:.6f} s, not the {self.tank:g} Pa published '
+                'before it (see its log); the run would not repeat'
             )
         return time_ns
 

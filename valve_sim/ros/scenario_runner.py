@@ -18,7 +18,9 @@ Run a bench scenario over DDS: valve_node and analyser_node in lockstep, then th
 run_scenario() starts both nodes (valve_node on use_sim_time with the scenario's
 parameters, analyser_node recording into the output folder), waits until the analyser
 records every topic of the valve, and drives the valve tick by tick (Lockstep): the
-inlet flow of each tick published before it, each event's parameter changes applied
+inlet flow of each tick published before it (and the tank pressure, when the scenario
+gives one: its gauge value + ambient_pressure, as the topic is absolute, stamped with
+the tick's start), each event's parameter changes applied
 after the state of the tick it falls on. Then it waits until the analyser reports
 (on /diagnostics) that it has recorded every state, since in lockstep the valve runs
 ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
@@ -32,7 +34,6 @@ import time
 
 from valve_sim.analysis.expectations import evaluate
 from valve_sim.core.errors import IncompleteRunError
-from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
@@ -45,7 +46,7 @@ READY_TIMEOUT = 180.0  # [s] start-up (a cold kernel compile on a loaded machine
 # The analyser's queue per topic: in lockstep the valve may run ahead of the analyser's
 # drain for as long as this lasts (100 s of states), and nothing is lost meanwhile.
 ANALYSER_QUEUE_DEPTH = 100_000
-FLOW_REPUBLISH = 0.02  # [s] of model time: the flow is published again so, as a bench does
+FLOW_REPUBLISH = 0.02  # [s] of model time: the inputs are published again so, as a bench does
 PROGRESS_INTERVAL = 2.0  # [s] of wall time between progress lines
 DRAIN_TIMEOUT = 120.0  # [s] for analyser_node to record the states still on their way
 
@@ -81,7 +82,7 @@ def ros_value(value):
 
 def start_nodes(scenario, folder):
     """Start valve_node (on /clock) and analyser_node for the scenario; returns NodeProcesses."""
-    ambient = scenario.parameters.get('ambient_pressure', STANDARD_ATMOSPHERE)
+    ambient = scenario.ambient_pressure
     valve = {'use_sim_time': 'true',
              **{name: ros_value(value) for name, value in scenario.parameters.items()}}
     ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
@@ -116,9 +117,14 @@ class AnalyserStatus:
 def drive(scenario, driver, progress):
     """Run the scenario's ticks on a connected Lockstep; returns the wall time [s] it took."""
     flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
+    tank = scenario.inputs.get('tank_pressure')
+    tanks = None if tank is None else tank.sample(scenario.tick_times()) + (
+        scenario.ambient_pressure)  # [Pa absolute], as the topic takes it
     events = scenario.event_ticks()
     republish = max(round(FLOW_REPUBLISH * NS_PER_S / scenario.period_ns), 1)
     driver.set_flow(flows[0])
+    if tanks is not None:
+        driver.set_tank_pressure(tanks[0], START_NS)
     driver.start(START_NS, scenario.period_ns)
     started = last_report = time.monotonic()
     for tick in range(scenario.ticks + 1):
@@ -132,6 +138,8 @@ def drive(scenario, driver, progress):
             break
         if flows[tick] != driver.flow or tick % republish == 0:
             driver.set_flow(flows[tick])
+        if tanks is not None and (tanks[tick] != driver.tank or tick % republish == 0):
+            driver.set_tank_pressure(tanks[tick], driver.clock_ns)
         driver.tick()
         if time.monotonic() - last_report > PROGRESS_INTERVAL:
             last_report = time.monotonic()
@@ -172,13 +180,15 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
     rclpy.init(context=context)
     driver = None
     try:
-        driver = Lockstep(context, processes=processes, rate=rate)
+        driver = Lockstep(context, processes=processes, rate=rate,
+                          tank='tank_pressure' in scenario.inputs)
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         driver.connect(wait_topics, READY_TIMEOUT)
         status = AnalyserStatus(driver.node)
+        recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
-                                                       RECORDED)),
+                                                       recorded)),
                           'analyser_node recording every topic', READY_TIMEOUT)
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
@@ -197,8 +207,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
         progress('stopping both nodes (SIGINT)')
         processes.stop()
     record.bag = next(iter(sorted(folder.glob('*.mcap'))))
-    ambient = scenario.parameters.get('ambient_pressure', STANDARD_ATMOSPHERE)
-    record.series = tick_series(record.bag, start_ns=START_NS, ambient_pressure=ambient)
+    record.series = tick_series(record.bag, start_ns=START_NS,
+                                ambient_pressure=scenario.ambient_pressure)
     check_complete(record.series, scenario, START_NS)
     record.steps = record.series.steps()
     record.checks = evaluate(scenario.expectations, record.series,
