@@ -80,6 +80,7 @@ setup(
         ('share/' + PACKAGE + '/config/calibration', glob('config/calibration/*')),
         ('share/' + PACKAGE + '/foxglove', glob('foxglove/*.json')),
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
+        ('share/' + PACKAGE + '/scenarios', glob('scenarios/*.yaml')),
         ('share/' + PACKAGE, ['LICENSE']),
     ],
     install_requires=['setuptools'],

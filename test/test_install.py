@@ -129,7 +129,8 @@ def test_the_install_space_has_its_code_config_and_launch_file(install):
     assert Path(module).is_relative_to(install), 'the installed code, not the source tree'
     assert Path(config) == install / 'share' / 'valve_sim' / 'config' / 'reference.yaml'
     share = install / 'share' / 'valve_sim'
-    for name in ('package.xml', 'LICENSE', 'config/table2.yaml', 'launch/valve_sim.launch.py'):
+    for name in ('package.xml', 'LICENSE', 'config/table2.yaml', 'launch/valve_sim.launch.py',
+                 'scenarios/paper_step.yaml', 'scenarios/stuck_main_valve.yaml'):
         assert (share / name).is_file(), name
 
 
