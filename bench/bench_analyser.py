@@ -20,7 +20,7 @@
 #
 # One run, three processes on this machine's DDS (a ROS_DOMAIN_ID of its own,
 # discovery on localhost):
-# - this script publishes valve_node's six tick topics at 1 kHz (valve_sim.recording.replay)
+# - this script publishes valve_node's six tick topics at 1 kHz (valve_sim.ros.replay)
 #   for --duration seconds: a simulated 5 <-> 20 L/min step every 1.25 s, so the
 #   analyser also measures a step every 1.25 s;
 # - analyser_node records them (and everything else it records by default) to MCAP;
@@ -160,7 +160,7 @@ def run_processes(folder, waveforms, queue_depth):
     Returns the figures as a dict.
     """
     import rclpy
-    from valve_sim.recording.replay import Replay
+    from valve_sim.ros.replay import Replay
     from valve_sim.ros import node_command
 
     processes = {

@@ -36,17 +36,18 @@ import rclpy
 from rclpy.parameter import Parameter
 from valve_harness import flushed
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.analysis.recorded_steps import analyse
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import relief_flows
 from valve_sim.recording.bag import BagReader, message_definition
-from valve_sim.recording.replay import Replay
+from valve_sim.recording.signal_reader import read_recording
 from valve_sim.ros.analyser_node import (
     measures_from_message,
     MEASURES_QOS,
     parameter_names,
     ValveAnalyser,
 )
+from valve_sim.ros.replay import Replay
 import yaml
 
 

@@ -32,7 +32,7 @@ import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.analysis.recorded_steps import analyse
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import load_parameters
@@ -46,6 +46,7 @@ from valve_sim.recording.bag import (
     SEPARATOR,
 )
 from valve_sim.recording.recovery import repair
+from valve_sim.recording.signal_reader import read_recording
 from valve_sim.recording.valve_topics import TOPIC_TYPES, write_simulation_bag
 import yaml
 

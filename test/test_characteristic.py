@@ -23,8 +23,9 @@ from valve_sim.analysis.characteristic import (
     CRACKING_FRACTION,
     CURVE_BASIS,
     MAIN_FLOW_BASIS,
+    ramp_test,
+    steady_marks,
 )
-from valve_sim.commands.characteristic import ramp_test, steady_marks
 from valve_sim.commands.cli import main as valve_sim
 from valve_sim.core.simulation import LITRE_PER_MINUTE, ramp_flows, run_flows
 from valve_sim.recording.valve_topics import write_simulation_bag

@@ -145,7 +145,7 @@ def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_pat
 
 
 def test_frozen_preload_protocol_lets_the_preset_move_with_the_spring(reference):
-    from valve_sim.commands.study import run_case
+    from valve_sim.analysis.study_cases import run_case
 
     held = run_case(reference, {'k_p': 20}, 1e-5, 'held-preset', 7e6)['case']
     frozen = run_case(reference, {'k_p': 20}, 1e-5, 'frozen-preload')['case']

@@ -32,10 +32,11 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.commands.analyse import print_steps, read_recording
-from valve_sim.commands.demo import report, sampling_problem
+from valve_sim.analysis.recorded_steps import sampling_problem, steps_text
+from valve_sim.commands.demo import report
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.bag import BagReader
+from valve_sim.recording.signal_reader import read_recording
 
 
 BAGS = Path(__file__).resolve().parent.parent / 'bags'
@@ -138,11 +139,10 @@ def test_report_names_an_undefined_measure_and_fails(tmp_path):
         report(tmp_path, bag)
 
 
-def test_steps_are_printed_with_their_number_in_the_recording(capsys):
+def test_steps_are_reported_with_their_number_in_the_recording():
     bag = BAGS / 'reference_step.mcap'
     step = json.loads(bag.with_suffix('.measures.json').read_text())['steps'][0]
-    print_steps([step], read_recording(bag), first_number=3)
-    assert capsys.readouterr().out.startswith('step 3: up at')
+    assert steps_text([step], read_recording(bag), first_number=3).startswith('step 3: up at')
 
 
 def test_report_of_retried_steps_needs_every_step_in_the_bag(tmp_path):

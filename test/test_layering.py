@@ -13,10 +13,11 @@
 # limitations under the License.
 
 """
-The wings of valve_sim import only downward, and only ros and commands use rclpy.
+The wings of valve_sim import only downward, and only ros (and the testing kit) use rclpy.
 
 Reads every module's imports with ast (nothing is executed), module-level and
-inside functions alike.
+inside functions alike. The commands import the library and commands/options.py,
+never another subcommand (cli, the entry point, finds them by name).
 """
 
 import ast
@@ -27,9 +28,11 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'valve_sim'
 WINGS = ['core', 'fmu', 'analysis', 'recording', 'ros', 'commands', 'testing']
-NO_RCLPY = {'core', 'fmu', 'analysis', 'recording'}
-# recording may use rclpy inside functions that need a live context, never at import time
-RCLPY_INSIDE_FUNCTIONS = {'recording'}
+NO_RCLPY = {'core', 'fmu', 'analysis', 'recording', 'commands'}
+LIBRARY = ['core', 'fmu', 'analysis', 'recording', 'ros']
+COMMANDS = PACKAGE / 'commands'
+# What a subcommand's module may import of commands/: the shared options, nothing else.
+SHARED_COMMAND_MODULES = {'options'}
 
 
 def imported_modules(path):
@@ -41,9 +44,11 @@ def imported_modules(path):
             for alias in node.names:
                 yield alias.name, id(node) in top_level
         elif isinstance(node, ast.ImportFrom) and node.module:
-            if node.module == 'valve_sim':
+            if node.module == 'valve_sim' or node.module.count('.') == 1 and (
+                node.module.split('.')[0] == 'valve_sim'
+            ):  # from valve_sim(.wing) import module
                 for alias in node.names:
-                    yield f'valve_sim.{alias.name}', id(node) in top_level
+                    yield f'{node.module}.{alias.name}', id(node) in top_level
             else:
                 yield node.module, id(node) in top_level
 
@@ -84,15 +89,50 @@ def test_imports_go_only_downward(path):
             if WINGS.index(parts[1]) > level:
                 problems.append(f'{module} (wing {parts[1]} is above {wing})')
         if parts[0] == 'rclpy' and wing in NO_RCLPY:
-            if top_level or wing not in RCLPY_INSIDE_FUNCTIONS:
-                problems.append(
-                    f'{module} ({wing} must not import rclpy'
-                    f'{" at import time" if wing in RCLPY_INSIDE_FUNCTIONS else ""})'
-                )
+            problems.append(f'{module} ({wing} must not import rclpy: ros/ drives nodes)')
     assert problems == [], f'{path.relative_to(PACKAGE)} imports upward: {problems}'
+
+
+@pytest.mark.parametrize(
+    'path',
+    sorted(p for p in COMMANDS.glob('*.py') if p.name not in ('__init__.py', 'cli.py')),
+    ids=lambda p: p.name,
+)
+def test_a_subcommand_imports_no_other_subcommand(path):
+    """Commands import only the library and commands/options.py (library code is not here)."""
+    siblings = sorted(
+        module
+        for module, _ in imported_modules(path)
+        if module.startswith('valve_sim.commands.')
+        and module.split('.')[2] not in SHARED_COMMAND_MODULES
+    )
+    assert siblings == [], f'commands/{path.name} imports other commands: {siblings}'
+
+
+@pytest.mark.parametrize('wing', LIBRARY)
+def test_the_library_never_imports_the_commands(wing):
+    found = sorted(
+        f'{path.relative_to(PACKAGE)}: {module}'
+        for path in (PACKAGE / wing).rglob('*.py')
+        for module, _ in imported_modules(path)
+        if module == 'valve_sim.commands' or module.startswith('valve_sim.commands.')
+    )
+    assert found == [], f'the library imports commands/: {found}'
 
 
 def test_the_check_sees_an_upward_import(tmp_path):
     bad = tmp_path / 'bad.py'
     bad.write_text('def f():\n    from valve_sim.ros import valve_node\n')
-    assert ('valve_sim.ros', False) in list(imported_modules(bad))
+    assert ('valve_sim.ros.valve_node', False) in list(imported_modules(bad))
+
+
+def test_the_check_sees_a_sibling_command_in_each_form(tmp_path):
+    bad = tmp_path / 'bad.py'
+    bad.write_text(
+        'from valve_sim.commands import simulate\n'
+        'from valve_sim.commands.analyse import run\n'
+        'import valve_sim.commands.study\n'
+    )
+    assert {module for module, _ in imported_modules(bad)} == {
+        'valve_sim.commands.simulate', 'valve_sim.commands.analyse', 'valve_sim.commands.study'
+    }

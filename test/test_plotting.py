@@ -29,8 +29,9 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.plotting import plot_step_response
-from valve_sim.commands.analyse import PLOT_LEAD, plot_steps, read_recording
+from valve_sim.analysis.recorded_steps import PLOT_LEAD, plot_steps
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.recording.signal_reader import read_recording
 
 
 BAGS = Path(__file__).resolve().parent.parent / 'bags'

@@ -31,12 +31,12 @@ from mcap.reader import make_reader
 import pytest
 from rosbags.highlevel import AnyReader
 from valve_harness import flushed
-from valve_sim.commands.analyse import read_recording
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.recovery import diagnose, repair
-from valve_sim.recording.replay import Replay
+from valve_sim.recording.signal_reader import read_recording
 from valve_sim.ros import node_command
+from valve_sim.ros.replay import Replay
 import yaml
 
 

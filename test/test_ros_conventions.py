@@ -39,10 +39,10 @@ from rclpy.parameter import Parameter
 from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE, relief_flows, Scenario, simulate
-from valve_sim.recording.replay import Replay
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import analyser_node
 from valve_sim.ros.live_view import layout_path
+from valve_sim.ros.replay import Replay
 
 
 pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]

@@ -27,13 +27,14 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 import pytest
-from valve_sim.commands.analyse import analyse, read_recording
+from valve_sim.analysis.recorded_steps import analyse
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import relief_flows, Scenario, simulate
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.rosbag2_metadata import bag_files
+from valve_sim.recording.signal_reader import read_recording
 from valve_sim.recording.valve_topics import (
     TOPIC_TYPES,
     TRANSPORT_DELAY_NS,

@@ -19,7 +19,6 @@ The cluster is a scheduler and two worker processes started here as `dask
 scheduler` / `dask worker` subprocesses, as a user starts them on other machines.
 """
 
-import argparse
 import csv
 import io
 import json
@@ -35,6 +34,8 @@ import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
+from valve_sim.analysis.study_backend import open_backend
+from valve_sim.analysis.study_cases import run_all
 from valve_sim.analysis.study_runner import (
     DaskBackend,
     evaluate_batch,
@@ -49,8 +50,6 @@ from valve_sim.analysis.tolerances import (
     parse_variations,
     summarise,
 )
-from valve_sim.commands.study import run_all
-from valve_sim.commands.study_backend import open_backend
 from valve_sim.core.errors import StudyError
 from valve_sim.core.parameters import ParameterError, scaled
 
@@ -311,11 +310,10 @@ def test_without_dask_the_study_runs_on_a_process_pool_and_the_others_say_what_t
     monkeypatch, capsys
 ):
     monkeypatch.setitem(sys.modules, 'distributed', None)
-    args = argparse.Namespace(scheduler=None, workers=2, batch_size=None)
-    assert isinstance(open_backend(args, 'study', pool_fallback=True), PoolBackend)
+    assert isinstance(open_backend('study', workers=2, pool_fallback=True), PoolBackend)
     assert 'local process pool' in capsys.readouterr().err
     with pytest.raises(StudyError, match=r"pip install 'dask\[distributed\]'"):
-        open_backend(args, 'tolerance')
+        open_backend('tolerance', workers=2)
 
 
 def test_a_bad_scheduler_address_is_one_clear_error():

@@ -38,11 +38,16 @@ the pilot stage alone passes the flow and the curve falls steeply away from that
 line. Cracking is then p_s at the first rising sample from which the curve stays
 within CURVE_BAND (0.1 %) of the pressure at rated flow of the line; reseat is
 p_s at the last falling sample before the curve leaves that band.
+
+ramp_test() runs the model's ramp and finds its marks both ways, steady_marks()
+gives the exact steady state's, marks_table() shows them side by side.
 """
 
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from valve_sim.core.errors import SteadyStateError
+from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 CRACKING_FRACTION = 0.01  # main-stage flow threshold, fraction of the rated flow
@@ -218,3 +223,67 @@ def _monotone_interp(grid, flow, pressure):
     """Interpolate p at the grid flows along a ramp, on the samples where q sets a new maximum."""
     keep = np.concatenate([[True], flow[1:] > np.maximum.accumulate(flow)[:-1]])
     return np.interp(grid, flow[keep], pressure[keep])
+
+
+def steady_marks(params, rated_flow, max_flow):
+    """Return the steady state's cracking (lift-off, 1 % main-stage flow) and rated pressures."""
+    from valve_sim.core.steady_state import (
+        cracking_pressure,
+        flow_for_main_stage_flow,
+        steady_state,
+    )
+
+    marks = {'lift_off_pressure': None, 'cracking_pressure': None, 'cracking_flow': None}
+    try:
+        marks['lift_off_pressure'] = cracking_pressure(params)
+    except SteadyStateError as error:
+        marks['lift_off_note'] = str(error)
+    try:
+        flow = flow_for_main_stage_flow(params, CRACKING_FRACTION * rated_flow, max_flow)
+        marks['cracking_flow'] = flow
+        marks['cracking_pressure'] = float(steady_state(params, flow)[0])
+    except SteadyStateError as error:
+        marks['cracking_note'] = str(error)
+    marks['rated_pressure'] = float(steady_state(params, rated_flow)[0])
+    if marks['cracking_pressure'] is not None:
+        marks['override'] = marks['rated_pressure'] - marks['cracking_pressure']
+    return marks
+
+
+def ramp_test(params, max_flow, rated_flow, ramp_time, hold_time, step_size, record_interval):
+    """Run the ramp; returns (Waveforms, main-stage flow per sample, {basis: Characteristic})."""
+    from valve_sim.core.simulation import main_stage_flow, ramp_flows, run_flows
+
+    waveforms = run_flows(
+        params, ramp_flows(max_flow, ramp_time, hold_time, step_size), step_size, record_interval
+    )
+    main = main_stage_flow(params, waveforms.states)
+    p_s, q_in = waveforms['supply_pressure'], waveforms.inlet_flow
+    return waveforms, main, {
+        'main_stage_flow': characteristic(p_s, q_in, rated_flow, main),
+        'pressure_flow_curve': characteristic(p_s, q_in, rated_flow),
+    }
+
+
+def marks_table(marks, steady=None):
+    """Return the marks in MPa and L/min as a table, beside the steady state's (a dict)."""
+    lines = [
+        f'{"mark":<22}{"ramp":>12}' + (f'{"steady state":>14}' if steady is not None else '')
+    ]
+    rows = (
+        ('cracking [MPa]', 'cracking_pressure', 1e-6),
+        ('cracking flow [L/min]', 'cracking_flow', 1 / LITRE_PER_MINUTE),
+        ('rated-flow p [MPa]', 'rated_pressure', 1e-6),
+        ('override [MPa]', 'override', 1e-6),
+        ('reseat [MPa]', 'reseat_pressure', 1e-6),
+        ('hysteresis [MPa]', 'hysteresis', 1e-6),
+    )
+    for label, key, scale in rows:
+        value = getattr(marks, key)
+        line = f'{label:<22}' + (f'{value * scale:12.5f}' if value is not None else f'{"-":>12}')
+        if steady is not None:
+            exact = steady.get(key)
+            line += f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
+        lines.append(line)
+    lines += [f'  {name}: {reason}' for name, reason in marks.reasons.items()]
+    return '\n'.join(lines)

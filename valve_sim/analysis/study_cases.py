@@ -17,7 +17,11 @@ The cases of the paper's parameter study and the protocol that sets each case's 
 
 One definition for `valve-sim study`, calibration checks, tolerance studies and
 optimisation: the protocol's preset, and the runner cases of sampled valves.
+run_all() runs the paper's study on a runner backend (study_runner), run_case() one
+of its cases here; each result is {'measures', 'poppet', 'case'} (study_result()).
 """
+
+import sys
 
 from valve_sim.analysis.paper import (
     REFERENCE_SCENARIO,
@@ -35,6 +39,7 @@ PROTOCOLS = {
     'the preset moves with the varied parameters',
 }
 DEFAULT_PROTOCOL = 'held-preset'
+FIGURE8_PARAMETER = 'm_p'  # Figure 8: the poppet waveforms of the m_p variations
 
 
 def study_cases():
@@ -106,3 +111,115 @@ def sample_cases(params, names, values, preset, step_size):
         }
         for index, row in enumerate(values)
     ]
+
+
+def runner_case(index, params, changes, step_size, protocol, preset_pressure):
+    """
+    Return one case of the study as the runner takes it: params scaled by changes.
+
+    protocol 'held-preset' has the runner re-solve the pilot spring preload so that
+    the main valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
+    """
+    return {
+        'index': index,
+        'params': scaled(params, changes),
+        'preset_pressure': protocol_preset(protocol, preset_pressure),
+        'scenario': REFERENCE_SCENARIO,
+        'step_size': step_size,
+        'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
+        'envelope': True,
+    }
+
+
+def study_result(row, protocol, preset_pressure):
+    """
+    Return a runner row as {'measures': ..., 'poppet': (time, y) or None, 'case': {...}}.
+
+    'case': protocol, preset_pressure_Pa, cracking_pressure_Pa, pilot_spring_preload_m,
+    initial_supply_pressure_Pa, initial_main_valve_displacement_m. A case that could not
+    run gets every measure None with the reason.
+    """
+    import numpy as np  # here: commands import this module for their --help
+    from valve_sim.analysis.measures import MEASURE_NAMES
+
+    case = {
+        'protocol': protocol,
+        'preset_pressure_Pa': preset_pressure,
+        'cracking_pressure_Pa': row.get('cracking_pressure'),
+        'pilot_spring_preload_m': row.get('pilot_spring_preload'),
+        'initial_supply_pressure_Pa': row.get('initial_supply_pressure'),
+        'initial_main_valve_displacement_m': row.get('initial_main_valve_displacement'),
+    }
+    if row['error']:
+        reasons = dict.fromkeys(MEASURE_NAMES, f'no step response: {row["error"]}')
+        return {
+            'measures': {**row['measures'], 'reasons': reasons, 'details': {}},
+            'poppet': None,
+            'case': case,
+        }
+    measures = {**row['measures'], 'reasons': dict(row['reasons']), 'details': {}}
+    if case['initial_main_valve_displacement_m'] <= 0.0:
+        measures['details']['note'] = (
+            'main stage closed before the step: the valve relieves through the pilot alone'
+        )
+    waveforms = row.get('waveforms')
+    poppet = (
+        (np.asarray(waveforms['time']), np.asarray(waveforms['poppet_displacement']))
+        if waveforms
+        else None
+    )
+    return {'measures': measures, 'poppet': poppet, 'case': case}
+
+
+def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_pressure=None):
+    """
+    Run one case here; returns {'measures', 'poppet', 'case'} as study_result().
+
+    preset_pressure [Pa] defaults to the cracking pressure of params.
+    """
+    from valve_sim.analysis.study_runner import evaluate_case
+    from valve_sim.core.steady_state import cracking_pressure
+
+    if preset_pressure is None:
+        preset_pressure = cracking_pressure(params)
+    case = runner_case(0, params, changes, step_size, protocol, preset_pressure)
+    return study_result(evaluate_case(case), protocol, preset_pressure)
+
+
+def run_all(
+    params,
+    step_size,
+    backend,
+    results_path,
+    protocol=DEFAULT_PROTOCOL,
+    preset_pressure=None,
+    resume=False,
+    progress_stream=sys.stderr,
+):
+    """
+    Run every case on the backend (None: here, serially); returns {label: study_result}.
+
+    Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
+    defaults to the cracking pressure of params.
+    """
+    from valve_sim.analysis.study_runner import run_cases, SerialBackend
+    from valve_sim.core.steady_state import cracking_pressure
+
+    if preset_pressure is None:
+        preset_pressure = cracking_pressure(params)
+    labelled = study_cases()
+    rows, _ = run_cases(
+        [
+            runner_case(index, params, changes, step_size, protocol, preset_pressure)
+            for index, (_, changes) in enumerate(labelled)
+        ],
+        results_path,
+        backend or SerialBackend(),
+        resume,
+        label='study',
+        progress_stream=progress_stream,
+    )
+    return {
+        label: study_result(rows[index], protocol, preset_pressure)
+        for index, (label, _) in enumerate(labelled)
+    }

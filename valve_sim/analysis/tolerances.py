@@ -30,12 +30,14 @@ a measure that does not exist (or a run that failed) fails its limits.
 """
 
 from collections import Counter
+import csv
 from dataclasses import dataclass
 import math
 import re
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.output_files import replacing
 from valve_sim.core.parameters import ParameterError, resolve_name, SPECS
 
 # scipy.stats is imported in the functions that use it, so that `valve-sim tolerance
@@ -311,3 +313,26 @@ def summarise(rows, limits):
         },
         'percentiles': percentiles,
     }
+
+
+def write_samples(path, names, values, rows, limits):
+    """samples.csv: per sampled valve its values, preload, measures, pass and reasons."""
+    with replacing(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(
+            ['index', *names, 'pilot_spring_preload', *MEASURE_NAMES, 'pass', 'reasons', 'error']
+        )
+        for index, sample in enumerate(values):
+            row = rows[index]
+            writer.writerow(
+                [
+                    index,
+                    *(repr(float(v)) for v in sample),
+                    row.get('pilot_spring_preload', ''),
+                    *('' if row['measures'][n] is None else row['measures'][n]
+                      for n in MEASURE_NAMES),
+                    int(passes(row, limits)),
+                    '; '.join(f'{n}: {r}' for n, r in row['reasons'].items()),
+                    row['error'] or '',
+                ]
+            )

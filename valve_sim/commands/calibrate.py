@@ -36,20 +36,21 @@ import shlex
 import sys
 
 import numpy as np
+from valve_sim.analysis.recorded_steps import analyse
 from valve_sim.analysis.signals import ROLE
-from valve_sim.commands.analyse import (
+from valve_sim.commands.options import (
+    add_options,
     add_signal_arguments,
-    analyse,
-    read_recording,
-    Recording,
+    flow_value,
+    load_from_arguments,
+    number,
     signal_map_from,
 )
-from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, flow_value, load_from_arguments, number
 from valve_sim.core.input_files import read_json, TARGET_MEASURES
-from valve_sim.core.output_files import json_text, write_text
+from valve_sim.core.output_files import json_text, make_folder, write_text
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.scenario import LITRE_PER_MINUTE
+from valve_sim.recording.signal_reader import read_recording, Recording
 
 # The model's and the fit's modules (numba, scipy) are imported in the functions that
 # run them, so that `valve-sim calibrate --help` stays quick.

@@ -32,9 +32,10 @@ import sys
 
 import numpy as np
 from valve_sim.analysis.characteristic import (
-    characteristic,
-    CRACKING_FRACTION,
+    marks_table,
+    ramp_test,
     split_ramps,
+    steady_marks,
 )
 from valve_sim.commands.options import (
     add_options,
@@ -43,8 +44,6 @@ from valve_sim.commands.options import (
     load_from_arguments,
     number,
 )
-from valve_sim.commands.simulate import write_bag
-from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.output_files import json_text, replacing, write_text
 from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
@@ -96,46 +95,6 @@ def _check(args, step_size):
     return rated
 
 
-def steady_marks(params, rated_flow, max_flow):
-    """Return the steady state's cracking (lift-off, 1 % main-stage flow) and rated pressures."""
-    from valve_sim.core.steady_state import (
-        cracking_pressure,
-        flow_for_main_stage_flow,
-        steady_state,
-    )
-
-    marks = {'lift_off_pressure': None, 'cracking_pressure': None, 'cracking_flow': None}
-    try:
-        marks['lift_off_pressure'] = cracking_pressure(params)
-    except SteadyStateError as error:
-        marks['lift_off_note'] = str(error)
-    try:
-        flow = flow_for_main_stage_flow(params, CRACKING_FRACTION * rated_flow, max_flow)
-        marks['cracking_flow'] = flow
-        marks['cracking_pressure'] = float(steady_state(params, flow)[0])
-    except SteadyStateError as error:
-        marks['cracking_note'] = str(error)
-    marks['rated_pressure'] = float(steady_state(params, rated_flow)[0])
-    if marks['cracking_pressure'] is not None:
-        marks['override'] = marks['rated_pressure'] - marks['cracking_pressure']
-    return marks
-
-
-def ramp_test(params, max_flow, rated_flow, ramp_time, hold_time, step_size, record_interval):
-    """Run the ramp; returns (Waveforms, main-stage flow per sample, {basis: Characteristic})."""
-    from valve_sim.core.simulation import main_stage_flow, ramp_flows, run_flows
-
-    waveforms = run_flows(
-        params, ramp_flows(max_flow, ramp_time, hold_time, step_size), step_size, record_interval
-    )
-    main = main_stage_flow(params, waveforms.states)
-    p_s, q_in = waveforms['supply_pressure'], waveforms.inlet_flow
-    return waveforms, main, {
-        'main_stage_flow': characteristic(p_s, q_in, rated_flow, main),
-        'pressure_flow_curve': characteristic(p_s, q_in, rated_flow),
-    }
-
-
 def _write_csv(path, header, rows):
     with replacing(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
@@ -148,28 +107,6 @@ def _ramp_labels(inlet_flow):
     labels = np.full(len(inlet_flow), 'top', dtype=object)
     labels[rising[:-1]], labels[falling[1:]] = 'rising', 'falling'
     return labels
-
-
-def print_marks(marks, steady=None):
-    """Print the marks in MPa and L/min, beside the steady state's if given (a dict)."""
-    print(f'{"mark":<22}{"ramp":>12}' + (f'{"steady state":>14}' if steady is not None else ''))
-    rows = (
-        ('cracking [MPa]', 'cracking_pressure', 1e-6),
-        ('cracking flow [L/min]', 'cracking_flow', 1 / LITRE_PER_MINUTE),
-        ('rated-flow p [MPa]', 'rated_pressure', 1e-6),
-        ('override [MPa]', 'override', 1e-6),
-        ('reseat [MPa]', 'reseat_pressure', 1e-6),
-        ('hysteresis [MPa]', 'hysteresis', 1e-6),
-    )
-    for label, key, scale in rows:
-        value = getattr(marks, key)
-        line = f'{label:<22}' + (f'{value * scale:12.5f}' if value is not None else f'{"-":>12}')
-        if steady is not None:
-            exact = steady.get(key)
-            line += f'{exact * scale:14.5f}' if exact is not None else f'{"-":>14}'
-        print(line)
-    for name, reason in marks.reasons.items():
-        print(f'  {name}: {reason}')
 
 
 def run(args):
@@ -196,15 +133,17 @@ def run(args):
                       report, args.max_flow)
     if args.mcap:
         from valve_sim.core.simulation import relief_flows
+        from valve_sim.recording.valve_topics import write_simulation_bag
 
-        write_bag(
-            args, waveforms, settings['ambient_pressure'], args.record_interval,
+        write_simulation_bag(
+            args.mcap, waveforms, settings['ambient_pressure'], args.record_interval,
+            start_time_ns=args.start_time, folder=args.bag_folder,
             relief=relief_flows(params, waveforms),
         )
     if args.json:
         print(json_text(report))
     else:
-        print_marks(marks['main_stage_flow'], steady)
+        print(marks_table(marks['main_stage_flow'], steady))
         curve = marks['pressure_flow_curve']
         alone = [
             f'{name} {value * 1e-6:.5f} MPa'

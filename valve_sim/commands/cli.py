@@ -113,15 +113,6 @@ def build_parser(argv):
     return parser
 
 
-def make_folder(path):
-    """Create the output folder path (and its parents); OSError naming it if that fails."""
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise OSError(f'output folder {path} cannot be created: {error.strerror}') from error
-    return path
-
-
 def explained(error):
     """Return an error's one-line message; a file the system refused is named first."""
     if isinstance(error, OSError) and error.filename and error.strerror:

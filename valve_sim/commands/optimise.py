@@ -36,19 +36,19 @@ import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
+from valve_sim.analysis.study_backend import check_fits, MAX_RUNS, open_backend
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
-from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, load_from_arguments, number
-from valve_sim.commands.study_backend import (
+from valve_sim.commands.options import (
+    add_options,
     add_protocol_arguments,
     add_runner_arguments,
-    check_fits,
-    MAX_RUNS,
-    open_backend,
+    load_from_arguments,
+    number,
 )
 from valve_sim.core.errors import StudyError
 from valve_sim.core.input_files import size_text
+from valve_sim.core.output_files import make_folder
 
 # The optimiser and the model (pymoo, numba, scipy) are imported in the functions that run
 # them, so that `valve-sim optimise --help` stays quick.
@@ -240,7 +240,7 @@ def run(args):
         f'Pareto set and 2 baselines with {problem.confirm_samples} valves each',
         file=sys.stderr,
     )
-    backend = open_backend(args, 'optimise')
+    backend = open_backend('optimise', args.scheduler, args.workers, args.dashboard)
     try:
         records = search(problem, backend, out / 'evaluations', args.population,
                          args.generations, args.resume, batch_size=args.batch_size or 1)

@@ -31,13 +31,18 @@ import math
 from pathlib import Path
 import sys
 
-from valve_sim.core.input_files import PARAMETER_FILE
+from valve_sim.analysis.signals import CLOCKS, ROLES, SignalMap
+from valve_sim.analysis.study_backend import BYTES_PER_WORKER, CORES, MAX_RUNS, WORKERS_PER_CORE
+from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
+from valve_sim.core.input_files import PARAMETER_FILE, size_text
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
     load_parameters,
     ParameterError,
+    SETTING_SPECS,
     SPECS,
+    STANDARD_ATMOSPHERE,
 )
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
@@ -289,3 +294,118 @@ def check_bag_arguments(args):
     """Refuse --bag-folder and --start-time without --mcap (ParameterError)."""
     if (args.bag_folder or args.start_time is not None) and not args.mcap:
         raise ParameterError('--bag-folder and --start-time need --mcap')
+
+
+# The studies' options (study, tolerance, sensitivity, optimise): the protocol and the runner.
+
+def add_study_arguments(parser, samples_help):
+    """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
+    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
+    parser.add_argument('--samples', type=number('a sample count', '', 1, 10**12, integer=True),
+                        default=256, metavar='N',
+                        help=f'{samples_help}; at most {MAX_RUNS:,} runs in all')
+    add_options(parser, '--seed', help='seed of the sampler (default 0)')
+    add_options(parser, '--step-size')
+
+
+def add_protocol_arguments(parser):
+    """--protocol and its short form --frozen-preload."""
+    parser.add_argument('--protocol', choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
+                        help='held-preset: preload re-solved per case, the preset held '
+                        '(default, the paper); frozen-preload: the preload of the parameter '
+                        'file in every case')
+    parser.add_argument('--frozen-preload', dest='protocol', action='store_const',
+                        const='frozen-preload', help='same as --protocol frozen-preload')
+
+
+def add_runner_arguments(parser):
+    """--scheduler, --workers, --batch-size and --resume."""
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                        help='address of a running Dask scheduler (default: a local cluster '
+                        'on this machine)')
+    parser.add_argument('--workers', type=number('a worker count', '', 1, 10**6, integer=True),
+                        default=CORES, metavar='N',
+                        help='worker processes of the local cluster (default: all cores; at '
+                        f'most {WORKERS_PER_CORE} per core, {size_text(BYTES_PER_WORKER)} '
+                        'of memory each)')
+    parser.add_argument('--batch-size', metavar='N',
+                        type=number('a batch size', '', 1, MAX_RUNS, integer=True),
+                        help='runs per task (default: about 8 tasks per worker, at most 64 runs)')
+    parser.add_argument('--resume', action='store_true',
+                        help='keep the runs already in DIR/results.jsonl and compute only the '
+                        'missing ones')
+    parser.add_argument('--dashboard', nargs='?', const='127.0.0.1:0', metavar='HOST:PORT',
+                        type=dashboard_address,
+                        help="serve Dask's dashboard of the local cluster and print its address "
+                        '(default 127.0.0.1:0: this machine only, a free port; 0.0.0.0:PORT '
+                        'shows it to the network). Without it the local cluster has none, and '
+                        'every part of it listens on 127.0.0.1 only')
+
+
+def dashboard_address(text):
+    """Parse --dashboard's HOST:PORT, PORT in [0, 65535] (argparse type)."""
+    host, colon, port = text.strip().rpartition(':')
+    if not (colon and host and port.isdigit() and int(port) <= 65535):
+        raise ArgumentTypeError(f'must be HOST:PORT with a PORT in [0, 65535], got {text!r}')
+    return f'{host}:{int(port)}'
+
+
+dashboard_address.bounds = 'HOST:PORT, PORT in [0, 65535]'
+
+
+# Where the signals of a recorded bag are (analyse, calibrate --bag).
+
+def add_signal_arguments(parser):
+    """--namespace, --topic-*, --joint-*, --ambient-pressure and --clock: where the signals are."""
+    parser.add_argument('--namespace', metavar='NS',
+                        help="namespace the valve's topics were recorded under (e.g. /rig1); "
+                        'relative --topic-* names resolve in it (default: the one namespace '
+                        "with valve_node's topics in the bag, else /)")
+    for role in ROLES:
+        option = role.name.replace('_', '-')
+        parser.add_argument(f'--topic-{option}', metavar='TOPIC',
+                            help=f'topic of the {role.meaning} (default {role.topic} in the '
+                            'namespace)')
+        if role.joint:
+            parser.add_argument(f'--joint-{option}', metavar='NAME', default=role.joint,
+                                help=f'JointState joint name of the {role.meaning} '
+                                f'(default {role.joint})')
+    ambient = SETTING_SPECS['ambient_pressure']
+    parser.add_argument('--ambient-pressure', default=STANDARD_ATMOSPHERE, metavar='PA',
+                        type=number('a pressure', 'Pa', ambient.minimum, ambient.maximum),
+                        help='subtracted from the recorded pressure to get gauge pressure; 0 '
+                        f'for a gauge sensor (default {STANDARD_ATMOSPHERE:g})')
+    parser.add_argument('--clock', choices=CLOCKS, default='header',
+                        help='time of a sample: its header stamp, or its receive time (needed '
+                        'for Float64 topics)')
+
+
+def signal_map_from(args, command='analyse'):
+    """
+    Build the SignalMap of --namespace, --topic-*, --joint-*, --ambient-pressure and --clock.
+
+    Without --namespace, the roles left at their default topics look in the namespace
+    detect_namespace() finds in the bag (said on stderr when it is not the root); sets
+    args.namespace to the namespace used ('' for the root).
+    """
+    from valve_sim.recording.signal_reader import detect_namespace
+
+    options = vars(args)
+    given = {role.name: options[f'topic_{role.name}'] for role in ROLES}
+    if args.namespace is None:
+        args.namespace = detect_namespace(args.bag, [r for r, topic in given.items() if not topic])
+        if args.namespace:
+            print(f'valve-sim {command}: the valve topics of {args.bag} are under '
+                  f'{args.namespace}: analysing those (--namespace chooses)', file=sys.stderr)
+    namespace = namespace_name(args.namespace)
+    args.namespace = namespace
+    topics = {
+        role.name: resolved(given[role.name] or role.topic, namespace) for role in ROLES
+    }
+    joints = {role.name: options[f'joint_{role.name}'] for role in ROLES if role.joint}
+    return SignalMap(topics, joints, args.ambient_pressure, args.clock)
+
+
+def resolved(topic, namespace):
+    """Return topic resolved in namespace ('' the root): relative names go below it."""
+    return topic if topic.startswith('/') else f'{namespace}/{topic}'

@@ -29,8 +29,8 @@ import os
 from pathlib import Path
 import time
 
-from valve_sim.commands.cli import make_folder
 from valve_sim.commands.options import number
+from valve_sim.core.output_files import make_folder
 
 
 def progress(text):

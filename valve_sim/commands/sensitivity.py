@@ -37,23 +37,17 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
+from valve_sim.analysis.study_backend import check_runs, PIP_INSTALL, run_samples
 from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.tolerances import parse_variations, undefined_reasons
-from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import load_from_arguments
-from valve_sim.commands.study_backend import (
+from valve_sim.analysis.tolerances import parse_variations, undefined_reasons, write_samples
+from valve_sim.commands.options import (
     add_protocol_arguments,
     add_runner_arguments,
-    check_runs,
-    PIP_INSTALL,
-)
-from valve_sim.commands.tolerance import (
     add_study_arguments,
-    run_samples,
-    write_samples,
+    load_from_arguments,
 )
 from valve_sim.core.errors import StudyError
-from valve_sim.core.output_files import json_text, replacing, write_text
+from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.parameters import SPECS
 
 
@@ -140,7 +134,11 @@ def run(args):
         f"{protocol['protocol']}: {protocol['protocol_meaning']}",
         file=sys.stderr,
     )
-    rows = run_samples(args, 'sensitivity', params, names, values, preset, settings, out)
+    rows = run_samples(
+        'sensitivity', params, names, values, preset, settings['step_size'],
+        out / 'results.jsonl', args.scheduler, args.workers, args.dashboard, args.resume,
+        args.batch_size,
+    )
     indices = measure_indices(distributions, rows, args.seed)
     write_indices(out / 'indices.csv', distributions, indices)
     write_samples(out / 'samples.csv', names, values, rows, [])

@@ -29,11 +29,11 @@ readings are what --mcap records on the pressure topics.
 import csv
 import math
 import sys
-import time
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import FIGURE5_MEASURES, is_reference_step, REFERENCE_SCENARIO
+from valve_sim.analysis.paper import is_reference_step, REFERENCE_SCENARIO
+from valve_sim.analysis.recorded_steps import measures_table
 from valve_sim.commands.options import (
     add_options,
     check_bag_arguments,
@@ -120,48 +120,31 @@ def add_arguments(parser):
                         'below it (default: the root namespace)')
 
 
-def write_bag(args, waveforms, ambient_pressure, publish_interval, readings=None, relief=None):
+def write_mcap(args, waveforms, ambient_pressure, publish_interval, readings, relief):
     """
-    Write --mcap as --bag-folder and --start-time say (valve_topics.write_simulation_bag).
+    Write --mcap (valve_topics.write_simulation_bag), as --bag-folder and --start-time say.
 
-    With --rig-topics (simulate only): what a rig records (valve_topics.write_rig_bag).
-    readings: the sensor stage's pressures per tick (nan: nothing published), if any;
-    relief: the relief flows per sample (simulation.relief_flows), if any.
+    With --rig-topics: what a rig records (valve_topics.write_rig_bag).
+    readings: the sensor stage's pressures per tick (nan: nothing published);
+    relief: the relief flows per sample (simulation.relief_flows).
     """
     from valve_sim.recording.valve_topics import write_rig_bag, write_simulation_bag
 
-    start_ns = args.start_time
-    if start_ns is None:
-        start_ns = time.time_ns() // 1_000_000 * 1_000_000
-    if getattr(args, 'rig_topics', None):
+    if args.rig_topics:
         pressure_topic, flow_topic = rig_topics(args.rig_topics)
         if not (math.isfinite(args.pressure_noise) and args.pressure_noise >= 0.0):
             raise ParameterError(
                 f'--pressure-noise must be finite and >= 0 Pa, got {args.pressure_noise}'
             )
         write_rig_bag(
-            args.mcap,
-            waveforms,
-            pressure_topic,
-            flow_topic,
-            ambient_pressure,
-            args.pressure_noise,
-            args.seed,
-            publish_interval,
-            start_time_ns=start_ns,
-            folder=args.bag_folder,
-            flow_interval=args.flow_interval,
+            args.mcap, waveforms, pressure_topic, flow_topic, ambient_pressure,
+            args.pressure_noise, args.seed, publish_interval, start_time_ns=args.start_time,
+            folder=args.bag_folder, flow_interval=args.flow_interval,
         )
         return
     write_simulation_bag(
-        args.mcap,
-        waveforms,
-        ambient_pressure,
-        publish_interval=publish_interval,
-        start_time_ns=start_ns,
-        folder=args.bag_folder,
-        readings=readings,
-        namespace=namespace_name(getattr(args, 'namespace', None)),
+        args.mcap, waveforms, ambient_pressure, publish_interval, start_time_ns=args.start_time,
+        folder=args.bag_folder, readings=readings, namespace=namespace_name(args.namespace),
         relief=relief,
     )
 
@@ -224,21 +207,6 @@ def write_csv(path, waveforms, relief):
                 [f'{t:.7f}', f'{q:.9e}']
                 + [f'{v:.9e}' for v in (*state, p_t, *flows)]
             )
-
-
-def print_table(measures, paper=False):
-    """
-    Print the six measures as a table; paper: beside Figure 5's values.
-
-    Only a run of the paper's own scenario should get the paper's column.
-    """
-    print(f'{"measure":<14}{"valve_sim":>12}' + (f'{"paper":>10}' if paper else ''))
-    for name in MEASURE_NAMES:
-        value = measures.values[name]
-        shown = f'{value:12.4g}' if value is not None else f'{"-":>12}'
-        print(f'{name:<14}{shown}' + (f'{FIGURE5_MEASURES[name]:>10.4g}' if paper else ''))
-    for name, reason in measures.reasons.items():
-        print(f'  {name}: {reason}')
 
 
 def load_injection(args, injection):
@@ -351,13 +319,13 @@ def run(args):
             1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
         )
         _, readings = read_waveforms(waveforms, sensors, interval, settings['ambient_pressure'])
-        write_bag(args, waveforms, settings['ambient_pressure'], interval, readings, relief)
+        write_mcap(args, waveforms, settings['ambient_pressure'], interval, readings, relief)
     if args.json:
         print(json_text(measures.as_dict()))
     else:
-        print_table(
+        print(measures_table(
             measures, paper=is_papers_run(params, scenario) and not faulty and not above_tank
-        )
+        ))
         if above_tank:
             print(
                 f'tank pressure {tank.initial:g} Pa (gauge)'

@@ -45,31 +45,23 @@ import csv
 from pathlib import Path
 import sys
 
-import numpy as np
 from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
-from valve_sim.analysis.study_cases import (
-    DEFAULT_PROTOCOL,
-    protocol_preset,
-    PROTOCOLS,
-    study_cases,
-)
-from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, load_from_arguments
-from valve_sim.commands.study_backend import (
+from valve_sim.analysis.study_backend import open_backend
+from valve_sim.analysis.study_cases import PROTOCOLS, run_all, study_cases
+from valve_sim.commands.options import (
+    add_options,
     add_protocol_arguments,
     add_runner_arguments,
-    open_backend,
+    load_from_arguments,
 )
-from valve_sim.core.output_files import replacing
-from valve_sim.core.parameters import scaled
+from valve_sim.core.output_files import make_folder, replacing
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim study --help` stays quick.
 
 
 FIGURE_NUMBERS = {'m_m': 6, 'm_p': 7, 'V_p': 9, 'V_c': 10, 'd_c': 11, 'k_p': 12}
-FIGURE8_PARAMETER = 'm_p'  # Figure 8: the poppet waveforms of the m_p variations
 # The six measures and T_s's continuous companion, the envelope's decay rate [1/s].
 STUDY_MEASURES = (*MEASURE_NAMES, ENVELOPE_DECAY)
 CASE_COLUMNS = (
@@ -87,121 +79,6 @@ def add_arguments(parser):
     add_protocol_arguments(parser)
     add_options(parser, '--step-size')
     add_runner_arguments(parser)
-
-
-def runner_case(index, params, changes, step_size, protocol, preset_pressure):
-    """
-    Return one case of the study as the runner takes it: params scaled by changes.
-
-    protocol 'held-preset' has the runner re-solve the pilot spring preload so that
-    the main valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
-    """
-    return {
-        'index': index,
-        'params': scaled(params, changes),
-        'preset_pressure': protocol_preset(protocol, preset_pressure),
-        'scenario': REFERENCE_SCENARIO,
-        'step_size': step_size,
-        'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
-        'envelope': True,
-    }
-
-
-def study_result(row, protocol, preset_pressure):
-    """
-    Return a runner row as {'measures': ..., 'poppet': (time, y) or None, 'case': CASE_COLUMNS}.
-
-    A case that could not run gets every measure None with the reason.
-    """
-    case = {
-        'protocol': protocol,
-        'preset_pressure_Pa': preset_pressure,
-        'cracking_pressure_Pa': row.get('cracking_pressure'),
-        'pilot_spring_preload_m': row.get('pilot_spring_preload'),
-        'initial_supply_pressure_Pa': row.get('initial_supply_pressure'),
-        'initial_main_valve_displacement_m': row.get('initial_main_valve_displacement'),
-    }
-    if row['error']:
-        reasons = dict.fromkeys(MEASURE_NAMES, f'no step response: {row["error"]}')
-        return {
-            'measures': {**row['measures'], 'reasons': reasons, 'details': {}},
-            'poppet': None,
-            'case': case,
-        }
-    measures = {**row['measures'], 'reasons': dict(row['reasons']), 'details': {}}
-    if case['initial_main_valve_displacement_m'] <= 0.0:
-        measures['details']['note'] = (
-            'main stage closed before the step: the valve relieves through the pilot alone'
-        )
-    waveforms = row.get('waveforms')
-    poppet = (
-        (np.asarray(waveforms['time']), np.asarray(waveforms['poppet_displacement']))
-        if waveforms
-        else None
-    )
-    return {'measures': measures, 'poppet': poppet, 'case': case}
-
-
-def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_pressure=None):
-    """
-    Run one case here; returns {'measures', 'poppet', 'case'} as study_result().
-
-    preset_pressure [Pa] defaults to the cracking pressure of params.
-    """
-    from valve_sim.analysis.study_runner import evaluate_case
-    from valve_sim.core.steady_state import cracking_pressure
-
-    if preset_pressure is None:
-        preset_pressure = cracking_pressure(params)
-    case = runner_case(0, params, changes, step_size, protocol, preset_pressure)
-    return study_result(evaluate_case(case), protocol, preset_pressure)
-
-
-def summary(measures):
-    """One line of the six measures, '-' where undefined."""
-    return ', '.join(
-        f'{name}={measures[name]:.4g}' if measures[name] is not None else f'{name}=-'
-        for name in MEASURE_NAMES
-    )
-
-
-def run_all(
-    params,
-    step_size,
-    backend,
-    results_path,
-    protocol=DEFAULT_PROTOCOL,
-    preset_pressure=None,
-    resume=False,
-    progress_stream=sys.stderr,
-):
-    """
-    Run every case on the backend (None: here, serially); returns {label: study_result}.
-
-    Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
-    defaults to the cracking pressure of params.
-    """
-    from valve_sim.analysis.study_runner import run_cases, SerialBackend
-    from valve_sim.core.steady_state import cracking_pressure
-
-    if preset_pressure is None:
-        preset_pressure = cracking_pressure(params)
-    labelled = study_cases()
-    rows, _ = run_cases(
-        [
-            runner_case(index, params, changes, step_size, protocol, preset_pressure)
-            for index, (_, changes) in enumerate(labelled)
-        ],
-        results_path,
-        backend or SerialBackend(),
-        resume,
-        label='study',
-        progress_stream=progress_stream,
-    )
-    return {
-        label: study_result(rows[index], protocol, preset_pressure)
-        for index, (label, _) in enumerate(labelled)
-    }
 
 
 def _label(symbol, percent):
@@ -298,7 +175,7 @@ def run(args):
         + (f'; preset {preset / 1e6:.4f} MPa' if held else ''),
         file=sys.stderr,
     )
-    backend = open_backend(args, 'study', pool_fallback=True)
+    backend = open_backend('study', args.scheduler, args.workers, args.dashboard, True)
     try:
         results = run_all(
             params,

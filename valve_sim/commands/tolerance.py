@@ -30,44 +30,30 @@ paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
   measures_cdf.png, measures_vs_<parameter>.png
 """
 
-import csv
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.study_cases import preset_protocol, sample_cases
+from valve_sim.analysis.study_backend import check_runs, run_samples
+from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import (
     draw,
     parse_limits,
     parse_variations,
-    passes,
     SAMPLERS,
     summarise,
+    write_samples,
 )
-from valve_sim.commands.cli import make_folder
-from valve_sim.commands.options import add_options, load_from_arguments, number
-from valve_sim.commands.study_backend import (
+from valve_sim.commands.options import (
     add_protocol_arguments,
     add_runner_arguments,
-    check_runs,
-    MAX_RUNS,
-    open_backend,
+    add_study_arguments,
+    load_from_arguments,
 )
-from valve_sim.core.output_files import json_text, replacing, write_text
+from valve_sim.core.output_files import json_text, make_folder, write_text
 from valve_sim.core.parameters import SPECS
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim tolerance --help` stays quick.
-
-
-def add_study_arguments(parser, samples_help):
-    """Add the options tolerance and sensitivity share: the model's, --out, --samples, --seed."""
-    add_options(parser, '--params', '--set', '--preset-pressure', '--out')
-    parser.add_argument('--samples', type=number('a sample count', '', 1, 10**12, integer=True),
-                        default=256, metavar='N',
-                        help=f'{samples_help}; at most {MAX_RUNS:,} runs in all')
-    add_options(parser, '--seed', help='seed of the sampler (default 0)')
-    add_options(parser, '--step-size')
 
 
 def add_arguments(parser):
@@ -83,28 +69,6 @@ def add_arguments(parser):
                         'of two), random: pseudo-random (all seeded)')
     add_protocol_arguments(parser)
     add_runner_arguments(parser)
-
-
-def write_samples(path, names, values, rows, limits):
-    with replacing(path, 'w', newline='') as stream:
-        writer = csv.writer(stream)
-        writer.writerow(
-            ['index', *names, 'pilot_spring_preload', *MEASURE_NAMES, 'pass', 'reasons', 'error']
-        )
-        for index, sample in enumerate(values):
-            row = rows[index]
-            writer.writerow(
-                [
-                    index,
-                    *(repr(float(v)) for v in sample),
-                    row.get('pilot_spring_preload', ''),
-                    *('' if row['measures'][n] is None else row['measures'][n]
-                      for n in MEASURE_NAMES),
-                    int(passes(row, limits)),
-                    '; '.join(f'{n}: {r}' for n, r in row['reasons'].items()),
-                    row['error'] or '',
-                ]
-            )
 
 
 def print_summary(summary):
@@ -129,30 +93,6 @@ def print_summary(summary):
         print(f'{name:<14}{cells}{note}')
 
 
-def run_samples(args, label, params, names, values, preset, settings, out):
-    """
-    Run the sampled valves on the study runner; return their rows in sample order.
-
-    Rows stream to out/results.jsonl (--resume continues it); the backend follows
-    --scheduler/--workers as open_backend sets it up for command label.
-    """
-    from valve_sim.analysis.study_runner import run_cases
-
-    backend = open_backend(args, label)
-    try:
-        results, _ = run_cases(
-            sample_cases(params, names, values, preset, settings['step_size']),
-            out / 'results.jsonl',
-            backend,
-            args.resume,
-            args.batch_size,
-            label=label,
-        )
-    finally:
-        backend.close()
-    return [results[index] for index in range(len(values))]
-
-
 def run(args):
     params, settings = load_from_arguments(args)
     distributions = parse_variations(args.vary, params)
@@ -162,7 +102,10 @@ def run(args):
     check_runs(args.samples, f'--samples {args.samples}')
     values = draw(distributions, args.samples, args.seed, args.sampler)
     out = make_folder(Path(args.out))
-    rows = run_samples(args, 'tolerance', params, names, values, preset, settings, out)
+    rows = run_samples(
+        'tolerance', params, names, values, preset, settings['step_size'], out / 'results.jsonl',
+        args.scheduler, args.workers, args.dashboard, args.resume, args.batch_size,
+    )
     summary = {
         'samples': len(values),
         'seed': args.seed,

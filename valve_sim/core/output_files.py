@@ -23,7 +23,8 @@ as BAG.repaired.mcap) is replaced, not followed. A path the user named itself
 (explicit=True) is written where it leads, a link resolved first, as the user meant.
 create_new() and append_to() open files that grow while they are written (a
 recording, a results file) without following a link. json_text() is strict JSON: a
-number that is not finite is written as null, never as NaN or Infinity.
+number that is not finite is written as null, never as NaN or Infinity. make_folder()
+creates an output folder, or says which one it could not create.
 """
 
 from contextlib import contextmanager
@@ -108,3 +109,12 @@ def finite(value):
 def json_text(document, indent=2):
     """Return strict JSON of document: non-finite numbers as null (finite())."""
     return json.dumps(finite(document), indent=indent, allow_nan=False)
+
+
+def make_folder(path):
+    """Create the output folder path (and its parents); OSError naming it if that fails."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise OSError(f'output folder {path} cannot be created: {error.strerror}') from error
+    return path

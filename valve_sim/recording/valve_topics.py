@@ -34,6 +34,7 @@ states carry no frame (frame_id ''), as joint_state_publisher's do.
 """
 
 import importlib
+import time
 
 import numpy as np
 from sensor_msgs.msg import FluidPressure
@@ -183,13 +184,20 @@ def samples_per_publish(waveforms, publish_interval):
     return every
 
 
+def start_ns(start_time_ns=None):
+    """Return start_time_ns [ns since the epoch], or for None the time now, to the millisecond."""
+    if start_time_ns is None:
+        return time.time_ns() // 1_000_000 * 1_000_000
+    return start_time_ns
+
+
 def write_simulation_bag(
     path,
     waveforms,
     ambient_pressure=STANDARD_ATMOSPHERE,
     publish_interval=1e-3,
     *,
-    start_time_ns,
+    start_time_ns=None,
     folder=False,
     frame_prefix=DEFAULT_FRAME_PREFIX,
     readings=None,
@@ -201,9 +209,9 @@ def write_simulation_bag(
 
     waveforms: simulation.Waveforms; every sample publish_interval [s] apart (a
     whole multiple of the waveforms' sample interval) becomes one tick, stamped
-    start_time_ns [ns since the epoch] + its model time, sent (publish_time) at its
-    stamp. inlet_flow carries the command: the first flow at the start and each
-    change at the last tick before it was applied; tank_pressure likewise, where the
+    start_time_ns [ns since the epoch; None: now, start_ns()] + its model time, sent
+    (publish_time) at its stamp. inlet_flow carries the command: the first flow at the
+    start and each change at the last tick before it was applied; tank_pressure likewise, where the
     run's tank was not at ambient throughout (absolute: + ambient_pressure). relief:
     the relief flow and its parts per sample (simulation.relief_flows; None: no
     relief_flow messages). Each message is received
@@ -217,6 +225,7 @@ def write_simulation_bag(
     from valve_sim.recording.bag import BagWriter  # here: valve_node needs no MCAP library
 
     every = samples_per_publish(waveforms, publish_interval)
+    start_time_ns = start_ns(start_time_ns)
     bag = BagWriter(
         path, folder=folder, custom_data={'source': 'valve-sim simulate (offline model run)'}
     )
@@ -279,7 +288,7 @@ def write_rig_bag(
     seed=0,
     publish_interval=1e-3,
     *,
-    start_time_ns,
+    start_time_ns=None,
     folder=False,
     flow_interval=None,
 ):
@@ -292,13 +301,14 @@ def write_rig_bag(
     ending at each sample, as a flow meter reports it, every flow_interval [s] (default
     publish_interval; a whole multiple of the waveforms' interval). No main-valve
     position, no headers: the receive time (log_time) is the sample time,
-    start_time_ns [ns since the epoch] + the model time. folder: a rosbag2 bag folder
-    at path. Returns the number of pressure samples.
+    start_time_ns [ns since the epoch; None: now, start_ns()] + the model time.
+    folder: a rosbag2 bag folder at path. Returns the number of pressure samples.
     """
     from valve_sim.recording.bag import BagWriter
 
     every = samples_per_publish(waveforms, publish_interval)
     flow_every = samples_per_publish(waveforms, flow_interval or publish_interval)
+    start_time_ns = start_ns(start_time_ns)
     indices = np.arange(0, len(waveforms.time), every)
     noise = np.random.default_rng(seed).normal(0.0, pressure_noise, len(indices))
     pressure = waveforms.states[indices, P_S] + ambient_pressure + noise
