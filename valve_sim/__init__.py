@@ -20,9 +20,9 @@ The package is built in wings, each importing only the wings below it:
     core       the model: parameters, Eqs. (1)-(16), integrator, steady state (numpy, scipy)
     fmu        the model as an FMI 2.0 co-simulation FMU's slave (pythonfmu)
     analysis   step-response measures, signal handling, reference data, plots
-    recording  MCAP bags as rosbag2 writes them, CDR tick messages, replay
-    ros        the nodes (valve_node, analyser_node): thin rclpy adapters
-    commands   the `valve-sim` command line, one module per subcommand
+    recording  MCAP bags as rosbag2 writes them, CDR tick messages, a bag's signals
+    ros        the nodes (valve_node, analyser_node): thin rclpy adapters; replay, demo run
+    commands   the `valve-sim` command line: parse, call the library, print
     testing    the test kit for users' suites: a valve_node in lockstep, a pytest fixture
 
 test/test_layering.py keeps it so.

@@ -15,8 +15,12 @@
 """
 The `valve-sim` command line: the entry (cli) and one module per subcommand.
 
-Each subcommand module has add_arguments(parser) and run(args) -> exit code; options
-declares the options several of them take. A subcommand's module level loads no numba,
-scipy, matplotlib, dask or rclpy (run() does), so that `valve-sim CMD --help` is quick.
-May import: every other wing. Commands that drive nodes (demo) may use rclpy.
+Each subcommand module has add_arguments(parser) and run(args) -> exit code: it parses,
+calls the library and prints; options declares the options several of them take and
+reads them (the model's, the studies', a bag's signals). A subcommand's module level
+loads no numba, scipy, matplotlib, dask or rclpy (run() does), so that
+`valve-sim CMD --help` is quick.
+May import: valve_sim.core, fmu, analysis, recording and ros, and commands.options; no
+subcommand imports another (cli, the entry point, finds them by name), no module
+imports rclpy (ros/ drives the nodes: demo through ros.demo_driver).
 """

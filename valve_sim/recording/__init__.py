@@ -13,10 +13,12 @@
 # limitations under the License.
 
 """
-Bag I/O: MCAP as rosbag2 writes it, the tick messages as CDR bytes, replay.
+Bag I/O: MCAP as rosbag2 writes it, the tick messages as CDR bytes, a bag's signals.
 
-Lives here: the MCAP writer and reader, the CDR message layout, valve_node's topic
-layout, a replay publisher.
-May import: valve_sim.core, valve_sim.analysis, message packages. rclpy only inside
-functions that need a live context (replay), never at import time.
+Lives here: the MCAP writer and reader, rosbag2 metadata and recovery, the CDR
+message layout, valve_node's topic layout and the offline bag writers, a bag read
+into signals (signal_reader: read_recording, decoders injected as the mcap library's
+decoder factories), the scenario runner's tick bags.
+May import: valve_sim.core, valve_sim.analysis, message packages, mcap. No rclpy:
+publishing is ros/'s (ros.replay).
 """
