@@ -39,9 +39,9 @@ import fmpy
 from fmpy.fmi2 import FMU2Slave
 import numpy as np
 from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
-from valve_sim.commands.fmu import build
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import simulate
+from valve_sim.fmu.builder import build
 
 
 def best_time(function, repeats):

@@ -18,7 +18,7 @@ The valve as an FMI 2.0 co-simulation FMU (Functional Mock-up Unit), built with 
 
 Lives here: relief_valve_slave, the FMU's slave class ReliefValve: a thin adapter that
 maps FMI variables onto valve_sim.core's RealTimeModel, the model valve_node runs.
-`valve-sim fmu` (valve_sim.commands.fmu) packs it with pythonfmu; docs/fmu.md says how.
+builder packs it with pythonfmu (build(), for `valve-sim fmu`); docs/fmu.md says how.
 May import: valve_sim.core, pythonfmu. No ROS, no bags, no plots: the FMU runs inside
 another tool's process.
 """
