@@ -25,14 +25,10 @@ import time
 
 from figure5 import outside_tolerance, TOLERANCES
 import pytest
-from valve_sim.analysis.calibration import (
-    calibrate,
-    CalibrationError,
-    fit_parameters,
-    RecordingTarget,
-)
+from valve_sim.analysis.calibration import calibrate, fit_parameters, RecordingTarget
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.core.errors import CalibrationError
 from valve_sim.core.parameters import config_path, load_parameters, read_parameter_file, scaled
 from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.recording.bag import BagReader, BagWriter
@@ -222,10 +218,14 @@ def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
 
 def test_the_design_rules_and_ties_as_the_fit_uses_them():
     from valve_sim.analysis.calibration import (
-        apply_values, CalibrationError, fit_parameters, fit_ties, LandsInsideBore,
+        apply_values,
+        fit_parameters,
+        fit_ties,
+        LandsInsideBore,
         MainSpringRange,
     )
     from valve_sim.core.bearing import reference_bearing_fit
+    from valve_sim.core.errors import CalibrationError
 
     reference, _ = load_parameters()
     lands, spring = LandsInsideBore(1e-3), MainSpringRange((1e3, 5e3), (20.0, 100.0))

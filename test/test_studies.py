@@ -51,8 +51,8 @@ from valve_sim.analysis.tolerances import (
 )
 from valve_sim.commands.study import run_all
 from valve_sim.commands.study_backend import open_backend
-from valve_sim.core.errors import StudyError
-from valve_sim.core.parameters import ParameterError, scaled
+from valve_sim.core.errors import ParameterError, StudyError
+from valve_sim.core.parameters import scaled
 
 
 DASK = [sys.executable, '-m', 'dask']

@@ -46,28 +46,15 @@ from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measur
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
 from valve_sim.core.bearing import with_bearing_fit
+from valve_sim.core.errors import CalibrationError, MODEL_ERRORS
 from valve_sim.core.input_files import shown
-from valve_sim.core.integrator import IntegrationError
 from valve_sim.core.linear import modes
 from valve_sim.core.model import coefficients, flows, X
-from valve_sim.core.parameters import (
-    check_value,
-    ParameterError,
-    PRESET_PRESSURE,
-    resolve_name,
-    SPECS,
-    validate,
-)
+from valve_sim.core.parameters import check_value, PRESET_PRESSURE, resolve_name, SPECS, validate
 from valve_sim.core.simulation import LITRE_PER_MINUTE, simulate, simulate_recorded_flow
-from valve_sim.core.steady_state import (
-    cracking_pressure,
-    steady_state,
-    SteadyStateError,
-    with_preset_pressure,
-)
+from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
 
 
-MODEL_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 FAILED_RESIDUAL = 1e3  # every residual of a parameter set the model cannot run
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
 # Penalties turn on this far (relative) inside their limits: a least-squares optimum sits a
@@ -76,10 +63,6 @@ PENALTY_MARGIN = 1e-3
 FLAT_CHANGE = 1e-9  # relative residual change below which a parameter is flat
 RANK_TOLERANCE = 1e-6  # singular values of the Jacobian below this (relative) count as 0
 Z_95 = 1.959964  # two-sided 95 % quantile of the normal distribution
-
-
-class CalibrationError(ParameterError):
-    """The calibration cannot be set up: bad target, bounds or parameter choice."""
 
 
 @dataclass(frozen=True)

@@ -220,7 +220,8 @@ def add_arguments(parser):
 
 
 def _target(args, step_size, signal_map):
-    from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
+    from valve_sim.analysis.calibration import MeasuresTarget, RecordingTarget
+    from valve_sim.core.errors import CalibrationError
 
     if args.target_measures:
         document = read_json(args.target_measures, TARGET_MEASURES)
@@ -278,7 +279,7 @@ def from_every_signal(recording, signal_map):
     if first == 0:
         return recording
     if first == len(known):
-        from valve_sim.analysis.calibration import CalibrationError
+        from valve_sim.core.errors import CalibrationError
 
         raise CalibrationError('no sample of the recording has every mapped signal')
     late = ', '.join(
@@ -306,7 +307,6 @@ def from_every_signal(recording, signal_map):
 def run(args):
     from valve_sim.analysis.calibration import (
         calibrate,
-        CalibrationError,
         CaseRelieves,
         fit_parameters,
         fit_ties,
@@ -317,6 +317,7 @@ def run(args):
         step_time_parameters,
         StudyRelieves,
     )
+    from valve_sim.core.errors import CalibrationError
 
     signal_map = signal_map_from(args, 'calibrate') if args.bag else None
     params, settings = load_from_arguments(args)  # in the bag's namespace, if any

@@ -114,11 +114,15 @@ def build_parser(argv):
 
 
 def make_folder(path):
-    """Create the output folder path (and its parents); OSError naming it if that fails."""
+    """Create the output folder path (and its parents); an OutputFileError naming it if not."""
+    from valve_sim.core.errors import OutputFileError
+
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise OSError(f'output folder {path} cannot be created: {error.strerror}') from error
+        raise OutputFileError(
+            f'output folder {path} cannot be created: {error.strerror}'
+        ) from error
     return path
 
 

@@ -28,7 +28,8 @@ import sys
 import tempfile
 
 from valve_sim.commands.options import add_options, load_from_arguments
-from valve_sim.core.parameters import NODE_NAME, ParameterError
+from valve_sim.core.errors import ParameterError
+from valve_sim.core.parameters import NODE_NAME
 
 
 SLAVE = 'valve_sim.fmu.relief_valve_slave'  # the module pythonfmu packs: ReliefValve

@@ -31,14 +31,9 @@ import math
 from pathlib import Path
 import sys
 
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import PARAMETER_FILE
-from valve_sim.core.parameters import (
-    check_value,
-    FAULT_SCHEDULE,
-    load_parameters,
-    ParameterError,
-    SPECS,
-)
+from valve_sim.core.parameters import check_value, FAULT_SCHEDULE, load_parameters, SPECS
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
