@@ -135,3 +135,17 @@ def test_a_file_that_cannot_be_written_is_a_user_error_naming_it(tmp_path):
     with pytest.raises(OutputFileError) as refused:
         append_to(link)
     assert refused.value.errno == errno.ELOOP and refused.value.filename == str(link)
+
+
+def test_library_code_leaves_ctrl_c_to_its_caller():
+    """Only the commands and the nodes catch KeyboardInterrupt; the library takes a callback."""
+    catching = []
+    for path in (ROOT / 'valve_sim').rglob('*.py'):
+        if path.parent.name in ('commands', 'ros'):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ExceptHandler) and node.type is not None and (
+                'KeyboardInterrupt' in ast.unparse(node.type)
+            ):
+                catching.append(f'{path.relative_to(ROOT)}:{node.lineno}')
+    assert not catching, catching

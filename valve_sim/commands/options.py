@@ -26,10 +26,13 @@ the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 """
 
 from argparse import ArgumentTypeError
+from contextlib import contextmanager
 from datetime import datetime, timezone
 import math
 from pathlib import Path
+import signal
 import sys
+import threading
 
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import PARAMETER_FILE
@@ -284,3 +287,30 @@ def check_bag_arguments(args):
     """Refuse --bag-folder and --start-time without --mcap (ParameterError)."""
     if (args.bag_folder or args.start_time is not None) and not args.mcap:
         raise ParameterError('--bag-folder and --start-time need --mcap')
+
+
+@contextmanager
+def ctrl_c_stops():
+    """
+    Within the block, Ctrl-C asks a long computation to stop instead of raising at once.
+
+    Yields should_stop() for the library (e.g. analysis.calibration.calibrate), true once
+    Ctrl-C (SIGINT) was pressed; the computation then ends with what it has. A second
+    Ctrl-C raises KeyboardInterrupt as usual (the command line: "interrupted", exit 130).
+    Outside the main thread, where Python takes no signals, should_stop() stays false.
+    """
+    pressed = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed.is_set
+        return
+    previous = signal.getsignal(signal.SIGINT)
+
+    def asked(signum, frame):
+        pressed.set()
+        signal.signal(signal.SIGINT, previous)  # the next Ctrl-C interrupts
+
+    signal.signal(signal.SIGINT, asked)
+    try:
+        yield pressed.is_set
+    finally:
+        signal.signal(signal.SIGINT, previous)
