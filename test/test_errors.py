@@ -19,9 +19,11 @@ import errno
 import importlib
 import os
 from pathlib import Path
+import signal
 
 import pytest
 from valve_sim.commands import cli
+from valve_sim.commands.options import ctrl_c_stops
 from valve_sim.core import errors
 from valve_sim.core.errors import OutputFileError, USER_ERRORS, ValveSimError
 from valve_sim.core.output_files import append_to, write_text
@@ -149,3 +151,14 @@ def test_library_code_leaves_ctrl_c_to_its_caller():
             ):
                 catching.append(f'{path.relative_to(ROOT)}:{node.lineno}')
     assert not catching, catching
+
+
+def test_the_first_ctrl_c_asks_the_library_to_stop_the_second_interrupts():
+    before = signal.getsignal(signal.SIGINT)
+    with ctrl_c_stops() as should_stop:
+        assert not should_stop()
+        os.kill(os.getpid(), signal.SIGINT)
+        assert should_stop()  # asked, not raised: the computation ends with what it has
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)  # Python runs the handler right after it
+    assert signal.getsignal(signal.SIGINT) is before
