@@ -78,7 +78,7 @@ def single_path(params_list):
 
 
 def batch_path(params_list):
-    return [measure(waveforms) for waveforms in simulate_batch(params_list, SCENARIO)]
+    return [measure(result.waveforms) for result in simulate_batch(params_list, SCENARIO)]
 
 
 def packed_instructions():

@@ -27,9 +27,9 @@ import sys
 import numpy as np
 import pytest
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.faults import FaultSet
 from valve_sim.core.model import coefficients, P_C, P_S, relief_flows as model_relief_flows, X, Y
-from valve_sim.core.parameters import ParameterError
 from valve_sim.core.simulation import (
     LITRE_PER_MINUTE,
     relief_flows,
@@ -39,7 +39,7 @@ from valve_sim.core.simulation import (
     step_flows,
     TankPressure,
 )
-from valve_sim.core.steady_state import cracking_pressure, steady_state, SteadyStateError
+from valve_sim.core.steady_state import cracking_pressure, steady_state
 
 
 STEP = 1e-5  # [s] the reference step size

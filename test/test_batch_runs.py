@@ -18,13 +18,9 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import FaultSet, HEALTHY
-from valve_sim.core.integrator import (
-    advance,
-    advance_lanes,
-    IntegrationError,
-    STEP_RATE_LIMIT,
-)
+from valve_sim.core.integrator import advance, advance_lanes, STEP_RATE_LIMIT
 from valve_sim.core.model import coefficients, fastest_chamber_rate, P_C, P_S
 from valve_sim.core.parameters import scaled
 from valve_sim.core.simulation import (
@@ -33,7 +29,7 @@ from valve_sim.core.simulation import (
     simulate,
     simulate_batch,
 )
-from valve_sim.core.steady_state import steady_state, SteadyStateError, with_preset_pressure
+from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 
 def test_lanes_give_exactly_the_single_run_kernel(reference):
@@ -96,7 +92,7 @@ def test_batch_skips_the_steady_lead_without_changing_the_measures(reference):
     """
     scenario = Scenario(end_time=0.45)  # the paper's step, shorter (the window is truncated)
     variants = [reference, scaled(reference, {'m_m': 20}), scaled(reference, {'d_c': 60})]
-    batch = simulate_batch(variants, scenario, lanes=2)
+    batch = [result.waveforms for result in simulate_batch(variants, scenario, lanes=2)]
     for params, fast in zip(variants, batch):
         full = simulate(params, scenario)
         assert np.array_equal(fast.time, full.time)
@@ -112,23 +108,33 @@ def test_batch_skips_the_steady_lead_without_changing_the_measures(reference):
 
 
 def test_batch_reports_each_failure_in_its_place(reference):
-    """A run that diverges gets its IntegrationError (time on the run's axis); the rest run on."""
+    """
+    Each run's RunResult (as scipy's OdeResult): the waveforms, or None and the reason.
+
+    A run that diverges has its IntegrationError (time on the run's axis) as the reason,
+    a start without a steady state its SteadyStateError; the rest run on.
+    """
     scenario = Scenario(end_time=0.3)
     # V_p / 1000: pressure modes faster than even MAX_SPLITS split steps resolve
     stiff = dict(reference, pilot_volume=reference['pilot_volume'] * 1e-3)
     results = simulate_batch([reference, stiff, reference], scenario)
-    assert isinstance(results[1], IntegrationError)
-    assert 'diverged at t = 0.25' in str(results[1])  # just after the step, not at 0
-    alone = simulate_batch([reference], scenario)[0]
+    assert not results[1].success and results[1].waveforms is None
+    assert isinstance(results[1].error, IntegrationError)
+    assert 'diverged at t = 0.25' in results[1].message  # just after the step, not at 0
+    assert results[1].message == str(results[1].error)
+    (alone,) = simulate_batch([reference], scenario)
+    assert alone.success and alone.error is None and alone.message == ''
     for result in (results[0], results[2]):
-        assert np.array_equal(result.states, alone.states)
+        assert result.success
+        assert np.array_equal(result.waveforms.states, alone.waveforms.states)
     (nan_start,) = simulate_batch([reference], Scenario(initial_flow=float('nan')))
-    assert isinstance(nan_start, SteadyStateError)
+    assert not nan_start.success and nan_start.waveforms is None
+    assert isinstance(nan_start.error, SteadyStateError) and nan_start.message
 
 
 def test_paper_scenario_measures_through_the_batch(reference):
     """The reference valve's measures through simulate_batch equal simulate()'s (1e-9)."""
-    fast = simulate_batch([reference], REFERENCE_SCENARIO)[0]
+    fast = simulate_batch([reference], REFERENCE_SCENARIO)[0].waveforms
     full = simulate(reference, REFERENCE_SCENARIO)
     a, b = _measures(full, REFERENCE_SCENARIO), _measures(fast, REFERENCE_SCENARIO)
     for name in MEASURE_NAMES:

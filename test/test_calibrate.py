@@ -25,14 +25,12 @@ import time
 
 from figure5 import outside_tolerance, TOLERANCES
 import pytest
-from valve_sim.analysis.calibration import (
-    calibrate,
-    CalibrationError,
-    fit_parameters,
-    RecordingTarget,
-)
+from valve_sim.analysis.calibration import calibrate, CalibrationProblem, FitSettings
+from valve_sim.analysis.calibration_parameters import fit_parameters
+from valve_sim.analysis.calibration_targets import RecordingTarget
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.core.errors import CalibrationError
 from valve_sim.core.parameters import config_path, load_parameters, read_parameter_file, scaled
 from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.recording.bag import BagReader, BagWriter
@@ -203,8 +201,69 @@ def test_a_data_problem_is_not_reported_as_a_model_problem(reference):
                              run['main_valve_displacement'])
     target.position_noise = math.nan  # a noise level the data could not give
     with pytest.raises(CalibrationError, match='a problem of the data') as refused:
-        calibrate(reference, fit_parameters(['d_c'], {}, reference), target, starts=1)
+        calibrate(CalibrationProblem(reference, fit_parameters(['d_c'], {}, reference), target),
+                  FitSettings(starts=1))
     assert 'main_valve' in str(refused.value) and 'model cannot' not in str(refused.value)
+
+
+def short_recording_problem(reference):
+    """Return the problem of fitting d_c to a short clean recording of a valve with d_c +5 %."""
+    run = simulate(scaled(reference, {'d_c': 5.0}), Scenario(step_time=0.1, end_time=0.3),
+                   record_interval=1e-3)
+    target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
+                             run['main_valve_displacement'])
+    return CalibrationProblem(reference, fit_parameters(['d_c'], {}, reference), target)
+
+
+def stop_after(count, asked):
+    """Return a should_stop() that says stop when it is asked for the (count + 1)-th time."""
+    def should_stop():
+        asked.append(None)
+        return len(asked) > count
+    return should_stop
+
+
+def test_a_fit_stops_when_its_caller_says_so(reference):
+    """
+    Interruption through the should_stop callback, asked before every evaluation.
+
+    Stopped at once: nothing to report (CalibrationError). Stopped in the identifiability
+    check (3 evaluations for one parameter) or in a start's least_squares: the best
+    evaluation so far, marked interrupted, the callback not asked again.
+    """
+    settings = FitSettings(starts=2)
+    with pytest.raises(CalibrationError, match='interrupted before the first evaluation'):
+        calibrate(short_recording_problem(reference), settings, should_stop=lambda: True)
+    asked = []
+    result = calibrate(short_recording_problem(reference), settings,
+                       should_stop=stop_after(2, asked))
+    assert result.interrupted and result.starts == [] and len(asked) == 3
+    assert result.evaluations == 3  # two, and the residuals at the best of them
+    asked = []
+    result = calibrate(short_recording_problem(reference), settings,
+                       should_stop=stop_after(6, asked))
+    assert result.interrupted and len(asked) == 7 and result.evaluations == 7
+    (run,) = result.starts
+    assert run['message'] == 'interrupted: best evaluation so far'
+    assert result.values == run['values'] and len(result.residuals) == len(result.residual_names)
+
+
+def test_every_requirement_follows_the_written_protocol():
+    from valve_sim.analysis.calibration_requirements import (
+        CaseRelieves, Check, Constraint, LandsInsideBore, MainSpringRange, ModesDecay,
+        PilotFlowLimit, StudyRelieves,
+    )
+
+    reference, _ = load_parameters()
+    constraints = [PilotFlowLimit(2e-5), LandsInsideBore(1e-3), ModesDecay(),
+                   MainSpringRange((1e3, 5e3), (20.0, 100.0)), CaseRelieves({'d_c': -20})]
+    for requirement in constraints:
+        assert isinstance(requirement, Constraint), requirement
+        assert requirement.penalty(reference) >= 0.0
+        status = requirement.status(reference)
+        assert status['constraint'] == requirement.name and isinstance(status['value'], str)
+        assert isinstance(status['satisfied'], bool)
+    assert isinstance(StudyRelieves(), Check) and not isinstance(StudyRelieves(), Constraint)
 
 
 def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
@@ -221,11 +280,10 @@ def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
 
 
 def test_the_design_rules_and_ties_as_the_fit_uses_them():
-    from valve_sim.analysis.calibration import (
-        apply_values, CalibrationError, fit_parameters, fit_ties, LandsInsideBore,
-        MainSpringRange,
-    )
+    from valve_sim.analysis.calibration_parameters import apply_values, fit_ties
+    from valve_sim.analysis.calibration_requirements import LandsInsideBore, MainSpringRange
     from valve_sim.core.bearing import reference_bearing_fit
+    from valve_sim.core.errors import CalibrationError
 
     reference, _ = load_parameters()
     lands, spring = LandsInsideBore(1e-3), MainSpringRange((1e3, 5e3), (20.0, 100.0))

@@ -21,9 +21,10 @@ import json
 import numpy as np
 import pytest
 from valve_sim.analysis.measures import step_measures
+from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import FaultEvent, parse_schedule
 from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
-from valve_sim.core.integrator import advance, OverpressureError
+from valve_sim.core.integrator import advance
 from valve_sim.core.model import (
     coefficients,
     net_forces,
@@ -33,7 +34,7 @@ from valve_sim.core.model import (
     X,
     X_DOT,
 )
-from valve_sim.core.parameters import load_parameters, ParameterError
+from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state
 from valve_sim.recording.bag import BagReader

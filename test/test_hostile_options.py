@@ -35,7 +35,7 @@ from hostile_inputs import bag_with_inf_pressure
 import numpy as np
 import pytest
 from valve_sim.commands.cli import main
-from valve_sim.core.parameters import ParameterError
+from valve_sim.core.errors import ParameterError
 
 
 pytestmark = pytest.mark.timeout(300)

@@ -29,14 +29,13 @@ from pathlib import Path
 
 from hostile_inputs import FILES, JSON_TEXTS, make_file, mutations, YAML_TEXTS
 import pytest
-from valve_sim.analysis.calibration import CalibrationError
 from valve_sim.analysis.robust_yield import check_candidate_row
 from valve_sim.analysis.scenario_file import load_scenario
 from valve_sim.analysis.study_runner import read_results
 from valve_sim.commands.cli import main
-from valve_sim.core.errors import InputFileError, StudyError
+from valve_sim.core.errors import CalibrationError, InputFileError, ParameterError, StudyError
 from valve_sim.core.fault_schedule import load_schedule
-from valve_sim.core.parameters import config_path, load_parameters, ParameterError
+from valve_sim.core.parameters import config_path, load_parameters
 from valve_sim.recording.rosbag2_metadata import bag_files
 
 

@@ -20,19 +20,18 @@ import sys
 
 import numpy as np
 import pytest
-from valve_sim.core.integrator import (
-    advance,
-    advance_lanes,
-    crossing_is_accurate,
+from valve_sim.core.errors import (
     IntegrationError,
     OverpressureError,
-    splits_needed,
+    ParameterError,
+    SteadyStateError,
 )
+from valve_sim.core.integrator import advance, advance_lanes, crossing_is_accurate, splits_needed
 from valve_sim.core.model import coefficients, P_S, Y
-from valve_sim.core.parameters import load_parameters, ParameterError, validate
+from valve_sim.core.parameters import load_parameters, validate
 from valve_sim.core.retuning import check_limits
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
-from valve_sim.core.steady_state import steady_state, SteadyStateError
+from valve_sim.core.steady_state import steady_state
 
 
 FLOW = 5.0 * LITRE_PER_MINUTE

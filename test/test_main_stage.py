@@ -19,7 +19,7 @@ from pathlib import Path
 import re
 
 import pytest
-from valve_sim.analysis.calibration import StudyRelieves
+from valve_sim.analysis.calibration_requirements import StudyRelieves
 from valve_sim.analysis.paper import TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters
 from valve_sim.core.linear import mode_sensitivity, modes

@@ -16,8 +16,8 @@
 
 import numpy as np
 import pytest
-from valve_sim.core.errors import SteadyStateError
-from valve_sim.core.integrator import advance, IntegrationError, STEP_RATE_LIMIT
+from valve_sim.core.errors import IntegrationError, SteadyStateError
+from valve_sim.core.integrator import advance, STEP_RATE_LIMIT
 from valve_sim.core.model import (
     coefficients,
     fastest_chamber_rate,

@@ -22,13 +22,9 @@ merges offline.
 """
 
 import pytest
-from valve_sim.core.parameter_sections import (
-    node_fqn,
-    parameters_for_node,
-    section_applies,
-    SectionError,
-)
-from valve_sim.core.parameters import load_parameters, parameter_document, ParameterError
+from valve_sim.core.errors import ParameterError, SectionError
+from valve_sim.core.parameter_sections import node_fqn, parameters_for_node, section_applies
+from valve_sim.core.parameters import load_parameters, parameter_document
 
 
 FILES = {

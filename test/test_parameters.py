@@ -19,10 +19,10 @@ import math
 import pytest
 from valve_sim.analysis.paper import TABLE2_CHANGES
 from valve_sim.core.bearing import reference_bearing_fit
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.parameters import (
     config_path,
     load_parameters,
-    ParameterError,
     read_parameter_file,
     resolve_name,
     scaled,

@@ -127,7 +127,7 @@ def test_the_figure_of_a_recorded_step_counts_time_from_the_first_sample(saved, 
 
 def test_the_fit_figure_shows_the_recording_above_the_model(reference, saved, tmp_path):
     """fit.png: recorded samples as dots drawn over the model's line, the step zoomed."""
-    from valve_sim.analysis.calibration import RecordingTarget
+    from valve_sim.analysis.calibration_targets import RecordingTarget
     from valve_sim.analysis.plotting import plot_recording_fit
 
     run = simulate(reference, Scenario(step_time=0.1, end_time=0.5), record_interval=1e-3)

@@ -16,7 +16,8 @@
 
 import numpy as np
 import pytest
-from valve_sim.core.integrator import advance, IntegrationError, OverpressureError
+from valve_sim.core.errors import IntegrationError, OverpressureError
+from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients, P_S
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.realtime_model import RealTimeModel, step_ns, TRIAL_STEPS

@@ -20,7 +20,8 @@ import pytest
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
-from valve_sim.core.parameters import ParameterError, SPECS
+from valve_sim.core.errors import ParameterError
+from valve_sim.core.parameters import SPECS
 from valve_sim.core.retuning import check_preset, dependent_change
 from valve_sim.core.steady_state import cracking_pressure
 from valve_sim.ros.ros_parameters import (

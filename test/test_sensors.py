@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 import pytest
-from valve_sim.core.parameters import ParameterError
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.sensors import PRESSURE_NAMES, SensorStage
 
 TRUE = [7.1e6, 6.0e6, 4.9e6, 2.1e6]  # [Pa absolute]

@@ -50,8 +50,8 @@ from valve_sim.analysis.tolerances import (
     parse_variations,
     summarise,
 )
-from valve_sim.core.errors import StudyError
-from valve_sim.core.parameters import ParameterError, scaled
+from valve_sim.core.errors import ParameterError, StudyError
+from valve_sim.core.parameters import scaled
 
 
 DASK = [sys.executable, '-m', 'dask']

@@ -33,10 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from valve_sim.analysis.measures import step_measures
-from valve_sim.core.integrator import IntegrationError
+from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.model import P_S, X
 from valve_sim.core.simulation import Scenario, simulate
-from valve_sim.core.steady_state import steady_state, SteadyStateError, with_preset_pressure
+from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 
 STEP_TIME = 0.1  # [s]

@@ -36,8 +36,8 @@ import math
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.tick_series import SIGNALS
+from valve_sim.core.errors import ProfileError
 from valve_sim.core.faults import at_supply_limit
-from valve_sim.core.input_profile import ProfileError
 from valve_sim.core.quantities import FLOW, NUMBER, parse_quantity, TIME, with_unit
 
 

@@ -55,7 +55,8 @@ from valve_sim.analysis.tolerances import (
     SAMPLERS,
     unit_samples,
 )
-from valve_sim.core.parameters import ParameterError, resolve_name, scaled
+from valve_sim.core.errors import ParameterError
+from valve_sim.core.parameters import resolve_name, scaled
 
 
 SENSES = ('minimise', 'maximise')

@@ -45,21 +45,21 @@ from pathlib import Path
 
 import numpy as np
 from valve_sim.analysis.expectations import parse_expectations
+from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.fault_schedule import (
     check_change,
     FaultEvent,
     parse_schedule,
     tick_index,
 )
-from valve_sim.core.input_files import InputFileError, read_yaml, SCENARIO_FILE
-from valve_sim.core.input_profile import parse_profile, ProfileError
+from valve_sim.core.input_files import read_yaml, SCENARIO_FILE
+from valve_sim.core.input_profile import parse_profile
 from valve_sim.core.limits import tank_pressure_problem
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
     INJECTION_PREFIXES,
     load_parameters,
-    ParameterError,
     PRESET_PRESSURE,
     resolve_name,
     SETTING_SPECS,

@@ -25,7 +25,7 @@ that comes from interactions. SALib is imported only when used.
 """
 
 import numpy as np
-from valve_sim.core.parameters import ParameterError
+from valve_sim.core.errors import ParameterError
 
 
 CONFIDENCE = 0.95

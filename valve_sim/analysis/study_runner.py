@@ -53,15 +53,8 @@ from valve_sim.analysis.measures import (
     MEASURE_NAMES,
     step_measures,
 )
-from valve_sim.core.errors import MODEL_ERRORS, StudyError
-from valve_sim.core.input_files import (
-    InputFileError,
-    json_lines,
-    parse_json,
-    shown,
-    STUDY_RESULTS,
-    STUDY_ROW,
-)
+from valve_sim.core.errors import InputFileError, MODEL_ERRORS, StudyError
+from valve_sim.core.input_files import json_lines, parse_json, shown, STUDY_RESULTS, STUDY_ROW
 from valve_sim.core.output_files import append_to, finite, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
@@ -121,15 +114,15 @@ def evaluate_batch(cases):
         )
         for (case, row, _), outcome in zip(members, outcomes):
             rows[case['index']] = (
-                _failed(row, outcome)
-                if isinstance(outcome, Exception)
-                else _measured(case, row, outcome)
+                _measured(case, row, outcome.waveforms)
+                if outcome.success
+                else _failed(row, outcome.message)
             )
     return [rows[case['index']] for case in cases]
 
 
-def _failed(row, error):
-    return {**row, 'measures': dict.fromkeys(MEASURE_NAMES), 'reasons': {}, 'error': str(error)}
+def _failed(row, reason):
+    return {**row, 'measures': dict.fromkeys(MEASURE_NAMES), 'reasons': {}, 'error': str(reason)}
 
 
 def _measured(case, row, waveforms):

@@ -37,8 +37,9 @@ import re
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.output_files import replacing
-from valve_sim.core.parameters import ParameterError, resolve_name, SPECS
+from valve_sim.core.parameters import resolve_name, SPECS
 
 # scipy.stats is imported in the functions that use it, so that `valve-sim tolerance
 # --help` (its parser takes SAMPLERS from here) stays quick.

@@ -221,7 +221,8 @@ def add_arguments(parser):
 
 
 def _target(args, step_size, signal_map):
-    from valve_sim.analysis.calibration import CalibrationError, MeasuresTarget, RecordingTarget
+    from valve_sim.analysis.calibration_targets import MeasuresTarget, RecordingTarget
+    from valve_sim.core.errors import CalibrationError
 
     if args.target_measures:
         document = read_json(args.target_measures, TARGET_MEASURES)
@@ -279,7 +280,7 @@ def from_every_signal(recording, signal_map):
     if first == 0:
         return recording
     if first == len(known):
-        from valve_sim.analysis.calibration import CalibrationError
+        from valve_sim.core.errors import CalibrationError
 
         raise CalibrationError('no sample of the recording has every mapped signal')
     late = ', '.join(
@@ -305,19 +306,22 @@ def from_every_signal(recording, signal_map):
 
 
 def run(args):
-    from valve_sim.analysis.calibration import (
-        calibrate,
-        CalibrationError,
-        CaseRelieves,
+    from valve_sim.analysis.calibration import calibrate, CalibrationProblem, FitSettings
+    from valve_sim.analysis.calibration_parameters import (
         fit_parameters,
         fit_ties,
+        step_time_parameters,
+    )
+    from valve_sim.analysis.calibration_requirements import (
+        CaseRelieves,
         LandsInsideBore,
         MainSpringRange,
         ModesDecay,
         PilotFlowLimit,
-        step_time_parameters,
         StudyRelieves,
     )
+    from valve_sim.commands.options import ctrl_c_stops
+    from valve_sim.core.errors import CalibrationError
 
     signal_map = signal_map_from(args, 'calibrate') if args.bag else None
     params, settings = load_from_arguments(args)  # in the bag's namespace, if any
@@ -349,20 +353,10 @@ def run(args):
             f'{args.target_measures or args.bag}; {args.starts} start(s)'
             + (f'; preset held at {preset / 1e6:g} MPa' if preset else '')
         )
-    result = calibrate(
-        params,
-        fitted,
-        target,
-        constraints,
-        checks,
-        preset_pressure=preset,
-        starts=args.starts,
-        spread=args.spread,
-        seed=args.seed,
-        tolerance=args.tolerance,
-        progress=progress,
-        ties=ties,
-    )
+    problem = CalibrationProblem(params, fitted, target, constraints, checks, preset, ties)
+    search = FitSettings(args.starts, args.spread, args.seed, args.tolerance)
+    with ctrl_c_stops() as should_stop:  # Ctrl-C ends the fit with its best result so far
+        result = calibrate(problem, search, progress, should_stop)
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_parameter_file(out / 'calibrated.yaml', result, settings, command)
@@ -397,7 +391,7 @@ def yaml_number(value):
 
 def write_parameter_file(path, result, settings, command):
     """calibrated.yaml: every model parameter and setting; fitted and derived ones marked."""
-    from valve_sim.analysis.calibration import BEARING_INPUTS
+    from valve_sim.analysis.calibration_parameters import BEARING_INPUTS
     from valve_sim.core.bearing import COEFFICIENTS
     from valve_sim.core.steady_state import cracking_pressure
 

@@ -44,8 +44,8 @@ from valve_sim.commands.options import (
     load_from_arguments,
     number,
 )
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.output_files import json_text, replacing, write_text
-from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that

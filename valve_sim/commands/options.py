@@ -26,20 +26,23 @@ the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 """
 
 from argparse import ArgumentTypeError
+from contextlib import contextmanager
 from datetime import datetime, timezone
 import math
 from pathlib import Path
+import signal
 import sys
+import threading
 
 from valve_sim.analysis.signals import CLOCKS, ROLES, SignalMap
 from valve_sim.analysis.study_backend import BYTES_PER_WORKER, CORES, MAX_RUNS, WORKERS_PER_CORE
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import PARAMETER_FILE, size_text
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
     load_parameters,
-    ParameterError,
     SETTING_SPECS,
     SPECS,
     STANDARD_ATMOSPHERE,
@@ -409,3 +412,30 @@ def signal_map_from(args, command='analyse'):
 def resolved(topic, namespace):
     """Return topic resolved in namespace ('' the root): relative names go below it."""
     return topic if topic.startswith('/') else f'{namespace}/{topic}'
+
+
+@contextmanager
+def ctrl_c_stops():
+    """
+    Within the block, Ctrl-C asks a long computation to stop instead of raising at once.
+
+    Yields should_stop() for the library (e.g. analysis.calibration.calibrate), true once
+    Ctrl-C (SIGINT) was pressed; the computation then ends with what it has. A second
+    Ctrl-C raises KeyboardInterrupt as usual (the command line: "interrupted", exit 130).
+    Outside the main thread, where Python takes no signals, should_stop() stays false.
+    """
+    pressed = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed.is_set
+        return
+    previous = signal.getsignal(signal.SIGINT)
+
+    def asked(signum, frame):
+        pressed.set()
+        signal.signal(signal.SIGINT, previous)  # the next Ctrl-C interrupts
+
+    signal.signal(signal.SIGINT, asked)
+    try:
+        yield pressed.is_set
+    finally:
+        signal.signal(signal.SIGINT, previous)

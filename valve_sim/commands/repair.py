@@ -26,7 +26,7 @@ new folder, with its metadata.yaml (as `ros2 bag reindex` writes it).
 
 from pathlib import Path
 
-from valve_sim.core.input_files import InputFileError
+from valve_sim.core.errors import InputFileError
 from valve_sim.recording.recovery import repair, repair_folder
 
 

@@ -45,10 +45,11 @@ from valve_sim.commands.options import (
     number,
     plot_path,
 )
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.output_files import json_text, replacing
-from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters, ParameterError
+from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters
 from valve_sim.core.scenario import Scenario, TankPressure
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that

@@ -13,19 +13,70 @@
 # limitations under the License.
 
 """
-The errors a user can cause (bad parameters, bad files, a diverging run).
+Every error valve_sim raises on purpose, under one root: ValveSimError.
 
-The command line prints these as one line and exits 1; anything else is a bug
-and keeps its traceback. Defined here, light to import (no numba, no scipy), and
-also offered by the modules that raise them (integrator, steady_state; InputFileError
-lives with the file readers, input_files).
+A ValveSimError is something a user can cause or fix (a bad parameter, a bad file, a
+run that diverges); the command line prints it as one line and exits 1, and so do
+the OS errors of USER_OS_ERRORS (a path the user gave that is missing, not allowed,
+a folder). Anything else is a bug and keeps its traceback. Each error is defined
+here, once, and imported from here; each keeps the builtin base callers catch it by
+(ValueError, RuntimeError, OSError). Light to import: no numba, no scipy.
+
+    ValveSimError
+      ParameterError (ValueError)       a parameter value, name or file is invalid
+        CalibrationError                 a calibration cannot be set up
+      SectionError (ValueError)         a parameter file's node sections are malformed
+      InputFileError (ValueError)       a file the user gave cannot be read or is wrong
+        ProfileError                     a malformed input profile (input_profile)
+      OutputFileError (OSError)         a file or folder the user named cannot be written
+      IntegrationError (RuntimeError)   a run diverged
+        OverpressureError                a chamber pressure passed burst_pressure
+      SteadyStateError (RuntimeError)   no steady state
+      IncompleteRunError (RuntimeError) a run ended without all it was to produce
+      StudyError (RuntimeError)         a study cannot run or complete
 """
 
-from valve_sim.core.input_files import InputFileError
-from valve_sim.core.parameters import ParameterError
+
+class ValveSimError(Exception):
+    """The root of valve_sim's errors: one a user can cause, said in one line."""
 
 
-class IntegrationError(RuntimeError):
+class ParameterError(ValveSimError, ValueError):
+    """
+    A parameter value, name or file is invalid.
+
+    The message names the parameter and the limit.
+    """
+
+
+class CalibrationError(ParameterError):
+    """The calibration cannot be set up: bad target, bounds or parameter choice."""
+
+
+class SectionError(ValveSimError, ValueError):
+    """A parameter file's structure or a section name is not one rcl accepts."""
+
+
+class InputFileError(ValveSimError, ValueError):
+    """A file given by the user cannot be read or has the wrong content."""
+
+
+class ProfileError(InputFileError):
+    """A malformed input profile: the key (a dotted path) and the problem."""
+
+    def __init__(self, key, problem):
+        super().__init__(f'{key}: {problem}')
+
+
+class OutputFileError(ValveSimError, OSError):
+    """
+    A file or folder the user named cannot be written (OSError's errno, strerror, filename).
+
+    Raised where the file is opened, so that the path is the one the user gave.
+    """
+
+
+class IntegrationError(ValveSimError, RuntimeError):
     """
     The integration diverged or produced a non-finite state.
 
@@ -39,18 +90,29 @@ class OverpressureError(IntegrationError):
     """A chamber pressure passed burst_pressure: a physical limit, not a numerical failure."""
 
 
-class SteadyStateError(RuntimeError):
+class SteadyStateError(ValveSimError, RuntimeError):
     """No steady state could be found."""
 
 
-class IncompleteRunError(RuntimeError):
+class IncompleteRunError(ValveSimError, RuntimeError):
     """A run ended without all it was to produce; the message says what is missing and why."""
 
 
-class StudyError(RuntimeError):
+class StudyError(ValveSimError, RuntimeError):
     """A study cannot run or complete (its results file, its cluster)."""
 
 
-# What one valve of a study can fail with (recorded as that case's error).
+# What one valve of a study or a calibration can fail with (recorded as that case's error).
 MODEL_ERRORS = (ParameterError, IntegrationError, SteadyStateError)
-USER_ERRORS = (*MODEL_ERRORS, InputFileError, IncompleteRunError, StudyError, OSError)
+# The OS errors of a path a user gave (missing, not allowed, a folder, not a folder, taken):
+# their user's error, not a bug, wherever they were not already turned into a ValveSimError.
+USER_OS_ERRORS = (
+    FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError, FileExistsError
+)
+# What the command line and the nodes print as one line (exit code 1).
+USER_ERRORS = (ValveSimError, *USER_OS_ERRORS)
+
+
+def output_error(error, path):
+    """Return an OSError met writing path as an OutputFileError naming path (the user's)."""
+    return OutputFileError(error.errno, error.strerror, str(path))

@@ -35,8 +35,9 @@ from dataclasses import dataclass, fields, replace
 import math
 import sys
 
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import shown
-from valve_sim.core.parameters import ParameterError, ParameterSpec
+from valve_sim.core.parameters import ParameterSpec
 
 
 PREFIX = 'fault.'

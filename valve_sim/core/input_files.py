@@ -46,6 +46,7 @@ import reprlib
 import stat
 import sys
 
+from valve_sim.core.errors import InputFileError
 import yaml
 
 
@@ -53,10 +54,6 @@ MiB = 1024 * 1024
 MAX_DEPTH = 32  # nesting levels of a YAML or JSON document (a parameter file uses 5)
 MAX_ALIASES = 100  # YAML aliases in one document
 MAX_NUMBER_DIGITS = 400  # characters of an integer literal; more cannot fit a float anyway
-
-
-class InputFileError(ValueError):
-    """A file given by the user cannot be read or has the wrong content."""
 
 
 @dataclass(frozen=True)

@@ -50,18 +50,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-from valve_sim.core.input_files import INPUT_CSV, InputFileError, read_text
+from valve_sim.core.errors import InputFileError, ProfileError
+from valve_sim.core.input_files import INPUT_CSV, read_text
 from valve_sim.core.quantities import FREQUENCY, NUMBER, parse_quantity, TIME
 
 
 KINDS = ('step', 'ramp', 'sine', 'series')
-
-
-class ProfileError(InputFileError):
-    """A malformed input profile: the key (a dotted path) and the problem."""
-
-    def __init__(self, key, problem):
-        super().__init__(f'{key}: {problem}')
 
 
 @dataclass(frozen=True)

@@ -23,19 +23,25 @@ as BAG.repaired.mcap) is replaced, not followed. A path the user named itself
 (explicit=True) is written where it leads, a link resolved first, as the user meant.
 create_new() and append_to() open files that grow while they are written (a
 recording, a results file) without following a link. json_text() is strict JSON: a
-number that is not finite is written as null, never as NaN or Infinity. make_folder()
+number that is not finite is written as null, never as NaN or Infinity. A file that
+cannot be written is an OutputFileError naming the path the user knows (a user's
+error, core.errors), raised here where the file is opened. make_folder()
 creates an output folder, or says which one it could not create.
 """
 
 from contextlib import contextmanager
+import errno
 import json
 import math
 import os
 from pathlib import Path
 import tempfile
 
+from valve_sim.core.errors import output_error, OutputFileError
 
 NO_LINK = os.O_NOFOLLOW | os.O_CLOEXEC
+# What a write meets when the file system refuses more (full, over quota, read-only, too big).
+STORAGE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG)
 
 
 def _umask():
@@ -53,7 +59,8 @@ def replacing(path, mode='w', explicit=False, **options):
     Yield a stream to write path with; the file is replaced only if the block completes.
 
     mode and options as for open() ('w', 'wb', newline=...). explicit: the user named
-    path (a link there is followed). An existing directory at path is an OSError.
+    path (a link there is followed). An existing directory at path is an
+    IsADirectoryError; a file that cannot be written an OutputFileError.
     """
     path = Path(os.path.realpath(path) if explicit else os.path.abspath(path))
     if path.is_dir() and not path.is_symlink():
@@ -63,7 +70,7 @@ def replacing(path, mode='w', explicit=False, **options):
             prefix=f'.{path.name}.', suffix='.part', dir=path.parent
         )
     except OSError as error:  # named as the file the user knows
-        raise OSError(error.errno, error.strerror, str(path)) from None
+        raise output_error(error, path) from None
     try:
         with os.fdopen(descriptor, mode, **options) as stream:
             yield stream
@@ -74,8 +81,10 @@ def replacing(path, mode='w', explicit=False, **options):
             os.unlink(temporary)
         except OSError:
             pass
-        if isinstance(error, OSError) and error.filename == temporary:
-            raise OSError(error.errno, error.strerror, str(path)) from None
+        if isinstance(error, OSError) and (
+            error.filename == temporary or error.errno in STORAGE_ERRORS
+        ):
+            raise output_error(error, path) from None
         raise
 
 
@@ -91,8 +100,11 @@ def create_new(path):
 
 
 def append_to(path):
-    """Open path to append text; an OSError (ELOOP) if it is a symbolic link."""
-    return os.fdopen(os.open(path, os.O_WRONLY | os.O_APPEND | NO_LINK), 'a')
+    """Open path to append text; an OutputFileError (ELOOP) if it is a symbolic link."""
+    try:
+        return os.fdopen(os.open(path, os.O_WRONLY | os.O_APPEND | NO_LINK), 'a')
+    except OSError as error:
+        raise output_error(error, path) from None
 
 
 def finite(value):
@@ -112,9 +124,11 @@ def json_text(document, indent=2):
 
 
 def make_folder(path):
-    """Create the output folder path (and its parents); OSError naming it if that fails."""
+    """Create the output folder path (and its parents); an OutputFileError naming it if not."""
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise OSError(f'output folder {path} cannot be created: {error.strerror}') from error
+        raise OutputFileError(
+            f'output folder {path} cannot be created: {error.strerror}'
+        ) from error
     return path

@@ -41,12 +41,10 @@ _populate_node_parameters_from_rcl_params, matches them):
 from dataclasses import dataclass, field
 import re
 
+from valve_sim.core.errors import SectionError
+
 PARAMS_KEY = 'ros__parameters'
 _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
-
-
-class SectionError(ValueError):
-    """A parameter file's structure or a section name is not one rcl accepts."""
 
 
 @dataclass

@@ -28,25 +28,13 @@ import math
 from pathlib import Path
 import sys
 
-from valve_sim.core.input_files import InputFileError, PARAMETER_FILE, read_yaml, shown
-from valve_sim.core.parameter_sections import (
-    describe_not_applied,
-    node_fqn,
-    parameters_for_node,
-    SectionError,
-)
+from valve_sim.core.errors import InputFileError, ParameterError, SectionError
+from valve_sim.core.input_files import PARAMETER_FILE, read_yaml, shown
+from valve_sim.core.parameter_sections import describe_not_applied, node_fqn, parameters_for_node
 
 
 PACKAGE = 'valve_sim'
 NODE_NAME = 'relief_valve'
-
-
-class ParameterError(ValueError):
-    """
-    A parameter value, name or file is invalid.
-
-    The message names the parameter and the limit.
-    """
 
 
 @dataclass(frozen=True)

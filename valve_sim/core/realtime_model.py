@@ -35,8 +35,9 @@ until resume() (a reset, a new inlet flow or a parameter change).
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.core.errors import IntegrationError
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.integrator import advance, IntegrationError
+from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients, relief_flows
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state

@@ -26,8 +26,9 @@ check_limits() that the running valve stays within its physical limits.
 
 import math
 
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
-from valve_sim.core.parameters import ParameterError, SPECS, validate
+from valve_sim.core.parameters import SPECS, validate
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 
 

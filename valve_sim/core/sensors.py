@@ -42,11 +42,12 @@ transducer reads beyond what the valve holds.
 import math
 
 import numpy as np
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.faults import checked_number, SwitchSpec
 from valve_sim.core.input_files import shown
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
-from valve_sim.core.parameters import ParameterError, ParameterSpec
+from valve_sim.core.parameters import ParameterSpec
 
 
 PREFIX = 'sensor.'

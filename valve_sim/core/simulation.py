@@ -37,7 +37,7 @@ simulate(): there rounding errors grow before the step as they would on a rig.
 from dataclasses import dataclass, field
 
 import numpy as np
-from valve_sim.core.errors import OverpressureError
+from valve_sim.core.errors import OverpressureError, ParameterError, SteadyStateError
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
 from valve_sim.core.integrator import advance, advance_lanes, step_inputs
@@ -52,13 +52,12 @@ from valve_sim.core.model import (
     STATE_NAMES,
     X_DOT,
 )
-from valve_sim.core.parameters import ParameterError
 from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
     LITRE_PER_MINUTE,
     Scenario,
     TankPressure,
 )
-from valve_sim.core.steady_state import steady_state, SteadyStateError
+from valve_sim.core.steady_state import steady_state
 
 
 LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
@@ -84,6 +83,30 @@ class Waveforms:
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """
+    One run of simulate_batch, in the manner of scipy's OdeResult: the waveforms or the reason.
+
+    waveforms: the run's Waveforms, None when it failed; error: why it failed (the
+    ParameterError, SteadyStateError or IntegrationError of its start or its
+    integration), None when it succeeded.
+    """
+
+    waveforms: Waveforms = None
+    error: Exception = None
+
+    @property
+    def success(self):
+        """Whether the run completed (it has waveforms)."""
+        return self.error is None
+
+    @property
+    def message(self):
+        """Why the run failed, in one line ('' when it succeeded)."""
+        return '' if self.error is None else str(self.error)
 
 
 def apply_faults(state, faults, changes):
@@ -379,14 +402,14 @@ def simulate_batch(
     params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
 ):
     """
-    Run one scenario for many parameter sets; a list with, per set, Waveforms or the error.
+    Run one scenario for many parameter sets; a list of RunResults, one per set, in order.
 
-    The same Waveforms as simulate() gives (the same sample times), except that the
+    A run's waveforms are those simulate() gives (the same sample times), except that the
     stretch before the step is not integrated but held at the exact steady state
-    when that is stable (see the module docstring). A set whose start fails gets its
-    SteadyStateError,
-    a run that diverges its IntegrationError, in place of Waveforms; the other
-    sets are not affected. lanes: how many runs the kernel advances together.
+    when that is stable (see the module docstring). A set whose start fails has its
+    ParameterError or SteadyStateError as the result's error, a run that diverges
+    its IntegrationError; the other sets are not affected. lanes: how many runs the
+    kernel advances together.
     """
     record_every = max(1, int(round(record_interval / step_size)))
     flows = step_flows(scenario, step_size)
@@ -397,7 +420,7 @@ def simulate_batch(
             state = steady_state(params, scenario.initial_flow)
             check_schedule(params, flows)
         except (ParameterError, SteadyStateError) as error:
-            results[index] = error
+            results[index] = RunResult(error=error)
             continue
         starts[index] = (state, coefficients(params))
         groups[lead if is_stable(params, state, scenario.initial_flow) else 0].append(index)
@@ -413,14 +436,16 @@ def simulate_batch(
                 time=skipped * step_size,
             )
             for lane, index in enumerate(group):
-                results[index] = errors[lane] or _waveforms(
-                    starts[index][0],
-                    records[lane],
-                    flows,
-                    record_every,
-                    step_size,
-                    scenario.initial_flow,
-                    held=skipped // record_every,
+                results[index] = RunResult(error=errors[lane]) if errors[lane] else RunResult(
+                    _waveforms(
+                        starts[index][0],
+                        records[lane],
+                        flows,
+                        record_every,
+                        step_size,
+                        scenario.initial_flow,
+                        held=skipped // record_every,
+                    )
                 )
     return results
 

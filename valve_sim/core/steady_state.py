@@ -40,7 +40,7 @@ from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import brentq, root
-from valve_sim.core.errors import IntegrationError, SteadyStateError
+from valve_sim.core.errors import IntegrationError, ParameterError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.jit import jit
@@ -57,7 +57,7 @@ from valve_sim.core.model import (
     X,
     Y,
 )
-from valve_sim.core.parameters import ParameterError, SPECS, validate
+from valve_sim.core.parameters import SPECS, validate
 
 
 PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5  # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME

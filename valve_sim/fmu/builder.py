@@ -22,7 +22,8 @@ into it as resources/parameters.yaml, a ROS 2 parameter file (parameter_file()).
 from pathlib import Path
 import tempfile
 
-from valve_sim.core.parameters import NODE_NAME, ParameterError
+from valve_sim.core.errors import ParameterError
+from valve_sim.core.parameters import NODE_NAME
 
 
 SLAVE = 'valve_sim.fmu.relief_valve_slave'  # the module pythonfmu packs: ReliefValve

@@ -48,13 +48,17 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
 from pythonfmu.enums import Fmi2Status
 from valve_sim import __version__
-from valve_sim.core.errors import IntegrationError, OverpressureError, SteadyStateError
+from valve_sim.core.errors import (
+    IntegrationError,
+    OverpressureError,
+    ParameterError,
+    SteadyStateError,
+)
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 from valve_sim.core.model import STATE_NAMES
 from valve_sim.core.parameters import (
     check_value,
     load_parameters,
-    ParameterError,
     PARAMETERS,
     PRESET_PRESSURE,
     SETTING_SPECS,

@@ -28,7 +28,8 @@ import os
 from pathlib import Path
 import re
 
-from valve_sim.core.input_files import BAG_METADATA, InputFileError, read_yaml, shown
+from valve_sim.core.errors import InputFileError
+from valve_sim.core.input_files import BAG_METADATA, read_yaml, shown
 from valve_sim.core.output_files import write_text
 import yaml
 

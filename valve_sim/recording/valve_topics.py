@@ -39,8 +39,9 @@ import time
 import numpy as np
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.model import P_C, P_S, STATE_NAMES, X, X_DOT, Y, Y_DOT
-from valve_sim.core.parameters import NODE_NAME, ParameterError, STANDARD_ATMOSPHERE
+from valve_sim.core.parameters import NODE_NAME, STANDARD_ATMOSPHERE
 from valve_sim.recording.cdr import CdrMessage
 
 

@@ -92,13 +92,8 @@ from valve_sim.analysis.signals import (
     TYPES,
 )
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
-from valve_sim.core.errors import InputFileError
-from valve_sim.core.parameters import (
-    ParameterError,
-    ParameterSpec,
-    SETTING_SPECS,
-    STANDARD_ATMOSPHERE,
-)
+from valve_sim.core.errors import InputFileError, USER_ERRORS
+from valve_sim.core.parameters import ParameterSpec, SETTING_SPECS, STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros import diagnostics, spinning
@@ -743,7 +738,7 @@ def main(args=None):
     stop = spinning.init(args)
     try:
         record(stop)
-    except (InputFileError, ParameterError, ParameterException, OSError) as error:
+    except (*USER_ERRORS, ParameterException) as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(str(error))
         return 1
     finally:

@@ -39,6 +39,7 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from valve_sim.core.errors import InputFileError
 from valve_sim.core.fault_schedule import (
     event_from_line,
     load_schedule,
@@ -52,7 +53,6 @@ from valve_sim.core.faults import (
     FAULT_SWITCH_SPECS,
     HEALTHY,
 )
-from valve_sim.core.input_files import InputFileError
 from valve_sim.core.model import P_C, P_S
 from valve_sim.core.parameters import FAULT_SCHEDULE
 from valve_sim.core.sensors import (

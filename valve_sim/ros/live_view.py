@@ -42,7 +42,8 @@ def layout_path():
     an editable install in the source tree (valve_sim.core.parameters.shipped_file);
     the source tree's path, if none has it.
     """
-    from valve_sim.core.parameters import ParameterError, shipped_file
+    from valve_sim.core.errors import ParameterError
+    from valve_sim.core.parameters import shipped_file
 
     try:
         return shipped_file('foxglove', LAYOUT)

@@ -41,8 +41,9 @@ from rcl_interfaces.msg import (
 )
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.parameter import Parameter
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.parameter_sections import describe_not_applied, parameters_for_node
-from valve_sim.core.parameters import parameter_document, ParameterError
+from valve_sim.core.parameters import parameter_document
 
 
 def descriptor(spec, read_only=False):

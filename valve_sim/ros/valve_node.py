@@ -86,21 +86,25 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.errors import (
+    InputFileError,
+    IntegrationError,
+    OverpressureError,
+    ParameterError,
+    SteadyStateError,
+)
 from valve_sim.core.input_files import (
     FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
     MAX_ALIASES,
     MAX_DEPTH,
     MAX_EVENTS,
 )
-from valve_sim.core.integrator import IntegrationError, OverpressureError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
     load_parameters,
     NODE_NAME,
-    ParameterError,
     PARAMETERS,
     PRESET_PRESSURE,
     retired_reason,
@@ -117,11 +121,7 @@ from valve_sim.core.retuning import (
     merged_parameters,
 )
 from valve_sim.core.sensors import SENSOR_NAMES
-from valve_sim.core.steady_state import (
-    cracking_pressure,
-    preload_for_cracking_pressure,
-    SteadyStateError,
-)
+from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource

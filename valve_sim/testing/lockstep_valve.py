@@ -35,10 +35,9 @@ import time
 
 from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
-from valve_sim.core.input_profile import ProfileError
-from valve_sim.core.parameters import ParameterError, STANDARD_ATMOSPHERE
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.core.quantities import FLOW, parse_quantity
 from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES

@@ -1,0 +1,215 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+What a calibration fits to: a target gives the residuals of a parameter set.
+
+- MeasuresTarget: the six step measures of the paper's test (value and tolerance each);
+  residual = weight (model - value) / tolerance.
+- RecordingTarget: a recorded step. The model is driven by the recorded inlet flow
+  itself (core.simulation.simulate_recorded_flow) and compared with the recorded
+  supply pressure, and with the main-valve position where it was recorded;
+  residual = (model - recorded) / noise, the noise of each signal estimated from
+  its sample-to-sample scatter before the first step.
+
+Both offer kind, residual_names, residuals(params), model_output(params) and
+covariance_scale(cost, count, fitted) (the s^2 of the fit's covariance).
+"""
+
+import math
+
+import numpy as np
+from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
+from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.errors import CalibrationError
+from valve_sim.core.input_files import shown
+from valve_sim.core.model import X
+from valve_sim.core.simulation import simulate, simulate_recorded_flow
+
+
+UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
+
+
+class MeasuresTarget:
+    """
+    The six measures of the paper's step test (or a subset), each with value and tolerance.
+
+    values, tolerances, weights: {measure name: number}; tolerance in the measure's unit.
+    """
+
+    kind = 'measures'
+
+    def __init__(self, values, tolerances, weights=None, scenario=REFERENCE_SCENARIO,
+                 step_size=1e-5):
+        self.names = [name for name in MEASURE_NAMES if name in values]
+        self.values = {name: float(values[name]) for name in self.names}
+        self.tolerances = {name: float(tolerances[name]) for name in self.names}
+        self.weights = {name: float((weights or {}).get(name, 1.0)) for name in self.names}
+        self.scenario, self.step_size = scenario, step_size
+        self.residual_names = list(self.names)
+
+    @classmethod
+    def from_document(cls, document, step_size=1e-5):
+        """
+        Build from {name: value} or {name: {"value", "tolerance", "weight"}} (JSON).
+
+        A bare value gets a tolerance of 10 % of itself. Raises CalibrationError.
+        """
+        if not isinstance(document, dict):
+            raise CalibrationError('a measures target must map measure names to values')
+        values, tolerances, weights = {}, {}, {}
+        unknown = sorted(set(document) - set(MEASURE_NAMES) - {'comment', 'source'})
+        if unknown:
+            raise CalibrationError(
+                f'unknown measure(s) {", ".join(unknown)}; known: {", ".join(MEASURE_NAMES)}'
+            )
+        for name in MEASURE_NAMES:
+            if name not in document:
+                continue
+            entry = document[name]
+            entry = entry if isinstance(entry, dict) else {'value': entry}
+            try:
+                values[name] = float(entry['value'])
+                tolerances[name] = float(entry.get('tolerance', 0.1 * abs(values[name])))
+                weights[name] = float(entry.get('weight', 1.0))
+            except (KeyError, TypeError, ValueError):
+                raise CalibrationError(
+                    f"measure {name}: need a number or {{'value': number, 'tolerance': number, "
+                    f"'weight': number}}, got {shown(entry)}"
+                ) from None
+            numbers = (values[name], tolerances[name], weights[name])
+            for what, number in zip(('value', 'tolerance', 'weight'), numbers):
+                if not math.isfinite(number):
+                    raise CalibrationError(f'measure {name}: {what} must be finite')
+            if tolerances[name] <= 0.0 or weights[name] <= 0.0:
+                raise CalibrationError(f'measure {name}: tolerance and weight must be > 0')
+        if not values:
+            raise CalibrationError('the measures target names none of ' + ', '.join(MEASURE_NAMES))
+        return cls(values, tolerances, weights, step_size=step_size)
+
+    def model_output(self, params):
+        """Measures (StepMeasures.as_dict) and waveforms of the model's step test."""
+        waveforms = simulate(params, self.scenario, self.step_size, 1e-4)
+        measures = step_measures(
+            waveforms.time,
+            waveforms['supply_pressure'],
+            waveforms['main_valve_displacement'],
+            self.scenario.step_time,
+        ).as_dict()
+        return measures, waveforms
+
+    def residuals(self, params):
+        measures, _ = self.model_output(params)
+        return np.array(
+            [
+                self.weights[name] * (measures[name] - self.values[name]) / self.tolerances[name]
+                if measures[name] is not None
+                else UNDEFINED_MEASURE_RESIDUAL
+                for name in self.names
+            ]
+        )
+
+    def covariance_scale(self, cost, count, fitted):
+        """Residuals are in tolerance units: s^2 = 1."""
+        return 1.0
+
+
+def noise_level(signal, count):
+    """
+    Robust standard deviation [signal unit] of white noise on the first count samples.
+
+    Differences with a non-finite end (a sample not recorded) are left out.
+    """
+    differences = np.diff(np.asarray(signal[:count], dtype=float))
+    differences = differences[np.isfinite(differences)]
+    if len(differences) < 2:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(differences - np.median(differences))) / math.sqrt(2))
+
+
+class RecordingTarget:
+    """
+    A recorded step: time [s], supply pressure [Pa gauge], inlet flow [m^3/s], main valve [m].
+
+    main_valve may be None (a rig without a position sensor) or hold NaN where not
+    recorded. inlet_flow[i] is the flow over the interval ending at time[i].
+    step_times [s]: steps located between two flow samples (a flowmeter slower than the
+    pressure, see measures.locate_step), brackets [(first, last)] [s] those samples'
+    times: the recorded flow changes only at the sample at last, the model's at the step
+    time. Located times are uncertain: step_time_parameters() fits them along with the
+    parameters, inside their brackets.
+    """
+
+    kind = 'recording'
+
+    def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
+                 step_threshold=1e-6, step_times=(), brackets=()):
+        time = np.asarray(time, dtype=float)
+        pressure = np.asarray(supply_pressure, dtype=float)
+        flow = np.asarray(inlet_flow, dtype=float)
+        if not (len(time) == len(pressure) == len(flow)) or len(time) < 10:
+            raise CalibrationError('a recording needs at least 10 joined samples')
+        if not (np.all(np.isfinite(pressure)) and np.all(np.isfinite(flow))):
+            raise CalibrationError('the recording holds NaN or infinite pressure or flow samples')
+        if np.any(np.diff(time) < step_size):
+            raise CalibrationError(
+                f'sample times must increase by at least the step size {step_size:g} s'
+            )
+        if np.any(flow < 0.0):
+            raise CalibrationError('the recorded inlet flow is negative somewhere')
+        self.steps = detect_steps(time, flow, step_threshold)
+        if not self.steps:
+            raise CalibrationError(
+                f'no usable step: the recorded inlet flow stays within {step_threshold:g} m^3/s '
+                f'of {flow[0]:g} m^3/s over {time[-1] - time[0]:.3f} s, so the recording shows '
+                'no dynamics to fit (record a flow step)'
+            )
+        first_step = min([self.steps[0][0], *step_times])  # a located one can come earlier
+        before = max(int(np.searchsorted(time, first_step, side='right')), 2)
+        self.time, self.pressure, self.flow, self.step_size = time, pressure, flow, step_size
+        self.step_times = list(step_times)  # located steps [s], fitted (step_time_parameters)
+        self.brackets = list(brackets)  # [(first, last)] [s]: where each step time can lie
+        self.pressure_noise = max(noise_level(pressure, before), 1.0)  # [Pa] floor: 1 Pa
+        self.position = None
+        self.residual_names = ['supply_pressure'] * len(time)
+        if main_valve is not None:
+            position = np.asarray(main_valve, dtype=float)
+            if np.any(np.isinf(position)):
+                raise CalibrationError('the recorded main-valve position is infinite somewhere')
+            if np.any(np.isfinite(position)):
+                self.position = position
+                self.position_noise = max(noise_level(position, before), 1e-9)  # [m]
+                recorded = np.isfinite(position)
+                self.residual_names += ['main_valve'] * int(recorded.sum())
+
+    def model_output(self, params):
+        """Model states (rows) at the recorded sample times."""
+        flow = self.flow.copy()
+        for t_step, (_, last) in zip(self.step_times, self.brackets):
+            after = min(int(np.searchsorted(self.time, last)), len(flow) - 1)
+            flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
+        return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
+
+    def residuals(self, params):
+        states = self.model_output(params)
+        parts = [(states[:, 0] - self.pressure) / self.pressure_noise]
+        if self.position is not None:
+            recorded = np.isfinite(self.position)
+            parts.append((states[recorded, X] - self.position[recorded]) / self.position_noise)
+        return np.concatenate(parts)
+
+    def covariance_scale(self, cost, count, fitted):
+        """s^2: the residual variance, for noise levels that were only estimated."""
+        return 2.0 * cost / max(count - fitted, 1)
