@@ -174,7 +174,8 @@ def print_marks(marks, steady=None):
 
 def run(args):
     check_bag_arguments(args)
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     step_size = settings['step_size']
     rated = _check(args, step_size)
     waveforms, main, marks = ramp_test(

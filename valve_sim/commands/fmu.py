@@ -86,7 +86,8 @@ def build(out, params, settings):
 
 
 def run(args):
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     path = build(args.out, params, settings)
     print(f'wrote {path}: FMI 2.0 co-simulation, model ReliefValve; it needs Python with '
           'valve_sim installed where it runs (docs/fmu.md)', file=sys.stderr)

@@ -154,7 +154,8 @@ def run_samples(args, label, params, names, values, preset, settings, out):
 
 
 def run(args):
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     distributions = parse_variations(args.vary, params)
     limits = parse_limits(args.limits)
     preset, protocol = preset_protocol(args.protocol, params)
