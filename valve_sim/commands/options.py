@@ -32,10 +32,10 @@ import math
 from pathlib import Path
 import sys
 
+from valve_sim.core.catalogue import CATALOGUE
 from valve_sim.core.input_files import PARAMETER_FILE
 from valve_sim.core.parameters import (
     check_value,
-    FAULT_SCHEDULE,
     load_parameters,
     ParameterError,
     SETTING_SPECS,
@@ -145,7 +145,7 @@ def assignment(text):
         raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
     if value.strip().lower() in ('true', 'false'):
         return name.strip(), value.strip().lower() == 'true'
-    if name.strip() == FAULT_SCHEDULE:
+    if getattr(CATALOGUE.get(name.strip()), 'kind', None) == 'string':  # fault_schedule
         return name.strip(), value.strip()
     try:
         return name.strip(), int(value) if value.strip().isdigit() else float(value)

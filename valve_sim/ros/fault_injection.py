@@ -65,13 +65,11 @@ INJECTION_SPECS = sorted(
     (*FAULT_SPECS.values(), *SENSOR_SPECS.values(), FAULT_SCHEDULE_SPEC),
     key=lambda spec: KIND_ORDER.index(spec.kind),
 )
-DOUBLE_SPECS = {spec.name: spec for spec in INJECTION_SPECS if spec.kind == 'double'}
 FAULT_STATUS_TOPIC = 'fault_status'
 # Latched: a late subscriber (the analyser, a bench's monitor) gets the settings in effect.
 FAULT_STATUS_QOS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
-INJECTION_NAMES = frozenset(spec.name for spec in INJECTION_SPECS) - {FAULT_SCHEDULE_SPEC.name}
 PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the folder holding valve_sim
 
 
