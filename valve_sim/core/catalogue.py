@@ -81,134 +81,389 @@ ANALYSER = 'valve_sim analyser_node'
 STANDARD_ATMOSPHERE = 101325.0
 
 
-def _model(name, symbol, unit, minimum, maximum, description, source):
-    return ParameterSpec(name, symbol, unit, minimum, maximum, description, source)
-
-
 MODEL = (
     # Fluid (water at about 50 degC), Table 1.
-    _model('fluid_density', 'rho', 'kg/m^3', 500.0, 2000.0, 'fluid density', TABLE1),
-    _model('fluid_viscosity', 'mu', 'Pa*s', 1e-5, 1.0, 'dynamic viscosity of the fluid', TABLE1),
-    _model('bulk_modulus', 'beta', 'Pa', 1e7, 1e10, 'bulk modulus of the fluid', TABLE1),
-    _model('discharge_coefficient', 'C_d', '1', 0.1, 1.0,
-           'discharge coefficient of the valve throttles, damping orifice and poppet', TABLE1),
-    _model('bearing_discharge_coefficient', 'C_b', '1', 0.1, 1.0,
-           'discharge coefficient of the hydrostatic bearing orifices', TABLE1),
+    ParameterSpec('fluid_density', 'rho', 'kg/m^3', 500.0, 2000.0, 'fluid density', TABLE1),
+    ParameterSpec(
+        'fluid_viscosity', 'mu', 'Pa*s', 1e-5, 1.0, 'dynamic viscosity of the fluid', TABLE1
+    ),
+    ParameterSpec('bulk_modulus', 'beta', 'Pa', 1e7, 1e10, 'bulk modulus of the fluid', TABLE1),
+    ParameterSpec(
+        'discharge_coefficient',
+        'C_d',
+        '1',
+        0.1,
+        1.0,
+        'discharge coefficient of the valve throttles, damping orifice and poppet',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'bearing_discharge_coefficient',
+        'C_b',
+        '1',
+        0.1,
+        1.0,
+        'discharge coefficient of the hydrostatic bearing orifices',
+        TABLE1,
+    ),
     # Moving parts, Table 1.
-    _model('main_valve_mass', 'm_m', 'kg', 1e-4, 10.0,
-           'mass of the main valve incl. 1/3 of its spring', TABLE1),
-    _model('pilot_poppet_mass', 'm_p', 'kg', 1e-5, 1.0,
-           'mass of the pilot poppet incl. 1/3 of its spring', TABLE1),
-    _model('main_valve_damping', 'c_m', 'N*s/m', 0.0, 1e4,
-           'viscous damping coefficient of the main valve', TABLE1),
-    _model('pilot_poppet_damping', 'c_p', 'N*s/m', 0.0, 1e4,
-           'viscous damping coefficient of the pilot poppet', TABLE1),
-    _model('pilot_spring_stiffness', 'k_p', 'N/m', 1.0, 1e8, 'pilot spring constant', TABLE1),
-    _model('damping_orifice_diameter', 'd_c', 'm', 1e-5, 0.02,
-           'damping orifice diameter between pilot chamber and poppet chamber', TABLE1),
+    ParameterSpec(
+        'main_valve_mass',
+        'm_m',
+        'kg',
+        1e-4,
+        10.0,
+        'mass of the main valve incl. 1/3 of its spring',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_poppet_mass',
+        'm_p',
+        'kg',
+        1e-5,
+        1.0,
+        'mass of the pilot poppet incl. 1/3 of its spring',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'main_valve_damping',
+        'c_m',
+        'N*s/m',
+        0.0,
+        1e4,
+        'viscous damping coefficient of the main valve',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_poppet_damping',
+        'c_p',
+        'N*s/m',
+        0.0,
+        1e4,
+        'viscous damping coefficient of the pilot poppet',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_spring_stiffness', 'k_p', 'N/m', 1.0, 1e8, 'pilot spring constant', TABLE1
+    ),
+    ParameterSpec(
+        'damping_orifice_diameter',
+        'd_c',
+        'm',
+        1e-5,
+        0.02,
+        'damping orifice diameter between pilot chamber and poppet chamber',
+        TABLE1,
+    ),
     # Chamber volumes, Table 1.
-    _model('supply_volume', 'V_s', 'm^3', 1e-9, 10.0,
-           'supply volume (valve inlet and connected line)', TABLE1),
-    _model('intermediate_volume', 'V_m', 'm^3', 1e-9, 1.0,
-           'volume between the two main throttles', TABLE1),
-    _model('pilot_volume', 'V_p', 'm^3', 1e-9, 1.0,
-           'pilot chamber volume behind the main valve', TABLE1),
-    _model('poppet_chamber_volume', 'V_c', 'm^3', 1e-9, 1.0,
-           'poppet chamber volume between damping orifice and pilot poppet', TABLE1),
+    ParameterSpec(
+        'supply_volume',
+        'V_s',
+        'm^3',
+        1e-9,
+        10.0,
+        'supply volume (valve inlet and connected line)',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'intermediate_volume',
+        'V_m',
+        'm^3',
+        1e-9,
+        1.0,
+        'volume between the two main throttles',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'pilot_volume',
+        'V_p',
+        'm^3',
+        1e-9,
+        1.0,
+        'pilot chamber volume behind the main valve',
+        TABLE1,
+    ),
+    ParameterSpec(
+        'poppet_chamber_volume',
+        'V_c',
+        'm^3',
+        1e-9,
+        1.0,
+        'poppet chamber volume between damping orifice and pilot poppet',
+        TABLE1,
+    ),
     # Main valve geometry (paper Figure 2, values not printed).
-    _model('main_valve_back_diameter', 'd_p', 'm', 1e-4, 0.2,
-           'main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)', OURS),
-    _model('first_throttle_outer_diameter', 'D_1', 'm', 1e-4, 0.2,
-           'outer diameter of the first (upstream) annular throttle land', OURS),
-    _model('first_throttle_inner_diameter', 'd_1', 'm', 1e-4, 0.2,
-           'inner diameter of the first annular throttle land', OURS),
-    _model('second_throttle_outer_diameter', 'D_2', 'm', 1e-4, 0.2,
-           'outer diameter of the second (downstream) annular throttle land', OURS),
-    _model('second_throttle_inner_diameter', 'd_2', 'm', 1e-4, 0.2,
-           'inner diameter of the second annular throttle land', OURS),
-    _model('first_throttle_clearance', 'h', 'm', 0.0, 1e-3,
-           'opening of the first throttle when the main valve is seated (x = 0)', OURS),
-    _model('main_spring_stiffness', 'k_m', 'N/m', 0.0, 1e8, 'main valve spring constant', OURS),
-    _model('main_spring_preload', 'x_0', 'm', 0.0, 0.05,
-           'initial compression of the main spring at x = 0', OURS),
-    _model('main_valve_stroke', 'x_max', 'm', 1e-5, 0.05,
-           'main valve stroke to its end stop', OURS),
+    ParameterSpec(
+        'main_valve_back_diameter',
+        'd_p',
+        'm',
+        1e-4,
+        0.2,
+        'main valve diameter on the pilot-chamber side (A_p = pi/4 d_p^2)',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_outer_diameter',
+        'D_1',
+        'm',
+        1e-4,
+        0.2,
+        'outer diameter of the first (upstream) annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_inner_diameter',
+        'd_1',
+        'm',
+        1e-4,
+        0.2,
+        'inner diameter of the first annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'second_throttle_outer_diameter',
+        'D_2',
+        'm',
+        1e-4,
+        0.2,
+        'outer diameter of the second (downstream) annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'second_throttle_inner_diameter',
+        'd_2',
+        'm',
+        1e-4,
+        0.2,
+        'inner diameter of the second annular throttle land',
+        OURS,
+    ),
+    ParameterSpec(
+        'first_throttle_clearance',
+        'h',
+        'm',
+        0.0,
+        1e-3,
+        'opening of the first throttle when the main valve is seated (x = 0)',
+        OURS,
+    ),
+    ParameterSpec(
+        'main_spring_stiffness', 'k_m', 'N/m', 0.0, 1e8, 'main valve spring constant', OURS
+    ),
+    ParameterSpec(
+        'main_spring_preload',
+        'x_0',
+        'm',
+        0.0,
+        0.05,
+        'initial compression of the main spring at x = 0',
+        OURS,
+    ),
+    ParameterSpec(
+        'main_valve_stroke', 'x_max', 'm', 1e-5, 0.05, 'main valve stroke to its end stop', OURS
+    ),
     # Hydrostatic bearings, Eq. (12).
-    _model('bearing_orifice_diameter', 'd_b', 'm', 1e-5, 0.01,
-           'diameter of one hydrostatic bearing orifice', OURS),
-    _model('bearing_coefficient_1', 'K_1', '1', -1e3, 1e3,
-           'first-order coefficient of the bearing flow polynomial, Eq. (12)', OURS),
-    _model('bearing_coefficient_2', 'K_2', '1', -1e3, 1e3,
-           'second-order coefficient of the bearing flow polynomial, Eq. (12)', OURS),
-    _model('bearing_coefficient_3', 'K_3', '1', -1e3, 1e3,
-           'third-order coefficient of the bearing flow polynomial, Eq. (12)', OURS),
+    ParameterSpec(
+        'bearing_orifice_diameter',
+        'd_b',
+        'm',
+        1e-5,
+        0.01,
+        'diameter of one hydrostatic bearing orifice',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_1',
+        'K_1',
+        '1',
+        -1e3,
+        1e3,
+        'first-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_2',
+        'K_2',
+        '1',
+        -1e3,
+        1e3,
+        'second-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
+    ParameterSpec(
+        'bearing_coefficient_3',
+        'K_3',
+        '1',
+        -1e3,
+        1e3,
+        'third-order coefficient of the bearing flow polynomial, Eq. (12)',
+        OURS,
+    ),
     # Pilot stage geometry (paper Figure 3, values not printed).
-    _model('sensing_rod_diameter', 'd_s', 'm', 1e-4, 0.05,
-           'diameter of the pressure-detecting rod (A_s = pi/4 d_s^2)', OURS),
-    _model('sensing_rod_clearance', 'delta_s', 'm', 0.0, 1e-3,
-           'radial clearance between pressure-detecting rod and sleeve', OURS),
-    _model('sensing_rod_length', 'l_s', 'm', 1e-4, 0.2, 'axial length of the rod clearance',
-           OURS),
-    _model('pilot_seat_diameter', 'd_v', 'm', 1e-4, 0.02, 'pilot poppet seat diameter', OURS),
-    _model('poppet_half_angle', 'theta_p', 'rad', 0.01, 1.56,
-           'half cone angle of the pilot poppet', OURS),
-    _model('pilot_spring_preload', 'y_0', 'm', 0.0, 0.05,
-           'initial compression of the pilot spring at y = 0 (set by the adjusting screw)',
-           OURS),
-    _model('poppet_stroke', 'y_max', 'm', 1e-5, 0.01, 'pilot poppet stroke to its end stop',
-           OURS),
-    # Physical limits of the valve (docs/model.md, "Physical limits"); max_inlet_flow goes up
-    # to 6e5 L/min: a bench may lift the input limit and leave burst_pressure.
-    _model('max_inlet_flow', 'q_in,max', 'm^3/s', 1e-6, 10.0,
-           'largest inlet flow the valve accepts; a larger one is rejected as input', OURS),
-    _model('burst_pressure', 'p_burst', 'Pa', 1e6, 1e9,
-           'gauge pressure no chamber of the valve reaches: the real body would have burst '
-           '(a state beyond it is an overpressure)', OURS),
+    ParameterSpec(
+        'sensing_rod_diameter',
+        'd_s',
+        'm',
+        1e-4,
+        0.05,
+        'diameter of the pressure-detecting rod (A_s = pi/4 d_s^2)',
+        OURS,
+    ),
+    ParameterSpec(
+        'sensing_rod_clearance',
+        'delta_s',
+        'm',
+        0.0,
+        1e-3,
+        'radial clearance between pressure-detecting rod and sleeve',
+        OURS,
+    ),
+    ParameterSpec(
+        'sensing_rod_length', 'l_s', 'm', 1e-4, 0.2, 'axial length of the rod clearance', OURS
+    ),
+    ParameterSpec(
+        'pilot_seat_diameter', 'd_v', 'm', 1e-4, 0.02, 'pilot poppet seat diameter', OURS
+    ),
+    ParameterSpec(
+        'poppet_half_angle',
+        'theta_p',
+        'rad',
+        0.01,
+        1.56,
+        'half cone angle of the pilot poppet',
+        OURS,
+    ),
+    ParameterSpec(
+        'pilot_spring_preload',
+        'y_0',
+        'm',
+        0.0,
+        0.05,
+        'initial compression of the pilot spring at y = 0 (set by the adjusting screw)',
+        OURS,
+    ),
+    ParameterSpec(
+        'poppet_stroke', 'y_max', 'm', 1e-5, 0.01, 'pilot poppet stroke to its end stop', OURS
+    ),
+    # Physical limits of the valve (docs/model.md, "Physical limits").
+    ParameterSpec(
+        'max_inlet_flow',
+        'q_in,max',
+        'm^3/s',
+        1e-6,
+        10.0,  # up to 6e5 L/min: a bench may lift the input limit and leave burst_pressure
+        'largest inlet flow the valve accepts; a larger one is rejected as input',
+        OURS,
+    ),
+    ParameterSpec(
+        'burst_pressure',
+        'p_burst',
+        'Pa',
+        1e6,
+        1e9,
+        'gauge pressure no chamber of the valve reaches: the real body would have burst '
+        '(a state beyond it is an overpressure)',
+        OURS,
+    ),
     # The test bench's supply (not the valve).
-    _model('supply_pressure_limit', 'p_s,max', 'Pa', 0.0, 5e8,
-           "highest supply pressure (gauge) the bench's supply delivers: its own relief "
-           'takes the inflow beyond it; where a valve fault drives p_s there, valve_node '
-           "raises an overpressure alarm. Set it to your bench's relief setting; 0: no limit",
-           OURS),
+    ParameterSpec(
+        'supply_pressure_limit',
+        'p_s,max',
+        'Pa',
+        0.0,
+        5e8,
+        "highest supply pressure (gauge) the bench's supply delivers: its own relief "
+        'takes the inflow beyond it; where a valve fault drives p_s there, valve_node '
+        "raises an overpressure alarm. Set it to your bench's relief setting; 0: no limit",
+        OURS,
+    ),
     # Numerical regularisation.
-    _model('orifice_transition_pressure', 'dp_tr', 'Pa', 1.0, 1e6,
-           'pressure drop below which orifice laws turn linear '
-           '(closed-valve start under fixed-step RK4)', OURS),
+    ParameterSpec(
+        'orifice_transition_pressure',
+        'dp_tr',
+        'Pa',
+        1.0,
+        1e6,
+        'pressure drop below which orifice laws turn linear '
+        '(closed-valve start under fixed-step RK4)',
+        OURS,
+    ),
 )
-
-
-def _setting(name, symbol, unit, minimum, maximum, description, source, live=True):
-    return ParameterSpec(name, symbol, unit, minimum, maximum, description, source,
-                         section='setting', live=live)
-
 
 # Run-time settings that share the parameter files with the model parameters.
 SETTINGS = (
-    _setting('step_size', 'dt', 's', 1e-7, 1e-4,
-             "fixed RK4 integration step (the paper's is 10 us)", 'paper, Method for Simulation'),
-    _setting('publish_rate', 'f_pub', 'Hz', 1.0, 1e4, 'valve_node tick and publish rate', OURS),
-    _setting('initial_inlet_flow', 'q_in,0', 'm^3/s', 0.0, 0.01,
-             'inlet flow whose exact steady state the node starts from',
-             'paper, Conditions for Calculation (5 L/min)', live=False),  # only the start uses it
-    _setting('input_timeout', 't_timeout', 's', 0.0, 3600.0,
-             'inlet_flow silence after which the node reports stale input (0 disables)', OURS),
-    _setting('ambient_pressure', 'p_atm', 'Pa', 0.0, 2e5,
-             "absolute ambient pressure: the zero of the model's gauge pressures, added to them "
-             'on the wire; the tank is at it unless tank_pressure says otherwise', OURS),
-    _setting('tank_pressure', 'p_t', 'Pa', -2e5, 1e9,
-             'gauge pressure of the tank (return line) the valve relieves into, for a '
-             'pressurised tank; the tank_pressure topic, once a message came, takes precedence. '
-             '0: the tank at ambient_pressure. Not below vacuum, below burst_pressure',
-             'our addition, see docs/model.md ("Back pressure")'),
+    ParameterSpec(
+        'step_size',
+        'dt',
+        's',
+        1e-7,
+        1e-4,
+        "fixed RK4 integration step (the paper's is 10 us)",
+        'paper, Method for Simulation',
+        section='setting',
+    ),
+    ParameterSpec(
+        'publish_rate', 'f_pub', 'Hz', 1.0, 1e4, 'valve_node tick and publish rate', OURS,
+        section='setting',
+    ),
+    ParameterSpec(
+        'initial_inlet_flow',
+        'q_in,0',
+        'm^3/s',
+        0.0,
+        0.01,
+        'inlet flow whose exact steady state the node starts from',
+        'paper, Conditions for Calculation (5 L/min)',
+        section='setting',
+        live=False,
+    ),
+    ParameterSpec(
+        'input_timeout',
+        't_timeout',
+        's',
+        0.0,
+        3600.0,
+        'inlet_flow silence after which the node reports stale input (0 disables)',
+        OURS,
+        section='setting',
+    ),
+    ParameterSpec(
+        'ambient_pressure',
+        'p_atm',
+        'Pa',
+        0.0,
+        2e5,
+        "absolute ambient pressure: the zero of the model's gauge pressures, added to them on "
+        'the wire; the tank is at it unless tank_pressure says otherwise',
+        OURS,
+        section='setting',
+    ),
+    ParameterSpec(
+        'tank_pressure',
+        'p_t',
+        'Pa',
+        -2e5,
+        1e9,
+        'gauge pressure of the tank (return line) the valve relieves into, for a pressurised '
+        'tank; the tank_pressure topic, once a message came, takes precedence. 0: the tank at '
+        'ambient_pressure. Not below vacuum, below burst_pressure',
+        'our addition, see docs/model.md ("Back pressure")',
+        section='setting',
+    ),
 )
 
 # The adjusting screw, in the parameter files and on every command line: when given, it sets
 # pilot_spring_preload (steady_state.with_preset_pressure), as valve_node's parameter does.
 PRESET_PRESSURE = ParameterSpec(
-    'preset_pressure', 'p_set', 'Pa', 0.0, 1e8,
+    'preset_pressure',
+    'p_set',
+    'Pa',
+    0.0,
+    1e8,
     'preset pressure: supply pressure (gauge) at which the main valve cracks open; '
     'setting it sets pilot_spring_preload, like turning the adjusting screw',
-    'our definition, see docs/model.md (the paper presets 7 MPa)', section='preset',
+    'our definition, see docs/model.md (the paper presets 7 MPa)',
+    section='preset',
 )
 
 FAULT_PREFIX = 'fault.'
