@@ -32,7 +32,8 @@ Sections:
   schedule  fault_schedule, a fault scenario file
   analyser  analyser_node's own doubles (read-only); it also takes ambient_pressure
 
-Light on purpose (standard library only): the commands' --help reads it.
+Light on purpose (standard library only): the commands' --help reads it. Long on purpose
+(over 600 lines): it is a table, one entry per parameter, and no logic but split().
 """
 
 from dataclasses import dataclass, field, replace

@@ -86,7 +86,7 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from valve_sim.core.catalogue import LIVE_NAMES, VALVE_NODE_SPECS
+from valve_sim.core.catalogue import LIVE_NAMES, split, VALVE_NODE_SPECS
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.input_files import (
     FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
@@ -117,7 +117,6 @@ from valve_sim.core.retuning import (
     dependent_change,
     merged_parameters,
 )
-from valve_sim.core.sensors import SENSOR_NAMES
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -554,11 +553,7 @@ class ReliefValveNode(Node):
         """(params, settings) with changes applied, checked; raises ParameterError."""
         settings = {
             **self.settings,
-            **{
-                name: check_value(name, value)
-                for name, value in changes.items()
-                if name in SETTING_SPECS
-            },
+            **{name: check_value(name, value) for name, value in split(changes).setting.items()},
         }
         return merged_parameters(self.model.params, changes), settings
 
@@ -572,11 +567,8 @@ class ReliefValveNode(Node):
         and a later change cannot bring back a part of the one undone.
         """
         undo, self._undo = self._undo, {}
-        sensors = {name: value for name, value in undo.items() if name in SENSOR_NAMES}
-        self.injection.sensors.change(sensors)
-        self._use_settings(
-            {**self.settings, **{n: v for n, v in undo.items() if n in SETTING_SPECS}}
-        )
+        self.injection.sensors.change(split(undo).sensor)
+        self._use_settings({**self.settings, **split(undo).setting})
         self._set_declared(
             {
                 **undo,
