@@ -228,7 +228,7 @@ def main():
     claim_domain()  # ROS_DOMAIN_ID if set, else one no other run holds; discovery on localhost
     from valve_sim.core.parameters import load_parameters
 
-    waveforms = repeated(step_cycle(load_parameters()[0]), args.duration)
+    waveforms = repeated(step_cycle(load_parameters().params), args.duration)
     with tempfile.TemporaryDirectory(prefix='bench_analyser_') as folder:
         figures = run_processes(Path(folder), waveforms, args.queue_depth)
     published, elapsed = figures['published'], figures['duration_s']

@@ -45,7 +45,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--json', metavar='FILE', help='write every run as JSON')
     args = parser.parse_args()
-    params, _ = load_parameters()
+    params = load_parameters().params
     began, runs = time.perf_counter(), []
     for preset in PRESETS:
         for initial in FLOWS:

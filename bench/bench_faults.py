@@ -115,7 +115,7 @@ def main(argv=None):
     parser.add_argument('--ticks', type=int, default=20000, help='ticks per valve')
     parser.add_argument('--json', metavar='FILE', help='write the figures as JSON')
     args = parser.parse_args(argv)
-    params = load_parameters()[0]
+    params = load_parameters().params
     valves = {
         'none': TickingValve(params, {}, {}),
         'all': TickingValve(params, ALL_FAULTS, ALL_SENSORS),

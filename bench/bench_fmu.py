@@ -98,7 +98,8 @@ def main():
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--json', metavar='FILE', help='write the results as JSON')
     args = parser.parse_args()
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     with tempfile.TemporaryDirectory(prefix='bench_fmu_') as folder:
         path = build(f'{folder}/valve.fmu', params, settings)
         unzipped = fmpy.extract(str(path), f'{folder}/unzipped')

@@ -108,7 +108,7 @@ def main():
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--json', metavar='FILE', help='also write the results as JSON')
     args = parser.parse_args()
-    params, _ = load_parameters()
+    params = load_parameters().params
 
     rk4_supply_pressure(params, 1e-5)  # compile (numba cache) and warm up
     reference = rk4_supply_pressure(params, 1.25e-6)

@@ -107,7 +107,7 @@ def main():
     parser.add_argument('--json', metavar='FILE')
     args = parser.parse_args()
     cores = os.cpu_count() or 1
-    params = load_parameters()[0]
+    params = load_parameters().params
     problem = candidate_problem(params, args.samples)
     case = problem.case(0, 'bench', {})
     single_runs(params, 2)

@@ -81,7 +81,8 @@ def model_alone(scenario):
     from valve_sim.core.parameters import load_parameters
     from valve_sim.core.realtime_model import RealTimeModel
 
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
     model = RealTimeModel(params, settings['step_size'], flows[0])
     model.trial(params, settings['step_size'], flows[0])  # kernels loaded, as the node does

@@ -43,7 +43,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--repeats', type=int, default=7)
     args = parser.parse_args()
-    params, _ = load_parameters()
+    params = load_parameters().params
     c, flows = coefficients(params), step_flows(REFERENCE_SCENARIO, 1e-5)
     start = steady_state(params, REFERENCE_SCENARIO.initial_flow)
     tanks = np.zeros(len(flows))  # the tank at ambient

@@ -149,7 +149,7 @@ def main():
         help='also compile rk4_lanes afresh (about a minute) and count its vector instructions',
     )
     args = parser.parse_args()
-    reference, _ = load_parameters()
+    reference = load_parameters().params
     preset = cracking_pressure(reference)
     sample = [with_preset_pressure(p, preset) for p in sampled_params(reference, args.single, 1)]
     batch_path(sample[:2])  # compile (numba cache) and warm up both paths

@@ -69,7 +69,7 @@ def tick_waveforms():
     from valve_sim.core.simulation import Scenario, simulate
 
     return simulate(
-        load_parameters()[0], Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
+        load_parameters().params, Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
     )
 
 
@@ -108,7 +108,7 @@ def reference():
     """Return the validated parameters of config/reference.yaml."""
     from valve_sim.core.parameters import load_parameters
 
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 @pytest.fixture(scope='session')

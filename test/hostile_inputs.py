@@ -132,7 +132,7 @@ def bag_with_inf_pressure(path):
     from valve_sim.core.simulation import Scenario, simulate
     from valve_sim.recording.valve_topics import write_simulation_bag
 
-    waveforms = simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=1.2),
+    waveforms = simulate(load_parameters().params, Scenario(step_time=0.1, end_time=1.2),
                          record_interval=1e-3)
     readings = waveforms.states[:, :4] + 101325.0
     readings[300:, 0] = np.inf

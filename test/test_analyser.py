@@ -67,7 +67,7 @@ while True:
 
 def tick_relief(waveforms):
     """Return the relief flow and its parts at each sample of the reference valve's run."""
-    return relief_flows(load_parameters()[0], waveforms)
+    return relief_flows(load_parameters().params, waveforms)
 
 
 @contextmanager

@@ -63,13 +63,13 @@ def waveforms():
 
     The step is at 0.25 s; its window is then truncated.
     """
-    return simulate(load_parameters()[0], Scenario(step_time=0.25, end_time=0.6))
+    return simulate(load_parameters().params, Scenario(step_time=0.25, end_time=0.6))
 
 
 @pytest.fixture(scope='module')
 def simulation_bag(waveforms, tmp_path_factory):
     path = tmp_path_factory.mktemp('bags') / 'simulation.mcap'
-    relief = relief_flows(load_parameters()[0], waveforms)
+    relief = relief_flows(load_parameters().params, waveforms)
     write_simulation_bag(path, waveforms, start_time_ns=START_NS, relief=relief)
     return path
 

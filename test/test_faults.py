@@ -46,7 +46,7 @@ PAPER_STEP = Scenario()
 
 @pytest.fixture(scope='module')
 def params():
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 @pytest.fixture(scope='module')
@@ -170,7 +170,7 @@ def test_a_weakened_pilot_spring_lowers_the_cracking_pressure_in_proportion(para
     weak = simulate(params, faults=FaultSet(pilot_spring_weakening=0.2))
     ratio = weak['supply_pressure'][-1] / healthy['supply_pressure'][-1]
     assert ratio == pytest.approx(0.8, rel=0.01)
-    assert params['pilot_spring_preload'] == load_parameters()[0]['pilot_spring_preload']
+    assert params['pilot_spring_preload'] == load_parameters().params['pilot_spring_preload']
 
 
 def test_seat_leakage_lowers_p_s_and_moves_cracking_to_a_higher_inlet_flow(params):

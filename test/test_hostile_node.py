@@ -239,7 +239,8 @@ def sim(context, tmp_path_factory):
 
 def reference_values():
     """Return the declared values a node is restored to: reference parameters, no fault."""
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     return {
         **params,
         **{name: settings[name] for name in ('step_size', 'publish_rate', 'ambient_pressure')},
@@ -370,13 +371,14 @@ def test_a_roll_back_restores_everything_it_rolls_back(sim_valve, kind):
     before = change_and_overpressure(probe, **change)
     report = probe.wait_for_diagnostics()
     assert probe.get_parameters(*before) == before
-    assert float(report['step_size_s']) == pytest.approx(load_parameters()[1]['step_size'])
-    assert float(report['publish_rate_hz']) == load_parameters()[1]['publish_rate']
+    assert float(report['step_size_s']) == pytest.approx(load_parameters().settings['step_size'])
+    assert float(report['publish_rate_hz']) == load_parameters().settings['publish_rate']
     assert report['faults_active'] == ''
     probe.next_tick()
     # The absurd flow still held halts the restored model at its last good state: p_s
     # reads at burst_pressure (an overpressure on the wire), the other chambers as before.
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     burst = params['burst_pressure'] + settings['ambient_pressure']
     assert probe.latest()[1] == pytest.approx(burst, rel=1e-12)
     for topic in PRESSURE_TOPICS[1:]:
@@ -391,9 +393,10 @@ def test_a_roll_back_restores_everything_it_rolls_back(sim_valve, kind):
     report = probe.wait_for_diagnostics(
         lambda values: values['input_timeout_s'] == '30.0', 'the unrelated change'
     )
-    assert float(report['step_size_s']) == pytest.approx(load_parameters()[1]['step_size'])
+    assert float(report['step_size_s']) == pytest.approx(load_parameters().settings['step_size'])
     assert report['faults_active'] == '' and report['sensor_dropout'] == ''
-    assert probe.set_parameters(input_timeout=load_parameters()[1]['input_timeout'])[0].successful
+    timeout = load_parameters().settings['input_timeout']
+    assert probe.set_parameters(input_timeout=timeout)[0].successful
 
 
 def test_a_clock_jump_back_starts_a_new_time_base_for_the_roll_back_window(sim_valve, sim):

@@ -58,7 +58,7 @@ def read_schedule(path):
 
 
 def read_parameters(path):
-    return load_parameters(path, injection={})
+    return load_parameters(path, with_injection=True)
 
 
 def read_metadata(path):

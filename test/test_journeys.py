@@ -164,7 +164,7 @@ def test_record_analyse_calibrate_and_run_the_calibrated_valve_in_a_namespace(
     (fitted,) = report['fitted']
     assert fitted['value'] == pytest.approx(rig['damping_orifice_diameter'], rel=1e-4)
     assert '/**/relief_valve:' in (out / 'calibrated.yaml').read_text()
-    calibrated, _ = load_parameters(out / 'calibrated.yaml')
+    calibrated = load_parameters(out / 'calibrated.yaml').params
 
     # valve_node under the same namespace with the calibrated file: the offline model
     with running_valve(

@@ -41,7 +41,7 @@ from valve_sim.core.model import coefficients
 from valve_sim.core.parameters import load_parameters
 
 print('package', valve_sim.__file__)
-params, _ = load_parameters()
+params = load_parameters().params
 print('splits', splits_needed(np.zeros(8), coefficients(params), 1e-5))
 """
 ORIGINAL = '    return max(\n        c_s * (throttle_1 + bearing + leak + seat)'

@@ -39,7 +39,7 @@ FLOW = 5.0 * LITRE_PER_MINUTE
 
 @pytest.fixture(scope='module')
 def reference():
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 @pytest.mark.parametrize('flow', [1.0, 0.05])

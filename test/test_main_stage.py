@@ -40,7 +40,7 @@ PRESET = 7e6
 
 @pytest.fixture(scope='module')
 def reference():
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 def documented_command():

@@ -67,7 +67,7 @@ HYBR_NO_PROGRESS = (
 
 @pytest.fixture(scope='module')
 def params():
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 @pytest.mark.parametrize('flow_lpm', FLOWS_LPM)

@@ -172,7 +172,8 @@ def test_the_command_writes_the_pareto_set_and_resumes_without_computing(tmp_pat
     assert summary['candidates_evaluated'] == 8 and summary['pareto']
     for entry in summary['pareto']:
         assert 0.0 <= entry['confirmed_yield']['ci95'][0] <= entry['confirmed_yield']['fraction']
-        params, settings = load_parameters(out / entry['parameter_file'])
+        loaded = load_parameters(out / entry['parameter_file'])
+        params, settings = loaded.params, loaded.settings
         assert params[D_C] == entry['design'][D_C]
         assert settings['preset_pressure'] == summary['problem']['preset_pressure']
     with open(out / 'pareto.csv') as stream:
@@ -238,7 +239,8 @@ def test_a_parameter_file_applies_to_the_node_in_any_namespace(reference, tmp_pa
     assert '\n/**/relief_valve:\n  ros__parameters:\n' in text
     path = tmp_path / 'design.yaml'
     path.write_text(text)
-    params, settings = load_parameters(path)
+    loaded = load_parameters(path)
+    params, settings = loaded.params, loaded.settings
     assert params == {**reference, D_C: 1.1e-3}
     assert settings['preset_pressure'] == problem.preset_pressure
 

@@ -132,12 +132,12 @@ def test_files_rcl_refuses_are_refused(document):
 def test_the_offline_tools_take_the_wildcard_and_namespaced_forms(tmp_path, reference):
     path = tmp_path / 'valve.yaml'
     path.write_text('/**/relief_valve:\n  ros__parameters:\n    main_valve_mass: 0.07\n')
-    assert load_parameters(path)[0]['main_valve_mass'] == 0.07
+    assert load_parameters(path).params['main_valve_mass'] == 0.07
     path.write_text('/rig1/relief_valve:\n  ros__parameters:\n    main_valve_mass: 0.07\n')
-    assert load_parameters(path, namespace='/rig1')[0]['main_valve_mass'] == 0.07
+    assert load_parameters(path, namespace='/rig1').params['main_valve_mass'] == 0.07
     with pytest.raises(ParameterError, match=r"'/rig1/relief_valve' .* do not apply to "
                        r'/relief_valve'):
         load_parameters(path)
     path.write_text('relief_valve:\n  ros__parameters:\n    main_valve_mass: 0.07\n'
                     '/**:\n  ros__parameters:\n    main_valve_mass: 0.08\n')
-    assert load_parameters(path)[0]['main_valve_mass'] == 0.08  # rcl: the later section wins
+    assert load_parameters(path).params['main_valve_mass'] == 0.08  # rcl: the later section wins

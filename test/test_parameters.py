@@ -35,7 +35,8 @@ from valve_sim.core.parameters import (
 def test_reference_file_holds_every_parameter_and_the_step_size():
     raw = read_parameter_file(config_path('reference.yaml'))
     assert set(SPECS) <= set(raw)
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     assert settings['step_size'] == 1e-5
     assert (
         settings['ambient_pressure'] == STANDARD_ATMOSPHERE
@@ -44,7 +45,7 @@ def test_reference_file_holds_every_parameter_and_the_step_size():
 
 
 def test_table2_file_is_the_reference_with_the_papers_changes(reference):
-    table2, _ = load_parameters(config_path('table2.yaml'))
+    table2 = load_parameters(config_path('table2.yaml')).params
     expected = scaled(reference, TABLE2_CHANGES)
     for name in SPECS:
         assert table2[name] == pytest.approx(expected[name], rel=1e-12), name
@@ -90,7 +91,7 @@ def test_a_file_that_sets_the_retired_swept_inner_diameter_loads_with_a_warning(
     old.write_text('relief_valve:\n  ros__parameters:\n    swept_inner_diameter: 20.8e-3\n'
                    '    main_valve_mass: 0.07\n')
     with caplog.at_level('WARNING'):
-        params, _ = load_parameters(old)
+        params = load_parameters(old).params
     assert params['main_valve_mass'] == 0.07 and 'swept_inner_diameter' not in params
     assert f'{old}: ignoring swept_inner_diameter = 0.0208' in caplog.text
     assert 'now the supply force area alpha_s' in caplog.text
@@ -111,7 +112,7 @@ def test_unknown_and_missing_names_are_rejected(reference):
 def test_symbols_and_names_both_resolve():
     assert resolve_name('m_m') == 'main_valve_mass'
     assert resolve_name('main_valve_mass') == 'main_valve_mass'
-    params, _ = load_parameters(overrides={'d_c': 1.2e-3, 'supply_volume': 0.02})
+    params = load_parameters(overrides={'d_c': 1.2e-3, 'supply_volume': 0.02}).params
     assert params['damping_orifice_diameter'] == 1.2e-3 and params['supply_volume'] == 0.02
 
 
@@ -120,7 +121,8 @@ def test_parameter_files_like_ros_writes_them(tmp_path):
     partial.write_text(
         '/**:\n  ros__parameters:\n    main_valve_mass: 7e-2\n    step_size: 5e-6\n'
     )
-    params, settings = load_parameters(partial)
+    loaded = load_parameters(partial)
+    params, settings = loaded.params, loaded.settings
     assert params['main_valve_mass'] == 0.07 and settings['step_size'] == 5e-6
 
 
@@ -149,7 +151,8 @@ def test_preset_pressure_in_a_parameter_file_sets_the_preload(tmp_path):
 
     path = tmp_path / 'rig.yaml'
     path.write_text('relief_valve:\n  ros__parameters:\n    preset_pressure: 8.0e6\n')
-    params, settings = load_parameters(path)
+    loaded = load_parameters(path)
+    params, settings = loaded.params, loaded.settings
     assert settings['preset_pressure'] == 8e6
     assert cracking_pressure(with_preset_pressure(params, 8e6)) == pytest.approx(8e6, rel=1e-9)
     path.write_text('relief_valve:\n  ros__parameters:\n    preset_pressure: -1.0\n')

@@ -31,7 +31,7 @@ START_NS = 1_000_000_000_000  # any clock time; the model time is anchored to it
 
 @pytest.fixture(scope='module')
 def reference():
-    return load_parameters()[0]
+    return load_parameters().params
 
 
 @pytest.fixture

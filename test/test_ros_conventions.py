@@ -257,8 +257,8 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert waiting.name == 'renamed_analyser: recording'
         assert waiting.hardware_id == 'rig_7/recorder'
         run.replay.wait_for_subscribers(timeout=TIMEOUT)
-        waveforms = simulate(load_parameters()[0], Scenario(step_time=0.05, end_time=0.2))
-        relief = relief_flows(load_parameters()[0], waveforms)
+        waveforms = simulate(load_parameters().params, Scenario(step_time=0.05, end_time=0.2))
+        relief = relief_flows(load_parameters().params, waveforms)
         run.replay.publish(waveforms, time.time_ns(), every=10, relief=relief)
         recording = run.wait_for(DiagnosticStatus.OK[0], 'recording to')
         assert (recording.name, recording.hardware_id) == (waiting.name, waiting.hardware_id)

@@ -112,13 +112,13 @@ def layout_problems(value, layout, ordered=True, where='metadata'):
 
 @pytest.fixture(scope='module')
 def waveforms():
-    return simulate(load_parameters()[0], Scenario(step_time=0.1, end_time=0.4))
+    return simulate(load_parameters().params, Scenario(step_time=0.1, end_time=0.4))
 
 
 @pytest.fixture(scope='module')
 def bag_folder(waveforms, tmp_path_factory):
     folder = tmp_path_factory.mktemp('bags') / 'step'
-    relief = relief_flows(load_parameters()[0], waveforms)
+    relief = relief_flows(load_parameters().params, waveforms)
     write_simulation_bag(folder, waveforms, start_time_ns=START_NS, folder=True, relief=relief)
     return folder
 

@@ -74,7 +74,8 @@ def test_a_tank_pressure_step_in_a_scenario_is_the_offline_one(tmp_path, valve_n
     assert 'input tank_pressure: starts at 0 Pa (gauge), 1 change(s)' in checked.stdout
     completed = scenario_command('run', 'tank.yaml', '--out', 'out', cwd=tmp_path)
     assert completed.returncode == 0, completed.stdout + completed.stderr
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     ambient = settings['ambient_pressure']
     (bag,) = (tmp_path / 'out').glob('*.mcap')
     series = tick_series(bag, start_ns=START_NS, ambient_pressure=ambient)

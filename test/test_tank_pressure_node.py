@@ -105,7 +105,7 @@ class TankPort(SpinningNode):
 
 @pytest.fixture(scope='module')
 def defaults(reference):
-    settings = load_parameters()[1]
+    settings = load_parameters().settings
     return {**reference, **{name: settings[name] for name in RETUNABLE_SETTINGS}}
 
 

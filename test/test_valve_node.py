@@ -63,7 +63,7 @@ RETUNABLE_SETTINGS = ('step_size', 'publish_rate', 'input_timeout', 'ambient_pre
 
 @pytest.fixture(scope='module')
 def reference_settings():
-    return load_parameters()[1]
+    return load_parameters().settings
 
 
 @pytest.fixture(scope='module')

@@ -60,7 +60,7 @@ def node(context, tmp_path_factory):
 def valve(node):
     """Yield the probe, the node restored: reference parameters, 5 L/min, steady state."""
     process, probe, _ = node
-    probe.restore(load_parameters()[0], FLOW)
+    probe.restore(load_parameters().params, FLOW)
     yield probe
     assert process.poll() is None, 'valve_node died'
     assert probe.non_finite == 0, 'a NaN or inf was published'
@@ -130,11 +130,11 @@ def test_absurd_flows_are_rejected_counted_and_never_applied(valve):
     valve.wait_for_new_samples(50)
     with valve.condition:
         assert all(q == FLOW for _, q in valve.applied[-50:]), 'the last good flow is held'
-    burst = load_parameters()[0]['burst_pressure']
+    burst = load_parameters().params['burst_pressure']
     assert max(p for _, p in supply_stamps_and_pressures(valve, start)) < burst + AMBIENT
     response = call_reset(valve)
     assert response.success and 'steady state of 8.33333e-05 m^3/s' in response.message
-    expected = steady_state(load_parameters()[0], FLOW)[P_S]
+    expected = steady_state(load_parameters().params, FLOW)[P_S]
     assert valve.first_after(reset_ns(response))[1] - AMBIENT == pytest.approx(expected, rel=1e-6)
 
 
@@ -171,7 +171,7 @@ def test_overpressure_holds_the_state_keeps_the_operators_changes_and_refuses_a_
     )
     held = {p for stamp, p in supply_stamps_and_pressures(valve, 0) if stamp > failed_ns}
     assert len(held) == 1, 'the last good state, published every tick'
-    assert held.pop() - AMBIENT <= load_parameters()[0]['burst_pressure']
+    assert held.pop() - AMBIENT <= load_parameters().params['burst_pressure']
     response = call_reset(valve)
     assert not response.success and 'overpressure' in response.message, response.message
     assert f'steady state at {flow:g} m^3/s is refused' in response.message, response.message
@@ -256,7 +256,7 @@ def test_tiny_flows_fill_the_closed_valve_for_two_seconds(valve, flow):
     for key in ('integration_failures', 'overpressures'):
         assert report[key] == before[key], key
     assert report['halted'] == 'false'
-    reference = load_parameters()[0]
+    reference = load_parameters().params
     volume = sum(reference[name] for name in CHAMBER_VOLUMES)
     rate = reference['bulk_modulus'] * flow / volume  # [Pa/s] all four chambers fill together
     elapsed = (stamp - start_ns) / 1e9  # [s] of model time between the two samples
@@ -272,7 +272,7 @@ def test_reset_works_at_a_tiny_flow(valve):
     valve.wait_for(lambda: valve.applied[-1][1] == 1.67e-14, 'the tiny flow applied')
     response = call_reset(valve)
     assert response.success, response.message
-    expected = steady_state(load_parameters()[0], 1.67e-14)[P_S]
+    expected = steady_state(load_parameters().params, 1.67e-14)[P_S]
     assert valve.first_after(reset_ns(response))[1] - AMBIENT == pytest.approx(expected, rel=1e-6)
 
 

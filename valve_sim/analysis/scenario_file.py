@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 from valve_sim.analysis.expectations import parse_expectations
+from valve_sim.core.catalogue import section_of
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.fault_schedule import (
     check_change,
@@ -58,7 +59,6 @@ from valve_sim.core.limits import tank_pressure_problem
 from valve_sim.core.parameters import (
     check_value,
     FAULT_SCHEDULE,
-    INJECTION_PREFIXES,
     load_parameters,
     PRESET_PRESSURE,
     resolve_name,
@@ -73,6 +73,7 @@ INPUTS = {'inlet_flow': FLOW, 'tank_pressure': PRESSURE}  # input: its dimension
 INPUT_UNITS = {'inlet_flow': 'm^3/s', 'tank_pressure': 'Pa (gauge)'}
 MAX_DURATION = 3600.0  # [s] of model time
 NS_PER_S = 1_000_000_000
+INJECTION = ('fault', 'sensor')  # catalogue sections set by name as they are, checked by events
 DIMENSIONS = {'Pa': PRESSURE, 'm^3/s': FLOW, 'm': LENGTH, 's': TIME}  # parameters' units
 # With a tank_pressure input: the parameters it sets, and the ambient pressure the runner
 # adds to it (the topic is absolute), which must hold for the whole run.
@@ -217,7 +218,7 @@ def _inputs(document, folder, read_bag_column):
 
 def _parameter_value(name, value, key):
     """Return a valve parameter's value: a number, or text with a unit of its dimension."""
-    if name.startswith(INJECTION_PREFIXES):
+    if section_of(name) in INJECTION:
         return value
     spec = PRESET_PRESSURE if name == PRESET_PRESSURE.name else SETTING_SPECS.get(name) or SPECS[
         resolve_name(name)]
@@ -228,8 +229,7 @@ def _parameter_value(name, value, key):
 
 def ros_name(name):
     """Return valve_node's name of a parameter given by ROS name or paper symbol."""
-    if name.startswith(INJECTION_PREFIXES) or name in SETTING_SPECS or (
-            name == PRESET_PRESSURE.name):
+    if section_of(name) in (*INJECTION, 'setting', 'preset'):
         return name
     return resolve_name(name)
 
@@ -262,10 +262,10 @@ def _valve(document, folder):
         raise ProfileError('valve.parameters', 'expected a mapping of parameter names to values')
     parameters = dict(start_parameter(name, value, f'valve.parameters.{name}')
                       for name, value in given.items())
-    injection = {}
     try:
-        params, settings = load_parameters(params_file, dict(parameters), injection)
-        for name, value in injection.items():
+        loaded = load_parameters(params_file, dict(parameters), with_injection=True)
+        params, settings = loaded.params, loaded.settings
+        for name, value in loaded.injection.items():
             check_change(name, value)
     except ParameterError as error:
         raise ProfileError('valve', str(error)) from None
@@ -274,7 +274,7 @@ def _valve(document, folder):
 
 def _event_value(name, value):
     """check() of parse_schedule: fault and sensor settings, or a live valve parameter."""
-    if name.startswith(INJECTION_PREFIXES):
+    if section_of(name) in INJECTION:
         return check_change(name, value)
     if name in FIXED:
         raise ParameterError(f"'{name}' cannot change while a scenario runs: {FIXED[name]}")

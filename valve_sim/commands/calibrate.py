@@ -324,7 +324,8 @@ def run(args):
     from valve_sim.core.errors import CalibrationError
 
     signal_map = signal_map_from(args, 'calibrate') if args.bag else None
-    params, settings = load_from_arguments(args)  # in the bag's namespace, if any
+    loaded = load_from_arguments(args)  # in the bag's namespace, if any
+    params, settings = loaded.params, loaded.settings
     preset = args.preset_pressure or None
     if args.starts < 1 or not (0.0 <= args.spread <= 2.0) or not args.tolerance > 0.0:
         raise CalibrationError('need --starts >= 1, 0 <= --spread <= 2 and --tolerance > 0')

@@ -111,7 +111,8 @@ def _ramp_labels(inlet_flow):
 
 def run(args):
     check_bag_arguments(args)
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     step_size = settings['step_size']
     rated = _check(args, step_size)
     waveforms, main, marks = ramp_test(

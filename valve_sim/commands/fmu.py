@@ -39,7 +39,8 @@ def add_arguments(parser):
 def run(args):
     from valve_sim.fmu.builder import build
 
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     path = build(args.out, params, settings)
     print(f'wrote {path}: FMI 2.0 co-simulation, model ReliefValve; it needs Python with '
           'valve_sim installed where it runs (docs/fmu.md)', file=sys.stderr)

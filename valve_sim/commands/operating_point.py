@@ -217,7 +217,8 @@ def report_sensitivity(table):
 def run(args):
     from valve_sim.core.steady_state import cracking_pressure
 
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     tank = settings['tank_pressure']
     inlet_flows = args.flow or (5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE)
     preset = cracking_pressure(params)  # the valve's setting: the tank at ambient

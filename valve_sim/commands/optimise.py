@@ -140,7 +140,8 @@ def problem_from(args):
         RobustProblem,
     )
 
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     design = parse_design(args.design, params, args.protocol)
     preset, protocol = preset_protocol(args.protocol, params)
     problem = RobustProblem(

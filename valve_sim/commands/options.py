@@ -27,6 +27,7 @@ the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 
 from argparse import ArgumentTypeError
 from contextlib import contextmanager
+from dataclasses import replace
 from datetime import datetime, timezone
 import math
 from pathlib import Path
@@ -37,11 +38,11 @@ import threading
 from valve_sim.analysis.signals import CLOCKS, ROLES, SignalMap
 from valve_sim.analysis.study_backend import BYTES_PER_WORKER, CORES, MAX_RUNS, WORKERS_PER_CORE
 from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
+from valve_sim.core.catalogue import CATALOGUE
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import PARAMETER_FILE, size_text
 from valve_sim.core.parameters import (
     check_value,
-    FAULT_SCHEDULE,
     load_parameters,
     SETTING_SPECS,
     SPECS,
@@ -102,6 +103,7 @@ def flow_value(text):
     return value
 
 
+STEP_SIZE = SETTING_SPECS['step_size']  # [s] its limits bound --step-size
 # The largest flow any option takes: the largest max_inlet_flow a valve may be given.
 MAX_FLOW = SPECS['max_inlet_flow'].maximum  # [m^3/s]
 flow_value.bounds = f'in [0, {MAX_FLOW:g}] m^3/s'
@@ -150,7 +152,7 @@ def assignment(text):
         raise ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
     if value.strip().lower() in ('true', 'false'):
         return name.strip(), value.strip().lower() == 'true'
-    if name.strip() == FAULT_SCHEDULE:
+    if getattr(CATALOGUE.get(name.strip()), 'kind', None) == 'string':  # fault_schedule
         return name.strip(), value.strip()
     try:
         return name.strip(), int(value) if value.strip().isdigit() else float(value)
@@ -188,7 +190,7 @@ OPTIONS = {
         'higher (docs/model.md, "Back pressure")',
     },
     '--step-size': {
-        'type': number('a step size', 's', 1e-7, 1e-4),
+        'type': number('a step size', 's', STEP_SIZE.minimum, STEP_SIZE.maximum),
         'metavar': 'S',
         'help': 'RK4 step [s] (default: step_size of the parameter file, 1e-5)',
     },
@@ -228,21 +230,22 @@ def add_options(parser, *flags, **changes):
         parser.add_argument(flag, **{**OPTIONS[flag], **changes})
 
 
-def load_from_arguments(args, injection=None):
+def load_from_arguments(args, with_injection=False):
     """
-    Return (params, settings) from the model's options, --params to --step-size.
+    Return the LoadedParameters of the model's options, --params to --step-size.
 
     The sections of --params that apply are those rcl applies to valve_node in the
     command's --namespace, if it has one (else the root namespace). --step-size
     overrides settings["step_size"], --tank-pressure settings["tank_pressure"]; fault
-    and sensor settings go into the dict injection (without one they are refused). A
-    preset pressure (--preset-pressure, else preset_pressure of --set or the file) sets
+    and sensor settings are its injection with with_injection (else they are refused).
+    A preset pressure (--preset-pressure, else preset_pressure of --set or the file) sets
     the pilot spring preload last.
     """
     from valve_sim.core.steady_state import with_preset_pressure
 
     namespace = namespace_name(getattr(args, 'namespace', None))
-    params, settings = load_parameters(args.params, dict(args.set), injection, namespace)
+    loaded = load_parameters(args.params, dict(args.set), namespace, with_injection)
+    params, settings = loaded.params, loaded.settings
     preset = settings.pop('preset_pressure', None)
     preset = getattr(args, 'preset_pressure', None) or preset
     if preset is not None:
@@ -259,9 +262,12 @@ def load_from_arguments(args, injection=None):
         )
     if getattr(args, 'step_size', None):
         settings['step_size'] = args.step_size
-    if not 1e-7 <= settings['step_size'] <= 1e-4:
-        raise ParameterError(f'step size {settings["step_size"]:g} s is outside [1e-07, 0.0001] s')
-    return params, settings
+    if not STEP_SIZE.minimum <= settings['step_size'] <= STEP_SIZE.maximum:
+        raise ParameterError(
+            f'step size {settings["step_size"]:g} s is outside '
+            f'[{STEP_SIZE.minimum:g}, {STEP_SIZE.maximum:g}] s'
+        )
+    return replace(loaded, params=params, settings=settings)
 
 
 def check_tank_pressure(pressure, params, settings):

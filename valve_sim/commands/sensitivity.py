@@ -122,7 +122,8 @@ def run(args):
         import SALib  # noqa: F401  (is it installed?)
     except ImportError:
         raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)
     preset, protocol = preset_protocol(args.protocol, params)
     names = [d.name for d in distributions]

@@ -45,8 +45,9 @@ from valve_sim.commands.options import (
     number,
     plot_path,
 )
+from valve_sim.core.catalogue import split
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.faults import FAULT_NAMES, HEALTHY
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.output_files import json_text, replacing
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters
@@ -215,12 +216,10 @@ def load_injection(args, injection):
     from valve_sim.core.fault_schedule import load_schedule
     from valve_sim.core.sensors import checked_settings, default_settings
 
-    faults = HEALTHY.changed({n: v for n, v in injection.items() if n in FAULT_NAMES})
-    sensors = checked_settings(
-        default_settings(),
-        {n: v for n, v in injection.items() if n not in FAULT_NAMES and n != FAULT_SCHEDULE},
-    )
-    path = args.faults or injection.get(FAULT_SCHEDULE)
+    change = split(injection)
+    faults = HEALTHY.changed(change.fault)
+    sensors = checked_settings(default_settings(), change.sensor)
+    path = args.faults or change.schedule.get(FAULT_SCHEDULE)
     return faults, sensors, load_schedule(path) if path else []
 
 
@@ -229,7 +228,7 @@ def is_papers_run(params, scenario):
     return (
         is_reference_step(scenario.initial_flow, scenario.final_flow)
         and scenario.ramp_time == 0.0
-        and params == load_parameters()[0]
+        and params == load_parameters().params
     )
 
 
@@ -241,9 +240,9 @@ def run(args):
     check_bag_arguments(args)
     if args.flow_interval is not None and not (args.mcap and args.rig_topics):
         raise ParameterError('--flow-interval needs --mcap and --rig-topics')
-    injection = {}
-    params, settings = load_from_arguments(args, injection)
-    faults, sensors, schedule = load_injection(args, injection)
+    loaded = load_from_arguments(args, with_injection=True)
+    params, settings = loaded.params, loaded.settings
+    faults, sensors, schedule = load_injection(args, loaded.injection)
     step_size = settings['step_size']
     scenario = _scenario(args)
     tank = tank_profile(args, params, settings)
@@ -275,9 +274,10 @@ def run(args):
         )
     faulty = bool(faults.active() or waveforms.events)
     if faulty:
+        schedule_file = args.faults or loaded.injection.get(FAULT_SCHEDULE)
         cause = '; '.join(
             [f'faults from the start: {faults.describe()}'] * bool(faults.active())
-            + [f'fault schedule {args.faults or injection.get(FAULT_SCHEDULE)}'] * bool(schedule)
+            + [f'fault schedule {schedule_file}'] * bool(schedule)
         )
         measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
     if waveforms.halted:

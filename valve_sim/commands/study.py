@@ -165,7 +165,8 @@ def write_figures(out, results, protocol):
 def run(args):
     from valve_sim.core.steady_state import cracking_pressure
 
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     out = make_folder(Path(args.out))
     preset = cracking_pressure(params)
     held = args.protocol == 'held-preset'

@@ -94,7 +94,8 @@ def print_summary(summary):
 
 
 def run(args):
-    params, settings = load_from_arguments(args)
+    loaded = load_from_arguments(args)
+    params, settings = loaded.params, loaded.settings
     distributions = parse_variations(args.vary, params)
     limits = parse_limits(args.limits)
     preset, protocol = preset_protocol(args.protocol, params)

@@ -32,101 +32,16 @@ model equations in valve_sim.core.model.coefficients; all zero/false is the heal
 """
 
 from dataclasses import dataclass, fields, replace
-import math
-import sys
 
+from valve_sim.core.catalogue import FAULT_PREFIX as PREFIX, section
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import shown
-from valve_sim.core.parameters import ParameterSpec
+from valve_sim.core.parameters import checked_number, unit_suffix
 
 
-PREFIX = 'fault.'
-OURS = 'our fault model, see docs/faults.md'
-
-
-@dataclass(frozen=True)
-class SwitchSpec:
-    """A boolean fault or sensor setting: name (ROS parameter), description, source."""
-
-    name: str
-    description: str
-    source: str
-
-    def describe(self):
-        return f'{self.description} [bool]'
-
-
-FAULT_SPECS = (
-    ParameterSpec(
-        'fault.bearing_coulomb_friction',
-        'F_c',
-        'N',
-        0.0,
-        1000.0,
-        'Coulomb (sliding) friction on the main valve from contaminated hydrostatic bearings',
-        OURS,
-    ),
-    ParameterSpec(
-        'fault.bearing_static_friction',
-        'F_st',
-        'N',
-        0.0,
-        1000.0,
-        'static friction (stiction) on the main valve at rest; taken as at least F_c',
-        OURS,
-    ),
-    ParameterSpec(
-        'fault.damping_orifice_blockage',
-        'b_c',
-        '1',
-        0.0,
-        1.0,
-        "fraction of the damping orifice's flow area lost (1: fully blocked)",
-        OURS,
-    ),
-    ParameterSpec(
-        'fault.bearing_orifice_blockage',
-        'b_b',
-        '1',
-        0.0,
-        1.0,
-        "fraction of the hydrostatic bearing orifices' flow area lost (1: fully blocked)",
-        OURS,
-    ),
-    ParameterSpec(
-        'fault.pilot_spring_weakening',
-        'w_p',
-        '1',
-        0.0,
-        1.0,
-        "fraction of the pilot spring's stiffness k_p lost (preload position y_0 kept)",
-        OURS,
-    ),
-    ParameterSpec(
-        'fault.seat_leakage_diameter',
-        'd_l',
-        'm',
-        0.0,
-        0.005,
-        'worn main seat / internal leakage: equivalent orifice diameter from supply to tank '
-        '(discharge coefficient C_d)',
-        OURS,
-    ),
-)
-FAULT_SWITCHES = (
-    SwitchSpec(
-        'fault.pilot_spring_broken',
-        'broken pilot spring: no stiffness and no preload force',
-        OURS,
-    ),
-    SwitchSpec(
-        'fault.main_valve_stuck',
-        'main valve stuck: x frozen at its position when the fault is set',
-        OURS,
-    ),
-)
-FAULT_DOUBLE_SPECS = {spec.name: spec for spec in FAULT_SPECS}
-FAULT_SWITCH_SPECS = {spec.name: spec for spec in FAULT_SWITCHES}
+FAULT_SPECS = section('fault')  # the catalogue's fault.* entries
+FAULT_DOUBLE_SPECS = {name: spec for name, spec in FAULT_SPECS.items() if spec.kind == 'double'}
+FAULT_SWITCH_SPECS = {name: spec for name, spec in FAULT_SPECS.items() if spec.kind == 'bool'}
 FAULT_NAMES = tuple(FAULT_DOUBLE_SPECS) + tuple(FAULT_SWITCH_SPECS)
 
 
@@ -189,34 +104,6 @@ def check_fault(name, value):
     if spec is None:
         raise ParameterError(f"unknown fault '{name}'; known: {', '.join(FAULT_NAMES)}")
     return checked_number(spec, value, 'fault parameter')
-
-
-def unit_suffix(spec):
-    """Return ' ' + the unit of spec to write after a number, or '' for a fraction ('1')."""
-    return '' if spec.unit == '1' else f' {spec.unit}'
-
-
-def checked_number(spec, value, kind):
-    """
-    Return value as a float if it is a finite number within spec's limits.
-
-    Raise ParameterError naming the parameter (kind, spec.name), its symbol and limits.
-    """
-    label = f"{kind} '{spec.name}' ({spec.symbol})"
-    unit = unit_suffix(spec)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(
-            f'{label} must be a number{unit and " in" + unit}, got {shown(value)}'
-        )
-    value = float(value) if abs(value) <= sys.float_info.max else math.inf
-    if not math.isfinite(value):
-        raise ParameterError(f'{label} must be finite, got {value}')
-    if not spec.minimum <= value <= spec.maximum:
-        raise ParameterError(
-            f'{label} = {value:g}{unit} is outside its limits '
-            f'[{spec.minimum:g}, {spec.maximum:g}]{unit}'
-        )
-    return value
 
 
 # The bench supply's relief: p_s within this fraction of supply_pressure_limit is there,

@@ -26,6 +26,7 @@ check_limits() that the running valve stays within its physical limits.
 
 import math
 
+from valve_sim.core.catalogue import split
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
 from valve_sim.core.parameters import SPECS, validate
@@ -40,11 +41,9 @@ def merged_parameters(params, changes):
     Return a validated copy of params with the model parameters in changes applied.
 
     params: the model parameters. changes: {name: value} of any parameters; only
-    model parameters (SPECS) are used. Raises ParameterError.
+    its model part (catalogue.split) is used. Raises ParameterError.
     """
-    return validate(
-        {**params, **{name: value for name, value in changes.items() if name in SPECS}}
-    )
+    return validate({**params, **split(changes).model})
 
 
 def dependent_change(params, changes):

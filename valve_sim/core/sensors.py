@@ -42,111 +42,26 @@ transducer reads beyond what the valve holds.
 import math
 
 import numpy as np
+from valve_sim.core.catalogue import (
+    NOISE_SEED,
+    section,
+    SENSOR_PREFIX as PREFIX,
+    SENSOR_SETTINGS,
+    SENSOR_TOPICS as PRESSURE_NAMES,
+)
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.faults import checked_number, SwitchSpec
 from valve_sim.core.input_files import shown
 from valve_sim.core.jit import jit
-from valve_sim.core.model import P_C, P_S, STATE_NAMES
-from valve_sim.core.parameters import ParameterSpec
+from valve_sim.core.model import P_C, P_S
+from valve_sim.core.parameters import checked_number
 
 
-PREFIX = 'sensor.'
-PRESSURE_NAMES = STATE_NAMES[P_S:P_C + 1]
-OURS = 'our transducer model, see docs/faults.md'
 NOISE_BLOCK = 1024  # standard normal draws taken from the generator at a time
 MIN_RESOLUTION = 1e-3  # [Pa] finest quantisation step; 1e-320 made every reading +inf
-SETTING_DOUBLES = (
-    ParameterSpec(
-        'bandwidth', 'f_c', 'Hz', 0.0, 1e6, 'first-order lag bandwidth; 0: no lag', OURS
-    ),
-    ParameterSpec('bias', 'b', 'Pa', -1e8, 1e8, 'offset added to the reading', OURS),
-    ParameterSpec(
-        'noise_std', 'sigma', 'Pa', 0.0, 1e8, 'standard deviation of Gaussian noise', OURS
-    ),
-    ParameterSpec(
-        'resolution',
-        'q',
-        'Pa',
-        0.0,
-        1e8,
-        'quantisation step of the reading; 0: none, else at least 1e-3 Pa',
-        OURS,
-    ),
-    ParameterSpec(
-        'range_min',
-        'p_min',
-        'Pa',
-        0.0,
-        1e9,
-        'lower end of the measuring range (absolute): the reading saturates there',
-        OURS,
-    ),
-    ParameterSpec(
-        'range_max',
-        'p_max',
-        'Pa',
-        0.0,
-        1e9,
-        'upper end of the measuring range (absolute): the reading saturates there; 0: none',
-        OURS,
-    ),
-    ParameterSpec(
-        'stuck_at',
-        'p_stuck',
-        'Pa',
-        -1.0,
-        1e9,
-        'reading of a stuck sensor (absolute); negative: the last reading before it stuck',
-        OURS,
-    ),
-)
-SETTING_SWITCHES = (
-    SwitchSpec('stuck', 'sensor fault: the reading frozen (at stuck_at)', OURS),
-    SwitchSpec('dropout', 'sensor fault: nothing published on this topic', OURS),
-)
-NOISE_SEED = ParameterSpec(
-    'sensor.noise_seed',
-    'seed',
-    '1',
-    0,
-    2**31 - 1,
-    'seed of the sensor noise (one stream per topic): the same seed repeats a run',
-    OURS,
-)
-DEFAULTS = {
-    'bandwidth': 0.0,
-    'bias': 0.0,
-    'noise_std': 0.0,
-    'resolution': 0.0,
-    'range_min': 0.0,
-    'range_max': 0.0,
-    'stuck_at': -1.0,
-    'stuck': False,
-    'dropout': False,
-}
-
-
-def _specs():
-    doubles, switches = {}, {}
-    for topic in PRESSURE_NAMES:
-        for spec in SETTING_DOUBLES:
-            name = f'{PREFIX}{topic}.{spec.name}'
-            doubles[name] = ParameterSpec(
-                name,
-                spec.symbol,
-                spec.unit,
-                spec.minimum,
-                spec.maximum,
-                f'{topic} sensor: {spec.description}',
-                spec.source,
-            )
-        for spec in SETTING_SWITCHES:
-            name = f'{PREFIX}{topic}.{spec.name}'
-            switches[name] = SwitchSpec(name, f'{topic} sensor: {spec.description}', spec.source)
-    return doubles, switches
-
-
-SENSOR_DOUBLE_SPECS, SENSOR_SWITCH_SPECS = _specs()
+DEFAULTS = {spec.name: spec.default for spec in SENSOR_SETTINGS}  # an ideal transducer
+SENSOR_SPECS = section('sensor')  # the catalogue's sensor.* entries
+SENSOR_DOUBLE_SPECS = {n: spec for n, spec in SENSOR_SPECS.items() if spec.kind == 'double'}
+SENSOR_SWITCH_SPECS = {n: spec for n, spec in SENSOR_SPECS.items() if spec.kind == 'bool'}
 SENSOR_NAMES = tuple(SENSOR_DOUBLE_SPECS) + tuple(SENSOR_SWITCH_SPECS) + (NOISE_SEED.name,)
 
 

@@ -149,7 +149,8 @@ class ReliefValve(Fmi2Slave):
         super().__init__(**kwargs)
         self.modelName = 'ReliefValve'
         path = Path(self.resources or '.') / PARAMETER_FILE
-        self._defaults, settings = load_parameters(path if path.is_file() else None)
+        loaded = load_parameters(path if path.is_file() else None)
+        self._defaults, settings = loaded.params, loaded.settings
         self._default_preset = cracking_pressure(self._defaults)
         self.model = None
         self._start_ns = 0

@@ -92,13 +92,13 @@ from valve_sim.analysis.signals import (
     TYPES,
 )
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
+from valve_sim.core.catalogue import ANALYSER_DOUBLES, ANALYSER_SPECS
 from valve_sim.core.errors import InputFileError, USER_ERRORS
-from valve_sim.core.parameters import ParameterSpec, SETTING_SPECS, STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros import diagnostics, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
-from valve_sim.ros.ros_parameters import declare_double
+from valve_sim.ros.ros_parameters import declare
 
 
 NODE_NAME = 'valve_analyser'
@@ -128,52 +128,10 @@ MEASURES_QOS = QoSProfile(
 )
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
 READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
-SOURCE = 'valve_sim analyser_node'
-DOUBLE_PARAMETERS = (
-    ParameterSpec(
-        'step_threshold',
-        'dq_step',
-        'm^3/s',
-        0.0,
-        1.0,
-        'smallest change of the applied inlet flow taken as a step',
-        SOURCE,
-    ),
-    ParameterSpec(
-        'step_merge_time',
-        't_merge',
-        's',
-        0.0,
-        10.0,
-        'changes this soon after a step belong to it (a ramp, a noisy edge)',
-        SOURCE,
-    ),
-    ParameterSpec(
-        'drain_period',
-        't_drain',
-        's',
-        1e-3,
-        0.1,
-        'period of taking the queued messages, writing and analysing them',
-        SOURCE,
-    ),
-    ParameterSpec(
-        'flush_interval',
-        't_flush',
-        's',
-        0.05,
-        60.0,
-        'longest time recorded data waits before its chunk is handed to the operating system',
-        SOURCE,
-    ),
-)
-DOUBLE_DEFAULTS = {
-    'ambient_pressure': STANDARD_ATMOSPHERE,
-    'step_threshold': 1e-6,
-    'step_merge_time': 0.05,
-    'drain_period': 0.005,
-    'flush_interval': 1.0,
-}
+# The node's own doubles (read-only), from the parameter catalogue: step_threshold,
+# step_merge_time, drain_period, flush_interval. It declares them after ambient_pressure
+# (ANALYSER_DOUBLES: by default the standard atmosphere).
+DOUBLE_PARAMETERS = ANALYSER_SPECS
 # Every parameter the node declares, but hardware_id (valve_sim.ros.diagnostics): the
 # node declares these tables, and --help and the launch file's check list them.
 PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
@@ -407,10 +365,8 @@ class ValveAnalyser(Node):
                 name=name, description=description, read_only=True, **constraints
             )
             settings[name] = self.declare_parameter(name, default, descriptor).value
-        for spec in (SETTING_SPECS['ambient_pressure'], *DOUBLE_PARAMETERS):
-            settings[spec.name] = declare_double(
-                self, spec, DOUBLE_DEFAULTS[spec.name], read_only=True
-            )
+        for spec in ANALYSER_DOUBLES:
+            settings[spec.name] = declare(self, spec)
         return settings
 
     @staticmethod

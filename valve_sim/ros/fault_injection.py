@@ -16,7 +16,8 @@
 valve_node's faults and sensors: parameters, schedule, sensor stage and alarms.
 
 The parameters fault.* and sensor.* (descriptors with unit, meaning and limits) and
-fault_schedule (a schedule file, valve_sim.core.fault_schedule) are declared here;
+fault_schedule (a schedule file, valve_sim.core.fault_schedule) are declared here, as
+the parameter catalogue (valve_sim.core.catalogue) has them;
 FaultInjection holds the sensor stage, the schedule and the overpressure state, and
 says what the diagnostics report. The physics are in valve_sim.core (faults,
 sensors); valve_node only calls this.
@@ -37,8 +38,8 @@ import sys
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from valve_sim.core.catalogue import FAULT_SCHEDULE_SPEC, split
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.fault_schedule import (
     event_from_line,
@@ -46,90 +47,48 @@ from valve_sim.core.fault_schedule import (
     open_schedule,
     Schedule,
 )
-from valve_sim.core.faults import (
-    at_supply_limit,
-    FAULT_DOUBLE_SPECS,
-    FAULT_NAMES,
-    FAULT_SWITCH_SPECS,
-    HEALTHY,
-)
+from valve_sim.core.faults import at_supply_limit, FAULT_SPECS, HEALTHY
 from valve_sim.core.model import P_C, P_S
-from valve_sim.core.parameters import FAULT_SCHEDULE
 from valve_sim.core.sensors import (
     checked_settings,
     default_settings,
-    NOISE_SEED,
-    SENSOR_DOUBLE_SPECS,
-    SENSOR_NAMES,
-    SENSOR_SWITCH_SPECS,
+    SENSOR_SPECS,
     SensorStage,
 )
-from valve_sim.ros.ros_parameters import declare_double
+from valve_sim.ros.ros_parameters import declare
 
 
-DOUBLE_SPECS = {**FAULT_DOUBLE_SPECS, **SENSOR_DOUBLE_SPECS}
+# The catalogue's entries of fault injection, in the order declared: doubles, switches, the
+# noise seed, the schedule file.
+KIND_ORDER = ('double', 'bool', 'integer', 'string')
+INJECTION_SPECS = sorted(
+    (*FAULT_SPECS.values(), *SENSOR_SPECS.values(), FAULT_SCHEDULE_SPEC),
+    key=lambda spec: KIND_ORDER.index(spec.kind),
+)
 FAULT_STATUS_TOPIC = 'fault_status'
 # Latched: a late subscriber (the analyser, a bench's monitor) gets the settings in effect.
 FAULT_STATUS_QOS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
-INJECTION_NAMES = frozenset(FAULT_NAMES + SENSOR_NAMES)
 PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the folder holding valve_sim
 
 
 def declare_fault_parameters(node):
     """
-    Declare fault.*, sensor.* and fault_schedule on node.
+    Declare fault.*, sensor.* and fault_schedule on node, as the catalogue has them.
 
     Returns (FaultSet, sensor settings, schedule path); raises ParameterError for bad values.
     """
-    defaults = {**HEALTHY.as_parameters(), **default_settings()}
-    values = {
-        spec.name: declare_double(node, spec, defaults[spec.name])
-        for spec in DOUBLE_SPECS.values()
-    }
-    for spec in {**FAULT_SWITCH_SPECS, **SENSOR_SWITCH_SPECS}.values():
-        descriptor = ParameterDescriptor(
-            name=spec.name,
-            type=ParameterType.PARAMETER_BOOL,
-            description=f'{spec.describe()}; source: {spec.source}',
-        )
-        values[spec.name] = node.declare_parameter(spec.name, False, descriptor).value
-    values[NOISE_SEED.name] = node.declare_parameter(
-        NOISE_SEED.name,
-        0,
-        ParameterDescriptor(
-            name=NOISE_SEED.name,
-            type=ParameterType.PARAMETER_INTEGER,
-            description=f'{NOISE_SEED.description}; source: {NOISE_SEED.source}',
-            integer_range=[IntegerRange(from_value=0, to_value=int(NOISE_SEED.maximum), step=1)],
-        ),
-    ).value
-    schedule = node.declare_parameter(
-        FAULT_SCHEDULE,
-        '',
-        ParameterDescriptor(
-            name=FAULT_SCHEDULE,
-            type=ParameterType.PARAMETER_STRING,
-            description=(
-                'fault scenario file (YAML, docs/faults.md): events at t [s] from the first '
-                "tick on the node's clock (from the next tick when set live); '' for none"
-            ),
-        ),
-    ).value
-    faults = HEALTHY.changed({name: values[name] for name in FAULT_NAMES})
-    sensors = checked_settings(
-        default_settings(), {name: values[name] for name in SENSOR_NAMES}
-    )
-    return faults, sensors, schedule
+    change = split({spec.name: declare(node, spec) for spec in INJECTION_SPECS})
+    faults = HEALTHY.changed(change.fault)
+    sensors = checked_settings(default_settings(), change.sensor)
+    return faults, sensors, change.schedule[FAULT_SCHEDULE_SPEC.name]
 
 
 def split_changes(changes):
-    """({fault.* changes}, {sensor.* changes}) of a {name: value} change."""
-    return (
-        {n: v for n, v in changes.items() if n in FAULT_NAMES},
-        {n: v for n, v in changes.items() if n in SENSOR_NAMES},
-    )
+    """({fault.* changes}, {sensor.* changes}) of a {name: value} change (catalogue.split)."""
+    change = split(changes)
+    return change.fault, change.sensor
 
 
 class FaultInjection:

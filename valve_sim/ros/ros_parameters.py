@@ -13,11 +13,12 @@
 # limitations under the License.
 
 """
-ROS 2 parameter declarations for valve_sim's parameter specs.
+ROS 2 parameter declarations for the entries of valve_sim's parameter catalogue.
 
-Turns a ParameterSpec (valve_sim.core.parameters) into a ParameterDescriptor: the
-description carries the symbol, unit and source, and a FloatingPointRange holds
-the spec's limits, so `ros2 param describe` tells a user what each number is.
+Turns a ParameterSpec (valve_sim.core.catalogue) into a ParameterDescriptor: the
+description carries the symbol, unit and source, and a FloatingPointRange (an
+IntegerRange) holds the spec's limits, so `ros2 param describe` tells a user what each
+number is. declare() declares an entry of any kind.
 
 Types are lenient: ROS 2 types a parameter-file value 0 as an integer, which a
 double parameter would refuse. declare_double() and integers_as_doubles() accept
@@ -35,6 +36,7 @@ import math
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
+    IntegerRange,
     ParameterDescriptor,
     ParameterType,
     ParameterValue,
@@ -91,6 +93,31 @@ def declare_double(node, spec, default, read_only=False):
         ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value)),
     )
     return float(value)
+
+
+def declare(node, spec):
+    """
+    Declare the catalogue entry spec on node with its default; returns the value.
+
+    A double goes through declare_double; a switch, an integer (with its range) and a
+    string are declared as their type. Read-only unless spec.live.
+    """
+    if spec.kind == 'double':
+        return declare_double(node, spec, spec.default, not spec.live)
+    kinds = {  # type, description
+        'bool': (ParameterType.PARAMETER_BOOL, f'{spec.describe()}; source: {spec.source}'),
+        'integer': (ParameterType.PARAMETER_INTEGER, f'{spec.description}; source: {spec.source}'),
+        'string': (ParameterType.PARAMETER_STRING, spec.description),
+    }
+    kind, description = kinds[spec.kind]
+    wanted = ParameterDescriptor(
+        name=spec.name, type=kind, description=description, read_only=not spec.live
+    )
+    if spec.kind == 'integer':
+        wanted.integer_range = [
+            IntegerRange(from_value=int(spec.minimum), to_value=int(spec.maximum), step=1)
+        ]
+    return node.declare_parameter(spec.name, spec.default, wanted).value
 
 
 def integers_as_doubles(parameters, double_names):

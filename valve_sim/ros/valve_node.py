@@ -86,6 +86,7 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
+from valve_sim.core.catalogue import LIVE_NAMES, split, VALVE_NODE_SPECS
 from valve_sim.core.errors import (
     InputFileError,
     IntegrationError,
@@ -120,18 +121,15 @@ from valve_sim.core.retuning import (
     dependent_change,
     merged_parameters,
 )
-from valve_sim.core.sensors import SENSOR_NAMES
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
-    DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
     FAULT_STATUS_QOS,
     FAULT_STATUS_TOPIC,
     FaultInjection,
-    INJECTION_NAMES,
     ScheduleLoader,
     split_changes,
 )
@@ -150,7 +148,6 @@ from valve_sim.ros.ros_parameters import (
 STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
 FAULT_STATUS_TASK = 'faults'  # fault_status status '<node name>: faults'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
-READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
 YOUNG_GENERATIONS = (
     1  # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
@@ -178,13 +175,8 @@ INLET_FLOW_QOS = {
 WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
 HOUSEKEEPING_INTERVAL_NS = 500_000_000  # calls of the 1 Hz timer closer than this: a backlog
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
-VALVE_SPECS = {
-    **SPECS,
-    **SETTING_SPECS,
-    PRESET_PRESSURE.name: PRESET_PRESSURE,
-    **INJECTION_DOUBLE_SPECS,
-}  # all double parameters
-LIVE_NAMES = frozenset(VALVE_SPECS) | INJECTION_NAMES | {FAULT_SCHEDULE}  # retuned between ticks
+# All double parameters (the catalogue's doubles of valve_node).
+VALVE_SPECS = {name: spec for name, spec in VALVE_NODE_SPECS.items() if spec.kind == 'double'}
 
 
 class ReliefValveNode(Node):
@@ -304,15 +296,15 @@ class ReliefValveNode(Node):
 
         Returns (params, settings).
         """
-        reference, reference_settings = load_parameters()
-        defaults = {**reference, **reference_settings}
+        reference = load_parameters()
+        defaults = {**reference.params, **reference.settings}
         # rclpy drops an undeclared override silently: say so for a retired parameter that
         # a parameter file (an older calibrated.yaml) still sets.
         for name in filter(retired_reason, self._parameter_overrides):
             self.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
                                       f'{retired_reason(name)}')
         values = {
-            spec.name: declare_double(self, spec, defaults[spec.name], spec.name in READ_ONLY)
+            spec.name: declare_double(self, spec, defaults[spec.name], not spec.live)
             for spec in PARAMETERS + SETTINGS
         }
         params = validate({name: values[name] for name in SPECS})
@@ -561,11 +553,7 @@ class ReliefValveNode(Node):
         """(params, settings) with changes applied, checked; raises ParameterError."""
         settings = {
             **self.settings,
-            **{
-                name: check_value(name, value)
-                for name, value in changes.items()
-                if name in SETTING_SPECS
-            },
+            **{name: check_value(name, value) for name, value in split(changes).setting.items()},
         }
         return merged_parameters(self.model.params, changes), settings
 
@@ -579,11 +567,8 @@ class ReliefValveNode(Node):
         and a later change cannot bring back a part of the one undone.
         """
         undo, self._undo = self._undo, {}
-        sensors = {name: value for name, value in undo.items() if name in SENSOR_NAMES}
-        self.injection.sensors.change(sensors)
-        self._use_settings(
-            {**self.settings, **{n: v for n, v in undo.items() if n in SETTING_SPECS}}
-        )
+        self.injection.sensors.change(split(undo).sensor)
+        self._use_settings({**self.settings, **split(undo).setting})
         self._set_declared(
             {
                 **undo,
