@@ -42,8 +42,6 @@ import gc
 import sys
 import time
 
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
@@ -90,14 +88,11 @@ from valve_sim.core.steady_state import (
     preload_for_cracking_pressure,
     SteadyStateError,
 )
-from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     DOUBLE_SPECS as INJECTION_DOUBLE_SPECS,
-    FAULT_STATUS_QOS,
-    FAULT_STATUS_TOPIC,
     FaultInjection,
     INJECTION_NAMES,
     ScheduleLoader,
@@ -115,15 +110,12 @@ from valve_sim.ros.ros_parameters import (
     value_problem,
 )
 from valve_sim.ros.valve_diagnostics import ValveDiagnostics
+from valve_sim.ros.valve_outputs import ValveOutputs
 
 
-FAULT_STATUS_TASK = 'faults'  # fault_status status '<node name>: faults'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 READ_ONLY = ('initial_inlet_flow',)  # only the start (and a parameter file) use it
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
-STATE_QUEUE_DEPTH = (
-    1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
-)
 # A tick takes at most INPUTS_PER_TICK inlet_flow messages, and none after INPUT_SHARE of
 # its period: under a flood each take waits for the middleware's busy reader lock.
 INPUTS_PER_TICK = 10
@@ -190,7 +182,9 @@ class ReliefValveNode(Node):
         self._opened_schedule = None  # the file a change being checked sets as fault_schedule
         self._before_change = {}  # declared values of the change being checked, before it
         self._undo = {}  # declared values before the last change that retuned the model
-        self._create_outputs()
+        self.outputs = ValveOutputs(self, self.frame_prefix)
+        self.diagnostics = ValveDiagnostics(self)
+        self._publish_fault_status()
         input_qos = self._declare_inlet_flow_qos()
         self.inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, input_qos, raw=True
@@ -199,7 +193,6 @@ class ReliefValveNode(Node):
             FluidPressure, 'tank_pressure', self.tank_input.offer_cdr, input_qos, raw=True
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
-        self.live_view = None  # a LiveView once serve_live_view() started one
         self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
         self.housekeeping = Housekeeping(self)
         self._tick_timer = self._create_tick_timer()
@@ -238,13 +231,18 @@ class ReliefValveNode(Node):
         return self.settings['tank_pressure'] if gauge is None else gauge
 
     @property
+    def live_view(self):
+        """Return the Foxglove LiveView the node serves, or None."""
+        return self.outputs.live_view
+
+    @property
     def subscriptions(self):
         """
         Return the subscriptions an executor runs: all but the inputs', the tick takes them.
 
         Both executors ask the node for these (the EventsExecutor ignores callback
         groups), so a flood of inlet_flow or tank_pressure never wakes the executor and
-        never queues callbacks ahead of the tick (_take_inputs).
+        never queues callbacks ahead of the tick (take_inputs).
         """
         taken = (self.inlet_subscription, self.tank_subscription)
         return (s for s in super().subscriptions if s not in taken)
@@ -567,7 +565,9 @@ class ReliefValveNode(Node):
             self._count_lateness(now_ns)
             self._advance(now_ns)
         self._inject()
-        self._publish_state()
+        self.outputs.publish_tick(
+            self.model, self.applied_flow, self.ambient_pressure, self.injection
+        )
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
         self.housekeeping.after_tick()
 
@@ -716,73 +716,13 @@ class ReliefValveNode(Node):
 
     # --- inputs and outputs -----------------------------------------------------------------
 
-    def _create_outputs(self):
-        """Create the publishers of the tick topics and the messages they reuse every tick."""
-        self._tick_messages = TickMessages(self.frame_prefix)
-        self._tick_publishers = {
-            topic: self.create_publisher(
-                message_class(TOPIC_TYPES[topic]), topic, STATE_QUEUE_DEPTH
-            )
-            for topic in TICK_TOPICS
-        }
-        self.diagnostics = ValveDiagnostics(self)
-        self._fault_status = self.create_publisher(
-            DiagnosticArray, FAULT_STATUS_TOPIC, FAULT_STATUS_QOS
-        )
-        self._publish_fault_status()
-
     def _publish_fault_status(self):
         """Publish the faults and sensor settings in effect, stamped from when they hold."""
-        time_ns = self.model.time_ns
-        stamp = (
-            self.get_clock().now().to_msg()
-            if time_ns is None
-            else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
-        )
-        name = diagnostics.status_name(self, FAULT_STATUS_TASK)
-        self._fault_status.publish(
-            self.injection.status_message(self.model.faults, stamp, name, self.hardware_id)
-        )
-
-    def _publish_state(self):
-        """
-        Publish the state of the model time, all messages with the same stamp.
-
-        After an overpressure (saturated) the supply pressure is published at the limit
-        it passed, the rest of the held state as it is.
-        """
-        ambient = self.settings['ambient_pressure']
-        state = self.model.output_state()
-        tick = self._tick_messages.fill(
-            self.model.time_ns,
-            state,
-            self.applied_flow,
-            ambient,
-            self.injection.readings(self.model.time_ns, state, ambient),
-            self.model.tank_pressure,
-            self.model.relief_flows(),
-        )
-        for topic, data in tick:
-            self._tick_publishers[topic].publish(data)
-        view = self.live_view
-        if view is not None and view.watched:  # one check per tick when nobody watches
-            for topic, data in tick:
-                view.log(self._tick_publishers[topic].topic_name, data, self.model.time_ns)
+        self.outputs.publish_fault_status(self.model, self.injection, self.hardware_id)
 
     def serve_live_view(self, port, host):
         """Serve the tick topics and /diagnostics over Foxglove's WebSocket protocol."""
-        topics = {
-            publisher.topic_name: TOPIC_TYPES[topic]
-            for topic, publisher in self._tick_publishers.items()
-        }
-        topics[self.diagnostics.publisher.topic_name] = 'diagnostic_msgs/msg/DiagnosticArray'
-        self.live_view = live_view.LiveView(
-            topics, port, host, name=self.get_fully_qualified_name()
-        )
-        self.get_logger().info(
-            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics); '
-            f'layout {live_view.layout_path()}'
-        )
+        self.outputs.serve_live_view(port, host, self.diagnostics.publisher.topic_name)
 
     def take_inputs(self, started_ns):
         """Take queued input messages: INPUTS_PER_TICK each, within INPUT_SHARE of a period."""
