@@ -600,7 +600,7 @@ class ReliefValveNode(Node):
         self.status.tick_started(now_ns, newest_slot_ns, period_ns)
 
     def _advance(self, now_ns):
-        """Advance the model to now_ns and report its Outcome (the core decides, see _report)."""
+        """Advance the model to now_ns; count, log and follow through the Outcome it returns."""
         period_ns = self._tick_timer.timer_period_ns
         if self.input.changed:
             self.input.changed = False
