@@ -16,7 +16,8 @@
 valve_node's faults and sensors over real DDS, on simulated time (/clock in lockstep).
 
 One node starts with a fault schedule; the tests run in file order on it: the
-schedule (compared with the offline run), its diagnostics, the overpressure alarm,
+schedule (compared with the offline run), its parameter values and /parameter_events,
+its diagnostics, the overpressure alarm,
 sensor noise and bias, dropout, and the parameters' descriptors and checks. An
 analyser records meanwhile (fault_status among the rest), so the bag tells when faults
 began.
@@ -30,6 +31,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.parameter import parameter_value_to_python
+from rclpy.qos import qos_profile_parameter_events
 from valve_harness import Recorder, running_valve
 from valve_sim.core.fault_schedule import load_schedule
 from valve_sim.core.model import P_S
@@ -90,6 +94,14 @@ def faulty(context, tmp_path_factory):
                            stop_signal=signal.SIGTERM) as (_, probe):
             recorded = []
             probe.node.create_subscription(DiagnosticArray, '/diagnostics', recorded.append, 10)
+            probe.parameter_events = []
+            probe.node.create_subscription(ParameterEvent, '/parameter_events',
+                                           probe.parameter_events.append,
+                                           qos_profile_parameter_events)
+            probe.wait_for(lambda: any(
+                info.node_namespace == NAMESPACE
+                for info in probe.node.get_publishers_info_by_topic('/parameter_events')
+            ), "the valve's /parameter_events publisher")
 
             # The analyser records the valve's (latched) fault status before the schedule starts.
             def fault_status_recorded():
@@ -125,6 +137,20 @@ def test_a_schedule_gives_the_same_supply_pressure_live_as_offline(faulty, refer
         x = {t - faulty.start_ns: row[0] for t, *row in faulty.joints}
     stuck = [x[t] for t in range(120 * PERIOD_NS, SCHEDULE_END_NS + 1, PERIOD_NS)]
     assert len(set(stuck)) == 1 and x[119 * PERIOD_NS] != stuck[0]
+
+
+def test_scheduled_faults_show_in_the_parameters_and_parameter_events(faulty):
+    """Applied directly, not through the parameter service, yet shown as a change is."""
+    final = {name: value for event in faulty.schedule for name, value in event.changes.items()}
+    assert faulty.get_parameters(*final) == final
+    announced = {}  # name: values in the valve's parameter events, in order
+    for event in list(faulty.parameter_events):
+        if event.node == f'{NAMESPACE}/relief_valve':
+            for parameter in event.changed_parameters:
+                announced.setdefault(parameter.name, []).append(
+                    parameter_value_to_python(parameter.value))
+    for name, value in final.items():
+        assert announced.get(name, [])[:1] == [value], (name, announced.get(name))
 
 
 def test_active_faults_show_in_diagnostics_with_their_values(faulty):

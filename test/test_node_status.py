@@ -12,8 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""valve_node's tick counts: late and missed ticks against the slots they were due at."""
+"""valve_node's counts: late and missed ticks against their slots, and what the model did."""
 
+from valve_sim.core.integrator import IntegrationError, OverpressureError
+from valve_sim.core.realtime_model import Outcome, Status
 from valve_sim.ros.node_status import NodeStatus
 
 
@@ -49,3 +51,15 @@ def test_counting_starts_again_after_the_previous_slot_is_forgotten():
     status.previous_slot_ns = None  # the clock jumped back, or the timer was recreated
     status.tick_started(50 * PERIOD + 100_000, 50 * PERIOD, PERIOD)
     assert (status.counters.late_ticks, status.counters.missed_ticks) == (0, 0)
+
+
+def test_an_outcome_counts_its_failure_by_kind_and_its_skipped_lag_in_periods():
+    status = NodeStatus(0)
+    status.count(Outcome(Status.PROGRESS, 10, 2_500_000), PERIOD)
+    status.count(Outcome(Status.FAILURE, error=OverpressureError('p_s beyond')), PERIOD)
+    status.count(Outcome(Status.ROLLED_BACK, error=IntegrationError('diverged')), PERIOD)
+    status.count(Outcome(Status.HALTED), PERIOD)
+    counters = status.counters
+    assert (counters.skipped_ticks, counters.skipped_time_s) == (2, 0.0025)
+    assert (counters.overpressures, counters.integration_failures) == (1, 1)
+    assert status.last_failure == 'diverged'

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""RealTimeModel: stepping against a clock in whole steps, catch-up limit, trial, roll-back."""
+"""RealTimeModel: stepping in whole steps, catch-up limit, trial, roll-back, update outcomes."""
 
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import coefficients, P_S
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.realtime_model import RealTimeModel, step_ns, TRIAL_STEPS
+from valve_sim.core.realtime_model import RealTimeModel, Status, step_ns, TRIAL_STEPS
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import steady_state
 
@@ -166,3 +166,68 @@ def test_reset_goes_to_the_steady_state_of_the_given_flow(model, reference):
 
 def test_step_size_is_kept_on_a_nanosecond_grid():
     assert step_ns(1e-5) == 10_000 and step_ns(1e-7) == 100 and step_ns(1e-12) == 1
+
+
+# update(): the failure policy, one test per Outcome.
+DIVERGING_FLOW = 1.0  # [m^3/s] 60 000 L/min: p_s passes burst_pressure within milliseconds
+
+
+def test_update_reports_progress_and_skipped_lag(model):
+    outcome = model.update(START_NS + 1_000_000_000, FLOW, max_lag_ns=50_000_000)
+    assert outcome.status is Status.PROGRESS and outcome.error is None
+    assert (outcome.steps, outcome.skipped_ns) == (5000, 950_000_000)
+    assert not outcome.rolled_back and model.halted is None
+
+
+def test_update_after_a_failure_without_a_recent_change_halts_and_holds(model, reference):
+    state = model.state.copy()
+    outcome = model.update(START_NS + 100_000_000, DIVERGING_FLOW, max_lag_ns=10**9)
+    assert outcome.status is Status.FAILURE and outcome.overpressure
+    assert not outcome.rolled_back and model.params == reference
+    assert model.halted == str(outcome.error)
+    assert np.array_equal(model.state, state) and model.time_ns == START_NS + 100_000_000
+    assert model.saturated == reference['burst_pressure'], 'p_s is read at the limit it passed'
+    assert model.output_state()[P_S] == reference['burst_pressure']
+    assert model.output_state()[1:].tolist() == state[1:].tolist()
+
+
+def test_update_of_a_halted_model_only_holds_until_resumed(model):
+    model.update(START_NS + 100_000_000, DIVERGING_FLOW, max_lag_ns=10**9)
+    state = model.state.copy()
+    outcome = model.update(START_NS + 200_000_000, FLOW, max_lag_ns=10**9)
+    assert outcome.status is Status.HALTED and outcome.error is None and outcome.steps == 0
+    assert np.array_equal(model.state, state) and model.time_ns == START_NS + 200_000_000
+    assert model.resume(), 'it was halted'
+    assert model.saturated is None and np.array_equal(model.output_state(), model.state)
+    assert not model.resume(), 'it runs'
+    assert model.update(START_NS + 201_000_000, FLOW, max_lag_ns=10**9).steps == 100
+
+
+def test_update_rolls_back_a_change_that_can_have_caused_the_failure(model, reference):
+    """A change within the trial window is undone, and the model goes on with the old one."""
+    tighter = {**reference, 'burst_pressure': model.state[P_S] * 1.01}
+    model.retune(tighter, 1e-5)
+    outcome = model.update(START_NS + 10_000_000, 4 * FLOW, max_lag_ns=10**9)
+    assert outcome.status is Status.ROLLED_BACK and outcome.rolled_back and outcome.overpressure
+    assert model.params == reference and model.halted is None and model.saturated is None
+    assert model.update(START_NS + 20_000_000, 4 * FLOW, max_lag_ns=10**9).status is (
+        Status.PROGRESS
+    )
+
+
+def test_update_halts_after_a_roll_back_whose_parameters_refuse_the_input(model, reference):
+    """Rolled back to a max_inlet_flow below the inlet flow: the model cannot run on."""
+    model.retune({**reference, 'max_inlet_flow': 10.0}, 1e-5)
+    outcome = model.update(START_NS + 100_000_000, DIVERGING_FLOW, max_lag_ns=10**9)
+    assert DIVERGING_FLOW > reference['max_inlet_flow']
+    assert outcome.status is Status.FAILURE and outcome.rolled_back
+    assert model.params == reference and model.halted == str(outcome.error)
+
+
+def test_update_tells_a_divergence_from_an_overpressure(reference):
+    """A step size the stiff poppet chamber cannot take: a divergence, not an overpressure."""
+    model = RealTimeModel({**reference, 'poppet_chamber_volume': 1e-9}, 1e-5, FLOW)
+    model.start(START_NS)
+    outcome = model.update(START_NS + 100_000_000, 2 * FLOW, max_lag_ns=10**9)
+    assert outcome.status is Status.FAILURE and not outcome.overpressure
+    assert model.saturated is None and np.array_equal(model.output_state(), model.state)

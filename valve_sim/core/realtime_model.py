@@ -24,21 +24,26 @@ limit is skipped: the model time jumps and the state is held over that stretch.
 Two inputs drive it, held over each call: the inlet flow and the tank pressure. Out come
 the state and the relief flow (relief_flows()), what the valve passes to the tank.
 
-When the state leaves the physical limits (valve_sim.core.limits: an overpressure,
-or a divergence) the model keeps its last good state. If a parameter change took
-effect within the trial window (TRIAL_STEPS steps) before, that change can have
-caused it and roll_back() undoes it; any other cause leaves the parameters alone
-and halt() stops the model: it holds its state, its time following the clock,
-until resume() (a reset, a new inlet flow or a parameter change).
+The owner calls update() with the clock time, as ros2_control's resource manager calls
+a simulated system's read() with the time and period, and gets an Outcome back: the
+failure policy is decided here, the owner (valve_node, a test) only reports it. When the
+state leaves the physical limits (valve_sim.core.limits: an overpressure, or a
+divergence) the model keeps its last good state. If a parameter change took effect
+within the trial window (TRIAL_STEPS steps) before, that change can have caused it and
+roll_back() undoes it; any other cause leaves the parameters alone and halt() stops the
+model: it holds its state, its time following the clock, until resume() (a reset, a new
+inlet flow or a parameter change). After an overpressure halt, output_state() reads p_s
+at burst_pressure, the limit it passed, as a transducer at full scale reads.
 """
 
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
-from valve_sim.core.errors import IntegrationError
+from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, relief_flows
+from valve_sim.core.model import coefficients, P_S, relief_flows
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 
@@ -64,6 +69,37 @@ class Progress:
     skipped_ns: int
 
 
+class Status(Enum):
+    """What one update() came to."""
+
+    PROGRESS = 'progress'  # integrated up to the clock (lag beyond the limit skipped)
+    HALTED = 'halted'  # halted before: the state held, the model time following the clock
+    ROLLED_BACK = 'rolled back'  # failed; the change that can have caused it undone; runs on
+    FAILURE = 'failure'  # failed; halted from now on (after any roll-back), the state held
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """
+    What one update() did: status, steps integrated and clock time skipped [ns].
+
+    error: the IntegrationError (or OverpressureError) of a failure, else None;
+    rolled_back: the last parameter change was undone (ROLLED_BACK, or a FAILURE
+    whose input the restored parameters refuse).
+    """
+
+    status: Status
+    steps: int = 0
+    skipped_ns: int = 0
+    error: IntegrationError = None
+    rolled_back: bool = False
+
+    @property
+    def overpressure(self):
+        """Return whether the failure was a state beyond burst_pressure (not a divergence)."""
+        return isinstance(self.error, OverpressureError)
+
+
 class RealTimeModel:
     """
     The valve state, its parameters and its model time [ns].
@@ -82,6 +118,7 @@ class RealTimeModel:
         self._previous = None  # (params, step_size, faults) before the last retune
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
+        self.saturated = None  # [Pa gauge] p_s is read at this limit while an overpressure halts
 
     def _use(self, params, step_size, faults):
         self.params = params
@@ -134,13 +171,47 @@ class RealTimeModel:
         self.time_ns += skipped_ns + steps * self._step_ns
         return Progress(steps, skipped_ns)
 
+    def update(self, now_ns, inlet_flow, max_lag_ns, tank_pressure=0.0):
+        """
+        Advance to the clock time now_ns [ns] as advance_to() does; return the Outcome.
+
+        Never raises IntegrationError: on a failure the last good state is held (the
+        model time moved to now_ns), the last parameter change is rolled back if it can
+        have caused it (roll_back()), and the model halts unless the roll-back let it
+        run on with inlet_flow [m^3/s] (within the restored max_inlet_flow).
+        """
+        if self.halted is not None:
+            self.hold_until(now_ns)
+            return Outcome(Status.HALTED)
+        try:
+            progress = self.advance_to(now_ns, inlet_flow, max_lag_ns, tank_pressure)
+        except IntegrationError as error:
+            self.hold_until(now_ns)
+            rolled_back = self.roll_back(error.failure_ns)
+            if rolled_back and inlet_flow <= self.params['max_inlet_flow']:
+                return Outcome(Status.ROLLED_BACK, error=error, rolled_back=True)
+            self.halt(str(error))
+            if isinstance(error, OverpressureError):
+                self.saturated = self.params['burst_pressure']
+            return Outcome(Status.FAILURE, error=error, rolled_back=rolled_back)
+        return Outcome(Status.PROGRESS, progress.steps, progress.skipped_ns)
+
     def halt(self, reason):
         """Stop advancing: hold the state (its time following the clock) until resume()."""
         self.halted = reason
 
     def resume(self):
-        """Advance again from the held state."""
-        self.halted = None
+        """Advance again from the held state; return whether the model was halted."""
+        halted, self.halted, self.saturated = self.halted, None, None
+        return halted is not None
+
+    def output_state(self):
+        """Return the state as read out: p_s at saturated, the limit it passed, if set."""
+        if self.saturated is None:
+            return self.state
+        state = self.state.copy()
+        state[P_S] = self.saturated
+        return state
 
     def hold_until(self, now_ns):
         """Move the model time to the last step boundary before now_ns [ns], holding the state."""

@@ -89,9 +89,7 @@ class NodeStatus:
     def __init__(self, steady_now_ns):
         self.counters = Counters()
         self.last_failure = ''
-        self.halted = None  # why the model stopped advancing, or None while it runs
         self.schedule_refused = ''  # why the last fault schedule set live was refused
-        self.saturated = None  # [Pa gauge] p_s published at this limit while halted by it
         self._reported = Counters()
         self._durations_ns = []
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
@@ -114,6 +112,22 @@ class NodeStatus:
         self.counters.missed_ticks += max(round((newest_slot_ns - due_ns) / period_ns), 0)
         self.previous_slot_ns = newest_slot_ns
 
+    def count(self, outcome, period_ns):
+        """
+        Count what a RealTimeModel.update() came to (its Outcome).
+
+        A failure counts as an overpressure or a divergence; lag skipped counts in
+        tick periods of period_ns [ns] (at least one) and in seconds.
+        """
+        counters = self.counters
+        if outcome.error is not None:
+            counters.overpressures += outcome.overpressure
+            counters.integration_failures += not outcome.overpressure
+            self.last_failure = str(outcome.error)
+        if outcome.skipped_ns:
+            counters.skipped_ticks += max(round(outcome.skipped_ns / period_ns), 1)
+            counters.skipped_time_s += outcome.skipped_ns / NS_PER_S
+
     def tick_done(self, compute_ns, period_ns):
         """
         Count a tick that took compute_ns [ns] of wall time.
@@ -134,6 +148,8 @@ class NodeStatus:
         inputs,
         settings,
         conditions=(),
+        halted=None,
+        saturated=None,
     ):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
@@ -142,17 +158,20 @@ class NodeStatus:
         status's (valve_sim.ros.diagnostics); model_time_ns: model time [ns] or None
         before the first tick; inputs: InputReport; settings: {name: value} shown as
         they are (units in the names); conditions: [(level, text)] more to report
-        (faults, overpressure).
+        (faults, overpressure); halted: why the model stopped advancing, or None
+        while it runs; saturated: [Pa gauge] the limit p_s is published at, or None.
         """
         counters, previous = self.counters, self._reported
         status = DiagnosticStatus(name=name, hardware_id=hardware_id)
-        status.level, status.message = self._summary(counters, previous, inputs, conditions)
+        status.level, status.message = self._summary(
+            counters, previous, inputs, conditions, halted, saturated
+        )
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
             **self._compute_times(),
             **{field.name: getattr(counters, field.name) for field in fields(Counters)},
             'last_integration_failure': self.last_failure,
-            'halted': self.halted is not None,
+            'halted': halted is not None,
             'inlet_flow_m3_s': inputs.inlet_flow,
             'seconds_since_input': inputs.seconds_since_input,
             'input_stale': inputs.stale,
@@ -167,7 +186,7 @@ class NodeStatus:
         array.header.stamp = stamp
         return array
 
-    def _summary(self, counters, previous, inputs, conditions=()):
+    def _summary(self, counters, previous, inputs, conditions=(), halted=None, saturated=None):
         """
         Return (level, message) of the status.
 
@@ -189,15 +208,15 @@ class NodeStatus:
         if failures:
             level = DiagnosticStatus.ERROR
             problems.append(f'integration diverged {failures}x, state held: {self.last_failure}')
-        if self.halted is not None:
+        if halted is not None:
             level = DiagnosticStatus.ERROR
             problems.append(
                 'model halted, holding its last good state until a reset, a new inlet flow '
                 'or a parameter change'
                 + (
-                    f'; supply_pressure published at burst_pressure = {self.saturated:g} Pa '
+                    f'; supply_pressure published at burst_pressure = {saturated:g} Pa '
                     '(gauge), the limit it passed'
-                    if self.saturated is not None
+                    if saturated is not None
                     else ''
                 )
             )

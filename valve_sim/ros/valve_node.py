@@ -13,58 +13,28 @@
 # limitations under the License.
 
 """
-valve_node: the virtual relief valve as a real-time ROS 2 node.
+valve_node: the virtual relief valve as a real-time ROS 2 node (docs/valve_node.md).
 
-Topic and service names are relative, so namespaces and remapping work:
+Names are relative, so namespaces and remapping work. Pressures are ABSOLUTE [Pa] on the wire.
+  sub inlet_flow             std_msgs/Float64           q_in [m^3/s], taken by the tick itself
+  sub tank_pressure          sensor_msgs/FluidPressure  overrides the tank_pressure parameter
+  pub supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
+                             sensor_msgs/FluidPressure  the sensor stage's readings
+  pub joint_states           sensor_msgs/JointState     main_valve, pilot_poppet: [m], [m/s]
+  pub applied_inlet_flow     sensor_msgs/JointState     q_in applied over the tick to the stamp
+  pub applied_tank_pressure  sensor_msgs/FluidPressure  the tank pressure applied over it
+  pub relief_flow            sensor_msgs/JointState     to the tank [m^3/s], and its three parts
+  pub /diagnostics           diagnostic_msgs/DiagnosticArray  1 Hz (valve_diagnostics)
+  pub fault_status           diagnostic_msgs/DiagnosticArray  latched faults and sensor settings
+  srv ~/reset                std_srvs/Trigger           the exact steady state of the inlet flow
 
-  sub  inlet_flow               std_msgs/Float64            inlet flow q_in [m^3/s], 0 to
-                                                            max_inlet_flow; best effort
-                                                            (hears reliable and
-                                                            SensorDataQoS publishers) or
-                                                            reliable: inlet_flow_reliability;
-                                                            taken by the tick itself
-  sub  tank_pressure            sensor_msgs/FluidPressure   the tank's (return line's) ABSOLUTE
-                                                            pressure [Pa]; once one came it
-                                                            overrides the tank_pressure
-                                                            parameter (gauge); taken, checked
-                                                            and counted as inlet_flow
-  pub  supply_pressure, intermediate_pressure, pilot_pressure, poppet_chamber_pressure
-                                sensor_msgs/FluidPressure   ABSOLUTE pressure [Pa]: the model's
-                                                            gauge pressure + ambient_pressure
-  pub  joint_states             sensor_msgs/JointState      main_valve, pilot_poppet:
-                                                            position [m], velocity [m/s]
-  pub  applied_inlet_flow       sensor_msgs/JointState      inlet_flow: velocity = q_in [m^3/s]
-                                                            applied over the tick ending at
-                                                            the stamp
-  pub  applied_tank_pressure    sensor_msgs/FluidPressure   the tank pressure applied over that
-                                                            tick, ABSOLUTE [Pa]
-  pub  relief_flow              sensor_msgs/JointState      relief_flow: velocity = all the
-                                                            valve passes to the tank [m^3/s]
-                                                            at the stamp; then its parts
-                                                            main_stage, pilot_stage,
-                                                            seat_leakage
-  pub  /diagnostics             diagnostic_msgs/DiagnosticArray, 1 Hz on the steady clock
-  pub  fault_status             diagnostic_msgs/DiagnosticArray, latched: every fault and sensor
-                                setting, on start and on each change, stamped from when they hold
-  srv  ~/reset                  std_srvs/Trigger            exact steady state of the current
-                                                            inlet flow
-
-Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a schedule file
-(fault_schedule), applied between ticks; the pressures published are the sensor stage's
-readings (the model's state is untouched); active faults show in /diagnostics (WARN), p_s
-at supply_pressure_limit as an overpressure alarm (ERROR).
-
-With --foxglove [PORT] the node also serves its tick topics and /diagnostics over the
-Foxglove WebSocket protocol (valve_sim.ros.live_view), for a live view without ROS.
-
-All messages of one tick carry the model time of the state as header.stamp; a
-pressure's header.frame_id is frame_prefix (a parameter, default '<node name>/')
-+ supply_port, intermediate_chamber, pilot_chamber or poppet_chamber. The
-/diagnostics status is '<node name>: valve model' with hardware_id the parameter
-hardware_id (default: the fully qualified node name), valve_sim.ros.diagnostics.
-The model itself (valve_sim.core.realtime_model) has no ROS in it; this module only
-adapts it: parameters, topics, the tick timer and the reset service.
-See docs/valve_node.md for the behaviour in detail.
+All messages of one tick carry the model time of the state as header.stamp. The model
+(valve_sim.core.realtime_model, no ROS) decides what a tick comes to; this module adapts
+it: parameters, inputs, the tick timer, the outcome's logs and counters, the reset
+service. Housekeeping (ros.housekeeping) and the /diagnostics report (ros.valve_diagnostics)
+live apart. Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a
+schedule file whose events are applied at the tick, directly. With --foxglove [PORT] the
+tick topics and /diagnostics are also served over Foxglove's WebSocket protocol.
 """
 
 import argparse
@@ -72,16 +42,12 @@ import gc
 import sys
 import time
 
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
-from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
@@ -90,7 +56,6 @@ from valve_sim.core.catalogue import LIVE_NAMES, split, VALVE_NODE_SPECS
 from valve_sim.core.errors import (
     InputFileError,
     IntegrationError,
-    OverpressureError,
     ParameterError,
     SteadyStateError,
 )
@@ -114,7 +79,7 @@ from valve_sim.core.parameters import (
     SPECS,
     validate,
 )
-from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, TRIAL_STEPS
+from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status, TRIAL_STEPS
 from valve_sim.core.retuning import (
     check_limits,
     check_preset,
@@ -122,19 +87,17 @@ from valve_sim.core.retuning import (
     merged_parameters,
 )
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
-from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TickMessages, TOPIC_TYPES
 from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
-    FAULT_STATUS_QOS,
-    FAULT_STATUS_TOPIC,
     FaultInjection,
     ScheduleLoader,
     split_changes,
 )
+from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
 from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
-from valve_sim.ros.node_status import InputReport, NodeStatus, Throttle
+from valve_sim.ros.node_status import NodeStatus, Throttle
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
 from valve_sim.ros.ros_parameters import (
     declare_double,
@@ -143,18 +106,12 @@ from valve_sim.ros.ros_parameters import (
     undeclared_reason,
     value_problem,
 )
+from valve_sim.ros.valve_diagnostics import ValveDiagnostics
+from valve_sim.ros.valve_outputs import ValveOutputs
 
 
-STATUS_TASK = 'valve model'  # /diagnostics status '<node name>: valve model'
-FAULT_STATUS_TASK = 'faults'  # fault_status status '<node name>: faults'
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
-YOUNG_GENERATIONS = (
-    1  # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
-)
-STATE_QUEUE_DEPTH = (
-    1000  # 1 s of 1 kHz state messages: a reliable writer drops beyond it in a stall
-)
 # A tick takes at most INPUTS_PER_TICK inlet_flow messages, and none after INPUT_SHARE of
 # its period: under a flood each take waits for the middleware's busy reader lock.
 INPUTS_PER_TICK = 10
@@ -172,8 +129,6 @@ INLET_FLOW_QOS = {
     'best_effort': QoSProfile(depth=INPUTS_PER_TICK, reliability=ReliabilityPolicy.BEST_EFFORT),
     'reliable': QoSProfile(depth=RELIABLE_INPUT_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
 }
-WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
-HOUSEKEEPING_INTERVAL_NS = 500_000_000  # calls of the 1 Hz timer closer than this: a backlog
 VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
 # All double parameters (the catalogue's doubles of valve_node).
 VALVE_SPECS = {name: spec for name, spec in VALVE_NODE_SPECS.items() if spec.kind == 'double'}
@@ -183,15 +138,14 @@ class ReliefValveNode(Node):
     """The valve model on a timer at publish_rate, fed by inlet_flow, publishing its state."""
 
     def __init__(self, argv=(), **kwargs):
-        self._inlet_subscription = None  # taken by the tick, left out of subscriptions
-        self._tank_subscription = None  # likewise
+        self.inlet_subscription = None  # taken by the tick, left out of subscriptions
+        self.tank_subscription = None  # likewise
         super().__init__(NODE_NAME, **kwargs)
         self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
         params, self.settings = self._declare_parameters()
         self.hardware_id = diagnostics.declare_hardware_id(self)
-        self._status_name = diagnostics.status_name(self, STATUS_TASK)
         self.frame_prefix = self._declare_frame_prefix()
         faults, sensors, schedule = declare_fault_parameters(self)
         self.injection = FaultInjection(sensors, schedule)
@@ -211,36 +165,27 @@ class ReliefValveNode(Node):
         self.kernels_seconds = time.perf_counter() - started  # also in /diagnostics
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
-        self.input_stale = False
-        self.tank_stale = False
-        self.tank_from_topic = False  # said once in the log
         self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
         self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
-        self._rejection_warnings = Throttle(WARNING_INTERVAL_NS)
-        self._tank_rejection_warnings = Throttle(WARNING_INTERVAL_NS)
-        self._housekeeping_calls = Throttle(HOUSEKEEPING_INTERVAL_NS)
         self.status = NodeStatus(time.monotonic_ns())
         self._restoring = False
         self.schedule_loader = ScheduleLoader()
         self._opened_schedule = None  # the file a change being checked sets as fault_schedule
         self._before_change = {}  # declared values of the change being checked, before it
         self._undo = {}  # declared values before the last change that retuned the model
-        self._create_outputs()
+        self.outputs = ValveOutputs(self, self.frame_prefix)
+        self.diagnostics = ValveDiagnostics(self)
+        self._publish_fault_status()
         input_qos = self._declare_inlet_flow_qos()
-        self._inlet_subscription = self.create_subscription(
+        self.inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, input_qos, raw=True
         )
-        self._tank_subscription = self.create_subscription(
+        self.tank_subscription = self.create_subscription(
             FluidPressure, 'tank_pressure', self.tank_input.offer_cdr, input_qos, raw=True
         )
         self.create_service(Trigger, '~/reset', self._on_reset)
-        self.live_view = None  # a LiveView once serve_live_view() started one
         self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
-        self._housekeeping_due = False
-        self._ticks_at_housekeeping = 0
-        self.create_timer(
-            1.0, self._on_housekeeping_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
+        self.housekeeping = Housekeeping(self)
         self._tick_timer = self._create_tick_timer()
         self.add_pre_set_parameters_callback(self._complete_parameter_change)
         self.add_on_set_parameters_callback(self._check_parameter_change)
@@ -277,15 +222,20 @@ class ReliefValveNode(Node):
         return self.settings['tank_pressure'] if gauge is None else gauge
 
     @property
+    def live_view(self):
+        """Return the Foxglove LiveView the node serves, or None."""
+        return self.outputs.live_view
+
+    @property
     def subscriptions(self):
         """
         Return the subscriptions an executor runs: all but the inputs', the tick takes them.
 
         Both executors ask the node for these (the EventsExecutor ignores callback
         groups), so a flood of inlet_flow or tank_pressure never wakes the executor and
-        never queues callbacks ahead of the tick (_take_inputs).
+        never queues callbacks ahead of the tick (take_inputs).
         """
-        taken = (self._inlet_subscription, self._tank_subscription)
+        taken = (self.inlet_subscription, self.tank_subscription)
         return (s for s in super().subscriptions if s not in taken)
 
     # --- parameters -------------------------------------------------------------------------
@@ -589,7 +539,7 @@ class ReliefValveNode(Node):
         """Advance the model to the clock and publish its state."""
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
-        self._take_inputs(started)
+        self.take_inputs(started)
         starting = self.model.time_ns is None or now_ns < self.model.time_ns
         if starting:
             self._start(now_ns)
@@ -599,10 +549,11 @@ class ReliefValveNode(Node):
             self._count_lateness(now_ns)
             self._advance(now_ns)
         self._inject()
-        self._publish_state()
+        self.outputs.publish_tick(
+            self.model, self.applied_flow, self.ambient_pressure, self.injection
+        )
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
-        if self._housekeeping_due:
-            self._housekeeping()
+        self.housekeeping.after_tick()
 
     def _start(self, now_ns):
         """
@@ -633,7 +584,7 @@ class ReliefValveNode(Node):
         self.status.tick_started(now_ns, newest_slot_ns, period_ns)
 
     def _advance(self, now_ns):
-        """Integrate up to now_ns; on a failure hold the last good state (see _recover)."""
+        """Advance the model to now_ns; count, log and follow through the Outcome it returns."""
         period_ns = self._tick_timer.timer_period_ns
         if self.input.changed:
             self.input.changed = False
@@ -641,20 +592,16 @@ class ReliefValveNode(Node):
         if self.tank_input.changed:
             self.tank_input.changed = False
             self._resume('a new tank pressure')
-        try:
-            progress = self.model.advance_to(
-                now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns, self.tank_pressure
-            )
-        except IntegrationError as error:
-            self._recover(now_ns, error)
-            return
-        if self.model.halted is None:
+        outcome = self.model.update(
+            now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns, self.tank_pressure
+        )
+        self.status.count(outcome, period_ns)
+        if outcome.status is Status.PROGRESS:
             self.applied_flow = self.inlet_flow
-        if progress.skipped_ns:
-            counters = self.status.counters
-            counters.skipped_ticks += max(round(progress.skipped_ns / period_ns), 1)
-            counters.skipped_time_s += progress.skipped_ns / NS_PER_S
-            self._warn_lag(progress.skipped_ns)
+            if outcome.skipped_ns:
+                self._warn_lag(outcome.skipped_ns)
+        elif outcome.error is not None:
+            self._report_failure(outcome)
 
     def _warn_lag(self, skipped_ns):
         """Warn of skipped lag at most once a second, with what was skipped since and in total."""
@@ -674,15 +621,7 @@ class ReliefValveNode(Node):
         self._take_schedule()
         changes = self.injection.due(self.model.time_ns)
         if changes:
-            result = self.set_parameters_atomically(
-                [Parameter(name, value=value) for name, value in changes.items()]
-            )
-            message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
-            # One logging call per severity: rclpy refuses a call site whose severity changes.
-            if result.successful:
-                self.get_logger().info(message)
-            else:
-                self.get_logger().error(f'{message} refused: {result.reason}')
+            self._apply_scheduled(changes)
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
         if overpressure and not self.injection.overpressure:
@@ -695,24 +634,44 @@ class ReliefValveNode(Node):
             self.get_logger().info('p_s back below supply_pressure_limit')
         self.injection.overpressure = overpressure
 
-    def _recover(self, now_ns, error):
+    def _apply_scheduled(self, changes):
         """
-        After a failure: hold the last good state; undo a parameter change that can have caused it.
+        Apply a schedule event's fault and sensor changes directly, from this tick on.
 
-        An overpressure (the state reached burst_pressure) is counted apart from a
-        numerical divergence. Only a change applied within the trial window before the
-        failure is rolled back, and the model then goes on; otherwise the parameters
-        stay and the model halts until a reset, a new inlet flow or a parameter change.
+        Not through the parameter service: the events were checked when the file was
+        read, and a fault leaves the model parameters (so the cracking point) as they
+        are. Only the sensor settings together are checked here (range_min below
+        range_max). The declared values are set, so parameter values and
+        /parameter_events show the event; a failure it causes within the trial window
+        rolls it back as it does a parameter change (_report_failure).
         """
-        counters = self.status.counters
-        if isinstance(error, OverpressureError):
-            counters.overpressures += 1
-        else:
-            counters.integration_failures += 1
-        self.status.last_failure = str(error)
+        message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
+        faults, sensors = split_changes(changes)
+        try:
+            self.injection.sensors.checked(sensors)
+        except ParameterError as error:
+            self._count_refusal(str(error))
+            self.get_logger().error(f'{message} refused: {error}')
+            return
+        before = {name: self.get_parameter(name).value for name in changes}
+        self._set_declared(changes)
+        if self.model.retune(self.model.params, self.model.step_size, faults or None):
+            self._undo = before  # what a roll-back of this event restores
+        self.injection.sensors.change(sensors)
+        self._publish_fault_status()
+        self._resume('a scheduled fault')
+        self.get_logger().info(message)
+
+    def _report_failure(self, outcome):
+        """
+        Log a failure the model held its last good state after; follow a roll-back through.
+
+        After a roll-back the node's other values of the undone change (settings, sensor
+        settings, the declared parameters) return too, and the inputs' limits follow.
+        """
+        error = outcome.error
         self.get_logger().error(f'{error} The last good state is held.')
-        self.model.hold_until(now_ns)
-        if self.model.roll_back(error.failure_ns):
+        if outcome.rolled_back:
             self.get_logger().error(
                 'parameters rolled back to the ones in use before the last change, '
                 'applied within the trial window before the failure'
@@ -720,117 +679,44 @@ class ReliefValveNode(Node):
             self._restore_parameters()
             self.input.max_inlet_flow = self.model.params['max_inlet_flow']
             self.tank_input.burst_pressure = self.model.params['burst_pressure']
-            if self.inlet_flow <= self.input.max_inlet_flow:
-                return
-        self.model.halt(str(error))
-        self.status.halted = str(error)
-        # After an overpressure p_s is published at the limit it passed, as a transducer
-        # at full scale reads, not at the last normal state (a relief valve that reads
-        # 7 MPa while it takes an impossible flow would mislead the bench).
-        saturated = self.model.params['burst_pressure']
-        self.status.saturated = saturated if isinstance(error, OverpressureError) else None
+        if outcome.status is not Status.FAILURE:
+            return
+        saturated = self.model.saturated
         self.get_logger().error(
             'the model stops advancing and holds its last good state until a reset, '
             'a new inlet flow or a parameter change'
             + (
                 f'; supply_pressure is published at burst_pressure = {saturated:g} Pa (gauge), '
                 'the limit it passed, the other topics at their last values'
-                if self.status.saturated is not None
+                if saturated is not None
                 else ''
             )
         )
 
     def _resume(self, cause):
         """Let a halted model advance again."""
-        if self.model.halted is None:
-            return
-        self.model.resume()
-        self.status.halted = None
-        self.status.saturated = None
-        self.get_logger().info(f'the model advances again after {cause}')
+        if self.model.resume():
+            self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
 
-    def _create_outputs(self):
-        """Create the publishers of the tick topics and the messages they reuse every tick."""
-        self._tick_messages = TickMessages(self.frame_prefix)
-        self._tick_publishers = {
-            topic: self.create_publisher(
-                message_class(TOPIC_TYPES[topic]), topic, STATE_QUEUE_DEPTH
-            )
-            for topic in TICK_TOPICS
-        }
-        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self._fault_status = self.create_publisher(
-            DiagnosticArray, FAULT_STATUS_TOPIC, FAULT_STATUS_QOS
-        )
-        self._publish_fault_status()
-
     def _publish_fault_status(self):
         """Publish the faults and sensor settings in effect, stamped from when they hold."""
-        time_ns = self.model.time_ns
-        stamp = (
-            self.get_clock().now().to_msg()
-            if time_ns is None
-            else Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S)
-        )
-        name = diagnostics.status_name(self, FAULT_STATUS_TASK)
-        self._fault_status.publish(
-            self.injection.status_message(self.model.faults, stamp, name, self.hardware_id)
-        )
-
-    def _publish_state(self):
-        """
-        Publish the state of the model time, all messages with the same stamp.
-
-        After an overpressure (saturated) the supply pressure is published at the limit
-        it passed, the rest of the held state as it is.
-        """
-        ambient = self.settings['ambient_pressure']
-        state = self.model.state
-        if self.status.saturated is not None:
-            state = state.copy()
-            state[P_S] = self.status.saturated
-        tick = self._tick_messages.fill(
-            self.model.time_ns,
-            state,
-            self.applied_flow,
-            ambient,
-            self.injection.readings(self.model.time_ns, state, ambient),
-            self.model.tank_pressure,
-            self.model.relief_flows(),
-        )
-        for topic, data in tick:
-            self._tick_publishers[topic].publish(data)
-        view = self.live_view
-        if view is not None and view.watched:  # one check per tick when nobody watches
-            for topic, data in tick:
-                view.log(self._tick_publishers[topic].topic_name, data, self.model.time_ns)
+        self.outputs.publish_fault_status(self.model, self.injection, self.hardware_id)
 
     def serve_live_view(self, port, host):
         """Serve the tick topics and /diagnostics over Foxglove's WebSocket protocol."""
-        topics = {
-            publisher.topic_name: TOPIC_TYPES[topic]
-            for topic, publisher in self._tick_publishers.items()
-        }
-        topics[self._diagnostics.topic_name] = 'diagnostic_msgs/msg/DiagnosticArray'
-        self.live_view = live_view.LiveView(
-            topics, port, host, name=self.get_fully_qualified_name()
-        )
-        self.get_logger().info(
-            f'Foxglove live view on ws://{host}:{self.live_view.port} ({len(topics)} topics); '
-            f'layout {live_view.layout_path()}'
-        )
+        self.outputs.serve_live_view(port, host, self.diagnostics.publisher.topic_name)
 
-    def _take_inputs(self, started_ns):
+    def take_inputs(self, started_ns):
         """Take queued input messages: INPUTS_PER_TICK each, within INPUT_SHARE of a period."""
         deadline_ns = started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns
-        self.input.take(self._inlet_subscription, INPUTS_PER_TICK, deadline_ns)
-        self.tank_input.take(self._tank_subscription, INPUTS_PER_TICK, deadline_ns)
+        self.input.take(self.inlet_subscription, INPUTS_PER_TICK, deadline_ns)
+        self.tank_input.take(self.tank_subscription, INPUTS_PER_TICK, deadline_ns)
 
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
-        self._take_inputs(time.perf_counter_ns())  # a flow sent just before the reset counts
+        self.take_inputs(time.perf_counter_ns())  # a flow sent just before the reset counts
         try:
             self.model.reset(self.inlet_flow, self.tank_pressure)
         except SteadyStateError as error:
@@ -838,8 +724,6 @@ class ReliefValveNode(Node):
             response.message = f'reset refused, the state is kept: {error}'
             self.get_logger().warn(response.message)
             return response
-        self.status.halted = None
-        self.status.saturated = None
         time_ns = self.model.time_ns or 0
         response.success = True
         response.message = (
@@ -851,176 +735,11 @@ class ReliefValveNode(Node):
         self.get_logger().info(response.message)
         return response
 
-    def _on_housekeeping_timer(self):
-        """
-        1 Hz: housekeeping runs right after the next tick, in the slack before the one after.
-
-        Run from this timer's callback it could delay a tick: it takes up to about a
-        millisecond. Without ticks (none since the last housekeeping, or none for a
-        second to run pending housekeeping: none yet, or a paused /clock) it runs at once,
-        and takes the inlet_flow messages no tick took. Calls that a busy executor queued
-        back to back count once (the steady clock decides).
-        """
-        if not self._housekeeping_calls.due(time.monotonic_ns()):
-            return
-        if self._housekeeping_due or self.status.counters.ticks == self._ticks_at_housekeeping:
-            self._take_inputs(time.perf_counter_ns())
-            self._housekeeping()
-        else:
-            self._housekeeping_due = True
-
-    def _housekeeping(self):
-        """
-        Publish the diagnostics report, and collect the young generations' garbage.
-
-        main() turns automatic collection off: a collection that starts inside a tick
-        stalls it for up to a millisecond.
-        """
-        self._housekeeping_due = False
-        self._ticks_at_housekeeping = self.status.counters.ticks
-        self._count_inputs()
-        self._warn_rejected_inputs()
-        self._update_receive_threads()
-        self._publish_diagnostics()
-        gc.collect(YOUNG_GENERATIONS)
-
-    def _count_inputs(self):
-        """Copy the input's counts to the diagnostics; note if one publisher sends inlet_flow."""
-        counters = self.status.counters
-        counters.accepted_inputs = self.input.accepted
-        counters.rejected_inputs = self.input.rejected
-        counters.lost_inputs = self.input.lost
-        counters.refused_clock_messages = self.clock_guard.refused
-        self.input.single_publisher = self._inlet_subscription.get_publisher_count() == 1
-        self.tank_input.single_publisher = self._tank_subscription.get_publisher_count() == 1
-
-    def _warn_rejected_inputs(self):
-        """At most once a second per input (steady clock): how many messages were rejected."""
-        for topic, received, throttle, holding in (
-            ('inlet_flow', self.input, self._rejection_warnings, f'{self.inlet_flow:g} m^3/s'),
-            (
-                'tank_pressure', self.tank_input, self._tank_rejection_warnings,
-                f'{self.tank_pressure:g} Pa (gauge)',
-            ),
-        ):
-            if received.rejected == received.reported_rejected:
-                continue
-            if throttle.due(time.monotonic_ns()):
-                new, reason = received.report()
-                self.get_logger().warn(
-                    f'{new} {topic} message(s) rejected since the last report '
-                    f'({received.rejected} since start), the last: {reason}; holding {holding}'
-                )
-
     def use_receive_thread_policy(self, policy):
         """Put the middleware's receive threads under policy (a POLICIES key), now and later."""
         self.receive_threads = ReceiveThreads(policy)
         self.receive_threads.update()
         self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
-
-    def _update_receive_threads(self):
-        """Give receive threads started since the last housekeeping their policy too."""
-        if self.receive_threads.update():
-            self.get_logger().info(
-                f'middleware receive threads: {self.receive_threads.describe()}'
-            )
-
-    def _publish_diagnostics(self):
-        now = self.get_clock().now()
-        inputs = self._input_report(now.nanoseconds)
-        if inputs.stale and not self.input_stale:
-            self.get_logger().warn(
-                f'no inlet_flow for {inputs.seconds_since_input:.1f} s: input stale, '
-                f'holding {self.inlet_flow:g} m^3/s'
-            )
-        elif self.input_stale and not inputs.stale:
-            self.get_logger().info('inlet_flow received again: input fresh')
-        self.input_stale = inputs.stale
-        tank = self._tank_report(now.nanoseconds)
-        settings = {
-            'publish_rate_hz': self.settings['publish_rate'],
-            'step_size_s': self.model.step_size,
-            'input_timeout_s': self.settings['input_timeout'],
-            'faults_active': self.model.faults.describe(),
-            'sensor_dropout': ', '.join(self.injection.sensors.dropped_topics()),
-            'overpressure': self.injection.overpressure,
-            'fault_schedule': self.injection.schedule_path,
-            'fault_schedule_loading': self.schedule_loader.loading,
-            'fault_schedule_refused': self.status.schedule_refused,
-            'supply_pressure_saturated_at': self.status.saturated,
-            'fault_schedule_events_pending': self.injection.schedule.pending(),
-            'startup_kernels_s': self.kernels_seconds,
-            'receive_threads': self.receive_threads.describe(),
-            **tank,
-        }
-        conditions = self.injection.conditions(
-            self.model.faults, self.model.state[P_S], self.model.params['supply_pressure_limit']
-        )
-        if tank['tank_pressure_stale']:
-            conditions.append((DiagnosticStatus.WARN, (
-                f'tank_pressure stale: none for {tank["seconds_since_tank_pressure"]:.1f} s, '
-                f'holding {self.tank_pressure:g} Pa (gauge)'
-            )))
-        report = self.status.report(
-            now.to_msg(),
-            self._status_name,
-            self.hardware_id,
-            time.monotonic_ns(),
-            self.model.time_ns,
-            inputs,
-            settings,
-            conditions,
-        )
-        self._diagnostics.publish(report)
-        if self.live_view is not None and self.live_view.watched:
-            self.live_view.log(
-                self._diagnostics.topic_name, serialize_message(report), now.nanoseconds
-            )
-
-    def _input_report(self, now_ns):
-        """InputReport: stale when no inlet_flow came for input_timeout [s] (0: never stale)."""
-        self.input.stamp(now_ns)
-        received_ns = self.input.received_ns
-        age = 0.0 if received_ns is None else max(now_ns - received_ns, 0) / NS_PER_S
-        timeout = self.settings['input_timeout']
-        return InputReport(self.inlet_flow, age, timeout > 0.0 and age > timeout)
-
-    def _tank_report(self, now_ns):
-        """
-        Return the tank input's diagnostics values: pressure, source, counts, age, staleness.
-
-        Stale as inlet_flow is (input_timeout), once the topic has set the tank pressure.
-        """
-        received, timeout = self.tank_input, self.settings['input_timeout']
-        received.stamp(now_ns)
-        from_topic = received.value is not None
-        age = max(now_ns - received.received_ns, 0) / NS_PER_S if from_topic else None
-        stale = from_topic and timeout > 0.0 and age > timeout
-        # One logging call per severity: rclpy refuses a call site whose severity changes.
-        if stale and not self.tank_stale:
-            self.get_logger().warn(
-                f'no tank_pressure for {age:.1f} s: input stale, holding '
-                f'{self.tank_pressure:g} Pa (gauge)'
-            )
-        elif self.tank_stale and not stale:
-            self.get_logger().info('tank_pressure received again: input fresh')
-        self.tank_stale = stale
-        if from_topic and not self.tank_from_topic:
-            self.get_logger().info(
-                f'the tank_pressure topic sets the tank pressure from now on: '
-                f'{self.tank_pressure:g} Pa (gauge), over the tank_pressure parameter '
-                f'({self.settings["tank_pressure"]:g} Pa)'
-            )
-        self.tank_from_topic = from_topic
-        return {
-            'tank_pressure_pa': self.tank_pressure,
-            'tank_pressure_source': 'topic' if from_topic else 'parameter',
-            'accepted_tank_pressures': received.accepted,
-            'rejected_tank_pressures': received.rejected,
-            'lost_tank_pressures': received.lost,
-            'seconds_since_tank_pressure': age,
-            'tank_pressure_stale': stale,
-        }
 
 
 STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)
