@@ -14,7 +14,7 @@
 
 """valve_node's counts: late and missed ticks against their slots, and what the model did."""
 
-from valve_sim.core.integrator import IntegrationError, OverpressureError
+from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.realtime_model import Outcome, Status
 from valve_sim.ros.node_status import NodeStatus
 
