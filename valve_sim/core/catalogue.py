@@ -634,7 +634,7 @@ class Change:
 
     @property
     def injection(self):
-        """The fault, sensor and schedule parts: {name: value}, in the change's order."""
+        """Return the fault, sensor and schedule parts as one {name: value}, in order."""
         return {**self.fault, **self.sensor, **self.schedule}
 
 
