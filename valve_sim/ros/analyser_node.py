@@ -52,9 +52,12 @@ name the QoS of each topic; the bag keeps the publishers' offers.
 How nothing is lost. Subscriptions have a deep queue (queue_depth per topic, 1 s at
 1 kHz by default), filled by the middleware's own threads; a reliable publisher's
 messages are not dropped on the way. The
-executor never runs them (their callback group is closed to it): a timer every
-drain_period takes all waiting messages of every topic in one go, writes them and
-feeds the analysis; taking them directly costs a fraction of a callback per
+executor (rclpy's EventsExecutor where there is one, as valve_node's) never runs them:
+the node leaves them out of the subscriptions it gives an executor. A timer every
+drain_period takes all waiting messages of every topic in one go (valve_sim.ros.raw_take,
+as valve_node takes its inputs), writes them and feeds the analysis, which reads the
+analysed fields from the CDR bytes (valve_sim.recording.cdr.read_message) instead of
+building rclpy messages; taking them directly costs a fraction of a callback per
 message. Every flush_interval the open chunk is completed and handed to the
 operating system, so a hard kill loses at most that much. SIGINT and SIGTERM
 end the spin; the node then takes what is still queued, measures (and
@@ -62,9 +65,10 @@ publishes) the open steps on what it has, and closes the file.
 """
 
 import argparse
-from dataclasses import dataclass
+import functools
 import os
 from pathlib import Path
+import struct
 import sys
 import textwrap
 import time
@@ -72,10 +76,8 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 import rclpy
-from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -100,9 +102,11 @@ from valve_sim.core.parameters import (
     STANDARD_ATMOSPHERE,
 )
 from valve_sim.recording.bag import BagWriter
+from valve_sim.recording.cdr import read_message
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros import diagnostics, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
+from valve_sim.ros.raw_take import RawTaker
 from valve_sim.ros.ros_parameters import declare_double
 
 
@@ -212,42 +216,20 @@ PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
 }
 
 
-class RecorderGroup(CallbackGroup):
+class RecordedTopic(RawTaker):
     """
-    A callback group the executor never runs.
+    A subscribed topic: its raw subscription, type, bag channel, extractor, counters.
 
-    The recorder takes its subscriptions' messages itself.
-    """
-
-    def can_execute(self, entity):
-        return False
-
-    def beginning_execution(self, entity):
-        return False
-
-    def ending_execution(self, entity):
-        pass
-
-
-@dataclass
-class RecordedTopic:
-    """
-    A subscribed topic.
-
-    Its subscription, type, bag channel (created on subscribing), extractor, counters.
+    Taken by the drain (RawTaker.take), each message handed to receive(data, info);
+    lost counts the gaps of a single publisher's sequence numbers.
     """
 
-    subscription: object
-    type_name: str
-    extractor: Extractor = None
-    channel: int = None
-    count: int = 0
-    single_publisher: bool = (
-        False  # then gaps in the publication sequence numbers are lost messages
-    )
-    last_sequence: int = None
-    lost: int = 0
-    qos: str = ''  # reliability and durability of the subscription
+    def __init__(self, subscription, type_name, receive, extractor=None, channel=None, qos=''):
+        super().__init__(receive)
+        self.subscription, self.type_name = subscription, type_name
+        self.extractor, self.channel = extractor, channel
+        self.count = 0
+        self.qos = qos  # reliability and durability of the subscription
 
 
 def subscription_qos(offers, depth):
@@ -392,7 +374,6 @@ class ValveAnalyser(Node):
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
         self.unreadable_since = {}  # topic -> when only unreadable types were first seen
         self.queue_depth = settings['queue_depth']
-        self.recorder_group = RecorderGroup()
         self.measures_publisher = self.create_publisher(
             DiagnosticArray, 'step_measures', MEASURES_QOS
         )
@@ -465,20 +446,15 @@ class ValveAnalyser(Node):
             # In the bag from now on, with its publishers' offers, as rosbag2 creates a topic
             # when it subscribes (listed with its count even if no message ever comes).
             channel = self.bag.add_topic(topic, type_name, [qos_offer(o) for o in offers])
-            self.recorded[topic] = RecordedTopic(
-                self.create_subscription(
-                    message_type,
-                    topic,
-                    lambda _: None,
-                    qos,
-                    callback_group=self.recorder_group,
-                    raw=True,
-                ),
+            self.recorded[topic] = recorded = RecordedTopic(
+                self.create_subscription(message_type, topic, lambda _: None, qos, raw=True),
                 type_name,
+                None,
                 self._extractor(topic, type_name),
                 channel=channel,
                 qos=qos_name(qos),
             )
+            recorded.receive = functools.partial(self._record, recorded)
             self.get_logger().info(
                 f'recording {topic} ({type_name}) with QoS {qos_name(qos)}, depth '
                 f'{qos.depth}, for {len(offers)} publisher(s) offering '
@@ -537,39 +513,45 @@ class ValveAnalyser(Node):
             self.get_logger().error(f'{error}: {topic} is recorded but not analysed')
             return None
 
+    @property
+    def subscriptions(self):
+        """
+        Return the subscriptions an executor runs: none of the recorded topics', drain takes them.
+
+        Both executors ask the node for these (the EventsExecutor ignores callback groups).
+        """
+        taken = {recorded.subscription for recorded in self.recorded.values()}
+        return [s for s in super().subscriptions if s not in taken]
+
     def drain(self):
         """Take every queued message of every topic: write it, and analyse those of the signals."""
         for topic, recorded in self.recorded.items():
-            subscription = recorded.subscription
-            with subscription.handle:
-                while (
-                    taken := subscription.handle.take_message(subscription.msg_type, True)
-                ) is not None:
-                    self._record(topic, recorded, *taken)
+            lost = recorded.lost
+            recorded.take(recorded.subscription)
+            if recorded.lost > lost:
+                self._warn_lost(topic, recorded.lost)
         if time.monotonic() - self.last_flush >= self.flush_interval:
             self.bag.flush()
             self.last_flush = time.monotonic()
 
-    def _record(self, topic, recorded, data, info):
-        self.bag.write(
-            recorded.channel, data, info['received_timestamp'], info['source_timestamp']
-        )
+    def _record(self, recorded, data, info):
+        """Write one message taken from a recorded topic; analyse it if it carries a signal."""
+        received = info['received_timestamp']
+        self.bag.write(recorded.channel, data, received, info['source_timestamp'])
         recorded.count += 1
-        sequence = info['publication_sequence_number']
-        if (
-            recorded.single_publisher
-            and recorded.last_sequence is not None
-            and sequence > recorded.last_sequence + 1
-        ):
-            recorded.lost += sequence - recorded.last_sequence - 1
-            self._warn_lost(topic, recorded.lost)
-        recorded.last_sequence = sequence
         if recorded.extractor:
-            message = deserialize_message(data, recorded.subscription.msg_type)
-            for role, time_ns, value in recorded.extractor.samples(
-                message, info['received_timestamp']
-            ):
+            message = self._message(recorded, data)
+            for role, time_ns, value in recorded.extractor.samples(message, received):
                 self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
+
+    @staticmethod
+    def _message(recorded, data):
+        """Return the fields of a message: read from its CDR bytes, else by rclpy."""
+        try:
+            message = read_message(recorded.type_name, data)
+        except (struct.error, ValueError, UnicodeDecodeError):
+            message = None
+        return message or deserialize_message(data, recorded.subscription.msg_type)
 
     def _warn_lost(self, topic, lost):
         """
@@ -695,7 +677,7 @@ def record(stop):
     node = ValveAnalyser()
     try:
         try:
-            spinning.spin_until(node, SingleThreadedExecutor(), stop)
+            spinning.spin_until(node, spinning.EXECUTORS[spinning.DEFAULT_EXECUTOR](), stop)
         finally:
             node.close()
     except OSError as error:
