@@ -17,8 +17,10 @@
 # The summary above is also this script's --help description.
 #
 #     flock /tmp/valve_sim_bench.lock python bench/bench_scenario.py [--repeats 3] [--json F]
+#         [--baseline DIR]
 #
-# In one run, on a ROS domain of its own (localhost only), each --repeats times, in turn:
+# In one run, on a ROS domain of its own (localhost only), each --repeats times, in turn,
+# each in a fresh process:
 #
 # - model: valve_node's RealTimeModel advanced tick by tick (1 ms, 100 RK4 steps) in
 #   this process, the paper step's flows: the model alone;
@@ -31,24 +33,30 @@
 # - scenario: `scenario run` of scenarios/paper_step.yaml, analyser_node recording
 #   every topic: all of it.
 #
-# Each reports its real-time factor (model time per wall time of the stepping) and
-# its wall time per tick; the differences between them say where a scenario's time
-# goes. The load average at start and end is printed: the machine is shared.
+# Each reports its real-time factor (model time per wall time of the stepping), its
+# wall time per tick, and the CPU time per tick of each process over the stepping
+# (the driver or runner, valve_node or the bare node, analyser_node), read from
+# /proc: on two cores these, not the wall times alone, say where a tick goes.
+# --baseline DIR runs every kind also with the valve_sim of another checkout (e.g.
+# `git archive main | tar -x -C DIR`), its processes on PYTHONPATH=DIR, alternating
+# with this checkout's in the same run: before and after side by side under the same
+# load. The load average at start and end is printed: the machine is shared.
 
 import argparse
 import json
 import os
 from pathlib import Path
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
 
-from valve_sim.ros.isolation import claim_domain
-
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'scenarios' / 'paper_step.yaml'
+KINDS = ('model', 'round_trip', 'lockstep', 'scenario')
+CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
 BARE_RESPONDER = (
     'import rclpy\n'
     'from rclpy.qos import QoSProfile, ReliabilityPolicy\n'
@@ -76,8 +84,32 @@ BARE_RESPONDER = (
 )
 
 
-def model_alone(scenario):
-    """Advance valve_node's RealTimeModel tick by tick with the scenario's flows; wall [s]."""
+def cpu_seconds():
+    """CPU time [s] of this process and of each child, by name: {name: user + system}."""
+    times = {}
+    for pid in filter(str.isdigit, os.listdir('/proc')):
+        try:
+            stat = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+            command = Path(f'/proc/{pid}/cmdline').read_bytes().decode(errors='replace')
+        except OSError:
+            continue  # ended meanwhile
+        if int(pid) == os.getpid():
+            name = 'driver'
+        elif int(stat[1]) == os.getpid():
+            name = next((n for n in ('bare_responder', 'valve_node', 'analyser_node')
+                         if n in command), command[:30])
+        else:
+            continue
+        times[name] = (int(stat[11]) + int(stat[12])) / CLOCK_TICKS
+    return times
+
+
+def cpu_used(before, after):
+    return {name: after[name] - before.get(name, 0.0) for name in after}
+
+
+def model_alone(scenario, folder):
+    """Advance valve_node's RealTimeModel tick by tick with the scenario's flows."""
     from valve_sim.core.parameters import load_parameters
     from valve_sim.core.realtime_model import RealTimeModel
 
@@ -87,18 +119,26 @@ def model_alone(scenario):
     model = RealTimeModel(params, settings['step_size'], flows[0])
     model.trial(params, settings['step_size'], flows[0])  # kernels loaded, as the node does
     model.start(0)
-    started = time.perf_counter()
+    cpu, started = cpu_seconds(), time.perf_counter()
     for tick in range(1, scenario.ticks + 1):
         model.advance_to(tick * scenario.period_ns, flows[tick - 1], 10 ** 12)
-    return time.perf_counter() - started
+    return time.perf_counter() - started, cpu_used(cpu, cpu_seconds())
 
 
-def lockstep_run(scenario, command, folder, name):
-    """Drive one node process (command) on /clock for the scenario's ticks; wall [s]."""
+def lockstep_run(scenario, folder, name):
+    """Drive one node process (valve_node or the bare node) on /clock for the scenario's ticks."""
     import rclpy
+    from valve_sim.ros import node_command
     from valve_sim.ros.lockstep import Lockstep
     from valve_sim.ros.node_processes import NodeProcesses
 
+    if name == 'valve_node':
+        command = node_command('valve_node', parameters={
+            'use_sim_time': 'true',
+            'initial_inlet_flow': repr(scenario.inputs['inlet_flow'].initial)})
+    else:
+        command = [sys.executable, '-c', BARE_RESPONDER, '--ros-args', '-p',
+                   'use_sim_time:=true']
     processes = NodeProcesses(folder, {name: command})
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -111,10 +151,10 @@ def lockstep_run(scenario, command, folder, name):
         if name == 'valve_node':
             driver.set_flow(scenario.inputs['inlet_flow'].initial)
         driver.start(period_ns=scenario.period_ns)
-        started = time.perf_counter()
+        cpu, started = cpu_seconds(), time.perf_counter()
         for _ in range(scenario.ticks):
             driver.tick()
-        return time.perf_counter() - started
+        return time.perf_counter() - started, cpu_used(cpu, cpu_seconds())
     finally:
         if driver is not None:
             driver.close()
@@ -123,66 +163,123 @@ def lockstep_run(scenario, command, folder, name):
 
 
 def scenario_run(scenario, folder):
-    """Run the scenario as `valve-sim scenario run` does; its stepping's wall time [s]."""
+    """Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU."""
     from valve_sim.ros.scenario_runner import run_scenario
 
-    record = run_scenario(scenario, folder, progress=lambda text: None)
+    cpu = {}
+
+    def progress(text):  # the runner's own lines mark the stepping's start and end
+        if text.startswith('running '):
+            cpu['start'] = cpu_seconds()
+        elif text.startswith('waiting for analyser_node to record'):
+            cpu['end'] = cpu_seconds()
+
+    record = run_scenario(scenario, folder, progress=progress)
     assert record.passed, [check.name for check in record.checks if not check.passed]
-    return record.wall_s
+    return record.wall_s, cpu_used(cpu['start'], cpu['end'])
 
 
-def summary(walls, scenario):
-    wall = statistics.median(walls)
-    return {'runs': len(walls), 'median_wall_s': wall, 'walls_s': walls,
-            'real_time_factor': scenario.duration / wall,
-            'per_tick_ms': wall / scenario.ticks * 1e3}
-
-
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
-    parser.add_argument('--repeats', type=int, default=3, help='runs of each kind')
-    parser.add_argument('--json', type=Path, help='also write the figures as JSON')
-    args = parser.parse_args()
-    claim_domain(keep_existing=False)
+def measure(kind, folder):
+    """Measure one kind in this process; print {wall_s, cpu_s} as one JSON line."""
     from valve_sim.analysis.scenario_file import load_scenario
-    from valve_sim.ros import node_command
 
     scenario = load_scenario(SCENARIO)
-    valve = node_command('valve_node', parameters={
-        'use_sim_time': 'true', 'initial_inlet_flow': repr(scenario.inputs['inlet_flow'].initial)})
-    bare = [sys.executable, '-c', BARE_RESPONDER, '--ros-args', '-p', 'use_sim_time:=true']
-    print(f'load average at start: {os.getloadavg()}', flush=True)
-    walls = {'model': [], 'round_trip': [], 'lockstep': [], 'scenario': []}
-    with tempfile.TemporaryDirectory() as temporary:
-        for repeat in range(args.repeats):
-            folder = Path(temporary) / str(repeat)
-            for kind in walls:
-                (folder / kind).mkdir(parents=True)
-            walls['model'].append(model_alone(scenario))
-            walls['round_trip'].append(lockstep_run(scenario, bare, folder / 'round_trip',
-                                                    'bare_responder'))
-            walls['lockstep'].append(lockstep_run(scenario, valve, folder / 'lockstep',
-                                                  'valve_node'))
-            walls['scenario'].append(scenario_run(scenario, folder / 'scenario'))
-            runs = ', '.join(f'{kind} {values[-1]:.3f} s' for kind, values in walls.items())
-            print(f'run {repeat + 1}: {runs}', flush=True)
-    results = {kind: summary(values, scenario) for kind, values in walls.items()}
-    tick = {kind: result['per_tick_ms'] for kind, result in results.items()}
-    results['split_per_tick_ms'] = {
+    folder.mkdir(parents=True, exist_ok=True)
+    if kind == 'model':
+        wall, cpu = model_alone(scenario, folder)
+    elif kind == 'scenario':
+        wall, cpu = scenario_run(scenario, folder)
+    else:
+        wall, cpu = lockstep_run(scenario, folder,
+                                 'bare_responder' if kind == 'round_trip' else 'valve_node')
+    print(json.dumps({'wall_s': wall, 'cpu_s': cpu, 'ticks': scenario.ticks,
+                      'duration_s': scenario.duration}))
+
+
+def run_kind(kind, folder, checkout):
+    """Measure kind in a fresh process that imports valve_sim from checkout."""
+    environment = dict(os.environ, PYTHONPATH=str(checkout))
+    output = subprocess.run(
+        [sys.executable, __file__, '--measure', kind, '--folder', str(folder)],
+        env=environment, check=True, capture_output=True, text=True, cwd=checkout).stdout
+    return json.loads(output.strip().splitlines()[-1])
+
+
+def summary(runs):
+    """Median wall and CPU per tick of the runs of one kind."""
+    ticks, duration = runs[0]['ticks'], runs[0]['duration_s']
+    wall = statistics.median(run['wall_s'] for run in runs)
+    names = sorted({name for run in runs for name in run['cpu_s']})
+    return {'runs': len(runs), 'median_wall_s': wall,
+            'walls_s': [run['wall_s'] for run in runs],
+            'real_time_factor': duration / wall, 'per_tick_ms': wall / ticks * 1e3,
+            'cpu_per_tick_ms': {name: statistics.median(run['cpu_s'].get(name, 0.0)
+                                                        for run in runs) / ticks * 1e3
+                                for name in names}}
+
+
+def split(results):
+    """Where a scenario's tick goes [ms], from the differences of the kinds' wall times."""
+    tick = {kind: results[kind]['per_tick_ms'] for kind in KINDS}
+    return {
         'model': tick['model'],
         'round_trip_floor': tick['round_trip'],
         'valve_node_publishing_and_executor': tick['lockstep'] - tick['round_trip']
         - tick['model'],
         'analyser_and_runner': tick['scenario'] - tick['lockstep'],
     }
-    results['load_average_end'] = os.getloadavg()
-    print(f'{scenario.duration:g} s of model time, {scenario.ticks} ticks '
-          f'(scenarios/{SCENARIO.name}), median of {args.repeats}:')
-    for kind in walls:
-        print(f'  {kind:<11} {results[kind]["real_time_factor"]:7.2f}x real time, '
-              f'{results[kind]["per_tick_ms"]:.3f} ms a tick')
-    print('where a scenario tick goes [ms]: ' + ', '.join(
+
+
+def report(label, results):
+    print(f'{label}:')
+    for kind in KINDS:
+        result = results[kind]
+        cpu = ', '.join(f'{name} {value:.3f}'
+                        for name, value in result['cpu_per_tick_ms'].items())
+        print(f'  {kind:<11} {result["real_time_factor"]:7.2f}x real time, '
+              f'{result["per_tick_ms"]:.3f} ms a tick; CPU ms a tick: {cpu}')
+    print('  where a scenario tick goes [ms of wall]: ' + ', '.join(
         f'{name} {value:.3f}' for name, value in results['split_per_tick_ms'].items()))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--repeats', type=int, default=3, help='runs of each kind')
+    parser.add_argument('--json', type=Path, help='also write the figures as JSON')
+    parser.add_argument('--baseline', type=Path,
+                        help='another checkout of valve_sim, measured alongside (before/after)')
+    parser.add_argument('--measure', choices=KINDS, help=argparse.SUPPRESS)
+    parser.add_argument('--folder', type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.measure:
+        return measure(args.measure, args.folder)
+    from valve_sim.ros.isolation import claim_domain
+
+    claim_domain(keep_existing=False)  # the measuring processes inherit the domain
+    checkouts = {'this checkout': REPO}
+    if args.baseline:
+        checkouts['baseline'] = args.baseline.resolve()
+    print(f'load average at start: {os.getloadavg()}', flush=True)
+    runs = {label: {kind: [] for kind in KINDS} for label in checkouts}
+    with tempfile.TemporaryDirectory() as temporary:
+        for repeat in range(args.repeats):
+            for label, checkout in checkouts.items():
+                for kind in KINDS:
+                    folder = Path(temporary) / str(repeat) / label.replace(' ', '_') / kind
+                    runs[label][kind].append(run_kind(kind, folder, checkout))
+                print(f'run {repeat + 1}, {label}: ' + ', '.join(
+                    f'{kind} {values[-1]["wall_s"]:.3f} s'
+                    for kind, values in runs[label].items()), flush=True)
+    results = {}
+    for label in checkouts:
+        results[label] = {kind: summary(values) for kind, values in runs[label].items()}
+        results[label]['split_per_tick_ms'] = split(results[label])
+    results['load_average_end'] = os.getloadavg()
+    scenario = runs['this checkout']['model'][0]
+    print(f'{scenario["duration_s"]:g} s of model time, {scenario["ticks"]} ticks '
+          f'(scenarios/{SCENARIO.name}), median of {args.repeats}:')
+    for label, checkout in checkouts.items():
+        report(f'{label} ({checkout})', results[label])
     print(f'load average at end: {results["load_average_end"]}')
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

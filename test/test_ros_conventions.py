@@ -40,7 +40,7 @@ from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE, relief_flows, Scenario, simulate
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
-from valve_sim.ros import analyser_node
+from valve_sim.ros import analyser_node, recorder
 from valve_sim.ros.live_view import layout_path
 from valve_sim.ros.replay import Replay
 
@@ -278,14 +278,14 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
             'recorded_by': 'valve_sim analyser_node rig_7/recorder'
         }
 
-    real_message_class = analyser_node.message_class
+    real_message_class = recorder.message_class
 
     def message_class_without_string(type_name):  # a type this analyser has no package for
         if type_name == 'std_msgs/msg/String':
             raise ImportError('no module named std_msgs (test)')
         return real_message_class(type_name)
 
-    monkeypatch.setattr(analyser_node, 'message_class', message_class_without_string)
+    monkeypatch.setattr(recorder, 'message_class', message_class_without_string)
     run = AnalyserRun(context, tmp_path, ['mystery', 'quiet'])
     try:
         run.source.create_publisher(message_class('std_msgs/msg/Float64'), 'quiet', 10)

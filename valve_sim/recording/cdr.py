@@ -85,3 +85,91 @@ class CdrMessage:
     def bytes(self):  # noqa: A003  (named after the type it returns; a rename changes the API)
         """Return the message's bytes: what rclpy's Publisher.publish and the bag writer take."""
         return bytes(self._data)
+
+
+FLOAT64 = struct.Struct('<d')
+COUNT = struct.Struct('<I')  # a string's length (with its NUL) or a sequence's count
+
+
+class CdrFields:
+    """
+    The fields of a little-endian CDR message, read in definition order.
+
+    A reader of the few types valve_sim analyses live (std_msgs/Float64,
+    sensor_msgs/FluidPressure, sensor_msgs/JointState) that skips rclpy's
+    deserialisation into message objects: read_message() gives an object with the same
+    attribute names. Raises struct.error or ValueError on bytes too short.
+    """
+
+    def __init__(self, data):
+        self.data, self.offset = data, len(ENCAPSULATION)
+
+    def _align(self, size):
+        self.offset += -(self.offset - len(ENCAPSULATION)) % size
+
+    def header(self):
+        sec, nanosec = STAMP.unpack_from(self.data, self.offset)
+        self.offset += STAMP.size
+        frame_id = self.string()
+        return _Fields(stamp=_Fields(sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+    def string(self):
+        self._align(COUNT.size)
+        (length,) = COUNT.unpack_from(self.data, self.offset)
+        start = self.offset + COUNT.size
+        self.offset = start + length
+        if self.offset > len(self.data):
+            raise ValueError('a string runs past the end of the message')
+        return bytes(self.data[start:self.offset - 1]).decode()
+
+    def strings(self):
+        self._align(COUNT.size)
+        (count,) = COUNT.unpack_from(self.data, self.offset)
+        self.offset += COUNT.size
+        return [self.string() for _ in range(count)]
+
+    def float64(self):
+        self._align(FLOAT64.size)
+        (value,) = FLOAT64.unpack_from(self.data, self.offset)
+        self.offset += FLOAT64.size
+        return value
+
+    def float64s(self):
+        self._align(COUNT.size)
+        (count,) = COUNT.unpack_from(self.data, self.offset)
+        self.offset += COUNT.size
+        if not count:
+            return ()
+        self._align(FLOAT64.size)
+        values = struct.unpack_from(f'<{count}d', self.data, self.offset)
+        self.offset += count * FLOAT64.size
+        return values
+
+
+class _Fields:
+    """A read message (or header, stamp): its fields as attributes."""
+
+    def __init__(self, **fields):
+        self.__dict__.update(fields)
+
+
+def read_message(type_name, data):
+    """
+    Return the fields of a message of type_name ('pkg/msg/Type') from its CDR bytes.
+
+    None if this reader does not read the type or the encoding (big-endian); raises
+    struct.error or ValueError on bytes too short for the type.
+    """
+    if len(data) < len(ENCAPSULATION) or data[1] != 1:
+        return None
+    fields = CdrFields(data)
+    if type_name == 'std_msgs/msg/Float64':
+        return _Fields(data=fields.float64())
+    if type_name == 'sensor_msgs/msg/FluidPressure':
+        header = fields.header()
+        return _Fields(header=header, fluid_pressure=fields.float64(), variance=fields.float64())
+    if type_name == 'sensor_msgs/msg/JointState':
+        header = fields.header()
+        return _Fields(header=header, name=fields.strings(), position=fields.float64s(),
+                       velocity=fields.float64s(), effort=fields.float64s())
+    return None

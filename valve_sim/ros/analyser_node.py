@@ -52,9 +52,12 @@ name the QoS of each topic; the bag keeps the publishers' offers.
 How nothing is lost. Subscriptions have a deep queue (queue_depth per topic, 1 s at
 1 kHz by default), filled by the middleware's own threads; a reliable publisher's
 messages are not dropped on the way. The
-executor never runs them (their callback group is closed to it): a timer every
-drain_period takes all waiting messages of every topic in one go, writes them and
-feeds the analysis; taking them directly costs a fraction of a callback per
+executor (rclpy's EventsExecutor where there is one, as valve_node's) never runs them:
+the node leaves them out of the subscriptions it gives an executor. A timer every
+drain_period takes all waiting messages of every topic in one go (valve_sim.ros.raw_take,
+as valve_node takes its inputs), writes them and feeds the analysis, which reads the
+analysed fields from the CDR bytes (valve_sim.recording.cdr.read_message) instead of
+building rclpy messages; taking them directly costs a fraction of a callback per
 message. Every flush_interval the open chunk is completed and handed to the
 operating system, so a hard kill loses at most that much. SIGINT and SIGTERM
 end the spin; the node then takes what is still queued, measures (and
@@ -62,9 +65,9 @@ publishes) the open steps on what it has, and closes the file.
 """
 
 import argparse
-from dataclasses import dataclass
 import os
 from pathlib import Path
+import struct
 import sys
 import textwrap
 import time
@@ -72,10 +75,8 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 import rclpy
-from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -95,9 +96,11 @@ from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
 from valve_sim.core.catalogue import ANALYSER_DOUBLES, ANALYSER_SPECS
 from valve_sim.core.errors import InputFileError, USER_ERRORS
 from valve_sim.recording.bag import BagWriter
-from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
+from valve_sim.recording.cdr import read_message
+from valve_sim.recording.valve_topics import TOPIC_TYPES
 from valve_sim.ros import diagnostics, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
+from valve_sim.ros.recorder import Recorder
 from valve_sim.ros.ros_parameters import declare
 
 
@@ -127,7 +130,6 @@ MEASURES_QOS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
-READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
 # The node's own doubles (read-only), from the parameter catalogue: step_threshold,
 # step_merge_time, drain_period, flush_interval. It declares them after ambient_pressure
 # (ANALYSER_DOUBLES: by default the standard atmosphere).
@@ -163,95 +165,6 @@ PLAIN_PARAMETERS = {  # name: (default, description, descriptor constraints)
         if kind == 'topic' or ROLE[name].joint
     },
 }
-
-
-class RecorderGroup(CallbackGroup):
-    """
-    A callback group the executor never runs.
-
-    The recorder takes its subscriptions' messages itself.
-    """
-
-    def can_execute(self, entity):
-        return False
-
-    def beginning_execution(self, entity):
-        return False
-
-    def ending_execution(self, entity):
-        pass
-
-
-@dataclass
-class RecordedTopic:
-    """
-    A subscribed topic.
-
-    Its subscription, type, bag channel (created on subscribing), extractor, counters.
-    """
-
-    subscription: object
-    type_name: str
-    extractor: Extractor = None
-    channel: int = None
-    count: int = 0
-    single_publisher: bool = (
-        False  # then gaps in the publication sequence numbers are lost messages
-    )
-    last_sequence: int = None
-    lost: int = 0
-    qos: str = ''  # reliability and durability of the subscription
-
-
-def subscription_qos(offers, depth):
-    """
-    Return the QoSProfile to record a topic with, as rosbag2 chooses it.
-
-    offers: the QoSProfiles of its publishers. Reliable only if every publisher is
-    (a reliable subscription never hears a best-effort publisher), else best effort;
-    transient local only if every publisher is (so their stored samples come too),
-    else volatile. Keep last depth messages.
-    """
-    def every(policy_of, value):
-        return all(policy_of(offer) == value for offer in offers)
-
-    return QoSProfile(
-        depth=depth,
-        reliability=(
-            ReliabilityPolicy.RELIABLE
-            if every(lambda offer: offer.reliability, ReliabilityPolicy.RELIABLE)
-            else ReliabilityPolicy.BEST_EFFORT
-        ),
-        durability=(
-            DurabilityPolicy.TRANSIENT_LOCAL
-            if every(lambda offer: offer.durability, DurabilityPolicy.TRANSIENT_LOCAL)
-            else DurabilityPolicy.VOLATILE
-        ),
-    )
-
-
-def qos_name(qos):
-    """Return 'reliable/volatile' style name of a QoSProfile's reliability and durability."""
-    return f'{qos.reliability.name.lower()}/{qos.durability.name.lower()}'
-
-
-def qos_offer(qos):
-    """
-    Convert an rclpy QoSProfile to an offer dict.
-
-    The dict is one offer as valve_sim.recording.bag.qos_profiles_yaml() takes them.
-    """
-    return {
-        'history': qos.history.name.lower(),
-        'depth': qos.depth,
-        'reliability': qos.reliability.name.lower(),
-        'durability': qos.durability.name.lower(),
-        'deadline_ns': qos.deadline.nanoseconds,
-        'lifespan_ns': qos.lifespan.nanoseconds,
-        'liveliness': qos.liveliness.name.lower(),
-        'liveliness_lease_duration_ns': qos.liveliness_lease_duration.nanoseconds,
-        'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions,
-    }
 
 
 def measures_message(record, name, hardware_id, bag, start=None):
@@ -305,27 +218,122 @@ def measures_from_message(array):
     }
 
 
+class StepMeasures:
+    """
+    The measures publisher: every step of the applied inlet flow measured, saved and published.
+
+    node: the analyser node (it publishes step_measures and logs); signal_map: where each
+    signal is found; step_threshold [m^3/s] and step_merge_time [s] as the parameters;
+    hardware_id: the status's; bag_path: the recording (the measures file goes beside it).
+    The recorder hands it each message of an analysed topic (add), and asks it which
+    type of a topic it reads (type_to_record) and how (extractor).
+    """
+
+    def __init__(self, node, signal_map, step_threshold, step_merge_time, hardware_id,
+                 bag_path):
+        self.node, self.signal_map, self.hardware_id = node, signal_map, hardware_id
+        self.bag_name = bag_path.name
+        self.file = MeasuresFile(bag_path.with_suffix('.measures.json'), bag_path.name)
+        self.joiner = Joiner(optional=('tank_pressure',))
+        self.analysis = StepAnalysis(step_threshold, step_merge_time)
+        self.publisher = node.create_publisher(DiagnosticArray, 'step_measures', MEASURES_QOS)
+
+    @property
+    def count(self):
+        """Return the number of steps measured so far."""
+        return self.file.count
+
+    def type_to_record(self, topic, type_names):
+        """
+        Return the type to record a topic with, of the types its publishers use.
+
+        Several types on one topic (a rogue publisher): the type the analysis reads for
+        the topic's roles, else valve_node's type of a topic of that name, else the first.
+        Returns (type name, whether the analysis can read it).
+        """
+        roles = self.signal_map.roles_of(topic)
+        readable = [
+            name for name in type_names
+            if all(name in TYPES.get(role, (JOINT_STATE, FLOAT64)) for role in roles)
+        ]
+        own = TOPIC_TYPES.get(topic.rsplit('/', 1)[-1])
+        preferred = [name for name in readable if name == own] + readable + list(type_names)
+        return preferred[0], bool(readable)
+
+    def extractor(self, topic, type_name):
+        """
+        Return the Extractor of an analysed topic.
+
+        None for the others, or (logged) for a type it cannot read.
+        """
+        roles = self.signal_map.roles_of(topic)
+        try:
+            return Extractor(topic, type_name, roles, self.signal_map) if roles else None
+        except InputFileError as error:
+            self.node.get_logger().error(f'{error}: {topic} is recorded but not analysed')
+            return None
+
+    def add(self, recorded, data, received_ns):
+        """Analyse a message of an analysed topic (a RecordedTopic), received at received_ns."""
+        message = self._message(recorded, data)
+        for role, time_ns, value in recorded.extractor.samples(message, received_ns):
+            self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
+
+    @staticmethod
+    def _message(recorded, data):
+        """Return the fields of a message: read from its CDR bytes, else by rclpy."""
+        try:
+            message = read_message(recorded.type_name, data)
+        except (struct.error, ValueError, UnicodeDecodeError):
+            message = None
+        return message or deserialize_message(data, recorded.subscription.msg_type)
+
+    def _measured(self, records):
+        """Append step records to the JSON file and publish them."""
+        for record in records:
+            try:
+                self.file.append(record)
+            except OSError as error:  # name the file: a full disk's error does not
+                raise OSError(error.errno, error.strerror, str(self.file.path)) from error
+            message = measures_message(
+                record,
+                diagnostics.status_name(self.node, MEASURES_TASK),
+                self.hardware_id,
+                self.bag_name,
+                self.analysis.first_time,
+            )
+            self.node.get_logger().info(message.status[0].message)
+            self.publisher.publish(message)
+
+    def finish(self):
+        """Measure the open steps on what there is (the recording ends)."""
+        self._measured(self.analysis.add_rows(self.joiner.finish()) + self.analysis.finish())
+
+
 class ValveAnalyser(Node):
     """
-    Records the configured topics to one MCAP file.
+    analyser_node: a recorder of the configured topics to one MCAP file, and a measures publisher.
 
-    It also measures every step of the applied inlet flow.
+    The recorder (valve_sim.ros.recorder.Recorder) hands the analysed topics' messages to
+    the measures publisher (StepMeasures), which measures every step of the applied
+    inlet flow; the node declares the parameters, runs both on its timers and
+    publishes the recording status.
     """
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.clock_guard = GuardedTimeSource.install(self)
         settings = self._declare_parameters()
-        self.signal_map = SignalMap(
+        signal_map = SignalMap(
             topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
             joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
             ambient_pressure=settings['ambient_pressure'],
         )
-        self.wanted = dict.fromkeys(
+        wanted = dict.fromkeys(
             [self.resolve_topic_name(t) for t in settings['topics']]
-            + list(self.signal_map.topics.values())
+            + list(signal_map.topics.values())
         )
-        self.optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
+        optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
@@ -333,29 +341,19 @@ class ValveAnalyser(Node):
             custom_data={'recorded_by': 'valve_sim analyser_node ' + self.hardware_id},
             new=True,
         )
-        self.measures = MeasuresFile(
-            self.bag.path.with_suffix('.measures.json'), self.bag.path.name
-        )
-        self.joiner = Joiner(optional=('tank_pressure',))
-        self.analysis = StepAnalysis(settings['step_threshold'], settings['step_merge_time'])
-        self.flush_interval = settings['flush_interval']
-        self.last_flush = self.last_loss_warning = time.monotonic()
-        self.recorded = {}
-        self.unrecordable = {}  # topic -> why it cannot be recorded
-        self.other_types = {}  # recorded topic -> types of other publishers, not recorded
-        self.unreadable_since = {}  # topic -> when only unreadable types were first seen
-        self.queue_depth = settings['queue_depth']
-        self.recorder_group = RecorderGroup()
-        self.measures_publisher = self.create_publisher(
-            DiagnosticArray, 'step_measures', MEASURES_QOS
-        )
+        self.measures = StepMeasures(self, signal_map, settings['step_threshold'],
+                                     settings['step_merge_time'], self.hardware_id,
+                                     self.bag.path)
+        self.measures_publisher = self.measures.publisher
+        self.recorder = Recorder(self, self.bag, wanted, optional, settings['queue_depth'],
+                                 settings['flush_interval'], self.measures)
         self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         # On the steady clock: recording must not stop while a simulation's /clock pauses.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(DISCOVERY_PERIOD, self._discover, clock=steady)
-        self.create_timer(settings['drain_period'], self.drain, clock=steady)
+        self.create_timer(DISCOVERY_PERIOD, self.recorder.discover, clock=steady)
+        self.create_timer(settings['drain_period'], self.recorder.drain, clock=steady)
         self.create_timer(1.0, self._publish_status, clock=steady)
-        self.get_logger().info(f'recording {", ".join(self.wanted)} to {self.bag.path}')
+        self.get_logger().info(f'recording {", ".join(wanted)} to {self.bag.path}')
 
     def _declare_parameters(self):
         """Declare the parameters (all read-only: restart to change); returns {name: value}."""
@@ -389,217 +387,20 @@ class ValveAnalyser(Node):
             path = folder / f'{stem}_{k}{suffix}'
         return path
 
-    def _discover(self):
+    @property
+    def subscriptions(self):
         """
-        Subscribe to each wanted topic once it has a publisher, with a QoS its publishers match.
+        Return the subscriptions an executor runs: none of the recorded topics', drain takes them.
 
-        Also note who publishes what.
+        Both executors ask the node for these (the EventsExecutor ignores callback groups).
         """
-        types = dict(self.get_topic_names_and_types())
-        for topic in [t for t in self.wanted if t not in self.recorded and t in types]:
-            offers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
-            if not offers:
-                continue  # only subscribers so far: the publishers' QoS decides ours
-            type_name, readable = self._type_to_record(topic, types[topic])
-            if not readable and self._still_waiting_for_a_readable_type(topic):
-                continue
-            try:
-                message_type = message_class(type_name)
-            except (ImportError, AttributeError, ValueError) as error:
-                self.unrecordable[topic] = f'no message type {type_name} here'
-                self.get_logger().error(
-                    f'cannot record {topic}: no message type {type_name} ({error})'
-                )
-                self.wanted.pop(topic)
-                continue
-            qos = subscription_qos(offers, self.queue_depth)
-            # In the bag from now on, with its publishers' offers, as rosbag2 creates a topic
-            # when it subscribes (listed with its count even if no message ever comes).
-            channel = self.bag.add_topic(topic, type_name, [qos_offer(o) for o in offers])
-            self.recorded[topic] = RecordedTopic(
-                self.create_subscription(
-                    message_type,
-                    topic,
-                    lambda _: None,
-                    qos,
-                    callback_group=self.recorder_group,
-                    raw=True,
-                ),
-                type_name,
-                self._extractor(topic, type_name),
-                channel=channel,
-                qos=qos_name(qos),
-            )
-            self.get_logger().info(
-                f'recording {topic} ({type_name}) with QoS {qos_name(qos)}, depth '
-                f'{qos.depth}, for {len(offers)} publisher(s) offering '
-                f'{", ".join(sorted({qos_name(offer) for offer in offers}))}'
-            )
-        for topic, recorded in self.recorded.items():
-            recorded.single_publisher = self.count_publishers(topic) == 1
-            others = sorted(set(types.get(topic, ())) - {recorded.type_name})
-            if others and others != self.other_types.get(topic):
-                self.get_logger().warn(
-                    f'{topic} also has publishers of {", ".join(others)}: recording '
-                    f'{recorded.type_name} only (rosbag2 would record neither: it records a '
-                    'topic of one type only)'
-                )
-            self.other_types[topic] = others
-
-    def _type_to_record(self, topic, type_names):
-        """
-        Return the type to record a topic with, of the types its publishers use.
-
-        Several types on one topic (a rogue publisher): the type the analysis reads for
-        the topic's roles, else valve_node's type of a topic of that name, else the first.
-        Returns (type name, whether the analysis can read it).
-        """
-        roles = self.signal_map.roles_of(topic)
-        readable = [
-            name for name in type_names
-            if all(name in TYPES.get(role, (JOINT_STATE, FLOAT64)) for role in roles)
-        ]
-        own = TOPIC_TYPES.get(topic.rsplit('/', 1)[-1])
-        preferred = [name for name in readable if name == own] + readable + list(type_names)
-        return preferred[0], bool(readable)
-
-    def _still_waiting_for_a_readable_type(self, topic):
-        """
-        Whether to wait before recording an analysed topic of no type the analysis reads.
-
-        Discovery reports publishers in any order: a rogue publisher found first would
-        otherwise fix the recorded type before valve_node's is seen (only the rogue's
-        messages go unrecorded meanwhile). After READABLE_TYPE_GRACE s without a readable
-        publisher the other type is recorded, as rosbag2 would.
-        """
-        first_seen = self.unreadable_since.setdefault(topic, time.monotonic())
-        return time.monotonic() - first_seen < READABLE_TYPE_GRACE
-
-    def _extractor(self, topic, type_name):
-        """
-        Return the Extractor of an analysed topic.
-
-        None for the others, or (logged) for a type it cannot read.
-        """
-        roles = self.signal_map.roles_of(topic)
-        try:
-            return Extractor(topic, type_name, roles, self.signal_map) if roles else None
-        except InputFileError as error:
-            self.get_logger().error(f'{error}: {topic} is recorded but not analysed')
-            return None
-
-    def drain(self):
-        """Take every queued message of every topic: write it, and analyse those of the signals."""
-        for topic, recorded in self.recorded.items():
-            subscription = recorded.subscription
-            with subscription.handle:
-                while (
-                    taken := subscription.handle.take_message(subscription.msg_type, True)
-                ) is not None:
-                    self._record(topic, recorded, *taken)
-        if time.monotonic() - self.last_flush >= self.flush_interval:
-            self.bag.flush()
-            self.last_flush = time.monotonic()
-
-    def _record(self, topic, recorded, data, info):
-        self.bag.write(
-            recorded.channel, data, info['received_timestamp'], info['source_timestamp']
-        )
-        recorded.count += 1
-        sequence = info['publication_sequence_number']
-        if (
-            recorded.single_publisher
-            and recorded.last_sequence is not None
-            and sequence > recorded.last_sequence + 1
-        ):
-            recorded.lost += sequence - recorded.last_sequence - 1
-            self._warn_lost(topic, recorded.lost)
-        recorded.last_sequence = sequence
-        if recorded.extractor:
-            message = deserialize_message(data, recorded.subscription.msg_type)
-            for role, time_ns, value in recorded.extractor.samples(
-                message, info['received_timestamp']
-            ):
-                self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
-
-    def _warn_lost(self, topic, lost):
-        """
-        Log lost messages at most once a second.
-
-        rclpy's own throttling inspects the stack: too slow here.
-        """
-        if time.monotonic() - self.last_loss_warning >= 1.0:
-            self.last_loss_warning = time.monotonic()
-            self.get_logger().warn(
-                f'{topic}: {lost} message(s) lost so far before reaching the analyser '
-                '(gaps in the publication sequence numbers)'
-            )
-
-    def _measured(self, records):
-        """Append step records to the JSON file and publish them."""
-        for record in records:
-            try:
-                self.measures.append(record)
-            except OSError as error:  # name the file: a full disk's error does not
-                raise OSError(error.errno, error.strerror, str(self.measures.path)) from error
-            message = measures_message(
-                record,
-                diagnostics.status_name(self, MEASURES_TASK),
-                self.hardware_id,
-                self.bag.path.name,
-                self.analysis.first_time,
-            )
-            self.get_logger().info(message.status[0].message)
-            self.measures_publisher.publish(message)
+        taken = self.recorder.subscriptions
+        return [s for s in super().subscriptions if s not in taken]
 
     def _publish_status(self):
-        """
-        Publish the recording status on /diagnostics.
-
-        ERROR once a topic cannot be recorded; else WARN while a topic has no
-        message or when some were lost; else OK. An optional topic (OPTIONAL_TOPICS)
-        counts once it has a publisher.
-        """
-        counts = {
-            topic: (self.recorded[topic].count if topic in self.recorded else 0)
-            for topic in self.wanted
-            if topic in self.recorded or topic not in self.optional
-        }
-        lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
-        waiting = [topic for topic, count in counts.items() if count == 0]
-        values = {
-            'file': str(self.bag.path),
-            'messages': str(self.bag.message_count),
-            'steps measured': str(self.measures.count),
-            **{f'messages {topic}': str(count) for topic, count in counts.items()},
-            **{f'qos {topic}': recorded.qos for topic, recorded in self.recorded.items()},
-            **{f'lost {topic}': str(count) for topic, count in lost.items()},
-        }
-        values.update({f'cannot record {t}': why for t, why in self.unrecordable.items()})
-        mixed = {topic: others for topic, others in self.other_types.items() if others}
-        values.update(
-            {f'other types on {topic}': ', '.join(others) for topic, others in mixed.items()}
-        )
-        values['refused /clock messages'] = str(self.clock_guard.refused)
-        message = (
-            f'cannot record {", ".join(self.unrecordable)}'
-            if self.unrecordable
-            else f'no messages yet on {", ".join(waiting)}'
-            if waiting
-            else 'publishers of other types on '
-            + ', '.join(f'{t} ({", ".join(o)}: not recorded)' for t, o in mixed.items())
-            if mixed
-            else f'{sum(lost.values())} message(s) lost before reaching the analyser'
-            if lost
-            else f'recording to {self.bag.path.name}'
-        )
-        level = (
-            DiagnosticStatus.ERROR
-            if self.unrecordable
-            else DiagnosticStatus.WARN
-            if waiting or lost or mixed or self.clock_guard.refused
-            else DiagnosticStatus.OK
-        )
+        """Publish the recording status on /diagnostics (Recorder.status)."""
+        level, message, values = self.recorder.status(self.measures.count,
+                                                      self.clock_guard.refused)
         status = DiagnosticStatus(
             level=level,
             name=diagnostics.status_name(self, RECORDING_TASK),
@@ -627,8 +428,8 @@ class ValveAnalyser(Node):
 
     def close(self):
         """Take what is still queued, measure the open steps on what there is, close the file."""
-        self.drain()
-        self._measured(self.analysis.add_rows(self.joiner.finish()) + self.analysis.finish())
+        self.recorder.drain()
+        self.measures.finish()
         self.bag.close()
         self.get_logger().info(
             f'closed {self.bag.path}: {self.bag.message_count} messages, '
@@ -646,7 +447,7 @@ def record(stop):
     node = ValveAnalyser()
     try:
         try:
-            spinning.spin_until(node, SingleThreadedExecutor(), stop)
+            spinning.spin_until(node, spinning.EXECUTORS[spinning.DEFAULT_EXECUTOR](), stop)
         finally:
             node.close()
     except OSError as error:

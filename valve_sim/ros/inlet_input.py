@@ -24,7 +24,8 @@ bounds how often it waits for that lock. Each message is checked as CDR bytes (t
 double read from them, no message object) against the physical limits
 (valve_sim.core.limits) and counted as accepted or rejected; only the last good
 value matters to the tick. What the middleware dropped before the node took it
-shows, for a single publisher, as gaps in its publication sequence numbers (lost).
+shows, for a single publisher, as gaps in its publication sequence numbers (lost),
+counted by the raw taker both nodes share (valve_sim.ros.raw_take).
 Nothing is logged per message: report() gives the rejections since the last report,
 for one rate-limited warning.
 
@@ -34,9 +35,9 @@ message is read and which values are valid.
 """
 
 import struct
-import time
 
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
+from valve_sim.ros.raw_take import RawTaker
 
 
 FLOAT64_CDR = struct.Struct('<d')  # std_msgs/Float64 data after the 4-byte CDR header
@@ -45,7 +46,7 @@ STRING_LENGTH = struct.Struct('<I')
 FRAME_ID_OFFSET = CDR_HEADER + 8  # std_msgs/Header: stamp (int32 sec, uint32 nanosec), frame_id
 
 
-class CheckedInput:
+class CheckedInput(RawTaker):
     """
     One input topic: the last good value and counts of what was received.
 
@@ -57,17 +58,15 @@ class CheckedInput:
     """
 
     def __init__(self, value):
+        super().__init__()
         self.value = value
         self.accepted = 0
         self.rejected = 0
-        self.lost = 0
-        self.single_publisher = False
         self.changed = False
         self.received = False  # a good message came since the last stamp()
         self.received_ns = None  # clock time [ns] of the tick after the last good message
         self.last_rejection = ''
         self.reported_rejected = 0  # rejected at the last report()
-        self._last_sequence = None
 
     def problem(self, value):
         """Return why value is not a valid input, or None."""
@@ -99,32 +98,9 @@ class CheckedInput:
             return False
         return self.offer(value)
 
-    def take(self, subscription, limit, deadline_ns):
-        """
-        Take up to limit queued messages of subscription, none after deadline_ns.
-
-        subscription: an rclpy raw subscription that no executor runs; deadline_ns
-        [ns] on time.perf_counter_ns(). Returns how many were taken.
-        """
-        handle, message_type = subscription.handle, subscription.msg_type
-        taken = 0
-        with handle:
-            while taken < limit and time.perf_counter_ns() < deadline_ns:
-                message = handle.take_message(message_type, True)
-                if message is None:
-                    break
-                data, info = message
-                self._count_gap(info['publication_sequence_number'])
-                self.offer_cdr(data)
-                taken += 1
-        return taken
-
-    def _count_gap(self, sequence):
-        """Count the messages missing before this one, if they all came from one publisher."""
-        last = self._last_sequence
-        if self.single_publisher and last is not None and sequence is not None:
-            self.lost += max(sequence - last - 1, 0)
-        self._last_sequence = sequence
+    def receive(self, data, info):
+        """Take a message as RawTaker.take() hands it over: its CDR bytes are checked."""
+        self.offer_cdr(data)
 
     def stamp(self, now_ns):
         """At a tick: a good message received since the last tick arrived by now_ns [ns]."""

@@ -51,7 +51,7 @@ from std_msgs.msg import Float64
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
-from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
+from valve_sim.recording.cdr import ENCAPSULATION, STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
@@ -82,7 +82,13 @@ def stamp_ns(data):
 
 
 def clock_message(time_ns):
-    return Clock(clock=Time(sec=time_ns // NS_PER_S, nanosec=time_ns % NS_PER_S))
+    """
+    Return a rosgraph_msgs/Clock of time_ns as its CDR bytes, which rclpy publishes as they are.
+
+    Built directly (a Time is the whole message): an rclpy message built and serialized
+    costs the driver about ten times as much on every tick.
+    """
+    return ENCAPSULATION + STAMP.pack(*divmod(time_ns, NS_PER_S))
 
 
 class WaitTopic:

@@ -1,0 +1,280 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+analyser_node's recorder: each wanted topic subscribed as rosbag2 does, taken raw, written.
+
+Recorder subscribes a node to each wanted topic once it has a publisher, with the QoS
+rosbag2 would choose (subscription_qos), of whatever type the graph reports for it,
+and adds it to the bag with its publishers' offers. drain() takes every queued
+message of every topic (valve_sim.ros.raw_take, the taker valve_node's inputs use),
+writes it to the bag, counts it and the messages a single publisher lost, and hands
+the analysed topics' messages to the measures publisher (analyser_node.StepMeasures),
+which also says which type of a topic it reads and how (type_to_record, extractor).
+status() is the recording status analyser_node publishes on /diagnostics. The node's
+docstring (valve_sim.ros.analyser_node) says what is recorded and how nothing is lost.
+"""
+
+import functools
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from valve_sim.recording.valve_topics import message_class
+from valve_sim.ros.raw_take import RawTaker
+
+
+READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
+
+
+class RecordedTopic(RawTaker):
+    """
+    A subscribed topic: its raw subscription, type, bag channel, extractor, counters.
+
+    Taken by the drain (RawTaker.take), each message handed to receive(data, info);
+    lost counts the gaps of a single publisher's sequence numbers.
+    """
+
+    def __init__(self, subscription, type_name, receive, extractor=None, channel=None, qos=''):
+        super().__init__(receive)
+        self.subscription, self.type_name = subscription, type_name
+        self.extractor, self.channel = extractor, channel
+        self.count = 0
+        self.qos = qos  # reliability and durability of the subscription
+
+
+def subscription_qos(offers, depth):
+    """
+    Return the QoSProfile to record a topic with, as rosbag2 chooses it.
+
+    offers: the QoSProfiles of its publishers. Reliable only if every publisher is
+    (a reliable subscription never hears a best-effort publisher), else best effort;
+    transient local only if every publisher is (so their stored samples come too),
+    else volatile. Keep last depth messages.
+    """
+    def every(policy_of, value):
+        return all(policy_of(offer) == value for offer in offers)
+
+    return QoSProfile(
+        depth=depth,
+        reliability=(
+            ReliabilityPolicy.RELIABLE
+            if every(lambda offer: offer.reliability, ReliabilityPolicy.RELIABLE)
+            else ReliabilityPolicy.BEST_EFFORT
+        ),
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL
+            if every(lambda offer: offer.durability, DurabilityPolicy.TRANSIENT_LOCAL)
+            else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+def qos_name(qos):
+    """Return 'reliable/volatile' style name of a QoSProfile's reliability and durability."""
+    return f'{qos.reliability.name.lower()}/{qos.durability.name.lower()}'
+
+
+def qos_offer(qos):
+    """
+    Convert an rclpy QoSProfile to an offer dict.
+
+    The dict is one offer as valve_sim.recording.bag.qos_profiles_yaml() takes them.
+    """
+    return {
+        'history': qos.history.name.lower(),
+        'depth': qos.depth,
+        'reliability': qos.reliability.name.lower(),
+        'durability': qos.durability.name.lower(),
+        'deadline_ns': qos.deadline.nanoseconds,
+        'lifespan_ns': qos.lifespan.nanoseconds,
+        'liveliness': qos.liveliness.name.lower(),
+        'liveliness_lease_duration_ns': qos.liveliness_lease_duration.nanoseconds,
+        'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions,
+    }
+
+
+class Recorder:
+    """
+    Records a node's wanted topics to a BagWriter; hands the analysed ones to the measures.
+
+    node: the rclpy Node that subscribes (and logs); bag: the BagWriter; wanted: the
+    topics to record (full names, in order); optional: those of them a status does not
+    wait for until they have a publisher; queue_depth: each subscription's queue;
+    flush_interval [s]: the longest time written data waits for its chunk to be
+    flushed; measures: the measures publisher (type_to_record, extractor, add).
+    """
+
+    def __init__(self, node, bag, wanted, optional, queue_depth, flush_interval, measures):
+        self.node, self.bag, self.measures = node, bag, measures
+        self.wanted, self.optional = wanted, optional
+        self.queue_depth, self.flush_interval = queue_depth, flush_interval
+        self.last_flush = self.last_loss_warning = time.monotonic()
+        self.recorded = {}
+        self.unrecordable = {}  # topic -> why it cannot be recorded
+        self.other_types = {}  # recorded topic -> types of other publishers, not recorded
+        self.unreadable_since = {}  # topic -> when only unreadable types were first seen
+
+    @property
+    def subscriptions(self):
+        """Return the set of the recorded topics' subscriptions: the drain takes them."""
+        return {recorded.subscription for recorded in self.recorded.values()}
+
+    def discover(self):
+        """
+        Subscribe to each wanted topic once it has a publisher, with a QoS its publishers match.
+
+        Also note who publishes what.
+        """
+        types = dict(self.node.get_topic_names_and_types())
+        for topic in [t for t in self.wanted if t not in self.recorded and t in types]:
+            offers = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
+            if not offers:
+                continue  # only subscribers so far: the publishers' QoS decides ours
+            type_name, readable = self.measures.type_to_record(topic, types[topic])
+            if not readable and self._still_waiting_for_a_readable_type(topic):
+                continue
+            try:
+                message_type = message_class(type_name)
+            except (ImportError, AttributeError, ValueError) as error:
+                self.unrecordable[topic] = f'no message type {type_name} here'
+                self.node.get_logger().error(
+                    f'cannot record {topic}: no message type {type_name} ({error})'
+                )
+                self.wanted.pop(topic)
+                continue
+            qos = subscription_qos(offers, self.queue_depth)
+            # In the bag from now on, with its publishers' offers, as rosbag2 creates a topic
+            # when it subscribes (listed with its count even if no message ever comes).
+            channel = self.bag.add_topic(topic, type_name, [qos_offer(o) for o in offers])
+            self.recorded[topic] = recorded = RecordedTopic(
+                self.node.create_subscription(message_type, topic, lambda _: None, qos,
+                                              raw=True),
+                type_name,
+                None,
+                self.measures.extractor(topic, type_name),
+                channel=channel,
+                qos=qos_name(qos),
+            )
+            recorded.receive = functools.partial(self._record, recorded)
+            self.node.get_logger().info(
+                f'recording {topic} ({type_name}) with QoS {qos_name(qos)}, depth '
+                f'{qos.depth}, for {len(offers)} publisher(s) offering '
+                f'{", ".join(sorted({qos_name(offer) for offer in offers}))}'
+            )
+        for topic, recorded in self.recorded.items():
+            recorded.single_publisher = self.node.count_publishers(topic) == 1
+            others = sorted(set(types.get(topic, ())) - {recorded.type_name})
+            if others and others != self.other_types.get(topic):
+                self.node.get_logger().warn(
+                    f'{topic} also has publishers of {", ".join(others)}: recording '
+                    f'{recorded.type_name} only (rosbag2 would record neither: it records a '
+                    'topic of one type only)'
+                )
+            self.other_types[topic] = others
+
+    def _still_waiting_for_a_readable_type(self, topic):
+        """
+        Whether to wait before recording an analysed topic of no type the analysis reads.
+
+        Discovery reports publishers in any order: a rogue publisher found first would
+        otherwise fix the recorded type before valve_node's is seen (only the rogue's
+        messages go unrecorded meanwhile). After READABLE_TYPE_GRACE s without a readable
+        publisher the other type is recorded, as rosbag2 would.
+        """
+        first_seen = self.unreadable_since.setdefault(topic, time.monotonic())
+        return time.monotonic() - first_seen < READABLE_TYPE_GRACE
+
+    def drain(self):
+        """Take every queued message of every topic: write it, and analyse those of the signals."""
+        for topic, recorded in self.recorded.items():
+            lost = recorded.lost
+            recorded.take(recorded.subscription)
+            if recorded.lost > lost:
+                self._warn_lost(topic, recorded.lost)
+        if time.monotonic() - self.last_flush >= self.flush_interval:
+            self.bag.flush()
+            self.last_flush = time.monotonic()
+
+    def _record(self, recorded, data, info):
+        """Write one message taken from a recorded topic; analyse it if it carries a signal."""
+        received = info['received_timestamp']
+        self.bag.write(recorded.channel, data, received, info['source_timestamp'])
+        recorded.count += 1
+        if recorded.extractor:
+            self.measures.add(recorded, data, received)
+
+    def _warn_lost(self, topic, lost):
+        """
+        Log lost messages at most once a second.
+
+        rclpy's own throttling inspects the stack: too slow here.
+        """
+        if time.monotonic() - self.last_loss_warning >= 1.0:
+            self.last_loss_warning = time.monotonic()
+            self.node.get_logger().warn(
+                f'{topic}: {lost} message(s) lost so far before reaching the analyser '
+                '(gaps in the publication sequence numbers)'
+            )
+
+    def status(self, steps_measured, refused_clock):
+        """
+        Return the recording status: (level, message, {key: value}).
+
+        ERROR once a topic cannot be recorded; else WARN while a topic has no
+        message or when some were lost; else OK. An optional topic
+        counts once it has a publisher.
+        """
+        counts = {
+            topic: (self.recorded[topic].count if topic in self.recorded else 0)
+            for topic in self.wanted
+            if topic in self.recorded or topic not in self.optional
+        }
+        lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
+        waiting = [topic for topic, count in counts.items() if count == 0]
+        values = {
+            'file': str(self.bag.path),
+            'messages': str(self.bag.message_count),
+            'steps measured': str(steps_measured),
+            **{f'messages {topic}': str(count) for topic, count in counts.items()},
+            **{f'qos {topic}': recorded.qos for topic, recorded in self.recorded.items()},
+            **{f'lost {topic}': str(count) for topic, count in lost.items()},
+        }
+        values.update({f'cannot record {t}': why for t, why in self.unrecordable.items()})
+        mixed = {topic: others for topic, others in self.other_types.items() if others}
+        values.update(
+            {f'other types on {topic}': ', '.join(others) for topic, others in mixed.items()}
+        )
+        values['refused /clock messages'] = str(refused_clock)
+        message = (
+            f'cannot record {", ".join(self.unrecordable)}'
+            if self.unrecordable
+            else f'no messages yet on {", ".join(waiting)}'
+            if waiting
+            else 'publishers of other types on '
+            + ', '.join(f'{t} ({", ".join(o)}: not recorded)' for t, o in mixed.items())
+            if mixed
+            else f'{sum(lost.values())} message(s) lost before reaching the analyser'
+            if lost
+            else f'recording to {self.bag.path.name}'
+        )
+        level = (
+            DiagnosticStatus.ERROR
+            if self.unrecordable
+            else DiagnosticStatus.WARN
+            if waiting or lost or mixed or refused_clock
+            else DiagnosticStatus.OK
+        )
+        return level, message, values
