@@ -90,10 +90,7 @@ def compile_kernels(site_packages):
     compiles its kernels at its first start. Returns the cache files written.
     """
     before = set(Path(site_packages, PACKAGE).rglob('*.nb[ic]'))
-    env = {
-        key: value for key, value in os.environ.items()
-        if key not in ('NUMBA_CACHE_DIR', 'NUMBA_DISABLE_JIT')  # numba's default: beside the code
-    }
+    env = dict(os.environ)  # NUMBA_CACHE_DIR, if set, is where the node will look too
     env['PYTHONPATH'] = os.pathsep.join(filter(None, [site_packages, env.get('PYTHONPATH')]))
     command = [sys.executable, '-m', PACKAGE + '.core.precompile']
     try:
