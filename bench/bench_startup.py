@@ -33,7 +33,8 @@
 #   empty folder), which compiles at its start: what a start costs without the build's
 #   or run.py's compile.
 #
-# The built node starts first, right after the build; then runs alternate between
+# After one bare start that is not counted (the probe's discovery warms up in it), the
+# built node starts first, right after the build; then runs alternate between
 # bare and warm, so load from other work on the machine spreads over both; the cold
 # runs come last. The load average at start and end is printed. valve_node's own
 # "ready" log line gives the part spent computing the steady state and compiling or
@@ -129,7 +130,12 @@ def node_command(kind, prefix):
 
 
 def start_up(probe, kind, index, command, changes, cache=None):
-    """Start one node, return (seconds to its first message, its ready seconds or None)."""
+    """
+    Start one node; return its seconds to the first message, ready seconds and CPU seconds.
+
+    ready: from its log line (None for the bare node); CPU: user + system time it had
+    used by then, which the load of other work stretches less than the wall time.
+    """
     namespace = f'/{kind}{index}'
     subscription = probe.watch(namespace)
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
@@ -148,13 +154,20 @@ def start_up(probe, kind, index, command, changes, cache=None):
                     log.seek(0)
                     raise RuntimeError(f'{kind} node gave no state: {log.read()[-2000:]}')
                 time.sleep(0.005)
+            cpu = cpu_seconds(process.pid)
         finally:
             process.terminate()
             process.wait(timeout=60)
         log.seek(0)
         ready = READY.search(log.read())
     probe.node.destroy_subscription(subscription)
-    return probe.arrived[namespace] - started, float(ready[1]) if ready else None
+    return probe.arrived[namespace] - started, float(ready[1]) if ready else None, cpu
+
+
+def cpu_seconds(pid):
+    """Return the user + system CPU seconds of a running process (/proc/PID/stat)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def summary(values):
@@ -175,12 +188,13 @@ LABELS = {
 
 
 def measure(args, folder):
-    """Build, then start the nodes as planned; return {kind: [(seconds, ready seconds)]}."""
+    """Build, then start the nodes as planned; return {kind: [(seconds, ready, cpu)]}."""
     precompile = [sys.executable, '-m', 'valve_sim.core.precompile']
     subprocess.run(precompile, check=True, env=dict(os.environ), timeout=BUILD_TIMEOUT)
     prefix, build_seconds = colcon_build(folder)
     print(f"colcon build: {build_seconds:.1f} s, the kernels' compile included", flush=True)
     probe = FirstMessage()
+    start_up(probe, 'bare', 'warmup', *node_command('bare', prefix))  # warms DDS and the probe
     plan = (
         [('built', 0)]
         + [(kind, i) for i in range(args.warm) for kind in ('bare', 'warm')]
@@ -190,10 +204,10 @@ def measure(args, folder):
     for kind, i in plan:
         command, changes = node_command(kind, prefix)
         cache = folder / f'cold{i}' if kind == 'cold' else None
-        seconds, ready = start_up(probe, kind, i, command, changes, cache)
-        runs[kind].append((seconds, ready))
+        seconds, ready, cpu = start_up(probe, kind, i, command, changes, cache)
+        runs[kind].append((seconds, ready, cpu))
         print(
-            f'{kind:<5} run {i + 1}: first state after {seconds:6.2f} s'
+            f'{kind:<5} run {i + 1}: first state after {seconds:6.2f} s, {cpu:5.2f} s of CPU'
             + (f' (steady state + kernels {ready:.2f} s)' if ready else ''),
             flush=True,
         )
@@ -217,12 +231,14 @@ def main():
         'load_average_start': load_start,
         'load_average_end': os.getloadavg(),
         'colcon_build_s': build_seconds,
-        **{kind: summary([s for s, _ in values]) for kind, values in runs.items() if values},
+        **{kind: summary([s for s, _, _ in values]) for kind, values in runs.items() if values},
         **{
-            f'{kind}_kernels': summary([r for _, r in values if r is not None])
+            f'{kind}_kernels': summary([r for _, r, _ in values if r is not None])
             for kind, values in runs.items()
-            if any(r is not None for _, r in values)
+            if any(r is not None for _, r, _ in values)
         },
+        **{f'{kind}_cpu': summary([c for _, _, c in values]) for kind, values in runs.items()
+           if values},
     }
     bare = figures['bare']['median_s']
     figures['targets'] = {
@@ -236,7 +252,11 @@ def main():
     print()
     print(f'{"start-up to first state":<44}{"median":>9}{"min":>9}{"max":>9}{"- bare":>9}')
     for kind in LABELS:
-        rows = ((kind, LABELS[kind]), (f'{kind}_kernels', '  of which steady state + kernels'))
+        rows = (
+            (kind, LABELS[kind]),
+            (f'{kind}_kernels', '  of which steady state + kernels'),
+            (f'{kind}_cpu', '  CPU time used by then'),
+        )
         for key, label in rows:
             if key in figures:
                 f = figures[key]
