@@ -18,10 +18,17 @@ The README's two commands, for a machine with nothing but Python 3 and git.
 
     python3 run.py demo [options]   the main job: valve_node + analyser_node, the paper's step
     python3 run.py test [pytest options] [test paths]   the test suite (the paths only, if given)
+    python3 run.py test --quick     the quick tier, for the edit-test loop: the tests of the
+                                    core, analysis and recording wings, no ROS node, no colcon,
+                                    no slow test (test/conftest.py: quick_tier)
+    python3 run.py install          set up .venv and compile the model's kernels, nothing else
 
 Each creates .venv beside this file on first use and installs valve_sim into it
 (editable, with its PyPI dependencies and the ROS 2 Jazzy wheels); it reinstalls
-when setup.py changes. Nothing needs sourcing.
+when setup.py changes. After installing it compiles the numba kernels into their
+cache beside the sources (valve_sim.core.precompile), so that valve_node starts at
+once; `install` does that again (after an edit of valve_sim/core, say). Nothing
+needs sourcing.
 """
 
 import hashlib
@@ -39,9 +46,10 @@ STAMP = VENV / 'valve_sim-installed'
 
 
 def ensure_environment():
+    """Create or update .venv if setup.py changed; return whether it (re)installed."""
     wanted = hashlib.sha256((ROOT / 'setup.py').read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text() == wanted:
-        return
+        return False
     if not (BIN / 'python').exists():
         print(f'run.py: creating virtual environment {VENV}', flush=True)
         venv.EnvBuilder(with_pip=True).create(VENV)
@@ -53,6 +61,16 @@ def ensure_environment():
     subprocess.run(pip + ['--upgrade', 'pip'], check=True)
     subprocess.run(pip + ['--editable', f'{ROOT}[wheels,studies,foxglove,fmu,test]'], check=True)
     STAMP.write_text(wanted)
+    compile_kernels()
+    return True
+
+
+def compile_kernels():
+    """Compile the kernels into numba's cache (beside the sources); a failure only warns."""
+    print('run.py: compiling the model kernels (about 30 s when not cached)', flush=True)
+    if subprocess.call([str(BIN / 'python'), '-m', 'valve_sim.core.precompile']) != 0:
+        print('run.py: the kernels did not compile; valve_node compiles them at its first start',
+              file=sys.stderr)
 
 
 def is_test_path(argument):
@@ -61,10 +79,14 @@ def is_test_path(argument):
 
 
 def main(argv):
-    if not argv or argv[0] not in ('demo', 'test'):
+    if not argv or argv[0] not in ('demo', 'test', 'install'):
         print(__doc__.strip(), file=sys.stderr)
         return 2
-    ensure_environment()
+    installed = ensure_environment()
+    if argv[0] == 'install':
+        if not installed:
+            compile_kernels()
+        return 0
     env = dict(os.environ, MPLBACKEND='Agg')
     if argv[0] == 'demo':
         command = [str(BIN / 'valve-sim'), 'demo', *argv[1:]]

@@ -17,11 +17,20 @@ ament_python package valve_sim: builds with colcon on ROS 2 Jazzy and installs w
 
 On a ROS install, rclpy and the message packages come from ROS (package.xml). In a
 plain virtual environment `pip install -e .[wheels,test]` brings them from PyPI.
+
+`setup.py install`, which a plain `colcon build` runs, also compiles the numba kernels
+beside the installed code (valve_sim.core.precompile), so that the installed valve_node
+starts at once; run.py does the same for its .venv.
 """
 
 from glob import glob
+import os
+from pathlib import Path
+import subprocess
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
 
 
 PACKAGE = 'valve_sim'
@@ -69,6 +78,52 @@ TEST_DEPENDENCIES = [
     'ros-jazzy-ament-package',
 ]
 
+COMPILE_TIMEOUT = 1800  # [s] a cold compile takes 30 s on a quiet machine, minutes loaded
+
+
+def compile_kernels(site_packages):
+    """
+    Compile the kernels of the valve_sim installed in site_packages into numba's cache there.
+
+    Run with this interpreter, in a process of its own that imports the installed copy
+    (not the source tree). A failure is reported and the install goes on: the node then
+    compiles its kernels at its first start. Returns the cache files written.
+    """
+    before = set(Path(site_packages, PACKAGE).rglob('*.nb[ic]'))
+    env = dict(os.environ)  # NUMBA_CACHE_DIR, if set, is where the node will look too
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [site_packages, env.get('PYTHONPATH')]))
+    command = [sys.executable, '-m', PACKAGE + '.core.precompile']
+    try:
+        done = subprocess.run(
+            command, cwd=site_packages, env=env, capture_output=True, text=True,
+            timeout=COMPILE_TIMEOUT,
+        )
+    except (OSError, subprocess.SubprocessError) as error:
+        print(f'valve_sim: kernels not compiled at install ({error}); valve_node compiles '
+              'them at its first start', file=sys.stderr)
+        return []
+    if done.returncode != 0:
+        print(f'valve_sim: kernels not compiled at install (exit code {done.returncode}); '
+              f'valve_node compiles them at its first start:\n{done.stderr[-2000:]}',
+              file=sys.stderr)
+        return []
+    print(done.stdout.strip())
+    return sorted(set(Path(site_packages, PACKAGE).rglob('*.nb[ic]')) - before)
+
+
+class InstallCompilingKernels(install):
+    """setup.py install, then the numba kernels compiled beside the installed code."""
+
+    def run(self):
+        super().run()
+        if self.root:  # a staging copy (a wheel, a distribution package): not where it runs
+            return
+        written = compile_kernels(self.install_lib)
+        if written and self.record:  # colcon's install.log: what the install wrote
+            with open(self.record, 'a') as record:
+                record.writelines(f'{path}\n' for path in written)
+
+
 setup(
     name=PACKAGE,
     version='0.1.0',
@@ -92,6 +147,7 @@ setup(
         'test': TEST_DEPENDENCIES,
     },
     zip_safe=True,
+    cmdclass={'install': InstallCompilingKernels},
     maintainer='valve_sim developers',
     maintainer_email='dev@valve-sim.local',
     description=(

@@ -19,8 +19,12 @@ Every test session claims a ROS_DOMAIN_ID that no other run on this machine hold
 (valve_sim.ros.isolation, a lock file per domain) and keeps discovery on localhost,
 before anything imports rclpy, so parallel or leftover runs never cross-talk.
 Child processes inherit both.
+
+`pytest --quick` (`python3 run.py test --quick`) runs the quick tier only: the test
+files of the core, analysis and recording wings (quick_tier), slow tests left out.
 """
 
+import ast
 import os
 from pathlib import Path
 import signal
@@ -39,6 +43,62 @@ os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
 import pytest  # noqa: E402, I100  (after the environment is set)
+
+QUICK_WINGS = ('valve_sim.core', 'valve_sim.analysis', 'valve_sim.recording')
+# A test file that imports one of these starts nodes or processes, or drives ROS.
+NOT_QUICK = ('subprocess', 'valve_harness', 'rclpy')
+QUICK_ROS = ('rclpy.serialization',)  # the recording wing's message bytes: no node
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        '--quick',
+        action='store_true',
+        help='the quick tier: tests of the core, analysis and recording wings, no slow ones',
+    )
+
+
+def quick_tier(path):
+    """
+    Whether the test file at path is in the quick tier, by what it imports.
+
+    In: it imports valve_sim from the core, analysis and recording wings only, and
+    neither rclpy (but its serialization) nor subprocess nor the node harness: no
+    ROS node, no colcon, no command in a process of its own.
+    """
+    imported = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            imported.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            imported.add(node.module)
+    ours = [name for name in imported if name.split('.')[0] == 'valve_sim']
+    return (
+        bool(ours)
+        and all(name.startswith(QUICK_WINGS) for name in ours)
+        and not any(
+            name.split('.')[0] in NOT_QUICK and not name.startswith(QUICK_ROS)
+            for name in imported
+        )
+    )
+
+
+def pytest_ignore_collect(collection_path, config):
+    if (
+        config.getoption('quick')
+        and collection_path.suffix == '.py'
+        and collection_path.name.startswith('test_')
+        and not quick_tier(collection_path)
+    ):
+        return True
+    return None
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption('quick'):
+        slow = [item for item in items if item.get_closest_marker('slow')]
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [item for item in items if not item.get_closest_marker('slow')]
 
 
 @pytest.fixture(scope='module')
