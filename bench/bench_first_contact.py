@@ -28,9 +28,10 @@
 # 3. warm demo: `python3 run.py demo` again;
 # 4. tests: `python3 run.py test -q` (unless --no-tests).
 #
-# Each must succeed (exit code 0). The README's timings come from this script; the
-# load average at start and end is printed, since other work on the machine shows
-# in every figure. pip's downloads come from this machine's package index and cache.
+# Each must succeed (exit code 0). docs/benchmarks.md's first-contact timings come
+# from this script; the load average at start and end is printed, since other work
+# on the machine shows in every figure. pip's downloads come from this machine's
+# package index and cache.
 
 import argparse
 import json

@@ -64,6 +64,36 @@ def test_every_relative_link_of_the_docs_resolves(page):
     assert broken == []
 
 
+README_MAX_LINES = 250  # issue 27: the README a newcomer reads; the rest is in docs/
+
+
+def test_the_readme_stays_a_newcomers_size():
+    lines = len((REPO / 'README.md').read_text().splitlines())
+    assert lines <= README_MAX_LINES, f'README.md has {lines} lines: move detail to docs/'
+
+
+def test_the_docs_index_lists_every_page():
+    index = REPO / 'docs' / 'README.md'
+    listed = set(LINK.findall(index.read_text()))
+    pages = {p.name for p in (REPO / 'docs').glob('*.md')} - {index.name}
+    assert sorted(pages - listed) == []
+
+
+def test_the_readme_layout_names_every_wing_and_module():
+    """The README's Layout section names each wing of valve_sim and each of its modules."""
+    readme = (REPO / 'README.md').read_text()
+    layout = readme.split('\n## Layout\n', 1)[1].split('\n## ', 1)[0]
+    named = set(re.findall(r'[a-z_0-9]+', layout))
+    package = REPO / 'valve_sim'
+    missing = [
+        str(path.relative_to(package))
+        for path in sorted(package.rglob('*.py'))
+        if '__pycache__' not in path.parts
+        and (path.stem if path.stem != '__init__' else path.parent.name) not in named
+    ]
+    assert missing == []
+
+
 def test_docs_define_the_measures_and_the_equations():
     measures = (REPO / 'docs' / 'measures.md').read_text()
     for name in ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms', 'p_inf'):
