@@ -85,6 +85,14 @@ def stop(process):
             process.wait()
 
 
+def scheduler_address(scheduler_file):
+    """Return the address in a Dask scheduler file, or None while it is missing or partial."""
+    try:
+        return json.loads(scheduler_file.read_text())['address']
+    except (FileNotFoundError, ValueError, KeyError):
+        return None
+
+
 @pytest.fixture(scope='module')
 def cluster(tmp_path_factory):
     """Yield (address, scheduler file) of a scheduler with two single-thread workers."""
@@ -101,9 +109,10 @@ def cluster(tmp_path_factory):
         )
     ]
     try:
-        wait_for(scheduler_file.exists, START_TIMEOUT, 'the scheduler file')
+        # The scheduler creates its file before it writes it: wait until it parses.
+        wait_for(lambda: scheduler_address(scheduler_file), START_TIMEOUT, 'the scheduler file')
         processes += [start_worker(scheduler_file, f'worker-{i}') for i in (1, 2)]
-        address = json.loads(scheduler_file.read_text())['address']
+        address = scheduler_address(scheduler_file)
         with Client(address, timeout='60s') as client:
             wait_for(lambda: len(client.nthreads()) == 2, START_TIMEOUT, 'two workers')
         yield address, scheduler_file
