@@ -254,7 +254,7 @@ def test_every_requirement_follows_the_written_protocol():
         PilotFlowLimit, StudyRelieves,
     )
 
-    reference, _ = load_parameters()
+    reference = load_parameters().params
     constraints = [PilotFlowLimit(2e-5), LandsInsideBore(1e-3), ModesDecay(),
                    MainSpringRange((1e3, 5e3), (20.0, 100.0)), CaseRelieves({'d_c': -20})]
     for requirement in constraints:

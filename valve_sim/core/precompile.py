@@ -48,7 +48,8 @@ def compile_kernels():
     from valve_sim.core.sensors import SensorStage
     from valve_sim.core.simulation import Scenario, simulate
 
-    params, settings = load_parameters()
+    loaded = load_parameters()
+    params, settings = loaded.params, loaded.settings
     step_size, flow = settings['step_size'], settings['initial_inlet_flow']
     model = RealTimeModel(params, step_size, flow, HEALTHY, 0.0)
     model.trial(params, step_size, flow)
