@@ -15,18 +15,14 @@
 """Spec -> ParameterDescriptor, lenient double declaration, value checks, preset_pressure logic."""
 
 import math
-from types import SimpleNamespace
 
 import pytest
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
-from valve_sim.core import retuning, steady_state
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.parameters import load_parameters, PRESET_PRESSURE, SPECS
-from valve_sim.core.realtime_model import RealTimeModel
+from valve_sim.core.parameters import SPECS
 from valve_sim.core.retuning import check_preset, dependent_change
-from valve_sim.core.sensors import SensorStage
 from valve_sim.core.steady_state import cracking_pressure
 from valve_sim.ros.ros_parameters import (
     declare_double,
@@ -34,7 +30,6 @@ from valve_sim.ros.ros_parameters import (
     integers_as_doubles,
     value_problem,
 )
-from valve_sim.ros.valve_parameters import ValveParameters
 
 
 MASS = SPECS['main_valve_mass']
@@ -126,43 +121,3 @@ def test_check_preset_refuses_disagreeing_values(reference):
         )
     with pytest.raises(ParameterError, match='pilot_spring_preload'):
         check_preset(reference, {'preset_pressure': 1e5})
-
-
-def test_a_live_d_c_change_through_the_three_callbacks_solves_the_cracking_point_once(
-    context, monkeypatch
-):
-    # The real pre-set, on-set and post-set callbacks on an rclpy node that carries what
-    # they use of valve_node: the model, settings, inputs and sensors.
-    loaded = load_parameters()
-    node = node_with(context)
-    d_c = SPECS['damping_orifice_diameter']
-    declare_double(node, d_c, loaded.params[d_c.name])
-    declare_double(node, PRESET_PRESSURE, cracking_pressure(loaded.params))
-    node.model = RealTimeModel(loaded.params, 1e-5, loaded.settings['initial_inlet_flow'])
-    node.settings = loaded.settings
-    node.inlet_flow = loaded.settings['initial_inlet_flow']
-    node.tank_input = SimpleNamespace(value=None)
-    node.input = SimpleNamespace()
-    node.injection = SimpleNamespace(sensors=SensorStage())
-    for name in ('publish_fault_status', 'use_settings', 'resume'):
-        setattr(node, name, lambda *args: None)
-    parameters = ValveParameters(node)
-    solves = []
-    solve = retuning.cracking_pressure
-
-    def counted(*args, **kwargs):
-        solves.append(args)
-        return solve(*args, **kwargs)
-
-    monkeypatch.setattr(retuning, 'cracking_pressure', counted)
-    monkeypatch.setattr(steady_state, 'cracking_pressure', counted)
-    wider = loaded.params[d_c.name] * 1.2
-    result = parameters.set_atomically(
-        [Parameter(d_c.name, value=wider)], node.set_parameters_atomically
-    )
-    assert result.successful, result.reason
-    assert len(solves) == 1
-    assert node.model.params[d_c.name] == node.get_parameter(d_c.name).value == wider
-    preset = node.get_parameter('preset_pressure').value
-    assert preset == solve(node.model.params) != cracking_pressure(loaded.params)
-    node.destroy_node()

@@ -67,7 +67,6 @@ from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     FaultInjection,
     ScheduleLoader,
-    split_changes,
 )
 from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
 from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
@@ -317,7 +316,7 @@ class ReliefValveNode(Node):
         self.parameters.take_schedule()
         changes = self.injection.due(self.model.time_ns)
         if changes:
-            self._apply_scheduled(changes)
+            self.parameters.apply_scheduled(changes)
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
         if overpressure and not self.injection.overpressure:
@@ -329,34 +328,6 @@ class ReliefValveNode(Node):
         elif self.injection.overpressure and not overpressure:
             self.get_logger().info('p_s back below supply_pressure_limit')
         self.injection.overpressure = overpressure
-
-    def _apply_scheduled(self, changes):
-        """
-        Apply a schedule event's fault and sensor changes directly, from this tick on.
-
-        Not through the parameter service: the events were checked when the file was
-        read, and a fault leaves the model parameters (so the cracking point) as they
-        are. Only the sensor settings together are checked here (range_min below
-        range_max). The declared values are set, so parameter values and
-        /parameter_events show the event; a failure it causes within the trial window
-        rolls it back as it does a parameter change (_report_failure).
-        """
-        message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
-        faults, sensors = split_changes(changes)
-        try:
-            self.injection.sensors.checked(sensors)
-        except ParameterError as error:
-            self.parameters.count_refusal(str(error))
-            self.get_logger().error(f'{message} refused: {error}')
-            return
-        before = {name: self.get_parameter(name).value for name in changes}
-        self.parameters.set_declared(changes)
-        if self.model.retune(self.model.params, self.model.step_size, faults or None):
-            self.parameters.undo = before  # what a roll-back of this event restores
-        self.injection.sensors.change(sensors)
-        self.publish_fault_status()
-        self.resume('a scheduled fault')
-        self.get_logger().info(message)
 
     def _report_failure(self, outcome):
         """

@@ -20,8 +20,9 @@ In the manner of ros2/demos demo_nodes_py, three callbacks, each with one job:
             once) and add the parameter it implies (preset_pressure or the preload);
   on-set    refuse it with the plan's problem, else open a new fault schedule file;
   post-set  apply the plan from the next tick on, without solving again.
-Values set by the node itself (a roll-back, a scheduled fault, a refused schedule
-file) go through set_declared, which the on-set and post-set callbacks let pass.
+Values set by the node itself (a roll-back, a scheduled fault: apply_scheduled, a
+refused schedule file) go through set_declared, which the on-set and post-set
+callbacks let pass.
 """
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -41,6 +42,7 @@ from valve_sim.core.parameters import (
     SPECS,
     validate,
 )
+from valve_sim.core.realtime_model import NS_PER_S
 from valve_sim.core.retuning import dependent_change, plan_change
 from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
 from valve_sim.ros.ros_parameters import (
@@ -265,6 +267,34 @@ class ValveParameters:
         node.status.counters.refused_fault_schedules += 1
         self.count_refusal(f'fault_schedule {path}: {events}')
         self.set_declared({FAULT_SCHEDULE: node.injection.schedule_path})
+
+    def apply_scheduled(self, changes):
+        """
+        Apply a schedule event's fault and sensor changes directly, from this tick on.
+
+        Not through the parameter service: the events were checked when the file was
+        read, and a fault leaves the model parameters (so the cracking point) as they
+        are. Only the sensor settings together are checked here (range_min below
+        range_max). The declared values are set, so parameter values and
+        /parameter_events show the event; a failure it causes within the trial window
+        rolls it back as it does a parameter change (restore).
+        """
+        node, parts = self.node, split(changes)
+        message = f'fault schedule at t = {node.model.time_ns / NS_PER_S:.6f} s: {changes}'
+        try:
+            node.injection.sensors.checked(parts.sensor)
+        except ParameterError as error:
+            self.count_refusal(str(error))
+            node.get_logger().error(f'{message} refused: {error}')
+            return
+        before = {name: node.get_parameter(name).value for name in changes}
+        self.set_declared(changes)
+        if node.model.retune(node.model.params, node.model.step_size, parts.fault or None):
+            self.undo = before  # what a roll-back of this event restores
+        node.injection.sensors.change(parts.sensor)
+        node.publish_fault_status()
+        node.resume('a scheduled fault')
+        node.get_logger().info(message)
 
     def set_declared(self, values):
         """Set declared parameter values {name: value} that differ, without the callbacks."""
