@@ -22,15 +22,23 @@ screw; changing any model parameter moves the cracking pressure, which
 preset_pressure then reports. dependent_change() derives the partner of a
 change, check_preset() verifies that a change keeps the two consistent, and
 check_limits() that the running valve stays within its physical limits.
+plan_change() does all of that for valve_node at once, solving the cracking
+point once: a ChangePlan that the node checks, then applies.
 """
 
+from dataclasses import dataclass
 import math
 
-from valve_sim.core.catalogue import split
-from valve_sim.core.errors import ParameterError
+from valve_sim.core.catalogue import Change, split
+from valve_sim.core.errors import IntegrationError, ParameterError, SteadyStateError
 from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
-from valve_sim.core.parameters import SPECS, validate
-from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
+from valve_sim.core.parameters import check_value, SPECS, validate
+from valve_sim.core.realtime_model import TRIAL_STEPS
+from valve_sim.core.steady_state import (
+    cracking_pressure,
+    preload_for_cracking_pressure,
+    preset_preload,
+)
 
 
 PRESET_TOLERANCE = 1e-6  # relative agreement of preset_pressure and the cracking pressure
@@ -80,7 +88,11 @@ def check_preset(params, changes):
         return
     if 'pilot_spring_preload' not in changes:
         preload_for_cracking_pressure(params, preset)
-    cracking = cracking_pressure(params)
+    _check_agreement(params, preset, cracking_pressure(params))
+
+
+def _check_agreement(params, preset, cracking):
+    """Raise unless preset_pressure [Pa] is the cracking pressure [Pa] of params."""
     if not math.isclose(cracking, preset, rel_tol=PRESET_TOLERANCE):
         raise ParameterError(
             f'preset_pressure = {preset:g} Pa disagrees with the cracking pressure '
@@ -89,7 +101,9 @@ def check_preset(params, changes):
         )
 
 
-def check_limits(params, state, inlet_flow, tank_pressure=0.0, ambient_pressure=None):
+def check_limits(
+    params, state, inlet_flow, tank_pressure=0.0, ambient_pressure=None, cracking=None
+):
     """
     Raise ParameterError unless params keep the running valve within its physical limits.
 
@@ -97,7 +111,7 @@ def check_limits(params, state, inlet_flow, tank_pressure=0.0, ambient_pressure=
     at ambient_pressure if given], must stay valid (max_inlet_flow, burst_pressure), the
     current state below burst_pressure, and the valve must crack below burst_pressure
     at that back pressure (a relief valve that cannot open before its body bursts
-    relieves nothing).
+    relieves nothing). cracking: that cracking pressure [Pa] if known (else solved).
     """
     problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow']) or tank_pressure_problem(
         tank_pressure, params['burst_pressure'], ambient_pressure
@@ -107,10 +121,96 @@ def check_limits(params, state, inlet_flow, tank_pressure=0.0, ambient_pressure=
     problem = state_problem(state, params['burst_pressure'])
     if problem:
         raise ParameterError(f'the current state would be refused: {problem}')
-    cracking = cracking_pressure(params, tank_pressure=tank_pressure)
+    if cracking is None:
+        cracking = cracking_pressure(params, tank_pressure=tank_pressure)
     if cracking >= params['burst_pressure']:
         raise ParameterError(
             f'the valve would crack at {cracking:g} Pa, not below burst_pressure (p_burst) = '
             f'{params["burst_pressure"]:g} Pa'
             + (f' (tank pressure {tank_pressure:g} Pa)' if tank_pressure else '')
         )
+
+
+@dataclass(frozen=True)
+class ChangePlan:
+    """
+    One live parameter change of valve_node, planned once: what it sets and implies.
+
+    changes: {name: value} as asked, with the dependent parameter added; parts: its
+    catalogue.split; params, settings: the model parameters and run-time settings after
+    it; dependent: {'preset_pressure': Pa} or {'pilot_spring_preload': m} the change
+    implies, or {}; tank_pressure: the tank pressure [Pa, gauge] under the new settings;
+    problem: why the change is refused, or None (then params and settings are set).
+    """
+
+    changes: dict
+    parts: Change
+    params: dict = None
+    settings: dict = None
+    dependent: dict = None
+    tank_pressure: float = None
+    problem: str = None
+
+
+def plan_change(model, settings, changes, inlet_flow, tank_input, sensors):
+    """
+    Plan a live change {name: value} of the RealTimeModel model's node, solving once.
+
+    settings: the run-time settings in use; inlet_flow [m^3/s]: the input the next tick
+    applies; tank_input: the tank pressure topic's last value [Pa, absolute], or None;
+    sensors: the SensorStage. Derives the dependent parameter (one cracking-point solve,
+    a few for a new preset), then checks in order: settings, model parameters, preset,
+    faults, sensor settings, the valve's limits at the current state and inputs (the
+    same cracking point at ambient tank pressure), and a trial integration from the
+    current state. Returns a ChangePlan; a refusal is its problem, never an exception.
+    """
+    plan = {'dependent': {}}
+    try:
+        new_settings = {
+            **settings,
+            **{name: check_value(name, value) for name, value in split(changes).setting.items()},
+        }
+        params = merged_parameters(model.params, changes)
+        params, cracking, plan['dependent'] = _preset(params, changes)
+        model.faults.changed(split(changes).fault)
+        sensors.checked(split(changes).sensor)
+        ambient = new_settings['ambient_pressure']
+        tank = new_settings['tank_pressure'] if tank_input is None else tank_input - ambient
+        check_limits(
+            params, model.state, inlet_flow, tank, ambient, cracking if tank == 0 else None
+        )
+        model.trial(
+            params, new_settings['step_size'], inlet_flow, split(changes).fault or None, tank
+        )
+    except IntegrationError as error:
+        plan['problem'] = (
+            f'the integration would diverge (trial of {TRIAL_STEPS} steps '
+            f'from the current state): {error}'
+        )
+    except (ParameterError, SteadyStateError) as error:
+        plan['problem'] = str(error)
+    else:
+        plan.update(params=params, settings=new_settings, tank_pressure=tank)
+    changes = {**changes, **plan['dependent']}
+    return ChangePlan(changes, split(changes), **plan)
+
+
+def _preset(params, changes):
+    """
+    Return (params, cracking pressure [Pa] or None, dependent change) of a change.
+
+    params: merged with the change. The preset and the preload agree after it:
+    a new preset sets the preload, a new model parameter the preset.
+    """
+    preset = changes.get('preset_pressure')
+    if preset is not None and 'pilot_spring_preload' not in changes:
+        preload, cracking = preset_preload(params, preset)
+        params = {**params, 'pilot_spring_preload': preload}
+        dependent = {'pilot_spring_preload': preload}
+    elif preset is not None or changes.keys() & SPECS.keys():
+        cracking = cracking_pressure(params)
+        dependent = {} if preset is not None else {'preset_pressure': cracking}
+    else:
+        return params, None, {}
+    _check_agreement(params, changes.get('preset_pressure', cracking), cracking)
+    return params, cracking, dependent

@@ -85,12 +85,6 @@ def declare_fault_parameters(node):
     return faults, sensors, change.schedule[FAULT_SCHEDULE_SPEC.name]
 
 
-def split_changes(changes):
-    """({fault.* changes}, {sensor.* changes}) of a {name: value} change (catalogue.split)."""
-    change = split(changes)
-    return change.fault, change.sensor
-
-
 class FaultInjection:
     """
     The node's sensor stage, fault schedule and overpressure state.

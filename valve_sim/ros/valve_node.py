@@ -30,9 +30,10 @@ Names are relative, so namespaces and remapping work. Pressures are ABSOLUTE [Pa
 
 All messages of one tick carry the model time of the state as header.stamp. The model
 (valve_sim.core.realtime_model, no ROS) decides what a tick comes to; this module adapts
-it: parameters, inputs, the tick timer, the outcome's logs and counters, the reset
-service. Housekeeping (ros.housekeeping) and the /diagnostics report (ros.valve_diagnostics)
-live apart. Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a
+it: inputs, the tick timer, the outcome's logs and counters, the reset service.
+Parameters (ros.valve_parameters: declarations, a change planned once and applied once),
+housekeeping (ros.housekeeping) and the /diagnostics report (ros.valve_diagnostics) live
+apart. Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a
 schedule file whose events are applied at the tick, directly. With --foxglove [PORT] the
 tick topics and /diagnostics are also served over Foxglove's WebSocket protocol.
 """
@@ -42,23 +43,15 @@ import gc
 import sys
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
-from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from valve_sim.core.catalogue import LIVE_NAMES, split, VALVE_NODE_SPECS
-from valve_sim.core.errors import (
-    InputFileError,
-    IntegrationError,
-    ParameterError,
-    SteadyStateError,
-)
+from valve_sim.core.errors import InputFileError, ParameterError, SteadyStateError
 from valve_sim.core.input_files import (
     FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
     MAX_ALIASES,
@@ -66,48 +59,28 @@ from valve_sim.core.input_files import (
     MAX_EVENTS,
 )
 from valve_sim.core.model import P_S
-from valve_sim.core.parameters import (
-    check_value,
-    FAULT_SCHEDULE,
-    load_parameters,
-    NODE_NAME,
-    PARAMETERS,
-    PRESET_PRESSURE,
-    retired_reason,
-    SETTING_SPECS,
-    SETTINGS,
-    SPECS,
-    validate,
-)
-from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status, TRIAL_STEPS
-from valve_sim.core.retuning import (
-    check_limits,
-    check_preset,
-    dependent_change,
-    merged_parameters,
-)
-from valve_sim.core.steady_state import cracking_pressure, preload_for_cracking_pressure
+from valve_sim.core.parameters import NODE_NAME
+from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status
 from valve_sim.ros import diagnostics, live_view, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     FaultInjection,
     ScheduleLoader,
-    split_changes,
 )
 from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
 from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
 from valve_sim.ros.node_status import NodeStatus, Throttle
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
-from valve_sim.ros.ros_parameters import (
-    declare_double,
-    integers_as_doubles,
-    log_parameter_files,
-    undeclared_reason,
-    value_problem,
-)
+from valve_sim.ros.ros_parameters import log_parameter_files
 from valve_sim.ros.valve_diagnostics import ValveDiagnostics
 from valve_sim.ros.valve_outputs import ValveOutputs
+from valve_sim.ros.valve_parameters import (
+    declare_choice,
+    declare_frame_prefix,
+    declare_valve_parameters,
+    ValveParameters,
+)
 
 
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
@@ -129,9 +102,12 @@ INLET_FLOW_QOS = {
     'best_effort': QoSProfile(depth=INPUTS_PER_TICK, reliability=ReliabilityPolicy.BEST_EFFORT),
     'reliable': QoSProfile(depth=RELIABLE_INPUT_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
 }
-VALUE_ERRORS = (ParameterError, SteadyStateError, IntegrationError)
-# All double parameters (the catalogue's doubles of valve_node).
-VALVE_SPECS = {name: spec for name, spec in VALVE_NODE_SPECS.items() if spec.kind == 'double'}
+RELIABILITY_DESCRIPTION = (
+    "inlet_flow and tank_pressure subscriptions: 'best_effort' (default; hears "
+    f'every publisher, keeps the last {INPUTS_PER_TICK} messages for the next '
+    "tick) or 'reliable' (reliable publishers only; keeps a burst of "
+    f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
+)
 
 
 class ReliefValveNode(Node):
@@ -144,9 +120,9 @@ class ReliefValveNode(Node):
         self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
-        params, self.settings = self._declare_parameters()
+        params, self.settings = declare_valve_parameters(self)
         self.hardware_id = diagnostics.declare_hardware_id(self)
-        self.frame_prefix = self._declare_frame_prefix()
+        self.frame_prefix = declare_frame_prefix(self)
         faults, sensors, schedule = declare_fault_parameters(self)
         self.injection = FaultInjection(sensors, schedule)
         self.tank_input = TankPressureInput(
@@ -168,15 +144,13 @@ class ReliefValveNode(Node):
         self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
         self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
         self.status = NodeStatus(time.monotonic_ns())
-        self._restoring = False
         self.schedule_loader = ScheduleLoader()
-        self._opened_schedule = None  # the file a change being checked sets as fault_schedule
-        self._before_change = {}  # declared values of the change being checked, before it
-        self._undo = {}  # declared values before the last change that retuned the model
         self.outputs = ValveOutputs(self, self.frame_prefix)
         self.diagnostics = ValveDiagnostics(self)
-        self._publish_fault_status()
-        input_qos = self._declare_inlet_flow_qos()
+        self.publish_fault_status()
+        input_qos = INLET_FLOW_QOS[
+            declare_choice(self, 'inlet_flow_reliability', INLET_FLOW_QOS, RELIABILITY_DESCRIPTION)
+        ]
         self.inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, input_qos, raw=True
         )
@@ -187,9 +161,7 @@ class ReliefValveNode(Node):
         self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
         self.housekeeping = Housekeeping(self)
         self._tick_timer = self._create_tick_timer()
-        self.add_pre_set_parameters_callback(self._complete_parameter_change)
-        self.add_on_set_parameters_callback(self._check_parameter_change)
-        self.add_post_set_parameters_callback(self._apply_parameter_change)
+        self.parameters = ValveParameters(self)
         self.get_logger().info(
             f'valve at the steady state of {self.inlet_flow:g} m^3/s'
             + (f' into a tank at {self.tank_pressure:g} Pa (gauge)' if self.tank_pressure else '')
@@ -238,296 +210,19 @@ class ReliefValveNode(Node):
         taken = (self.inlet_subscription, self.tank_subscription)
         return (s for s in super().subscriptions if s not in taken)
 
-    # --- parameters -------------------------------------------------------------------------
-
-    def _declare_parameters(self):
-        """
-        Declare all parameters, defaults from config/reference.yaml.
-
-        Returns (params, settings).
-        """
-        reference = load_parameters()
-        defaults = {**reference.params, **reference.settings}
-        # rclpy drops an undeclared override silently: say so for a retired parameter that
-        # a parameter file (an older calibrated.yaml) still sets.
-        for name in filter(retired_reason, self._parameter_overrides):
-            self.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
-                                      f'{retired_reason(name)}')
-        values = {
-            spec.name: declare_double(self, spec, defaults[spec.name], not spec.live)
-            for spec in PARAMETERS + SETTINGS
-        }
-        params = validate({name: values[name] for name in SPECS})
-        settings = {name: values[name] for name in SETTING_SPECS}
-        return self._declare_preset_pressure(params), settings
-
-    def _declare_inlet_flow_qos(self):
-        """Declare inlet_flow_reliability (read-only); return the subscription's QoS."""
-        descriptor = ParameterDescriptor(
-            name='inlet_flow_reliability',
-            description=(
-                "inlet_flow and tank_pressure subscriptions: 'best_effort' (default; hears "
-                f'every publisher, keeps the last {INPUTS_PER_TICK} messages for the next '
-                "tick) or 'reliable' (reliable publishers only; keeps a burst of "
-                f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
-            ),
-            read_only=True,
-        )
-        choice = self.declare_parameter('inlet_flow_reliability', 'best_effort', descriptor).value
-        if choice not in INLET_FLOW_QOS:
-            raise ParameterError(
-                f"inlet_flow_reliability must be one of {', '.join(INLET_FLOW_QOS)}, "
-                f'got {choice!r}'
-            )
-        return INLET_FLOW_QOS[choice]
-
-    def _declare_frame_prefix(self):
-        """Declare frame_prefix (read-only): the pressures' frames are it + their place."""
-        descriptor = ParameterDescriptor(
-            name='frame_prefix',
-            description=(
-                "prefix of the pressure messages' header.frame_id (+ supply_port, "
-                'intermediate_chamber, pilot_chamber, poppet_chamber); default: node name + /'
-            ),
-            read_only=True,
-        )
-        return self.declare_parameter('frame_prefix', self.get_name() + '/', descriptor).value
-
-    def _declare_preset_pressure(self, params):
-        """
-        Declare preset_pressure, by default the cracking pressure.
-
-        An override sets the preload.
-        """
-        cracking = cracking_pressure(params)
-        preset = declare_double(self, PRESET_PRESSURE, cracking)
-        if preset == cracking:
-            return params
-        preload = preload_for_cracking_pressure(params, preset)
-        self.set_parameters([Parameter('pilot_spring_preload', value=preload)])
-        return {**params, 'pilot_spring_preload': preload}
+    # --- parameters (ros.valve_parameters) -------------------------------------------------
 
     def set_parameters_atomically(self, parameter_list):
-        """
-        Node.set_parameters_atomically, which both parameter services call.
+        """Node.set_parameters_atomically, which both parameter services call, checked first."""
+        return self.parameters.set_atomically(parameter_list, super().set_parameters_atomically)
 
-        Checks each value against its spec first, for a reason with symbol, limits
-        and unit, and each name (an undeclared one is named, with the declared name
-        meant), and counts and logs every refusal.
-        """
-        problems = (
-            value_problem(VALVE_SPECS[p.name], p)
-            if p.name in VALVE_SPECS
-            else None
-            if self.has_parameter(p.name)
-            else retired_reason(p.name) or undeclared_reason(p.name, VALVE_SPECS)
-            for p in parameter_list
-        )
-        reason = next(filter(None, problems), None)
-        try:
-            result = (
-                SetParametersResult(successful=False, reason=reason)
-                if reason
-                else super().set_parameters_atomically(parameter_list)
-            )
-        except ParameterNotDeclaredException as error:
-            self._count_refusal(str(error))
-            raise
-        if not result.successful:
-            self._count_refusal(result.reason)
-        return result
-
-    def _count_refusal(self, reason):
-        self.status.counters.rejected_parameter_changes += 1
-        self.get_logger().warn(f'parameter change refused: {reason}')
-
-    def _complete_parameter_change(self, parameters):
-        """Pre-set callback: integers taken as doubles, and the dependent parameter added."""
-        parameters = integers_as_doubles(parameters, VALVE_SPECS)
-        try:
-            dependent = dependent_change(self.model.params, {p.name: p.value for p in parameters})
-        except VALUE_ERRORS:
-            return parameters  # the on-set callback refuses the change and says why
-        return parameters + [
-            Parameter(name, Parameter.Type.DOUBLE, value) for name, value in dependent.items()
-        ]
-
-    def _check_parameter_change(self, parameters):
-        """
-        On-set callback: validate the merged set.
-
-        Then trial-integrate it from the current state.
-        """
-        changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
-        if not changes or self._restoring:
-            return SetParametersResult(successful=True)
-        try:
-            params, settings = self._merged(changes)
-            check_preset(params, changes)
-            faults, sensors = split_changes(changes)
-            self.model.faults.changed(faults)
-            self.injection.sensors.checked(sensors)
-            tank = self._tank_pressure_with(settings)
-            check_limits(
-                params, self.model.state, self.inlet_flow, tank, settings['ambient_pressure']
-            )
-            self.model.trial(
-                params, settings['step_size'], self.inlet_flow, faults or None, tank
-            )
-            if FAULT_SCHEDULE in changes:
-                self._open_schedule(changes[FAULT_SCHEDULE])
-        except IntegrationError as error:
-            return SetParametersResult(
-                successful=False,
-                reason=(
-                    f'the integration would diverge (trial of {TRIAL_STEPS} steps '
-                    f'from the current state): {error}'
-                ),
-            )
-        except (ParameterError, SteadyStateError, InputFileError) as error:
-            return SetParametersResult(successful=False, reason=str(error))
-        self._before_change = {
-            name: self.get_parameter(name).value
-            for name in changes
-            if name != FAULT_SCHEDULE
-        }
-        return SetParametersResult(successful=True)
-
-    def _open_schedule(self, path):
-        """
-        Open (not read) a schedule file set live; '' sets none. Raises InputFileError.
-
-        The file is read and checked on the loader's thread (_take_schedule applies it).
-        """
-        if self.schedule_loader.loading:
-            raise ParameterError(
-                f'fault schedule {self.schedule_loader.loading} is still being read and '
-                'checked; set fault_schedule again once the log says it is in use'
-            )
-        self._opened_schedule = self.schedule_loader.opened(path) if path else None
-
-    def _apply_parameter_change(self, parameters):
-        """Post-set callback: the accepted change takes effect from the next tick."""
-        changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
-        if not changes or self._restoring:
-            return
-        before, self._before_change = self._before_change, {}
-        params, settings = self._merged(changes)
-        faults, sensors = split_changes(changes)
-        if self.model.retune(params, settings['step_size'], faults or None):
-            self._undo = before  # what a roll-back of this change restores
-        self.injection.sensors.change(sensors)
-        if FAULT_SCHEDULE in changes:
-            self._load_schedule(changes[FAULT_SCHEDULE])
-        if faults or sensors:
-            self._publish_fault_status()
-        self.input.max_inlet_flow = params['max_inlet_flow']
-        self._use_tank_limits(params, settings)
-        if 'tank_pressure' in changes and self.tank_input.value is not None:
-            self.get_logger().warn(
-                'tank_pressure set, but the tank_pressure topic sets the tank pressure '
-                f'({self.tank_input.gauge():g} Pa gauge): the topic takes precedence'
-            )
-        self._use_settings(settings)
-        self._resume('a parameter change')
-        self.get_logger().info(f'parameters set: {changes}')
-
-    def _use_settings(self, settings):
+    def use_settings(self, settings):
         """Use the run-time settings; a new publish_rate recreates the tick timer."""
         rate_changed = settings['publish_rate'] != self.settings['publish_rate']
         self.settings = settings
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()
-
-    def _load_schedule(self, path):
-        """Read the schedule file opened by the check on the loader's thread ('': none, now)."""
-        stream, self._opened_schedule = self._opened_schedule, None
-        if not path:
-            self.injection.use_events((), '')
-            return
-        self.schedule_loader.start(path, stream)
-        self.get_logger().info(f'reading fault schedule {path}: in use once it is checked')
-
-    def _take_schedule(self):
-        """
-        At a tick: use a schedule the loader has read and checked, from this tick on.
-
-        A file the loader refused is logged, counted as a refused parameter change, shown
-        in the diagnostics (fault_schedule_refused), and fault_schedule is set back to
-        the file in use.
-        """
-        loaded = self.schedule_loader.take()
-        if loaded is None:
-            return
-        path, events = loaded
-        if not isinstance(events, str):
-            self.injection.use_events(events, path)
-            self.get_logger().info(
-                f'fault schedule {path} in use: {len(events)} events, t from this tick'
-            )
-            return
-        self.status.schedule_refused = f'{path}: {events}'
-        self.status.counters.refused_fault_schedules += 1
-        self._count_refusal(f'fault_schedule {path}: {events}')
-        self._set_declared({FAULT_SCHEDULE: self.injection.schedule_path})
-
-    def _set_declared(self, values):
-        """Set declared parameter values {name: value} that differ, without the callbacks."""
-        changed = [
-            Parameter(name, value=value)
-            for name, value in values.items()
-            if self.get_parameter(name).value != value
-        ]
-        if not changed:
-            return
-        self._restoring = True
-        try:
-            super().set_parameters_atomically(changed)
-        finally:
-            self._restoring = False
-
-    def _tank_pressure_with(self, settings):
-        """Return the tank pressure [Pa, gauge] under settings: the topic's, else the parameter."""
-        absolute = self.tank_input.value
-        if absolute is None:
-            return settings['tank_pressure']
-        return absolute - settings['ambient_pressure']
-
-    def _use_tank_limits(self, params, settings):
-        """Check tank_pressure messages against these parameters' limits from now on."""
-        self.tank_input.ambient_pressure = settings['ambient_pressure']
-        self.tank_input.burst_pressure = params['burst_pressure']
-
-    def _merged(self, changes):
-        """(params, settings) with changes applied, checked; raises ParameterError."""
-        settings = {
-            **self.settings,
-            **{name: check_value(name, value) for name, value in split(changes).setting.items()},
-        }
-        return merged_parameters(self.model.params, changes), settings
-
-    def _restore_parameters(self):
-        """
-        After the model rolled back its last change: the rest of that change undone too.
-
-        Settings and sensor settings of the change return to their values before it,
-        and the node's declared parameters to what is in use (the model's parameters,
-        step size and faults, and every other value of the change): all agree again,
-        and a later change cannot bring back a part of the one undone.
-        """
-        undo, self._undo = self._undo, {}
-        self.injection.sensors.change(split(undo).sensor)
-        self._use_settings({**self.settings, **split(undo).setting})
-        self._set_declared(
-            {
-                **undo,
-                **self.model.params,
-                'step_size': self.model.step_size,
-                **self.model.faults.as_parameters(),
-            }
-        )
-        self._publish_fault_status()
 
     # --- stepping ---------------------------------------------------------------------------
 
@@ -588,10 +283,10 @@ class ReliefValveNode(Node):
         period_ns = self._tick_timer.timer_period_ns
         if self.input.changed:
             self.input.changed = False
-            self._resume('a new inlet flow')
+            self.resume('a new inlet flow')
         if self.tank_input.changed:
             self.tank_input.changed = False
-            self._resume('a new tank pressure')
+            self.resume('a new tank pressure')
         outcome = self.model.update(
             now_ns, self.inlet_flow, CATCH_UP_LIMIT_PERIODS * period_ns, self.tank_pressure
         )
@@ -618,10 +313,10 @@ class ReliefValveNode(Node):
 
     def _inject(self):
         """Apply the schedule's events due at this tick; watch for overpressure."""
-        self._take_schedule()
+        self.parameters.take_schedule()
         changes = self.injection.due(self.model.time_ns)
         if changes:
-            self._apply_scheduled(changes)
+            self.parameters.apply_scheduled(changes)
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
         if overpressure and not self.injection.overpressure:
@@ -633,34 +328,6 @@ class ReliefValveNode(Node):
         elif self.injection.overpressure and not overpressure:
             self.get_logger().info('p_s back below supply_pressure_limit')
         self.injection.overpressure = overpressure
-
-    def _apply_scheduled(self, changes):
-        """
-        Apply a schedule event's fault and sensor changes directly, from this tick on.
-
-        Not through the parameter service: the events were checked when the file was
-        read, and a fault leaves the model parameters (so the cracking point) as they
-        are. Only the sensor settings together are checked here (range_min below
-        range_max). The declared values are set, so parameter values and
-        /parameter_events show the event; a failure it causes within the trial window
-        rolls it back as it does a parameter change (_report_failure).
-        """
-        message = f'fault schedule at t = {self.model.time_ns / NS_PER_S:.6f} s: {changes}'
-        faults, sensors = split_changes(changes)
-        try:
-            self.injection.sensors.checked(sensors)
-        except ParameterError as error:
-            self._count_refusal(str(error))
-            self.get_logger().error(f'{message} refused: {error}')
-            return
-        before = {name: self.get_parameter(name).value for name in changes}
-        self._set_declared(changes)
-        if self.model.retune(self.model.params, self.model.step_size, faults or None):
-            self._undo = before  # what a roll-back of this event restores
-        self.injection.sensors.change(sensors)
-        self._publish_fault_status()
-        self._resume('a scheduled fault')
-        self.get_logger().info(message)
 
     def _report_failure(self, outcome):
         """
@@ -676,7 +343,7 @@ class ReliefValveNode(Node):
                 'parameters rolled back to the ones in use before the last change, '
                 'applied within the trial window before the failure'
             )
-            self._restore_parameters()
+            self.parameters.restore()
             self.input.max_inlet_flow = self.model.params['max_inlet_flow']
             self.tank_input.burst_pressure = self.model.params['burst_pressure']
         if outcome.status is not Status.FAILURE:
@@ -693,14 +360,14 @@ class ReliefValveNode(Node):
             )
         )
 
-    def _resume(self, cause):
+    def resume(self, cause):
         """Let a halted model advance again."""
         if self.model.resume():
             self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
 
-    def _publish_fault_status(self):
+    def publish_fault_status(self):
         """Publish the faults and sensor settings in effect, stamped from when they hold."""
         self.outputs.publish_fault_status(self.model, self.injection, self.hardware_id)
 
