@@ -119,6 +119,7 @@ class RealTimeModel:
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
         self.saturated = None  # [Pa gauge] p_s is read at this limit while an overpressure halts
+        self.relief_flows()  # its kernel loads (or compiles) here, not in the first tick
 
     def _use(self, params, step_size, faults):
         self.params = params
