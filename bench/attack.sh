@@ -22,5 +22,5 @@
 # then the count of attacks survived and the run time; exit code 0 only if all survived.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-[ -x .venv/bin/python ] || python3 run.py test test/test_layering.py -q > /dev/null
+[ -x .venv/bin/python ] || python3 run.py test test/lint/test_layering.py -q > /dev/null
 exec .venv/bin/python bench/attack.py "$@"

@@ -22,7 +22,7 @@
 # start, or the flow stopped as end) at every preset of PRESETS, as a step and as a
 # RAMP_TIME ramp: valve_sim.analysis.envelope judges each run (relieves, pilot
 # relieves, closed, stalled, diverged). The test suite runs a coarse subset
-# (test/test_envelope.py); this is the full grid. Exit code 1 if any run stalled
+# (test/analysis/test_envelope.py); this is the full grid. Exit code 1 if any run stalled
 # or diverged.
 
 import argparse

@@ -25,7 +25,7 @@ The package is built in wings, each importing only the wings below it:
     commands   the `valve-sim` command line: parse, call the library, print
     testing    the test kit for users' suites: a valve_node in lockstep, a pytest fixture
 
-test/test_layering.py keeps it so.
+test/lint/test_layering.py keeps it so.
 """
 
 __version__ = '0.1.0'

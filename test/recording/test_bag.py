@@ -51,7 +51,7 @@ from valve_sim.recording.valve_topics import TOPIC_TYPES, write_simulation_bag
 import yaml
 
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE_BAG = ROOT / 'bags' / 'reference_step.mcap'
 START_NS = 1_700_000_000 * 10**9
 

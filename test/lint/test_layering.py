@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 
-PACKAGE = Path(__file__).resolve().parents[1] / 'valve_sim'
+PACKAGE = Path(__file__).resolve().parents[2] / 'valve_sim'
 WINGS = ['core', 'fmu', 'analysis', 'recording', 'ros', 'commands', 'testing']
 NO_RCLPY = {'core', 'fmu', 'analysis', 'recording', 'commands'}
 LIBRARY = ['core', 'fmu', 'analysis', 'recording', 'ros']

@@ -28,7 +28,7 @@ from valve_sim.core.simulation import LITRE_PER_MINUTE
 from valve_sim.core.steady_state import with_preset_pressure
 
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 # The design rules of docs/model.md ("The main stage as built"), as the documented
 # calibrate command imposes them: the wall between the guide bore and a land [m], the
 # main spring's rate [N/m] and preload force [N].

@@ -40,7 +40,7 @@ from valve_sim.ros.replay import Replay
 import yaml
 
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 REFERENCE_BAG = REPO / 'bags' / 'reference_step.mcap'
 TIMEOUT = 60.0  # [s] for anything that waits on another process
 

@@ -26,7 +26,7 @@ from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.cli import SUBCOMMANDS
 
 
-TABLE2 = Path(__file__).resolve().parent.parent / 'config' / 'table2.yaml'
+TABLE2 = Path(__file__).resolve().parents[2] / 'config' / 'table2.yaml'
 
 
 def valve_sim(*args, check=True):

@@ -39,7 +39,7 @@ from valve_sim.recording.bag import BagReader
 from valve_sim.recording.signal_reader import read_recording
 
 
-BAGS = Path(__file__).resolve().parent.parent / 'bags'
+BAGS = Path(__file__).resolve().parents[2] / 'bags'
 
 
 def run_demo(folder, *options, timeout=300):

@@ -25,7 +25,7 @@ import re
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 COPYRIGHT = re.compile(r'^# Copyright (\d{4})(-\d{4})? \S.*$', re.MULTILINE)
 APACHE_NOTICE = [
     'Licensed under the Apache License, Version 2.0 (the "License");',

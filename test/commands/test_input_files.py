@@ -113,7 +113,7 @@ VALID = {
     'fault schedule': config_path('fault_schedule_example.yaml').read_bytes(),
     'parameter file': config_path('reference.yaml').read_bytes(),
     'bag metadata': METADATA.encode(),
-    'scenario': (Path(__file__).resolve().parents[1] / 'scenarios'
+    'scenario': (Path(__file__).resolve().parents[2] / 'scenarios'
                  / 'stuck_main_valve.yaml').read_bytes(),
     'study results': json.dumps(RUNNER_ROW).encode(),
     'optimise results': json.dumps(CANDIDATE_ROW).encode(),
@@ -254,7 +254,7 @@ def test_the_limits_are_documented():
     """docs/valve_node.md states each kind of file's size limit and the schedule's events."""
     from valve_sim.core.input_files import KINDS, MAX_EVENTS, size_text
 
-    docs = (Path(__file__).resolve().parents[1] / 'docs' / 'valve_node.md').read_text()
+    docs = (Path(__file__).resolve().parents[2] / 'docs' / 'valve_node.md').read_text()
     for kind in KINDS:
         assert kind.name in docs, kind.name
         if kind.max_bytes:

@@ -32,7 +32,7 @@ import pytest
 
 pytest.importorskip('numba')
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = """
 import numpy as np
 import valve_sim

@@ -314,7 +314,7 @@ def test_simulate_writes_a_bag_folder(tmp_path, capsys):
 def test_sample_bag_has_receive_times_and_rosbag2_metadata():
     from valve_sim.recording.bag import BagReader
 
-    sample = Path(__file__).resolve().parent.parent / 'bags' / 'reference_step.mcap'
+    sample = Path(__file__).resolve().parents[2] / 'bags' / 'reference_step.mcap'
     first = next(BagReader(sample).messages())[2]
     assert first.publish_time == START_NS < first.log_time <= START_NS + 10**6
     statistics, _, records = mcap_summary(sample)

@@ -40,7 +40,7 @@ from valve_sim.core.errors import ParameterError
 
 pytestmark = pytest.mark.timeout(300)
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EVERY_BAD_NUMBER = ('nan', 'inf', '-inf', '1e300', '-1')
 CALIBRATE = ['calibrate', '--target-measures', 'x.json', '--fit', 'd_c', '--out', 'o']
 OPTIMISE = ['optimise', '--design', 'd_c=±5%', '--minimise', 'P_1_percent', '--tolerance',

@@ -20,7 +20,7 @@ import re
 import pytest
 
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SKIPPED = {'.venv', '.git', '__pycache__', 'build', 'install', 'log', 'out', '.pytest_cache'}
 TEXT = {'.py', '.md', '.yaml', '.xml', '.sh', '.cfg', '.txt', '.json'}
 OUTSIDE = re.compile(r'\.\./shared|/work/|\.\./\.\./')

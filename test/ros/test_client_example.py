@@ -26,7 +26,7 @@ from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 
 pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
-CLIENT_PAGE = Path(__file__).resolve().parent.parent / 'docs' / 'client.md'
+CLIENT_PAGE = Path(__file__).resolve().parents[2] / 'docs' / 'client.md'
 NAMESPACE = '/client_example'
 
 

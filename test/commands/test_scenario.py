@@ -37,7 +37,7 @@ from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import TICK_TOPICS
 
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / 'scenarios'
 RUN_TIMEOUT = 600.0  # [s] a run: node start-up on a loaded machine, then a second of model time
 NS_PER_S = 1_000_000_000

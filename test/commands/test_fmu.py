@@ -394,7 +394,7 @@ def test_a_c_master_runs_the_papers_step_with_libpython_preloaded(unzipped, offl
     master = tmp_path / 'fmu_c_master'
     headers = Path(fmpy.__file__).parent / 'c-code'
     subprocess.run([compiler, '-O1', f'-I{headers}', '-o', str(master),
-                    str(Path(__file__).parent / 'fmu_c_master.c'), '-ldl', '-lm'], check=True)
+                    str(Path(__file__).parents[1] / 'fmu_c_master.c'), '-ldl', '-lm'], check=True)
     refs = {v.name: v.valueReference for v in description.modelVariables}
     library = Path(sysconfig.get_config_var('LIBDIR')) / sysconfig.get_config_var('LDLIBRARY')
     paths = [str(Path(valve_sim_package.__file__).parents[1]), *site.getsitepackages()]

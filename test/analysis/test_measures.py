@@ -250,5 +250,5 @@ def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(referen
                          direction=-1)
     assert down.values['P_1_percent'] < 0.0 and down.values['P_o_percent'] < 0.0
     assert down.values['T_1_ms'] > 0.0 and down.values['r_d'] > 0.0
-    docs = Path(__file__).resolve().parents[1] / 'docs' / 'measures.md'
+    docs = Path(__file__).resolve().parents[2] / 'docs' / 'measures.md'
     assert 'for a step down P_1 is negative' in ' '.join(docs.read_text().split())

@@ -151,7 +151,7 @@ def test_layout_parses_and_names_only_what_the_node_serves(renamed_valve):
 
 def test_layout_is_installed_with_the_package(tmp_path):
     """setup.py's data files put the layout in share/valve_sim/foxglove, as colcon would."""
-    repo = Path(__file__).resolve().parent.parent
+    repo = Path(__file__).resolve().parents[2]
     done = subprocess.run(
         [sys.executable, 'setup.py', '-q', 'install_data', '--install-dir', str(tmp_path)],
         cwd=repo,

@@ -28,7 +28,7 @@ from valve_sim.core import errors
 from valve_sim.core.errors import OutputFileError, USER_ERRORS, ValveSimError
 from valve_sim.core.output_files import append_to, write_text
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SOURCES = sorted(
     path for folder in ('valve_sim', 'test', 'bench') for path in (ROOT / folder).rglob('*.py')
 )

@@ -41,7 +41,7 @@ from valve_sim.core.catalogue import (
 from valve_sim.core.model import P_C, P_S, STATE_NAMES
 from valve_sim.core.parameters import load_parameters
 
-DOCS = Path(__file__).resolve().parents[1] / 'docs'
+DOCS = Path(__file__).resolve().parents[2] / 'docs'
 PAGES = ('valve_node.md', 'analyser.md', 'faults.md', 'model.md')
 NAME_HEADERS = ('parameter', 'name', 'setting')
 COLUMNS = {  # header: what the column holds

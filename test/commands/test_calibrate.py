@@ -36,7 +36,7 @@ from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.recording.bag import BagReader, BagWriter
 
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TRUTH = {'damping_orifice_diameter': 1.08e-3, 'pilot_spring_stiffness': 139040.0}  # +8 %, -12 %
 RIG = ('--topic-supply-pressure', '/rig/inlet_pressure', '--topic-inlet-flow', '/rig/flowmeter',
        '--clock', 'receive')

@@ -42,7 +42,7 @@ pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kern
 AMBIENT = 101325.0  # [Pa] ambient_pressure default
 FLOW = 5.0 * LITRE_PER_MINUTE
 NAMESPACE = '/limits'
-DOCS = Path(__file__).resolve().parent.parent / 'docs' / 'valve_node.md'
+DOCS = Path(__file__).resolve().parents[2] / 'docs' / 'valve_node.md'
 CHAMBER_VOLUMES = ('supply_volume', 'intermediate_volume', 'pilot_volume', 'poppet_chamber_volume')
 
 

@@ -39,7 +39,7 @@ from valve_sim.ros.analyser_node import parameter_names
 
 pytestmark = pytest.mark.timeout(1200)
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 START_TIMEOUT = 240.0  # [s] a cold kernel compile on a loaded 2-core machine
 BUILD_TIMEOUT = 900  # [s] colcon build, the kernels' compile included, on a loaded machine
 NOT_SOURCES = ('.venv', '.git', '__pycache__', 'build', 'install', 'log', '*.egg-info', 'demo_*')

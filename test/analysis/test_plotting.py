@@ -34,7 +34,7 @@ from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.recording.signal_reader import read_recording
 
 
-BAGS = Path(__file__).resolve().parent.parent / 'bags'
+BAGS = Path(__file__).resolve().parents[2] / 'bags'
 
 
 @pytest.fixture
