@@ -55,7 +55,6 @@ def compile_kernels():
     model.trial(params, step_size, flow)
     model.start(0)
     model.advance_to(NS_PER_S // 1000, flow, NS_PER_S, 0.0)
-    model.relief_flows()
     SensorStage()
     simulate(params, Scenario(step_time=STEP_TIME, end_time=END_TIME), record_interval=1e-3)
 
