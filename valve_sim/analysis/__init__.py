@@ -19,8 +19,9 @@ Lives here: the measures and step detection, streaming step analysis, the steps 
 recording (recorded_steps: measures, Figure 5, their text), signal mapping and
 joining, the paper's reference data and study cases (and the study run on a backend
 sized for this machine: study_backend), tolerances, sensitivity and robust
-optimisation, parameter identification (calibration), the static characteristic
-(and the model's ramp test), the envelope check, matplotlib figures.
+optimisation, parameter identification (calibration: the fit, its uncertainty and its
+report), the static characteristic (and the model's ramp test), the envelope check,
+matplotlib figures.
 May import: valve_sim.core. No ROS and no bag files: recording reads bags and hands
 arrays to this wing.
 """

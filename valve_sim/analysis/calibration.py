@@ -24,8 +24,7 @@ One implementation for the paper's Figure 5 and for a rig's own valve, in three 
 and the fit itself, here: calibrate(problem, settings). scipy.optimize.least_squares
 (trust region reflective, bounds) runs from several starts; the best start that meets
 every constraint and check wins. Approximate 95 % intervals and correlations come
-from the Jacobian at the result: covariance s^2 (J^T J)^-1, s^2 = residual variance
-for a recording, 1 for measures (their residuals are in units of their tolerance).
+from the Jacobian at the result (calibration_uncertainty).
 A caller stops a fit by its should_stop callback (the command line's Ctrl-C): the
 result is then the best evaluation so far, marked interrupted.
 """
@@ -37,13 +36,12 @@ import time as clock
 import numpy as np
 from scipy.optimize import least_squares
 from valve_sim.analysis.calibration_parameters import apply_values, start_value, STEP_TIME
+from valve_sim.analysis.calibration_uncertainty import add_uncertainty, central_jacobian
 from valve_sim.core.errors import CalibrationError, MODEL_ERRORS
 
 
 FAILED_RESIDUAL = 1e3  # every residual of a parameter set the model cannot run
 FLAT_CHANGE = 1e-9  # relative residual change below which a parameter is flat
-RANK_TOLERANCE = 1e-6  # singular values of the Jacobian below this (relative) count as 0
-Z_95 = 1.959964  # two-sided 95 % quantile of the normal distribution
 
 
 @dataclass(frozen=True)
@@ -187,19 +185,6 @@ def _non_finite(target, residual):
     )
 
 
-def _jacobian(objective, u, relative_step):
-    """Central-difference Jacobian d(residual)/du at u, and the residual there."""
-    base = objective(u)
-    columns = []
-    for j in range(len(u)):
-        step = relative_step * max(abs(u[j]), 1e-3)
-        up, down = u.copy(), u.copy()
-        up[j] += step
-        down[j] -= step
-        columns.append((objective(up) - objective(down)) / (2.0 * step))
-    return base, np.column_stack(columns)
-
-
 def _starts(fitted, start, count, spread, seed):
     """Start points in normalised units: the file's values, then seeded log-normal ones."""
     rng = np.random.default_rng(seed)
@@ -249,10 +234,10 @@ def calibrate(problem, settings=FitSettings(), progress=None, should_stop=None):
         result.residuals = objective(u)
     else:
         relative = _relative_step(problem, settings)
-        residual, jacobian = _jacobian(objective, u, max(relative, 1e-6))
+        residual, jacobian = central_jacobian(objective, u, max(relative, 1e-6))
         objective.use_step_times(u)  # the Jacobian moved them
         result.residuals = residual
-        _uncertainty(result, problem.target, jacobian, start)
+        add_uncertainty(result, problem.target, jacobian, start)
     return _finished(result, objective, began)
 
 
@@ -263,7 +248,7 @@ def _relative_step(problem, settings):
 def _check_identifiable(objective):
     """Raise CalibrationError if the start cannot be run or a fitted parameter is flat."""
     fitted = objective.problem.fitted
-    base, jacobian = _jacobian(objective, np.ones(len(fitted)), 0.01)
+    base, jacobian = central_jacobian(objective, np.ones(len(fitted)), 0.01)
     if np.all(base == FAILED_RESIDUAL):
         if objective.failure.startswith('the model'):
             raise CalibrationError(
@@ -377,43 +362,3 @@ def _finished(result, objective, began):
     result.evaluations = objective.count
     result.wall_time = clock.monotonic() - began
     return result
-
-
-def _uncertainty(result, target, jacobian, start):
-    """
-    Approximate 95 % intervals and correlations from the Jacobian (normalised units).
-
-    None of either when the Jacobian's rank (singular values above RANK_TOLERANCE of
-    the largest) is below the number of fitted parameters: the target then pins only
-    result.rank combinations of them (more parameters than measures), not each value.
-    """
-    count, fitted = len(result.residuals), len(result.fitted)
-    singular = np.linalg.svd(jacobian, compute_uv=False)
-    result.rank = int(np.sum(singular > RANK_TOLERANCE * singular[0])) if singular[0] > 0 else 0
-    if result.rank < fitted:
-        result.uncertainty_note = (
-            f'no intervals: the target determines {result.rank} combinations of the '
-            f'{fitted} fitted parameters, not each of them'
-        )
-        return
-    scale = target.covariance_scale(result.cost, count, fitted)
-    information = jacobian.T @ jacobian
-    try:
-        covariance = scale * np.linalg.inv(information)
-    except np.linalg.LinAlgError:
-        result.flat = [p.name for p in result.fitted]
-        return
-    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    if not np.all(sigma > 0.0):
-        result.uncertainty_note = (
-            'no intervals or correlations: the residual is zero (a perfect fit, as of a '
-            'noise-free recording of this very model), so the data tell nothing of their '
-            'noise, and an uncertainty computed from them would be zero'
-        )
-        return
-    result.intervals = [
-        (value - Z_95 * s * scale_, value + Z_95 * s * scale_)
-        for value, s, scale_ in zip(result.values, sigma, start)
-    ]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        result.correlations = covariance / np.outer(sigma, sigma)
