@@ -46,8 +46,9 @@ from valve_sim.analysis.measures import step_measures
 from valve_sim.analysis.optimisation import parse_design, parse_objectives, RobustProblem
 from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
 from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.study_backend import DaskBackend
 from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.study_runner import DaskBackend, run_cases
+from valve_sim.analysis.study_runner import run_cases
 from valve_sim.analysis.tolerances import draw, parse_variations
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import simulate

@@ -42,7 +42,8 @@ import time
 import numpy as np
 from valve_sim.analysis.measures import step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO, STUDY_PARAMETERS
-from valve_sim.analysis.study_runner import DaskBackend, evaluate_batch, run_cases
+from valve_sim.analysis.study_backend import DaskBackend
+from valve_sim.analysis.study_runner import evaluate_batch, run_cases
 from valve_sim.core.parameters import load_parameters, scaled
 from valve_sim.core.simulation import simulate, simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure

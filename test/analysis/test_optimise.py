@@ -35,8 +35,8 @@ from valve_sim.analysis.optimisation import (
 )
 from valve_sim.analysis.optimisation_report import parameter_file_text
 from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.study_backend import SerialBackend
 from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.study_runner import SerialBackend
 from valve_sim.analysis.tolerances import parse_variations, unit_samples
 from valve_sim.commands.cli import main
 from valve_sim.core.parameters import load_parameters

@@ -34,16 +34,9 @@ import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.study_backend import open_backend
+from valve_sim.analysis.study_backend import DaskBackend, open_backend, PoolBackend, SerialBackend
 from valve_sim.analysis.study_cases import run_all
-from valve_sim.analysis.study_runner import (
-    DaskBackend,
-    evaluate_batch,
-    PoolBackend,
-    Progress,
-    run_cases,
-    SerialBackend,
-)
+from valve_sim.analysis.study_runner import evaluate_batch, Progress, run_cases
 from valve_sim.analysis.tolerances import (
     Distribution,
     parse_limits,

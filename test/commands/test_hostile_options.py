@@ -192,7 +192,8 @@ def test_repair_never_follows_a_planted_link_at_its_default_output(tmp_path, cap
 
 
 def test_a_results_file_that_is_a_link_is_refused(tmp_path):
-    from valve_sim.analysis.study_runner import run_cases, SerialBackend
+    from valve_sim.analysis.study_backend import SerialBackend
+    from valve_sim.analysis.study_runner import run_cases
     from valve_sim.core.errors import StudyError
 
     victim = tmp_path / 'victim.jsonl'

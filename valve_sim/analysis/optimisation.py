@@ -48,7 +48,8 @@ from valve_sim.analysis.robust_yield import (
     evaluate_candidates,
     MIN_DECAY_RATE,
 )
-from valve_sim.analysis.study_runner import fingerprint, Progress, run_cases
+from valve_sim.analysis.study_results import fingerprint
+from valve_sim.analysis.study_runner import Progress, run_cases
 from valve_sim.analysis.tolerances import (
     follows_nominal,
     parse_variation,

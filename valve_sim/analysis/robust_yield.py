@@ -167,10 +167,10 @@ def check_candidate_row(row):
     """
     Raise ValueError naming the key unless row is a candidate row as evaluate_candidate makes it.
 
-    The resume check of study_runner.read_results for the optimisation's results files:
+    The resume check of study_results.read_results for the optimisation's results files:
     the nominal valve's row and every kept sample row are checked as the runner's rows.
     """
-    from valve_sim.analysis.study_runner import check_row, is_number
+    from valve_sim.analysis.study_results import check_row, is_number
 
     if not isinstance(row, dict):
         raise ValueError(f'a row is a JSON object, got {shown(row)}')

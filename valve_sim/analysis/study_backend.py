@@ -13,11 +13,14 @@
 # limitations under the License.
 
 """
-Where a study runs: the runner's backend chosen and sized for this machine.
+Where a study runs: the runner's backends, chosen and sized for this machine.
 
-open_backend() gives a DaskBackend on an existing cluster (scheduler tcp://HOST:PORT)
-or on a local cluster of workers processes, or without dask a PoolBackend where the
-command allows it (study_runner). run_samples() runs sampled valves on one.
+A backend runs batches of cases for study_runner.run_cases(): SerialBackend (in this
+process), PoolBackend (a local process pool) or DaskBackend (a Dask cluster; Dask is
+imported only by DaskBackend). open_backend() gives a DaskBackend on an existing
+cluster (scheduler tcp://HOST:PORT) or on a local cluster of workers processes, or
+without dask a PoolBackend where the command allows it. run_samples() runs sampled
+valves on one.
 
 Sizes are bounded before anything is allocated or started: a study of more than
 MAX_RUNS runs, or one whose runs would not fit in the memory available here
@@ -41,6 +44,7 @@ BYTES_PER_RUN = 4096
 WORKERS_PER_CORE = 4
 BYTES_PER_WORKER = 256 * 1024 * 1024  # [bytes] a Dask worker process with the model loaded
 CORES = os.cpu_count() or 1
+LOOPBACK = '127.0.0.1'  # where every part of a local cluster listens
 
 
 def available_memory():
@@ -71,6 +75,148 @@ def check_fits(what, count, things, limit, each):
         )
 
 
+class SerialBackend:
+    """Batches one after another in this process (tests, debugging)."""
+
+    workers = 1
+
+    def run(self, evaluate, batches):
+        for batch in batches:
+            yield evaluate(batch)
+
+    def close(self):
+        pass
+
+
+class PoolBackend:
+    """A local process pool: the paper's study when dask is not installed."""
+
+    def __init__(self, workers):
+        self.workers = max(1, workers)
+
+    def run(self, evaluate, batches):
+        from concurrent.futures import as_completed, ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            futures = [pool.submit(evaluate, batch) for batch in batches]
+            try:
+                for future in as_completed(futures):
+                    yield future.result()
+            finally:
+                for future in futures:
+                    future.cancel()
+
+    def close(self):
+        pass
+
+
+class DaskBackend:
+    """
+    Batches as tasks on a dask.distributed cluster.
+
+    address: a scheduler (tcp://HOST:PORT) of an existing cluster, connected at once;
+    or None for a LocalCluster of `workers` single-threaded processes on this
+    machine (default: one per core), started when the first batch is submitted, so
+    that a resumed study with nothing missing starts none. A task whose worker dies
+    is rescheduled by Dask; `retries` re-runs a task that raised.
+
+    The local cluster listens on the loopback interface only (scheduler, workers,
+    nannies, and the scheduler's HTTP routes on a free port): its pages show the
+    workers' details, and nothing of it is for the network. dashboard: also serve
+    Dask's dashboard there, at HOST:PORT ('127.0.0.1:0': this machine, a free port;
+    '0.0.0.0:8787' only when the network is meant to see it); its address is
+    dashboard_link once started.
+    """
+
+    def __init__(self, address=None, workers=None, retries=3, dashboard=None):
+        self.retries, self.dashboard = retries, dashboard
+        self.cluster = self._client = None
+        if address:
+            from distributed import Client
+
+            try:
+                self._client = Client(address, timeout='30s')
+            except (OSError, ValueError, TimeoutError) as error:
+                raise StudyError(
+                    f'cannot reach the Dask scheduler {address!r} (expected tcp://HOST:PORT): '
+                    f'{error}'
+                ) from None
+            self.workers = max(1, sum(self._client.nthreads().values()))
+        else:
+            self.workers = max(1, workers or os.cpu_count() or 1)
+
+    @property
+    def started(self):
+        """Whether a client exists: connected to the scheduler, or a local cluster started."""
+        return self._client is not None
+
+    @property
+    def client(self):
+        """Return the Dask client; the first use starts the local cluster."""
+        return self.start()._client
+
+    def start(self):
+        """Start the local cluster now (else it starts with the first batch); return self."""
+        if self._client is None:
+            import logging
+
+            from distributed import Client, LocalCluster
+
+            self.cluster = LocalCluster(
+                n_workers=self.workers,
+                threads_per_worker=1,
+                processes=True,
+                host=LOOPBACK,
+                dashboard_address=self.dashboard,
+                # without a dashboard the scheduler still serves health and metrics routes
+                scheduler_kwargs={'dashboard_address': self.dashboard or f'{LOOPBACK}:0'},
+                silence_logs=logging.ERROR,
+            )
+            self._client = Client(self.cluster)
+        return self
+
+    @property
+    def dashboard_link(self):
+        """Return the address of Dask's dashboard, or None without one (or before start)."""
+        if self._client is None or (self.cluster is not None and not self.dashboard):
+            return None
+        return self._client.dashboard_link
+
+    def run(self, evaluate, batches):
+        if not batches:
+            return
+        from distributed import as_completed
+
+        futures = [
+            self.client.submit(evaluate, batch, retries=self.retries, pure=False)
+            for batch in batches
+        ]
+        try:
+            for future in as_completed(futures):
+                try:
+                    yield future.result()
+                except Exception as error:  # noqa: B902  (KilledWorker, a worker's bug)
+                    first, last = future_cases(batches, futures, future)
+                    raise StudyError(
+                        f'the batch of cases {first}-{last} failed on the cluster: '
+                        f'{type(error).__name__}: {error}'
+                    ) from error
+        finally:
+            self.client.cancel(futures)
+
+    def close(self):
+        if self._client is not None:
+            self._client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def future_cases(batches, futures, future):
+    """First and last case index of the batch a future ran."""
+    batch = batches[futures.index(future)]
+    return batch[0]['index'], batch[-1]['index']
+
+
 def open_backend(command, scheduler=None, workers=CORES, dashboard=None, pool_fallback=False):
     """
     Return the Dask backend of command (a name for messages); without dask a PoolBackend.
@@ -80,8 +226,6 @@ def open_backend(command, scheduler=None, workers=CORES, dashboard=None, pool_fa
     (None: none). Without dask, a PoolBackend if pool_fallback and no scheduler;
     otherwise a missing dask raises StudyError saying what to pip-install.
     """
-    from valve_sim.analysis.study_runner import DaskBackend, PoolBackend
-
     check_workers(workers)
     try:
         import distributed  # noqa: F401  (is it installed?)

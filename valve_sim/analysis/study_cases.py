@@ -17,7 +17,7 @@ The cases of the paper's parameter study and the protocol that sets each case's 
 
 One definition for `valve-sim study`, calibration checks, tolerance studies and
 optimisation: the protocol's preset, and the runner cases of sampled valves.
-run_all() runs the paper's study on a runner backend (study_runner), run_case() one
+run_all() runs the paper's study on a runner backend (study_backend), run_case() one
 of its cases here; each result is {'measures', 'poppet', 'case'} (study_result()).
 """
 
@@ -202,7 +202,8 @@ def run_all(
     Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
     defaults to the cracking pressure of params.
     """
-    from valve_sim.analysis.study_runner import run_cases, SerialBackend
+    from valve_sim.analysis.study_backend import SerialBackend
+    from valve_sim.analysis.study_runner import run_cases
     from valve_sim.core.steady_state import cracking_pressure
 
     if preset_pressure is None:

@@ -30,19 +30,15 @@ used, the cracking pressure, the initial p_s and x, the six measures, their reas
 and error (a message when the valve could not be set or the run failed; then the
 measures are None).
 
-run_cases() submits batches to a backend (DaskBackend, PoolBackend, SerialBackend)
-and appends every finished row to a JSON-lines results file as it arrives (first
-line: the study's fingerprint), so an interrupted study resumes with only the
-missing indices. A row whose index is already on file is dropped, so a batch that
-Dask recomputes after a worker died is never recorded twice. Dask is imported only
-by DaskBackend.
+run_cases() submits batches to a backend (study_backend: DaskBackend, PoolBackend,
+SerialBackend) and appends every finished row to a JSON-lines results file as it
+arrives (study_results: first line the study's fingerprint), so an interrupted study
+resumes with only the missing indices. A row whose index is already on file is
+dropped, so a batch that Dask recomputes after a worker died is never recorded twice.
 """
 
-from dataclasses import asdict
-import hashlib
 import json
 import math
-import os
 from pathlib import Path
 import sys
 import time
@@ -53,8 +49,8 @@ from valve_sim.analysis.measures import (
     MEASURE_NAMES,
     step_measures,
 )
-from valve_sim.core.errors import InputFileError, MODEL_ERRORS, StudyError
-from valve_sim.core.input_files import json_lines, parse_json, shown, STUDY_RESULTS, STUDY_ROW
+from valve_sim.analysis.study_results import drop_torn_tail, fingerprint, read_results
+from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.output_files import append_to, finite, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
@@ -64,16 +60,6 @@ from valve_sim.core.steady_state import cracking_pressure, preset_preload
 RECORD_INTERVAL = 1e-4  # [s] sample interval of the waveforms the measures are taken from
 TASKS_PER_WORKER = 8  # batches per worker: small enough to balance, large enough to amortise
 MAX_BATCH = 64
-LOOPBACK = '127.0.0.1'  # where every part of a local cluster listens
-
-
-# The numbers a row may hold besides its measures (evaluate_batch, _measured).
-NUMBER_KEYS = (
-    'pilot_spring_preload',
-    'cracking_pressure',
-    'initial_supply_pressure',
-    'initial_main_valve_displacement',
-)
 
 
 def evaluate_case(case):
@@ -165,107 +151,6 @@ def _measured(case, row, waveforms):
             **{name: waveforms[name].tolist() for name in case['record']},
         }
     return row
-
-
-def fingerprint(cases):
-    """Hash of everything that determines a study's results (cases in order)."""
-    digest = hashlib.sha256()
-    for case in cases:
-        plain = {
-            key: asdict(value) if hasattr(value, '__dataclass_fields__') else value
-            for key, value in case.items()
-        }
-        digest.update(json.dumps(plain, sort_keys=True, default=list).encode())
-    return digest.hexdigest()[:16]
-
-
-def read_results(path, study, check=None):
-    """
-    Rows on file for the study with this fingerprint: {index: row}.
-
-    A missing file gives {}; a file of another study raises StudyError. Every row
-    ends with a newline: a torn last line (the process died while writing it) is
-    not a row, and drop_torn_tail() removes it before new rows are appended. The file
-    is read once, within input_files' limits (STUDY_RESULTS, each line STUDY_ROW), and
-    every row is checked by check (default check_row, the rows of evaluate_batch; the
-    rows of another evaluate need their own): a damaged one is a StudyError naming its
-    line.
-    """
-    check = check or check_row
-    path = Path(path)
-    if not os.path.lexists(path):
-        return {}
-    lines = json_lines(path, STUDY_RESULTS, STUDY_ROW)
-    header = {}
-    for number, text in lines:
-        try:
-            header = parse_json(text, STUDY_ROW, f'{path}, line {number},')
-        except InputFileError:
-            pass
-        break
-    if not isinstance(header, dict) or header.get('study') != study:
-        raise StudyError(
-            f'{path} holds results of a different study (other parameters, samples or '
-            'seed); give another --out or run without --resume to start afresh'
-        )
-    rows = {}
-    for number, text in lines:
-        where = f'{path}, line {number}'
-        try:
-            row = parse_json(text, STUDY_ROW, where)
-            check(row)
-        except (InputFileError, ValueError) as error:
-            raise StudyError(
-                f'{where}: not a row of this study ({error}); delete that line to compute '
-                'the run again, or run without --resume to start afresh'
-            ) from None
-        rows.setdefault(row['index'], row)
-    return rows
-
-
-def check_row(row):
-    """Raise ValueError naming the key unless row is a results row as evaluate_batch makes it."""
-    if not isinstance(row, dict):
-        raise ValueError(f'a row is a JSON object, got {shown(row)}')
-    index = row.get('index')
-    if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-        raise ValueError(f"key 'index' must be an integer >= 0, got {shown(index)}")
-    measures = row.get('measures')
-    if not isinstance(measures, dict) or not set(MEASURE_NAMES) <= set(measures) <= set(
-        MEASURE_NAMES + (ENVELOPE_DECAY,)
-    ):
-        raise ValueError(
-            f"key 'measures' must map {', '.join(MEASURE_NAMES)} (and {ENVELOPE_DECAY}, if "
-            'asked) to numbers or null'
-        )
-    for name, value in measures.items():
-        if value is not None and not is_number(value):
-            raise ValueError(f"key 'measures.{name}' must be a number or null, got {shown(value)}")
-    reasons = row.get('reasons')
-    if not isinstance(reasons, dict) or not all(isinstance(r, str) for r in reasons.values()):
-        raise ValueError(f"key 'reasons' must map measure names to text, got {shown(reasons)}")
-    if row.get('error') is not None and not isinstance(row['error'], str):
-        raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
-    for key in NUMBER_KEYS:
-        if key in row and not is_number(row[key]):
-            raise ValueError(f"key '{key}' must be a number, got {shown(row[key])}")
-    waveforms = row.get('waveforms', {'time': []})
-    if not isinstance(waveforms, dict) or not all(
-        isinstance(trace, list) and all(map(is_number, trace)) for trace in waveforms.values()
-    ):
-        raise ValueError("key 'waveforms' must map names to lists of numbers")
-
-
-def is_number(value):
-    """Return whether a value read from JSON is a number (an int or a float, not a bool)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def drop_torn_tail(path):
-    """Cut a file after its last newline (a row that was being written when it died)."""
-    with open(path, 'r+b') as stream:
-        data = stream.read()
-        stream.truncate(data.rfind(b'\n') + 1)
 
 
 def batches_of(cases, batch_size):
@@ -396,145 +281,3 @@ def run_cases(
     if lost:
         raise StudyError(f'{len(lost)} runs produced no result; rerun with --resume')
     return rows, computed
-
-
-class SerialBackend:
-    """Batches one after another in this process (tests, debugging)."""
-
-    workers = 1
-
-    def run(self, evaluate, batches):
-        for batch in batches:
-            yield evaluate(batch)
-
-    def close(self):
-        pass
-
-
-class PoolBackend:
-    """A local process pool: the paper's study when dask is not installed."""
-
-    def __init__(self, workers):
-        self.workers = max(1, workers)
-
-    def run(self, evaluate, batches):
-        from concurrent.futures import as_completed, ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=self.workers) as pool:
-            futures = [pool.submit(evaluate, batch) for batch in batches]
-            try:
-                for future in as_completed(futures):
-                    yield future.result()
-            finally:
-                for future in futures:
-                    future.cancel()
-
-    def close(self):
-        pass
-
-
-class DaskBackend:
-    """
-    Batches as tasks on a dask.distributed cluster.
-
-    address: a scheduler (tcp://HOST:PORT) of an existing cluster, connected at once;
-    or None for a LocalCluster of `workers` single-threaded processes on this
-    machine (default: one per core), started when the first batch is submitted, so
-    that a resumed study with nothing missing starts none. A task whose worker dies
-    is rescheduled by Dask; `retries` re-runs a task that raised.
-
-    The local cluster listens on the loopback interface only (scheduler, workers,
-    nannies, and the scheduler's HTTP routes on a free port): its pages show the
-    workers' details, and nothing of it is for the network. dashboard: also serve
-    Dask's dashboard there, at HOST:PORT ('127.0.0.1:0': this machine, a free port;
-    '0.0.0.0:8787' only when the network is meant to see it); its address is
-    dashboard_link once started.
-    """
-
-    def __init__(self, address=None, workers=None, retries=3, dashboard=None):
-        self.retries, self.dashboard = retries, dashboard
-        self.cluster = self._client = None
-        if address:
-            from distributed import Client
-
-            try:
-                self._client = Client(address, timeout='30s')
-            except (OSError, ValueError, TimeoutError) as error:
-                raise StudyError(
-                    f'cannot reach the Dask scheduler {address!r} (expected tcp://HOST:PORT): '
-                    f'{error}'
-                ) from None
-            self.workers = max(1, sum(self._client.nthreads().values()))
-        else:
-            self.workers = max(1, workers or os.cpu_count() or 1)
-
-    @property
-    def started(self):
-        """Whether a client exists: connected to the scheduler, or a local cluster started."""
-        return self._client is not None
-
-    @property
-    def client(self):
-        """Return the Dask client; the first use starts the local cluster."""
-        return self.start()._client
-
-    def start(self):
-        """Start the local cluster now (else it starts with the first batch); return self."""
-        if self._client is None:
-            import logging
-
-            from distributed import Client, LocalCluster
-
-            self.cluster = LocalCluster(
-                n_workers=self.workers,
-                threads_per_worker=1,
-                processes=True,
-                host=LOOPBACK,
-                dashboard_address=self.dashboard,
-                # without a dashboard the scheduler still serves health and metrics routes
-                scheduler_kwargs={'dashboard_address': self.dashboard or f'{LOOPBACK}:0'},
-                silence_logs=logging.ERROR,
-            )
-            self._client = Client(self.cluster)
-        return self
-
-    @property
-    def dashboard_link(self):
-        """Return the address of Dask's dashboard, or None without one (or before start)."""
-        if self._client is None or (self.cluster is not None and not self.dashboard):
-            return None
-        return self._client.dashboard_link
-
-    def run(self, evaluate, batches):
-        if not batches:
-            return
-        from distributed import as_completed
-
-        futures = [
-            self.client.submit(evaluate, batch, retries=self.retries, pure=False)
-            for batch in batches
-        ]
-        try:
-            for future in as_completed(futures):
-                try:
-                    yield future.result()
-                except Exception as error:  # noqa: B902  (KilledWorker, a worker's bug)
-                    first, last = future_cases(batches, futures, future)
-                    raise StudyError(
-                        f'the batch of cases {first}-{last} failed on the cluster: '
-                        f'{type(error).__name__}: {error}'
-                    ) from error
-        finally:
-            self.client.cancel(futures)
-
-    def close(self):
-        if self._client is not None:
-            self._client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-
-
-def future_cases(batches, futures, future):
-    """First and last case index of the batch a future ran."""
-    batch = batches[futures.index(future)]
-    return batch[0]['index'], batch[-1]['index']
