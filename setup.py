@@ -157,7 +157,7 @@ setup(
     entry_points={
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',
-            'valve_node = valve_sim.ros.valve_node:main',
+            'valve_node = valve_sim.ros.valve_node_main:main',
             'analyser_node = valve_sim.ros.analyser_node:main',
         ],
     },

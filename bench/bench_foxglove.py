@@ -58,7 +58,7 @@ SETTLE = 2.0  # [s] at the start of each phase, not measured (a report window sp
 def start_node(name, options, folder):
     log = open(folder / f'{name}.log', 'w')
     return subprocess.Popen(
-        [sys.executable, '-m', 'valve_sim.ros.valve_node', *options, '--ros-args', '-r',
+        [sys.executable, '-m', 'valve_sim.ros.valve_node_main', *options, '--ros-args', '-r',
          f'__ns:=/{name}'],
         stdout=log,
         stderr=subprocess.STDOUT,

@@ -126,7 +126,7 @@ def node_command(kind, prefix):
         return [str(prefix / 'lib' / 'valve_sim' / 'valve_node')], {
             'AMENT_PREFIX_PATH': str(prefix), 'PYTHONPATH': str(site)
         }
-    return [sys.executable, '-m', 'valve_sim.ros.valve_node'], {}
+    return [sys.executable, '-m', 'valve_sim.ros.valve_node_main'], {}
 
 
 def start_up(probe, kind, index, command, changes, cache=None):

@@ -71,7 +71,7 @@ def start_node(log_path, *ros_args, options=()):
     """
     Start valve_node in its own process, output to log_path.
 
-    The command: python -m valve_sim.ros.valve_node *options --ros-args ...
+    The command: python -m valve_sim.ros.valve_node_main *options --ros-args ...
     """
     env = dict(
         os.environ,
@@ -80,7 +80,8 @@ def start_node(log_path, *ros_args, options=()):
     )
     with open(log_path, 'w') as log:
         return subprocess.Popen(
-            [sys.executable, '-m', 'valve_sim.ros.valve_node', *options, '--ros-args', *ros_args],
+            [sys.executable, '-m', 'valve_sim.ros.valve_node_main', *options,
+             '--ros-args', *ros_args],
             stdout=log,
             stderr=subprocess.STDOUT,
             env=env,

@@ -427,3 +427,37 @@ def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
     assert result['supply_pressure'][0] == steady_state(params, Q0)[P_S]
     refused = valve_sim('fmu', '--out', str(tmp_path / 'valve.zip'), check=False)
     assert refused.returncode == 1 and '--out must name a .fmu file' in refused.stderr
+
+
+def test_a_d_c_change_before_start_and_between_steps_solves_the_cracking_point_once(
+    monkeypatch, tmp_path, reference
+):
+    # The slave in this process (not through FMI) with the cracking-point solver counted:
+    # a change is planned once (core.retuning.plan_change) and applied once.
+    from valve_sim.core import retuning, steady_state
+    from valve_sim.fmu.relief_valve_slave import ReliefValve
+
+    solve, solves = steady_state.cracking_pressure, []
+
+    def counted(*args, **kwargs):
+        solves.append(args)
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(steady_state, 'cracking_pressure', counted)
+    monkeypatch.setattr(retuning, 'cracking_pressure', counted)
+    d_c = reference['damping_orifice_diameter']
+    valve = ReliefValve(instance_name='counted', resources=str(tmp_path))  # the defaults
+    valve.setup_experiment(0.0)
+    valve.damping_orifice_diameter = d_c * 1.2
+    solves.clear()
+    valve.exit_initialization_mode()
+    assert len(solves) == 1 and valve.model is not None, valve.log_queue
+    assert valve.model.params['damping_orifice_diameter'] == d_c * 1.2
+    assert valve.preset_pressure == solve(valve.model.params) != solve(reference)
+    assert valve.do_step(0.0, INTERVAL)
+    valve.damping_orifice_diameter = d_c * 1.4
+    solves.clear()
+    assert valve.do_step(INTERVAL, INTERVAL)
+    assert len(solves) == 1
+    assert valve.model.params['damping_orifice_diameter'] == d_c * 1.4
+    assert valve.preset_pressure == solve(valve.model.params)

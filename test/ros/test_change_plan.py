@@ -97,6 +97,16 @@ def test_refusals_are_the_plan_s_problem_not_an_exception(model, loaded):
         {'preset_pressure': 9e6, 'pilot_spring_preload': loaded.params['pilot_spring_preload']},
     )
     assert 'disagrees' in disagreeing.problem
+    unreachable = plan(model, loaded, {'preset_pressure': 1e5})
+    assert 'pilot_spring_preload' in unreachable.problem and unreachable.params is None
+
+
+def test_a_preset_and_preload_that_agree_are_accepted_as_they_are(model, loaded):
+    preload = loaded.params['pilot_spring_preload']
+    preset = steady_state.cracking_pressure(loaded.params)
+    planned = plan(model, loaded, {'preset_pressure': preset, 'pilot_spring_preload': preload})
+    assert planned.problem is None and planned.dependent == {}
+    assert planned.params['pilot_spring_preload'] == preload
 
 
 def test_a_tank_pressure_solves_the_cracking_point_at_it_too(model, loaded, solves):

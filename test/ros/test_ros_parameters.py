@@ -20,9 +20,8 @@ import pytest
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
-from valve_sim.core.errors import ParameterError
 from valve_sim.core.parameters import SPECS
-from valve_sim.core.retuning import check_preset, dependent_change
+from valve_sim.core.retuning import dependent_change
 from valve_sim.core.steady_state import cracking_pressure
 from valve_sim.ros.ros_parameters import (
     declare_double,
@@ -103,21 +102,3 @@ def test_preset_pressure_sets_the_preload_and_model_changes_report_the_new_crack
     )
     assert stiffer['preset_pressure'] > cracking_pressure(reference)
     assert dependent_change(reference, {'step_size': 2e-5}) == {}
-
-
-def test_check_preset_refuses_disagreeing_values(reference):
-    preset = cracking_pressure(reference)
-    check_preset(
-        reference,
-        {'preset_pressure': preset, 'pilot_spring_preload': reference['pilot_spring_preload']},
-    )
-    with pytest.raises(ParameterError, match='disagrees'):
-        check_preset(
-            reference,
-            {
-                'preset_pressure': preset + 1e5,
-                'pilot_spring_preload': reference['pilot_spring_preload'],
-            },
-        )
-    with pytest.raises(ParameterError, match='pilot_spring_preload'):
-        check_preset(reference, {'preset_pressure': 1e5})

@@ -20,10 +20,11 @@ preset_pressure is the valve's cracking pressure: the steady supply pressure
 Setting it sets pilot_spring_preload, the way a technician turns the adjusting
 screw; changing any model parameter moves the cracking pressure, which
 preset_pressure then reports. dependent_change() derives the partner of a
-change, check_preset() verifies that a change keeps the two consistent, and
-check_limits() that the running valve stays within its physical limits.
-plan_change() does all of that for valve_node at once, solving the cracking
-point once: a ChangePlan that the node checks, then applies.
+change, planned_parameters() the parameters after it with the two consistent
+(solving the cracking point once), and check_limits() checks that the running
+valve stays within its physical limits. plan_change() does all of that for a
+running model at once (valve_node, the FMU), solving the cracking point once: a
+ChangePlan that the caller checks, then applies.
 """
 
 from dataclasses import dataclass
@@ -72,23 +73,6 @@ def dependent_change(params, changes):
     if 'preset_pressure' not in changes and changes.keys() & SPECS.keys():
         return {'preset_pressure': cracking_pressure(merged_parameters(params, changes))}
     return {}
-
-
-def check_preset(params, changes):
-    """
-    Raise unless a change keeps preset_pressure the cracking pressure of params (merged).
-
-    valve_node adds the dependent parameter to every change; where it is missing,
-    deriving it failed, and repeating that raises the reason.
-    """
-    preset = changes.get('preset_pressure')
-    if preset is None:
-        if changes.keys() & SPECS.keys():
-            cracking_pressure(params)
-        return
-    if 'pilot_spring_preload' not in changes:
-        preload_for_cracking_pressure(params, preset)
-    _check_agreement(params, preset, cracking_pressure(params))
 
 
 def _check_agreement(params, preset, cracking):
@@ -170,8 +154,7 @@ def plan_change(model, settings, changes, inlet_flow, tank_input, sensors):
             **settings,
             **{name: check_value(name, value) for name, value in split(changes).setting.items()},
         }
-        params = merged_parameters(model.params, changes)
-        params, cracking, plan['dependent'] = _preset(params, changes)
+        params, cracking, plan['dependent'] = planned_parameters(model.params, changes)
         model.faults.changed(split(changes).fault)
         sensors.checked(split(changes).sensor)
         ambient = new_settings['ambient_pressure']
@@ -195,13 +178,17 @@ def plan_change(model, settings, changes, inlet_flow, tank_input, sensors):
     return ChangePlan(changes, split(changes), **plan)
 
 
-def _preset(params, changes):
+def planned_parameters(params, changes):
     """
     Return (params, cracking pressure [Pa] or None, dependent change) of a change.
 
-    params: merged with the change. The preset and the preload agree after it:
-    a new preset sets the preload, a new model parameter the preset.
+    params: the model parameters in use; changes: {name: value}, of which the model
+    parameters and preset_pressure count. The params returned are merged with the
+    change and validated, the preset and the preload agreeing: a new preset sets the
+    preload (a few cracking-point solves), a new model parameter the preset (one).
+    Raises ParameterError or SteadyStateError.
     """
+    params = merged_parameters(params, changes)
     preset = changes.get('preset_pressure')
     if preset is not None and 'pilot_spring_preload' not in changes:
         preload, cracking = preset_preload(params, preset)

@@ -32,8 +32,9 @@ Variables (SI; pressures gauge, above the ambient pressure, as `valve-sim simula
 
 doStep integrates the whole internal steps that fit up to the communication point and
 carries the remainder into the next step, as valve_node does (RealTimeModel), so any
-communication step works. A parameter change between steps is checked and trial-run
-as valve_node checks it. An overpressure halts the model as it halts valve_node
+communication step works. A parameter change between steps is planned, checked and
+trial-run as valve_node plans it (core.retuning.plan_change: the cracking point solved
+once), then applied. An overpressure halts the model as it halts valve_node
 (supply_pressure at burst_pressure, the rest held): fmi2OK with a logged warning. A
 divergence keeps the last good state: fmi2Discard with the reason logged, until an input
 or a parameter changes. An invalid input (NaN, negative, beyond the limits), a refused
@@ -65,12 +66,8 @@ from valve_sim.core.parameters import (
     SPECS,
 )
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
-from valve_sim.core.retuning import (
-    check_limits,
-    check_preset,
-    dependent_change,
-    merged_parameters,
-)
+from valve_sim.core.retuning import plan_change, planned_parameters
+from valve_sim.core.sensors import SensorStage
 from valve_sim.core.steady_state import cracking_pressure
 
 
@@ -158,6 +155,7 @@ class ReliefValve(Fmi2Slave):
         self._applied = None  # (inlet flow, tank pressure) of the last step
         self._saturated = False  # halted by an overpressure: p_s shown at burst_pressure
         self._failed = None  # why the start failed
+        self._sensors = SensorStage()  # ideal, for plan_change: the FMU has no sensor stage
         for spec in PARAMETERS:
             setattr(self, spec.name, self._defaults[spec.name])
             self._parameter(spec)
@@ -244,7 +242,9 @@ class ReliefValve(Fmi2Slave):
                     f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
                     f'got {self.initial_state!r}'
                 )
-            params, preset = self._requested(self._defaults, self._default_preset)
+            changes = self._changes(self._defaults, self._default_preset)
+            params, _, dependent = planned_parameters(self._defaults, changes)
+            preset = {**changes, **dependent}.get('preset_pressure', self._default_preset)
             step_size = check_value('step_size', self.step_size)
             inlet_flow, tank_pressure = self._inputs(params)
             start_flow = inlet_flow if self.initial_state == 'steady' else 0.0
@@ -331,48 +331,44 @@ class ReliefValve(Fmi2Slave):
             raise ParameterError(f'input refused: {problem}')
         return float(flow), float(tank)
 
-    def _requested(self, params, preset):
+    def _changes(self, params, preset, step_size=None):
         """
-        Return (params, preset_pressure) as the parameter variables now ask, checked.
+        Return {name: value} of the parameter variables that differ from those in use, checked.
 
-        params, preset: those in use. Setting preset_pressure sets pilot_spring_preload,
-        changing a model parameter moves preset_pressure, as in valve_node; setting both
-        inconsistently is refused (ParameterError).
+        params, preset: the model parameters and preset_pressure in use; step_size: the
+        step size in use [s] (None: before the start, where it is no change). Setting
+        preset_pressure sets pilot_spring_preload, changing a model parameter moves
+        preset_pressure, as in valve_node (core.retuning); ParameterError if one is invalid.
         """
         changes = {
             name: getattr(self, name) for name in SPECS if getattr(self, name) != params[name]
         }
         if self.preset_pressure != preset:
-            changes['preset_pressure'] = check_value('preset_pressure', self.preset_pressure)
-        if not changes:
-            return params, preset
-        for name, value in changes.items():
-            check_value(name, value)
-        changes.update(dependent_change(params, changes))
-        new = merged_parameters(params, changes)
-        check_preset(new, changes)
-        return new, changes.get('preset_pressure', preset)
+            changes['preset_pressure'] = self.preset_pressure
+        if step_size is not None and self.step_size != step_size:
+            changes['step_size'] = self.step_size
+        return {name: check_value(name, value) for name, value in changes.items()}
 
     def _retune(self, inlet_flow, tank_pressure):
         """Apply changed parameters or step size as valve_node would; True if any changed."""
         model = self.model
-        preset = self._preset
-        step_size = self.step_size
+        settings = {'step_size': model.step_size, 'tank_pressure': tank_pressure,
+                    'ambient_pressure': None}  # pressures gauge: no vacuum limit checked
         try:
-            params, preset = self._requested(model.params, preset)
-            if params is model.params and step_size == model.step_size:
+            changes = self._changes(model.params, self._preset, model.step_size)
+            if not changes:
                 return False
-            step_size = check_value('step_size', step_size)
-            check_limits(params, model.state, inlet_flow, tank_pressure)
-            model.trial(params, step_size, inlet_flow, tank_pressure=tank_pressure)
-        except REFUSED as error:
+            plan = plan_change(model, settings, changes, inlet_flow, None, self._sensors)
+            if plan.problem:
+                raise ParameterError(plan.problem)
+        except ParameterError as error:
             self._show(model.params, self._preset)
             self.step_size = model.step_size
             raise ParameterError(
                 f'parameter change refused, the parameters in use are kept: {error}'
             ) from None
-        model.retune(params, step_size)
-        self._show(params, preset)
+        model.retune(plan.params, plan.settings['step_size'])
+        self._show(plan.params, plan.changes.get('preset_pressure', self._preset))
         return True
 
     def _show(self, params, preset):

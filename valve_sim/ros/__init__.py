@@ -23,7 +23,7 @@ The home of rclpy (the only wing that uses it, with the testing kit); nodes stay
 around valve_sim.core and valve_sim.analysis.
 May import: valve_sim.core, valve_sim.analysis, valve_sim.recording, rclpy.
 
-A node process (`python -m valve_sim.ros.<node>`, or its console script) ends
+A node process (`python -m valve_sim.ros.<module>`, or its console script) ends
 quietly on SIGINT or SIGTERM while it is still starting up (exit code 128 + the
 signal's number): this package is imported before the node's own (slow) imports,
 and spinning.init() later installs the handlers that stop the node cleanly.
@@ -39,7 +39,7 @@ import os
 import sys
 
 
-NODE_PROGRAMS = ('valve_node', 'analyser_node')
+NODE_PROGRAMS = {'valve_node': 'valve_node_main', 'analyser_node': 'analyser_node'}  # module
 
 
 def _exit_quietly(number, _frame):
@@ -70,11 +70,11 @@ def node_command(program, options=(), parameters=None, ros_args=()):
     """
     Return the command that runs a node program of NODE_PROGRAMS with this Python.
 
-    python -m valve_sim.ros.PROGRAM OPTIONS [--ros-args -p NAME:=VALUE ... ROS_ARGS];
-    parameters: {name: value} set at start.
+    python -m valve_sim.ros.MODULE OPTIONS [--ros-args -p NAME:=VALUE ... ROS_ARGS], MODULE
+    the program's module; parameters: {name: value} set at start.
     """
     ros = [f'{name}:={value}' for name, value in (parameters or {}).items()]
     ros = [item for assignment in ros for item in ('-p', assignment)] + list(ros_args)
-    return [sys.executable, '-m', f'valve_sim.ros.{program}', *options] + (
+    return [sys.executable, '-m', f'valve_sim.ros.{NODE_PROGRAMS[program]}', *options] + (
         ['--ros-args', *ros] if ros else []
     )

@@ -61,7 +61,8 @@ class Driver:
         from rclpy.node import Node
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64
-        from valve_sim.ros.analyser_node import MEASURES_QOS, NODE_NAME, RECORDING_TASK
+        from valve_sim.ros.analyser_node import NODE_NAME, RECORDING_TASK
+        from valve_sim.ros.measures_publisher import MEASURES_QOS
         from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
         self.processes, self.folder, self.flow = processes, folder, INITIAL_FLOW
@@ -159,7 +160,7 @@ class Driver:
 
     def _measured_step(self):
         """Wait for the analyser's measures of the step just commanded: (t_step [s], values)."""
-        from valve_sim.ros.analyser_node import measures_from_message
+        from valve_sim.ros.measures_publisher import measures_from_message
 
         count = len(self.measures)
         self.spin_until(

@@ -31,15 +31,41 @@ for one rate-limited warning.
 
 CheckedInput is that taking, checking and counting, once; InletFlowInput (std_msgs/Float64,
 m^3/s) and TankPressureInput (sensor_msgs/FluidPressure, absolute Pa) say only how their
-message is read and which values are valid.
+message is read and which values are valid. Both subscriptions' QoS (INLET_FLOW_QOS, the
+inlet_flow_reliability parameter) and how much a tick takes (INPUTS_PER_TICK, INPUT_SHARE)
+live here too.
 """
 
 import struct
 
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 from valve_sim.ros.raw_take import RawTaker
 
 
+# A tick takes at most INPUTS_PER_TICK inlet_flow messages, and none after INPUT_SHARE of
+# its period: under a flood each take waits for the middleware's busy reader lock.
+INPUTS_PER_TICK = 10
+INPUT_SHARE = 0.2
+RELIABLE_INPUT_DEPTH = 1000  # a 1 s burst at 1 kHz
+# inlet_flow_reliability: best effort by default, as REP 2003 asks of sensor-data subscribers:
+# it matches reliable and best-effort (SensorDataQoS) publishers alike (a reliable subscription
+# never hears the latter). Its queue keeps the last INPUTS_PER_TICK messages, all that the next
+# tick takes, so the value applied is never older than the tick; a flood beyond that is dropped
+# by the middleware (counted as lost for a single publisher). Reliable keeps a burst for the
+# ticks to take and count, at the price of up to RELIABLE_INPUT_DEPTH / INPUTS_PER_TICK ticks
+# of delay while a reliable flood keeps it full (a deep full queue also costs the middleware
+# more per message).
+INLET_FLOW_QOS = {
+    'best_effort': QoSProfile(depth=INPUTS_PER_TICK, reliability=ReliabilityPolicy.BEST_EFFORT),
+    'reliable': QoSProfile(depth=RELIABLE_INPUT_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
+}
+RELIABILITY_DESCRIPTION = (
+    "inlet_flow and tank_pressure subscriptions: 'best_effort' (default; hears "
+    f'every publisher, keeps the last {INPUTS_PER_TICK} messages for the next '
+    "tick) or 'reliable' (reliable publishers only; keeps a burst of "
+    f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
+)
 FLOAT64_CDR = struct.Struct('<d')  # std_msgs/Float64 data after the 4-byte CDR header
 CDR_HEADER = 4
 STRING_LENGTH = struct.Struct('<I')

@@ -21,7 +21,7 @@ rosbag2 would choose (subscription_qos), of whatever type the graph reports for 
 and adds it to the bag with its publishers' offers. drain() takes every queued
 message of every topic (valve_sim.ros.raw_take, the taker valve_node's inputs use),
 writes it to the bag, counts it and the messages a single publisher lost, and hands
-the analysed topics' messages to the measures publisher (analyser_node.StepMeasures),
+the analysed topics' messages to the measures publisher (measures_publisher.StepMeasures),
 which also says which type of a topic it reads and how (type_to_record, extractor).
 status() is the recording status analyser_node publishes on /diagnostics. The node's
 docstring (valve_sim.ros.analyser_node) says what is recorded and how nothing is lost.

@@ -34,34 +34,22 @@ it: inputs, the tick timer, the outcome's logs and counters, the reset service.
 Parameters (ros.valve_parameters: declarations, a change planned once and applied once),
 housekeeping (ros.housekeeping) and the /diagnostics report (ros.valve_diagnostics) live
 apart. Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a
-schedule file whose events are applied at the tick, directly. With --foxglove [PORT] the
-tick topics and /diagnostics are also served over Foxglove's WebSocket protocol.
+schedule file whose events are applied at the tick, directly. The process (command line,
+main) is ros.valve_node_main; with its --foxglove [PORT] the tick topics and /diagnostics
+are also served over Foxglove's WebSocket protocol.
 """
 
-import argparse
-import gc
-import sys
 import time
 
-import rclpy
-from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from valve_sim.core.errors import InputFileError, ParameterError, SteadyStateError
-from valve_sim.core.input_files import (
-    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
-    MAX_ALIASES,
-    MAX_DEPTH,
-    MAX_EVENTS,
-)
+from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status
-from valve_sim.ros import diagnostics, live_view, spinning
+from valve_sim.ros import diagnostics
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
@@ -69,9 +57,16 @@ from valve_sim.ros.fault_injection import (
     ScheduleLoader,
 )
 from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
-from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
+from valve_sim.ros.inlet_input import (
+    INLET_FLOW_QOS,
+    InletFlowInput,
+    INPUT_SHARE,
+    INPUTS_PER_TICK,
+    RELIABILITY_DESCRIPTION,
+    TankPressureInput,
+)
 from valve_sim.ros.node_status import NodeStatus, Throttle
-from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES, ReceiveThreads
+from valve_sim.ros.receive_threads import DEFAULT_POLICY, ReceiveThreads
 from valve_sim.ros.ros_parameters import log_parameter_files
 from valve_sim.ros.valve_diagnostics import ValveDiagnostics
 from valve_sim.ros.valve_outputs import ValveOutputs
@@ -85,29 +80,6 @@ from valve_sim.ros.valve_parameters import (
 
 READY_MESSAGE = 'ready'  # start of the log line that says the node ticks from now on
 CATCH_UP_LIMIT_PERIODS = 50  # a tick integrates at most this many tick periods of lag
-# A tick takes at most INPUTS_PER_TICK inlet_flow messages, and none after INPUT_SHARE of
-# its period: under a flood each take waits for the middleware's busy reader lock.
-INPUTS_PER_TICK = 10
-INPUT_SHARE = 0.2
-RELIABLE_INPUT_DEPTH = 1000  # a 1 s burst at 1 kHz
-# inlet_flow_reliability: best effort by default, as REP 2003 asks of sensor-data subscribers:
-# it matches reliable and best-effort (SensorDataQoS) publishers alike (a reliable subscription
-# never hears the latter). Its queue keeps the last INPUTS_PER_TICK messages, all that the next
-# tick takes, so the value applied is never older than the tick; a flood beyond that is dropped
-# by the middleware (counted as lost for a single publisher). Reliable keeps a burst for the
-# ticks to take and count, at the price of up to RELIABLE_INPUT_DEPTH / INPUTS_PER_TICK ticks
-# of delay while a reliable flood keeps it full (a deep full queue also costs the middleware
-# more per message).
-INLET_FLOW_QOS = {
-    'best_effort': QoSProfile(depth=INPUTS_PER_TICK, reliability=ReliabilityPolicy.BEST_EFFORT),
-    'reliable': QoSProfile(depth=RELIABLE_INPUT_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
-}
-RELIABILITY_DESCRIPTION = (
-    "inlet_flow and tank_pressure subscriptions: 'best_effort' (default; hears "
-    f'every publisher, keeps the last {INPUTS_PER_TICK} messages for the next '
-    "tick) or 'reliable' (reliable publishers only; keeps a burst of "
-    f'{RELIABLE_INPUT_DEPTH} for the ticks to take and count)'
-)
 
 
 class ReliefValveNode(Node):
@@ -407,90 +379,3 @@ class ReliefValveNode(Node):
         self.receive_threads = ReceiveThreads(policy)
         self.receive_threads.update()
         self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
-
-
-STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)
-
-
-def parse_arguments(args):
-    """valve_node's own command line (ROS arguments removed)."""
-    parser = argparse.ArgumentParser(
-        prog='valve_node',
-        description='The virtual relief valve as a ROS 2 node.',
-        epilog=(
-            f'fault_schedule: a regular file of {FAULT_SCHEDULE_FILE.limits()} and at most '
-            f'{MAX_EVENTS:,} events (YAML, UTF-8, at most {MAX_ALIASES} aliases, '
-            f'{MAX_DEPTH} levels deep), read in a process of its own when set live; a '
-            '/clock before 0 s or at or past 2^31 s is ignored and counted. '
-            'docs/valve_node.md, "Files it reads, and other hostile input".'
-        ),
-    )
-    parser.add_argument(
-        '--executor',
-        choices=spinning.EXECUTORS,
-        default=spinning.DEFAULT_EXECUTOR,
-        help=(
-            f'rclpy executor that runs the node (default {spinning.DEFAULT_EXECUTOR}; '
-            "events, rclpy's EventsExecutor, "
-            "costs a third of single-threaded's CPU time per tick: docs/valve_node.md)"
-        ),
-    )
-    parser.add_argument(
-        '--receive-threads',
-        choices=POLICIES,
-        default=DEFAULT_POLICY,
-        help=(
-            f"scheduling of the middleware's receive threads (default {DEFAULT_POLICY}: as "
-            'the middleware starts them; idle: SCHED_IDLE, so that a flood of messages '
-            'cannot delay the tick on a machine that does nothing else; docs/valve_node.md)'
-        ),
-    )
-    live_view.add_port_option(
-        parser,
-        'serve the tick topics and /diagnostics over the Foxglove WebSocket protocol '
-        f'(default port {live_view.DEFAULT_PORT}; 0: any free port); the layout to open: '
-        f'{live_view.layout_path()}. On a ROS install, run foxglove_bridge instead',
-    )
-    parser.add_argument(
-        '--foxglove-host',
-        default=live_view.DEFAULT_HOST,
-        metavar='HOST',
-        help='address the Foxglove server listens on '
-        f'(default {live_view.DEFAULT_HOST}, this machine; '
-        '0.0.0.0 for the network)',
-    )
-    return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:])
-
-
-def main(args=None):
-    """Run valve_node until SIGINT or SIGTERM; returns the exit code."""
-    options = parse_arguments(args)
-    stop = spinning.init(args)
-    try:
-        node = ReliefValveNode(sys.argv if args is None else args)
-    except STARTUP_ERRORS as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {error}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        if options.foxglove is not None:
-            node.serve_live_view(options.foxglove, options.foxglove_host)
-        node.get_logger().info(f'executor: {options.executor}')
-        node.use_receive_thread_policy(options.receive_threads)
-        gc.freeze()  # start-up objects stay out of the garbage collector's scans
-        gc.disable()  # the node collects in its housekeeping, between ticks
-        spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
-    except InputFileError as error:  # the live view's port or foxglove-sdk
-        node.get_logger().fatal(f'cannot start: {error}')
-        return 1
-    finally:
-        if node.live_view is not None:
-            node.live_view.close()
-        node.schedule_loader.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
