@@ -57,6 +57,7 @@ from valve_sim.analysis.tolerances import (
     unit_samples,
 )
 from valve_sim.core.errors import ParameterError
+from valve_sim.core.output_files import make_folder
 from valve_sim.core.parameters import resolve_name, scaled
 
 
@@ -274,8 +275,7 @@ def search(problem, backend, folder, population, generations, resume=False,
     from pymoo.operators.sampling.lhs import LHS
     from pymoo.problems.static import StaticProblem
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = make_folder(Path(folder))
     if not resume:
         for old in folder.glob('*.jsonl'):
             old.unlink()

@@ -26,7 +26,7 @@ holds preset_pressure, which sets the pilot spring preload when the file is load
 import csv
 
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.core.output_files import json_text, replacing, write_text
+from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.parameters import NODE_NAME, PARAMETERS
 
 
@@ -127,8 +127,7 @@ def write_outputs(out, problem, outcome, records, population, generations):
 
     The baselines' parameter files are written too (params/reference.yaml, table2.yaml).
     """
-    params_folder = out / 'params'
-    params_folder.mkdir(exist_ok=True)
+    params_folder = make_folder(out / 'params')
     for old in params_folder.glob('pareto_*.yaml'):
         old.unlink()
     pareto = []

@@ -24,12 +24,12 @@ run, the events and the limits of the checks that bound a signal.
 """
 
 from datetime import datetime, timezone
-import json
 import socket
 import xml.etree.ElementTree as ElementTree
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.output_files import json_text, replacing, write_text
 
 
 STEP_KEYS = ('t_step', 'direction', 'flow_before', *MEASURE_NAMES, 'reasons')
@@ -114,7 +114,7 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
 def plot_run(path, run):
     """Draw p_s, x and y, and the inlet flow over the run, with events and signal limits."""
     from valve_sim.analysis.expectations import Bound
-    from valve_sim.analysis.plotting import plt
+    from valve_sim.analysis.plotting import plt, save_figure
 
     series, scenario = run.series, run.scenario
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 8), constrained_layout=True)
@@ -149,8 +149,7 @@ def plot_run(path, run):
     word, failed = verdict(run.checks)
     axes[0].set_title(f'scenario {scenario.name}: {word} '
                       f'({len(run.checks) - failed} of {len(run.checks)} checks hold)')
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path, dpi=110)
 
 
 def write_reports(run, junit_path=None):
@@ -162,8 +161,9 @@ def write_reports(run, junit_path=None):
         'figure': folder / 'scenario.png',
         'junit': junit_path or folder / 'junit.xml',
     }
-    paths['report'].write_text(report_text(run))
-    paths['json'].write_text(json.dumps(report_document(run), indent=2) + '\n')
+    write_text(paths['report'], report_text(run))
+    write_text(paths['json'], json_text(report_document(run)) + '\n')
     plot_run(paths['figure'], run)
-    paths['junit'].write_bytes(junit_document(run.scenario, run.checks, run.wall_s))
+    with replacing(paths['junit'], 'wb', explicit=junit_path is not None) as stream:
+        stream.write(junit_document(run.scenario, run.checks, run.wall_s))
     return paths

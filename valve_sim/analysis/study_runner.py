@@ -51,7 +51,7 @@ from valve_sim.analysis.measures import (
 )
 from valve_sim.analysis.study_results import drop_torn_tail, fingerprint, read_results
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
-from valve_sim.core.output_files import append_to, finite, write_text
+from valve_sim.core.output_files import append_to, finite, make_folder, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
@@ -252,7 +252,7 @@ def run_cases(
     if resume and results_path.exists():
         drop_torn_tail(results_path)
     else:
-        results_path.parent.mkdir(parents=True, exist_ok=True)
+        make_folder(results_path.parent)
         write_text(results_path, json.dumps({'study': study, 'cases': len(cases)}) + '\n')
     if progress is None:
         progress = Progress(label, len(cases), len(rows), progress_stream)

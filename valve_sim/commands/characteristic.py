@@ -45,7 +45,7 @@ from valve_sim.commands.options import (
     number,
 )
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.output_files import json_text, replacing, write_text
+from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
@@ -164,7 +164,7 @@ def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow)
     from valve_sim.analysis.plotting import plot_characteristic
     from valve_sim.core.steady_state import steady_curve
 
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     q_in, p_s = waveforms.inlet_flow, waveforms['supply_pressure']
     _write_csv(
         out / 'characteristic.csv',

@@ -52,7 +52,7 @@ def build(out, params, settings):
     from importlib.util import find_spec
 
     from pythonfmu import FmuBuilder
-    from valve_sim.core.output_files import replacing
+    from valve_sim.core.output_files import replacing, write_text
     from valve_sim.fmu.relief_valve_slave import PARAMETER_FILE
 
     out = Path(out)
@@ -60,7 +60,7 @@ def build(out, params, settings):
         raise ParameterError(f'--out must name a .fmu file, got {out}')
     with tempfile.TemporaryDirectory(prefix='valve_sim_fmu_') as folder:
         defaults = Path(folder) / PARAMETER_FILE
-        defaults.write_text(parameter_file(params, settings))
+        write_text(defaults, parameter_file(params, settings))
         built = FmuBuilder.build_FMU(
             find_spec(SLAVE).origin, dest=Path(folder) / 'build' / out.name,
             project_files=[defaults], needsExecutionTool=True,
