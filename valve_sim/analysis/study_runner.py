@@ -54,7 +54,8 @@ from valve_sim.analysis.measures import (
     step_measures,
 )
 from valve_sim.core.errors import InputFileError, MODEL_ERRORS, StudyError
-from valve_sim.core.input_files import json_lines, parse_json, shown, STUDY_RESULTS, STUDY_ROW
+from valve_sim.core.input_documents import parse_json
+from valve_sim.core.input_files import json_lines, shown, STUDY_RESULTS, STUDY_ROW
 from valve_sim.core.output_files import append_to, finite, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import simulate_batch

@@ -50,7 +50,8 @@ from mcap.records import (
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.input_files import BAG_RECORD, MCAP_FILE, open_regular, parse_yaml
+from valve_sim.core.input_documents import parse_yaml
+from valve_sim.core.input_files import BAG_RECORD, MCAP_FILE, open_regular
 from valve_sim.core.output_files import replacing
 from valve_sim.recording import rosbag2_metadata
 

@@ -52,12 +52,8 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from valve_sim.core.errors import InputFileError, ParameterError, SteadyStateError
-from valve_sim.core.input_files import (
-    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
-    MAX_ALIASES,
-    MAX_DEPTH,
-    MAX_EVENTS,
-)
+from valve_sim.core.input_documents import MAX_ALIASES, MAX_DEPTH
+from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status
