@@ -18,14 +18,8 @@ import math
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import (
-    _lobes,
-    detect_steps,
-    envelope_decay_rate,
-    MEASURE_NAMES,
-    step_measures,
-    StepDetector,
-)
+from valve_sim.analysis.measures import _lobes, envelope_decay_rate, MEASURE_NAMES, step_measures
+from valve_sim.analysis.step_detection import detect_steps, StepDetector
 
 
 P0, DELTA = 7.0e6, 1.0e4  # pressure before the step, settled increment [Pa]

@@ -43,7 +43,8 @@ import pytest
 from std_srvs.srv import Trigger
 from test_calibrate import valve_sim
 from valve_harness import Recorder, running_valve, TIMEOUT
-from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.step_detection import detect_steps
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters, scaled, STANDARD_ATMOSPHERE
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate

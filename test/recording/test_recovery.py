@@ -33,7 +33,8 @@ from rosbags.highlevel import AnyReader
 from valve_harness import flushed
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
-from valve_sim.recording.recovery import diagnose, repair
+from valve_sim.recording.mcap_scan import diagnose
+from valve_sim.recording.recovery import repair
 from valve_sim.recording.signal_reader import read_recording
 from valve_sim.ros import node_command
 from valve_sim.ros.replay import Replay
@@ -102,7 +103,7 @@ def test_analyse_says_truncated_and_where_for_a_file_cut_before_its_first_chunk(
     """
     The issue's reproduction: head -c 449000 bags/reference_step.mcap > t.mcap.
 
-    analyse reads the file as repair does (recovery.Scan): what the chunk cut short
+    analyse reads the file as repair does (mcap_scan.Scan): what the chunk cut short
     holds, with the warning that says where the file ends; the repaired copy gives the
     same analysis.
     """
@@ -285,7 +286,7 @@ def test_a_bag_folder_is_repaired_file_by_file_into_a_new_bag_folder(tmp_path):
 def many_chunks(path, messages=3000, chunk_size=8192):
     """Write a closed bag of supply-pressure messages in small chunks; return the chunk offsets."""
     from valve_sim.recording.bag import BagWriter
-    from valve_sim.recording.recovery import RECORD_HEADER
+    from valve_sim.recording.mcap_scan import RECORD_HEADER
 
     bag = BagWriter(path, chunk_size=chunk_size)
     bag.add_topic('/supply_pressure', 'sensor_msgs/msg/FluidPressure')

@@ -324,7 +324,7 @@ def test_a_clock_the_analyser_cannot_represent_is_ignored_and_the_bag_closed(
     """A /clock of negative seconds or past 2^31 s: ignored, counted, the bag closed on SIGINT."""
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
-    from valve_sim.recording.recovery import diagnose
+    from valve_sim.recording.mcap_scan import diagnose
 
     code, log, _ = record_while(
         node,

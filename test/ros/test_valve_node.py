@@ -37,7 +37,8 @@ import rclpy
 from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import Float64
 from valve_harness import PRESSURE_TOPICS, running_valve, start_node, TIMEOUT
-from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.step_detection import detect_steps
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import config_path, load_parameters, SPECS
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate

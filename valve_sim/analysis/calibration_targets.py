@@ -31,8 +31,9 @@ covariance_scale(cost, count, fitted) (the s^2 of the fit's covariance).
 import math
 
 import numpy as np
-from valve_sim.analysis.measures import detect_steps, MEASURE_NAMES, step_measures
+from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.step_detection import detect_steps
 from valve_sim.core.errors import CalibrationError
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
@@ -146,7 +147,7 @@ class RecordingTarget:
     main_valve may be None (a rig without a position sensor) or hold NaN where not
     recorded. inlet_flow[i] is the flow over the interval ending at time[i].
     step_times [s]: steps located between two flow samples (a flowmeter slower than the
-    pressure, see measures.locate_step), brackets [(first, last)] [s] those samples'
+    pressure, see step_detection.locate_step), brackets [(first, last)] [s] those samples'
     times: the recorded flow changes only at the sample at last, the model's at the step
     time. Located times are uncertain: step_time_parameters() fits them along with the
     parameters, inside their brackets.

@@ -16,22 +16,11 @@
 The paper's six step-response measures, as docs/measures.md defines them.
 
 This is the only implementation: the command line, the live analyser and bag
-analysis all call step_measures() and StepDetector.
+analysis all call step_measures(), at steps found and dated by step_detection.
 
 Inputs are sampled waveforms: time t [s], supply pressure p_s [Pa, gauge],
 main-valve displacement x [m], and t_step [s], the time at which the inlet-flow
 step took effect in the model (the last sample computed with the old flow).
-
-Dating a step (StepDetector, locate_step): where the flow is sampled with every
-pressure sample (valve_node, the offline model), the step is dated at the last
-sample with the old flow. A flowmeter sampled more coarsely than the pressure only
-brackets it: between its last sample with the old flow and its first with the new
-one (10 ms apart at 100 Hz). Inside that bracket the step is located from the
-supply pressure, which a relief valve's step moves at once (the inlet flow
-compresses the supply volume): at the point where the line through the first two
-pressure samples outside the pre-step noise band meets the pre-step level, kept
-between the last sample inside the band and the first outside. Its uncertainty is
-half the pressure sample interval there.
 
 Settling time T_s: the paper's, from x (the time after which x stays within
 x_inf +- 5 % of the step width), wherever x is recorded. A rig rarely records x;
@@ -69,9 +58,6 @@ FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
 ENVELOPE_DECAY = 'envelope_decay_per_s'  # T_s's continuous companion (docs/measures.md)
 WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
-PRE_STEP_SPAN = 0.05  # [s] pressure before a bracketed step: its level and noise band
-ONSET_BAND = 4.0  # a step moves p_s out of +-4 noise standard deviations of its level
-ONSET_SAMPLES = 3  # ... for this many samples in a row (one noise spike is no step)
 SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
@@ -409,77 +395,3 @@ def _set_settling_time(values, reasons, settling):
         reasons['T_s_ms'] = reason
     else:
         values['T_s_ms'] = time * 1e3
-
-
-class StepDetector:
-    """
-    Finds steps in an inlet-flow signal, one sample at a time.
-
-    A step is a change of more than `threshold` [m^3/s] from the current level;
-    it is dated at the last sample before the change (where the model state was
-    still computed with the old flow). Changes within `merge_time` [s] of a step
-    belong to it (a ramp or a noisy edge), so they move the level but do not
-    start a new step. Feed samples with update(); it returns a step or None.
-    """
-
-    def __init__(self, threshold=1e-6, merge_time=0.05):
-        self.threshold = threshold
-        self.merge_time = merge_time
-        self.level = None
-        self.previous_time = None
-        self.last_step_time = -math.inf
-
-    def update(self, time, flow):
-        """Feed one sample; returns (t_step, flow_before, direction) when a step starts."""
-        step = None
-        if self.level is None:
-            self.level = flow
-        elif abs(flow - self.level) > self.threshold:
-            if time - self.last_step_time > self.merge_time:
-                step = (self.previous_time, self.level, 1 if flow > self.level else -1)
-                self.last_step_time = self.previous_time
-            self.level = flow
-        self.previous_time = time
-        return step
-
-
-def locate_step(t, supply_pressure, bracket, direction):
-    """
-    Locate a step inside bracket (t_a, t_b) [s] from the supply pressure (module docstring).
-
-    t [s] and supply_pressure [Pa]: the samples around the step, PRE_STEP_SPAN before
-    t_a included; direction +1 up, -1 down. Returns (t_step, uncertainty) [s], or None
-    when the pressure does not show the step (too few samples before it, or no sample
-    leaves the noise band within twice the bracket).
-    """
-    t, p = np.asarray(t, dtype=float), np.asarray(supply_pressure, dtype=float)
-    t_a, t_b = bracket
-    before = (t >= t_a - PRE_STEP_SPAN) & (t <= t_a)
-    if before.sum() < 3:
-        return None
-    level = float(np.median(p[before]))
-    jumps = np.diff(p[before])
-    noise = 1.4826 * float(np.median(np.abs(jumps - np.median(jumps)))) / math.sqrt(2.0)
-    band = max(ONSET_BAND * noise, 1e-7 * abs(level))
-    e = direction * (p - level)
-    outside = (e > band) & (t > t_a)
-    runs = np.ones(max(len(e) - ONSET_SAMPLES + 1, 0), dtype=bool)
-    for k in range(ONSET_SAMPLES):
-        runs &= outside[k:len(e) - ONSET_SAMPLES + 1 + k]
-    first = np.flatnonzero(runs & (t[:len(runs)] <= t_b + (t_b - t_a)))
-    if len(first) == 0 or first[0] == 0:
-        return None
-    i = int(first[0])
-    slope = (e[i + 1] - e[i]) / (t[i + 1] - t[i])
-    onset = t[i] - e[i] / slope if slope > 0.0 else t[i - 1]
-    t_step = min(max(onset, t[i - 1], t_a), t[i], t_b)  # between samples i - 1 and i
-    below = t[t <= t_step]
-    above = t[t > t_step]
-    spacing = (above[0] if len(above) else t_step) - (below[-1] if len(below) else t_step)
-    return t_step, spacing / 2.0
-
-
-def detect_steps(t, inlet_flow, threshold=1e-6, merge_time=0.05):
-    """All steps [(t_step, flow_before, direction)] of a sampled inlet flow [m^3/s]."""
-    detector = StepDetector(threshold, merge_time)
-    return [step for step in map(detector.update, t, inlet_flow) if step]

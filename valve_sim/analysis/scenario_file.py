@@ -53,7 +53,8 @@ from valve_sim.core.fault_schedule import (
     parse_schedule,
     tick_index,
 )
-from valve_sim.core.input_files import read_yaml, SCENARIO_FILE
+from valve_sim.core.input_documents import read_yaml
+from valve_sim.core.input_files import SCENARIO_FILE
 from valve_sim.core.input_profile import parse_profile
 from valve_sim.core.limits import tank_pressure_problem
 from valve_sim.core.parameters import (

@@ -21,13 +21,13 @@ flow q [m^3/s], the time [s] of the flow sample q came from and, where known, th
 tank pressure p_t [Pa, gauge]. The measures are taken on the pressure across the
 valve, p_s - p_t: the supply pressure above the tank, which is p_s itself with the
 tank at ambient (a back pressure then moves no measure of the valve's own response).
-valve_sim.analysis.measures.StepDetector finds the steps (up and down, any number); a
-step between two flow samples further apart than 1.5 pressure sample intervals (a coarse
-flowmeter) is located inside them from the pressure (measures.locate_step). Once a
-step's window (measures.WINDOW after it) is complete,
-valve_sim.analysis.measures.step_measures gives its six measures. Only the rows from
-measures.PRE_STEP_SPAN before the oldest open step on are kept, so memory stays bounded
-however long the stream.
+valve_sim.analysis.step_detection.StepDetector finds the steps (up and down, any
+number); a step between two flow samples further apart than 1.5 pressure sample
+intervals (a coarse flowmeter) is located inside them from the pressure
+(step_detection.locate_step). Once a step's window (measures.WINDOW after it) is
+complete, valve_sim.analysis.measures.step_measures gives its six measures. Only the
+rows from step_detection.PRE_STEP_SPAN before the oldest open step on are kept, so
+memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
@@ -47,14 +47,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from valve_sim.analysis.measures import (
-    locate_step,
-    PRE_STEP_SPAN,
-    step_measures,
-    StepDetector,
-    WINDOW,
-)
+from valve_sim.analysis.measures import step_measures, WINDOW
 from valve_sim.analysis.signals import seconds
+from valve_sim.analysis.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
 from valve_sim.core.output_files import json_text, replacing, write_text
 
 

@@ -29,7 +29,8 @@ from pathlib import Path
 
 from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES
 from valve_sim.core.errors import InputFileError, StudyError
-from valve_sim.core.input_files import json_lines, parse_json, shown, STUDY_RESULTS, STUDY_ROW
+from valve_sim.core.input_documents import parse_json
+from valve_sim.core.input_files import json_lines, shown, STUDY_RESULTS, STUDY_ROW
 
 
 # The numbers a row may hold besides its measures (evaluate_batch, _measured).

@@ -46,7 +46,8 @@ from valve_sim.commands.options import (
     number,
     signal_map_from,
 )
-from valve_sim.core.input_files import read_json, TARGET_MEASURES
+from valve_sim.core.input_documents import read_json
+from valve_sim.core.input_files import TARGET_MEASURES
 from valve_sim.core.output_files import json_text, make_folder, write_text
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 from valve_sim.recording.signal_reader import read_recording, Recording
@@ -254,7 +255,7 @@ def located_steps(recording):
     Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
 
     A flowmeter slower than the pressure shows a step only at its next sample (last);
-    analyse locates it from the pressure (measures.locate_step), and calibrate fits it.
+    analyse locates it from the pressure (step_detection.locate_step), and calibrate fits it.
     """
     return [
         (record['t_step'], tuple(record['details']['t_step_bracket']))

@@ -36,7 +36,8 @@ import time
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.commands.options import add_options
 from valve_sim.core.errors import IncompleteRunError
-from valve_sim.core.input_files import MEASURES_FILE, read_json
+from valve_sim.core.input_documents import read_json
+from valve_sim.core.input_files import MEASURES_FILE
 from valve_sim.core.output_files import make_folder
 
 

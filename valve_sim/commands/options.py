@@ -23,6 +23,10 @@ the command: add_options(parser, '--json', help='print the marks as JSON').
 This module imports only the standard library and valve_sim's light modules, and so do
 the commands' module levels, so that `valve-sim CMD --help` is quick: the model
 (numba, scipy) loads when a command runs, as in load_from_arguments.
+
+Longer than 400 lines on purpose: it is the one module a subcommand may import besides
+the library (the layering rule, test/lint/test_layering.py), so every option, argument
+type and argument reader two subcommands share lives here, in one place to look.
 """
 
 from argparse import ArgumentTypeError

@@ -45,7 +45,8 @@ import sys
 
 from valve_sim.core.errors import InputFileError, ParameterError
 from valve_sim.core.faults import check_fault, FAULT_NAMES
-from valve_sim.core.input_files import FAULT_SCHEDULE, MAX_EVENTS, open_regular, read_yaml, shown
+from valve_sim.core.input_documents import read_yaml
+from valve_sim.core.input_files import FAULT_SCHEDULE, MAX_EVENTS, open_regular, shown
 from valve_sim.core.sensors import check_sensor, SENSOR_NAMES
 
 

@@ -39,7 +39,8 @@ from valve_sim.core.catalogue import (  # noqa: F401
     STANDARD_ATMOSPHERE,
 )
 from valve_sim.core.errors import InputFileError, ParameterError, SectionError
-from valve_sim.core.input_files import PARAMETER_FILE, read_yaml, shown
+from valve_sim.core.input_documents import read_yaml
+from valve_sim.core.input_files import PARAMETER_FILE, shown
 from valve_sim.core.parameter_sections import describe_not_applied, node_fqn, parameters_for_node
 
 

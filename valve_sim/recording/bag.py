@@ -45,7 +45,7 @@ from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.output_files import create_new
 from valve_sim.recording import rosbag2_metadata
-from valve_sim.recording.recovery import Scan
+from valve_sim.recording.mcap_scan import Scan
 import yaml
 
 
@@ -309,7 +309,7 @@ class BagReader:
 
     Iterate messages() for (channel, schema, message) of mcap.records. After the
     iteration, problem is None for a complete file, or says what was missing. The
-    records come from recovery.Scan, the reader `valve-sim repair` uses, so both give
+    records come from mcap_scan.Scan, the reader `valve-sim repair` uses, so both give
     one verdict on a damaged file, as fast (a sparse hole is skipped, not read).
     """
 

@@ -29,7 +29,8 @@ from pathlib import Path
 import re
 
 from valve_sim.core.errors import InputFileError
-from valve_sim.core.input_files import BAG_METADATA, read_yaml, shown
+from valve_sim.core.input_documents import read_yaml
+from valve_sim.core.input_files import BAG_METADATA, shown
 from valve_sim.core.output_files import write_text
 import yaml
 

@@ -30,12 +30,8 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.utilities import remove_ros_args
 from valve_sim.core.errors import InputFileError, ParameterError, SteadyStateError
-from valve_sim.core.input_files import (
-    FAULT_SCHEDULE as FAULT_SCHEDULE_FILE,
-    MAX_ALIASES,
-    MAX_DEPTH,
-    MAX_EVENTS,
-)
+from valve_sim.core.input_documents import MAX_ALIASES, MAX_DEPTH
+from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.ros import live_view, spinning
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES
