@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = """
 import numpy as np
 import valve_sim
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.integrator import splits_needed
-from valve_sim.core.model import coefficients
 from valve_sim.core.parameters import load_parameters
 
 print('package', valve_sim.__file__)
