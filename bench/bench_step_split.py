@@ -32,8 +32,8 @@ import time
 
 import numpy as np
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.integrator import CHECK_EVERY, rk4_steps
-from valve_sim.core.model import coefficients
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import step_flows
 from valve_sim.core.steady_state import steady_state

@@ -44,8 +44,9 @@ from valve_sim.analysis.measures import step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO, STUDY_PARAMETERS
 from valve_sim.analysis.study_backend import DaskBackend
 from valve_sim.analysis.study_runner import evaluate_batch, run_cases
+from valve_sim.core.batch import simulate_batch
 from valve_sim.core.parameters import load_parameters, scaled
-from valve_sim.core.simulation import simulate, simulate_batch
+from valve_sim.core.simulation import simulate
 from valve_sim.core.steady_state import cracking_pressure, with_preset_pressure
 
 
@@ -92,10 +93,10 @@ def packed_instructions():
     import re
 
     from numba import njit
-    from valve_sim.core import integrator
+    from valve_sim.core import lanes
 
-    signature = integrator.rk4_lanes.signatures[0]
-    fresh = njit(nogil=True, error_model='numpy')(integrator.rk4_lanes.py_func)
+    signature = lanes.rk4_lanes.signatures[0]
+    fresh = njit(nogil=True, error_model='numpy')(lanes.rk4_lanes.py_func)
     fresh.compile(signature)
     packed = r'\b(v(?:sqrt|div|mul|add|sub)pd)\s[^\n]*%[yz]mm'
     found = re.findall(packed, fresh.inspect_asm(signature))

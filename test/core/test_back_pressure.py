@@ -27,9 +27,10 @@ import sys
 import numpy as np
 import pytest
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.faults import FaultSet
-from valve_sim.core.model import coefficients, P_C, P_S, relief_flows as model_relief_flows, X, Y
+from valve_sim.core.model import P_C, P_S, relief_flows as model_relief_flows, X, Y
 from valve_sim.core.simulation import (
     LITRE_PER_MINUTE,
     relief_flows,

@@ -18,17 +18,15 @@ import numpy as np
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.core.batch import simulate_batch
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.faults import FaultSet, HEALTHY
-from valve_sim.core.integrator import advance, advance_lanes, STEP_RATE_LIMIT
-from valve_sim.core.model import coefficients, fastest_chamber_rate, P_C, P_S
+from valve_sim.core.integrator import advance, STEP_RATE_LIMIT
+from valve_sim.core.lanes import advance_lanes
+from valve_sim.core.model import fastest_chamber_rate, P_C, P_S
 from valve_sim.core.parameters import scaled
-from valve_sim.core.simulation import (
-    LITRE_PER_MINUTE,
-    Scenario,
-    simulate,
-    simulate_batch,
-)
+from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 

@@ -21,12 +21,12 @@ import json
 import numpy as np
 import pytest
 from valve_sim.analysis.measures import step_measures
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import FaultEvent, parse_schedule
 from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import (
-    coefficients,
     net_forces,
     P_S,
     seat_leakage_flow,

@@ -19,10 +19,13 @@ integrator.splits_needed inlines model.fastest_chamber_rate from another file,
 which numba's own freshness check does not look at. On a copy of the package,
 each run in a fresh process: the first compiles and caches, the second loads
 the cache, and after an edit of model.py the third compiles the edited function.
+A cache index that no longer unpickles (a class it names has moved) is compiled
+over, not an error.
 """
 
 import os
 from pathlib import Path
+import pickle
 import shutil
 import subprocess
 import sys
@@ -30,14 +33,14 @@ import sys
 import pytest
 
 
-pytest.importorskip('numba')
+numba = pytest.importorskip('numba')
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = """
 import numpy as np
 import valve_sim
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.integrator import splits_needed
-from valve_sim.core.model import coefficients
 from valve_sim.core.parameters import load_parameters
 
 print('package', valve_sim.__file__)
@@ -71,10 +74,15 @@ def run(copy):
     return int(lines[-1].split()[-1]), ' '.join(kernel_log)
 
 
-def test_an_edit_of_an_inlined_function_in_another_file_is_compiled(tmp_path):
+def copy_package(folder):
+    """Copy the package and its config into folder, without any compiled kernel."""
     ignore = shutil.ignore_patterns('__pycache__')
-    shutil.copytree(ROOT / 'valve_sim', tmp_path / 'valve_sim', ignore=ignore)
-    shutil.copytree(ROOT / 'config', tmp_path / 'config', ignore=ignore)
+    shutil.copytree(ROOT / 'valve_sim', folder / 'valve_sim', ignore=ignore)
+    shutil.copytree(ROOT / 'config', folder / 'config', ignore=ignore)
+
+
+def test_an_edit_of_an_inlined_function_in_another_file_is_compiled(tmp_path):
+    copy_package(tmp_path)
     first, log = run(tmp_path)
     assert first > 1  # the empty, closed valve is stiff: its steps are split
     assert 'data saved' in log
@@ -88,3 +96,24 @@ def test_an_edit_of_an_inlined_function_in_another_file_is_compiled(tmp_path):
     edited, log = run(tmp_path)
     assert edited == 1  # the edited (much slower) rate needs no split
     assert 'data saved' in log
+
+
+def test_an_index_that_no_longer_unpickles_is_compiled_over(tmp_path):
+    """An index naming a class that is not there (it moved) reads as empty: compiled anew."""
+    copy_package(tmp_path)
+    first, log = run(tmp_path)
+    assert 'data saved' in log
+    (index,) = (tmp_path / 'valve_sim' / 'core' / '__pycache__').glob(
+        'integrator.splits_needed-*.nbi'
+    )
+    with open(index, 'wb') as f:  # numba's layout: its version, then the pickled index
+        pickle.dump(numba.__version__, f, protocol=-1)
+        f.write(b'cvalve_sim.core.model\nMovedAway\n.')  # unpickles to a missing attribute
+    with pytest.raises(AttributeError):
+        pickle.loads(index.read_bytes()[len(pickle.dumps(numba.__version__, protocol=-1)):])
+    again, log = run(tmp_path)
+    assert again == first
+    assert 'data saved' in log  # compiled over, the index written anew
+    third, log = run(tmp_path)
+    assert third == first
+    assert 'data loaded' in log and 'data saved' not in log

@@ -20,14 +20,16 @@ import sys
 
 import numpy as np
 import pytest
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import (
     IntegrationError,
     OverpressureError,
     ParameterError,
     SteadyStateError,
 )
-from valve_sim.core.integrator import advance, advance_lanes, crossing_is_accurate, splits_needed
-from valve_sim.core.model import coefficients, P_S, Y
+from valve_sim.core.integrator import advance, crossing_is_accurate, splits_needed
+from valve_sim.core.lanes import advance_lanes
+from valve_sim.core.model import P_S, Y
 from valve_sim.core.parameters import load_parameters, validate
 from valve_sim.core.retuning import check_limits
 from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate

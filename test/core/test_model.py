@@ -16,10 +16,10 @@
 
 import numpy as np
 import pytest
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.integrator import advance, STEP_RATE_LIMIT
 from valve_sim.core.model import (
-    coefficients,
     fastest_chamber_rate,
     flows,
     net_forces,

@@ -16,9 +16,10 @@
 
 import numpy as np
 import pytest
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, P_S
+from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.realtime_model import RealTimeModel, Status, step_ns, TRIAL_STEPS
 from valve_sim.core.simulation import LITRE_PER_MINUTE

@@ -32,9 +32,10 @@ import numpy as np
 from valve_sim.analysis.measures import WINDOW
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
 from valve_sim.analysis.study_cases import case_parameters, study_cases
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import MODEL_ERRORS
 from valve_sim.core.linear import modes
-from valve_sim.core.model import coefficients, flows, X
+from valve_sim.core.model import flows, X
 from valve_sim.core.simulation import LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state
 

@@ -50,10 +50,10 @@ from valve_sim.analysis.measures import (
     step_measures,
 )
 from valve_sim.analysis.study_results import drop_torn_tail, fingerprint, read_results
+from valve_sim.core.batch import simulate_batch
 from valve_sim.core.errors import MODEL_ERRORS, StudyError
 from valve_sim.core.output_files import append_to, finite, make_folder, write_text
 from valve_sim.core.parameters import validate
-from valve_sim.core.simulation import simulate_batch
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
 
 
@@ -72,7 +72,7 @@ def evaluate_batch(cases):
     Rows of a batch of cases (the work unit a backend runs), in the order of cases.
 
     Each valve is set to its preset first. Cases that share a scenario and step
-    size then run together through core.simulation.simulate_batch: several valves
+    size then run together through core.batch.simulate_batch: several valves
     per kernel call, each bit-identical to a run of its own, the stable steady
     state before the step held instead of integrated (docs/speed.md). A row does
     not depend on which cases share its batch.

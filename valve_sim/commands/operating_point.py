@@ -51,7 +51,8 @@ def operating_point(params, inlet_flow, tank_pressure=0.0):
     oscillatory modes, slowest first.
     """
     from valve_sim.core.linear import modes
-    from valve_sim.core.model import coefficients, flows, relief_flows
+    from valve_sim.core.coefficients import coefficients
+    from valve_sim.core.model import flows, relief_flows
     from valve_sim.core.steady_state import steady_state
 
     c = coefficients(params)

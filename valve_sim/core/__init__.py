@@ -16,9 +16,10 @@
 The valve model: parameters, equations (1)-(16), integration, steady state.
 
 Lives here: the parameter catalogue (every parameter's spec, catalogue.py), parameter
-files, the model equations, the RK4 integrator, the exact steady state, bearing design,
-linear modes, offline simulation, real-time stepping and live retuning; valve faults,
-the pressure transducers' model (sensors) and fault schedule files; every error
+files, the model equations and their coefficients, the RK4 integrator (one valve, or
+many in lanes), the exact steady state, bearing design, linear modes, offline simulation
+(single runs, and batch runs for studies), real-time stepping and live retuning; valve
+faults, the pressure transducers' model (sensors) and fault schedule files; every error
 valve_sim raises, under one root (errors); the kernels' build-time compile (precompile).
 May import: numpy, scipy, yaml, numba, ament_index_python (to find the installed
 config files); nothing else of valve_sim. No ROS middleware, no plotting, no bag formats.

@@ -28,7 +28,7 @@ Each fault is a physical change of the valve (docs/faults.md):
 
 A fault never moves the adjusting screw: pilot_spring_preload (y_0) stays, so a weaker
 spring makes a smaller preload force and a lower cracking pressure. The numbers enter the
-model equations in valve_sim.core.model.coefficients; all zero/false is the healthy valve.
+model equations in valve_sim.core.coefficients.coefficients; all zero/false is the healthy valve.
 """
 
 from dataclasses import dataclass, fields, replace

@@ -32,12 +32,8 @@ the paper's operating points that never happens.
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
 Its two inputs, the inlet flow and the tank pressure, are held over a step; the
-kernels take both as arrays with one value per step.
-rk4_steps takes it for one valve; rk4_lanes takes it for LANES independent valves
-(lanes: parameter sets and states) through the same input schedules at once,
-in one loop over the lanes that the compiler vectorises (SIMD: four lanes per
-instruction on AVX2). The same function in the same order of operations: each
-lane's result is bit-identical to rk4_steps (no fast-math), docs/speed.md.
+kernels take both as arrays with one value per step. rk4_steps takes it for one
+valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
 """
 
 import numpy as np
@@ -52,10 +48,8 @@ from valve_sim.core.limits import (
     state_problem,
 )
 from valve_sim.core.model import (
-    Coefficients,
     derivatives,
     fastest_chamber_rate,
-    HEALTHY_TERMS,
     P_C,
     P_M,
     P_P,
@@ -79,8 +73,6 @@ CROSSING_TOLERANCE = 1e-3
 # between: a chamber's rate changes with the flows and openings, over milliseconds, and
 # STEP_RATE_LIMIT keeps 28 % below RK4's limit; asking every step cost a third of the run.
 CHECK_EVERY = 10
-# Valves rk4_lanes advances together: a few vector registers' worth (4 doubles each).
-LANES = 16
 
 
 @jit
@@ -230,7 +222,7 @@ def crossing_is_accurate(start, inlet_flows, done, c, step, tank_pressures=0.0):
     return bool(gap <= CROSSING_TOLERANCE * c.burst_pressure)
 
 
-def _failure(start, reached, inlet_flows, done, c, step, time, verdict, tank_pressures):
+def limits_error(start, reached, inlet_flows, done, c, step, time, verdict, tank_pressures):
     """
     Return the error of a run that left the limits at step done (0-based) of this call.
 
@@ -298,192 +290,10 @@ def advance(state, inlet_flows, coefficients, step, record_every=0, time=0.0, ta
         state, inlet_flows, tank_pressures, coefficients, float(step), max(record_every, 1), record
     )
     if done < len(inlet_flows):
-        error = _failure(
+        error = limits_error(
             start, state.copy(), inlet_flows, done, coefficients, step, time, verdict,
             tank_pressures,
         )
         state[:] = start
         raise error
     return record
-
-
-def _lane_coefficients_function(fixed):
-    """
-    Compile lane_coefficients(table, lane) -> Coefficients of lane in table [fields x LANES].
-
-    Fields named in fixed take its constant values instead of the table's. Generated
-    from Coefficients' fields so that it follows any field added to the model; a
-    namedtuple cannot be built from an array column any other way in numba.
-    """
-    arguments = ', '.join(
-        repr(fixed[name]) if name in fixed else f'table[{i} * LANES + lane]'
-        for i, name in enumerate(Coefficients._fields)
-    )
-    namespace = {'Coefficients': Coefficients, 'LANES': LANES}
-    exec(f'def lane_coefficients(table, lane):\n    return Coefficients({arguments})\n', namespace)
-    return jit(namespace['lane_coefficients'], cache=False)
-
-
-lane_coefficients = _lane_coefficients_function({})
-# The same for lanes without a fault: the compiler then leaves the fault terms out.
-healthy_lane_coefficients = _lane_coefficients_function(HEALTHY_TERMS)
-
-
-@jit
-def lane_state(states, lane):
-    """Return the state of lane in states [8 x LANES, flat] as an 8-tuple."""
-    return (
-        states[P_S * LANES + lane],
-        states[P_M * LANES + lane],
-        states[P_P * LANES + lane],
-        states[P_C * LANES + lane],
-        states[X * LANES + lane],
-        states[X_DOT * LANES + lane],
-        states[Y * LANES + lane],
-        states[Y_DOT * LANES + lane],
-    )
-
-
-@jit
-def set_lane_state(states, lane, state):
-    """Write the 8-tuple state of lane into states [8 x LANES, flat]."""
-    for i in range(8):
-        states[i * LANES + lane] = state[i]
-
-
-@jit
-def rk4_lanes(
-    states, inlet_flows, tank_pressures, table, faulty, step, record_every, records, completed,
-    verdicts,
-):
-    """
-    Advance LANES valves by len(inlet_flows) RK4 steps together, the same inputs for all.
-
-    states [8 x LANES] and table [fields x LANES] (each lane's Coefficients) are flat
-    arrays in rows: a state or coefficient of every lane side by side, so that the
-    loop over lanes reads and writes contiguous memory at offsets the compiler
-    knows, and vectorises. Each lane takes rk4_step exactly as rk4_steps does. The
-    vectorised loop leaves the fault terms out; a lane with a fault (faulty[lane]:
-    a fault term differs from model.HEALTHY_TERMS) or whose step must be split
-    (splits_needed) takes its step alone after it. Every record_every steps the
-    states go into records[lane, row]. completed[lane] is set to the number of
-    steps the lane completed: fewer than len(inlet_flows) means its state left the
-    limits; the lane then stops with that state in states, and verdicts[lane] says
-    how (limits.state_check).
-    """
-    steps = inlet_flows.shape[0]
-    splits = np.ones(LANES, dtype=np.int64)
-    alone = np.zeros(LANES, dtype=np.bool_)  # stepped after the vectorised loop, or stopped
-    checked = np.empty(LANES, dtype=np.int64)
-    for j in range(LANES):
-        completed[j] = steps
-        verdicts[j] = STATE_OK
-    row = 0
-    until_record = record_every
-    for k in range(steps):
-        q, p_t = inlet_flows[k], tank_pressures[k]
-        if k % CHECK_EVERY == 0:
-            for j in range(LANES):
-                if completed[j] == steps:
-                    state, c = lane_state(states, j), lane_coefficients(table, j)
-                    splits[j] = splits_needed(state, c, step, p_t)
-                    alone[j] = faulty[j] or splits[j] > 1
-        # One step of every healthy lane at once: pure arithmetic over contiguous rows.
-        for j in range(LANES):
-            c = healthy_lane_coefficients(table, j)
-            state = lane_state(states, j)
-            stepped = rk4_step(state, q, p_t, c, step)
-            set_lane_state(states, j, state if alone[j] else stepped)
-            checked[j] = state_check(stepped, c.burst_pressure)
-        for j in range(LANES):
-            if completed[j] < steps:
-                continue
-            if alone[j]:
-                c = lane_coefficients(table, j)
-                state = lane_state(states, j)
-                for _ in range(splits[j]):
-                    state = rk4_step(state, q, p_t, c, step / splits[j])
-                set_lane_state(states, j, state)
-                checked[j] = state_check(state, c.burst_pressure)
-            if checked[j] != STATE_OK:
-                completed[j] = k
-                verdicts[j] = checked[j]
-                alone[j] = True
-        until_record -= 1
-        if until_record == 0:
-            until_record = record_every
-            if row < records.shape[1]:
-                for j in range(LANES):
-                    for i in range(8):
-                        records[j, row, i] = states[i * LANES + j]
-                row += 1
-
-
-def advance_lanes(
-    states, inlet_flows, coefficient_sets, step, record_every=0, time=0.0, tank_pressures=0.0
-):
-    """
-    Advance several valves (rows of states, modified in place) through the same inlet_flows.
-
-    states: float64 array [valves x 8]; coefficient_sets: one Coefficients per valve;
-    the other arguments as for advance(). The valves run LANES at a time through
-    rk4_lanes (the last group filled up with copies of its first valve). Returns
-    (records [valves x rows x 8], errors): errors[valve] is None or the
-    IntegrationError (or OverpressureError) of a valve that left the limits, whose
-    state is then left as it was before the call. The valves do not affect each
-    other, and each gives exactly what advance() gives it alone.
-    """
-    inlet_flows, tank_pressures = step_inputs(inlet_flows, tank_pressures)
-    count = len(states)
-    rows = len(inlet_flows) // record_every if record_every else 0
-    records = np.empty((count, rows, 8))
-    start = np.array(states, dtype=float).reshape((count, 8))
-    table = np.array([tuple(c) for c in coefficient_sets], dtype=float)
-    faulty = np.array(
-        [
-            any(getattr(c, name) != value for name, value in HEALTHY_TERMS.items())
-            for c in coefficient_sets
-        ]
-    )
-    errors = []
-    for first in range(0, count, LANES):
-        group = list(range(first, min(first + LANES, count)))
-        lanes = group + [first] * (LANES - len(group))
-        columns = np.ascontiguousarray(start[lanes].T).reshape(-1)
-        completed = np.empty(LANES, dtype=np.int64)
-        verdicts = np.empty(LANES, dtype=np.int64)
-        lane_records = np.empty((LANES, rows, 8))
-        rk4_lanes(
-            columns,
-            inlet_flows,
-            tank_pressures,
-            np.ascontiguousarray(table[lanes].T).reshape(-1),
-            faulty[lanes],
-            float(step),
-            max(record_every, 1),
-            lane_records,
-            completed,
-            verdicts,
-        )
-        ends = columns.reshape((8, LANES)).T
-        records[group] = lane_records[: len(group)]
-        for lane, valve in enumerate(group):
-            if completed[lane] < len(inlet_flows):
-                errors.append(
-                    _failure(
-                        start[valve],
-                        ends[lane].copy(),
-                        inlet_flows,
-                        completed[lane],
-                        coefficient_sets[valve],
-                        step,
-                        time,
-                        verdicts[lane],
-                        tank_pressures,
-                    )
-                )
-                states[valve] = start[valve]
-            else:
-                errors.append(None)
-                states[valve] = ends[lane]
-    return records, errors

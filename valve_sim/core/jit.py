@@ -26,6 +26,12 @@ edit of model.py, or a `git pull` that changes it, numba would keep running the
 old equations. So every kernel's cache entry is also stamped with one digest of
 all valve_sim/core sources (SOURCES_DIGEST): any change there recompiles every
 kernel on its next use. Hashing the sources costs about a millisecond at import.
+
+numba's index of a kernel's cache entries is a pickle that names classes by module
+(a kernel's signature names model.Coefficients): after such a class has moved, or
+any other change that leaves an index unreadable, numba would raise on loading it
+and stop the first start. An index that does not unpickle counts as an empty cache
+here: the kernel is compiled again and the index written anew.
 """
 
 import hashlib
@@ -54,11 +60,12 @@ def _stamped_cache_class():
 
     The cache's location is the one numba itself chooses (NUMBA_CACHE_DIR, the
     source tree's __pycache__, or the user-wide cache when that is not writable);
-    only its freshness check changes. None where this numba's cache does not have
-    the expected form: then the kernels are compiled in each process, never stale.
+    only its freshness check changes, and an unreadable index reads as empty. None
+    where this numba's cache does not have the expected form: then the kernels are
+    compiled in each process, never stale.
     """
     try:
-        from numba.core.caching import CompileResultCacheImpl, FunctionCache
+        from numba.core.caching import CompileResultCacheImpl, FunctionCache, IndexDataCacheFile
     except ImportError:  # pragma: no cover - a numba without this caching layout
         return None
     numba_locators = tuple(CompileResultCacheImpl._locator_classes)
@@ -86,8 +93,25 @@ def _stamped_cache_class():
     class StampedCacheImpl(CompileResultCacheImpl):
         _locator_classes = [StampedLocator]
 
+    class ReadableIndexFile(IndexDataCacheFile):
+        """numba's index and data files, with an index that does not unpickle read as empty."""
+
+        def _load_index(self):
+            try:
+                return super()._load_index()
+            except Exception:  # AttributeError, ImportError, UnpicklingError, EOFError, ...
+                return {}
+
     class StampedFunctionCache(FunctionCache):
         _impl_class = StampedCacheImpl
+
+        def __init__(self, py_func):
+            super().__init__(py_func)
+            self._cache_file = ReadableIndexFile(
+                cache_path=self._cache_path,
+                filename_base=self._impl.filename_base,
+                source_stamp=self._impl.locator.get_source_stamp(),
+            )
 
     return StampedFunctionCache
 

@@ -29,7 +29,8 @@ import math
 
 import numpy as np
 import scipy.linalg
-from valve_sim.core.model import coefficients, state_derivative
+from valve_sim.core.coefficients import coefficients
+from valve_sim.core.model import state_derivative
 from valve_sim.core.parameters import PARAMETERS
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
 

@@ -40,10 +40,11 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
-from valve_sim.core.model import coefficients, P_S, relief_flows
+from valve_sim.core.model import P_S, relief_flows
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 

@@ -23,29 +23,21 @@ empty, closed valve. The tank's pressure, the second input, is a TankPressure pr
 the valve passed to the tank at each sample. Faults (a FaultSet) hold from the start; a
 fault schedule (valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 
-simulate() integrates the whole run. simulate_batch(), for studies, runs many
-parameter sets through one scenario on the lanes kernel and does not integrate
-the stretch before the step when the start is a stable steady state: there the
-flow is constant and the state is the exact steady state, a fixed point of RK4
-(every stage's derivative is zero), so the integration would only reproduce it
-up to rounding. Its samples before the step are then the steady state itself
-(docs/speed.md gives the measured difference). An unstable steady state (a
-linear mode with Re(lambda) >= 0, valve_sim.core.linear) is integrated as in
-simulate(): there rounding errors grow before the step as they would on a rig.
+simulate() integrates the whole run; run_flows() any inlet-flow schedule. The batch
+runs of studies (many parameter sets through one scenario) are valve_sim.core.batch's.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from valve_sim.core.errors import OverpressureError, ParameterError, SteadyStateError
+from valve_sim.core.coefficients import coefficients
+from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import tick_index
 from valve_sim.core.faults import FAULT_NAMES, HEALTHY
-from valve_sim.core.integrator import advance, advance_lanes, step_inputs
+from valve_sim.core.integrator import advance, step_inputs
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import schedule_problem, tank_pressure_problem
-from valve_sim.core.linear import jacobian
 from valve_sim.core.model import (
-    coefficients,
     flows as model_flows,
     P_S,
     relief_flows as model_relief_flows,
@@ -58,9 +50,6 @@ from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
     TankPressure,
 )
 from valve_sim.core.steady_state import steady_state
-
-
-LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
 
 
 @dataclass
@@ -83,30 +72,6 @@ class Waveforms:
 
     def __getitem__(self, name):
         return self.states[:, STATE_NAMES.index(name)]
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """
-    One run of simulate_batch, in the manner of scipy's OdeResult: the waveforms or the reason.
-
-    waveforms: the run's Waveforms, None when it failed; error: why it failed (the
-    ParameterError, SteadyStateError or IntegrationError of its start or its
-    integration), None when it succeeded.
-    """
-
-    waveforms: Waveforms = None
-    error: Exception = None
-
-    @property
-    def success(self):
-        """Whether the run completed (it has waveforms)."""
-        return self.error is None
-
-    @property
-    def message(self):
-        """Why the run failed, in one line ('' when it succeeded)."""
-        return '' if self.error is None else str(self.error)
 
 
 def apply_faults(state, faults, changes):
@@ -208,7 +173,7 @@ def step_tank_pressures(tank, steps, step_size):
     return tank.at((np.arange(steps) + 0.5) * step_size)
 
 
-def _waveforms(
+def recorded_waveforms(
     initial, record, flows, record_every, step_size, initial_flow, held=0, events=(),
     tanks=None,
 ):
@@ -339,7 +304,7 @@ def run_flows(
         start = stop
     if not halted:
         records.append(run(len(flows)))
-    waveforms = _waveforms(
+    waveforms = recorded_waveforms(
         initial, np.vstack(records), flows, record_every, step_size, initial_flow, events=events,
         tanks=np.concatenate([[initial_tank_pressure], tanks]),
     )
@@ -380,74 +345,6 @@ def simulate(
         step_tank_pressures(tank, len(flows), step_size),
         tank.initial,
     )
-
-
-def steady_lead(flows, initial_flow, record_every):
-    """
-    Count the steps at the start of a run that hold initial_flow, in whole record intervals.
-
-    From the steady state of initial_flow, these need no integration if it is stable.
-    """
-    changed = np.flatnonzero(flows != initial_flow)
-    first = changed[0] if len(changed) else len(flows)
-    return first // record_every * record_every
-
-
-def is_stable(params, state, inlet_flow):
-    """Return whether every linear mode about a steady state decays (all Re(lambda) < 0)."""
-    return bool(np.max(np.linalg.eigvals(jacobian(params, state, inlet_flow)).real) < 0.0)
-
-
-def simulate_batch(
-    params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
-):
-    """
-    Run one scenario for many parameter sets; a list of RunResults, one per set, in order.
-
-    A run's waveforms are those simulate() gives (the same sample times), except that the
-    stretch before the step is not integrated but held at the exact steady state
-    when that is stable (see the module docstring). A set whose start fails has its
-    ParameterError or SteadyStateError as the result's error, a run that diverges
-    its IntegrationError; the other sets are not affected. lanes: how many runs the
-    kernel advances together.
-    """
-    record_every = max(1, int(round(record_interval / step_size)))
-    flows = step_flows(scenario, step_size)
-    lead = steady_lead(flows, scenario.initial_flow, record_every)
-    results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
-    for index, params in enumerate(params_list):
-        try:
-            state = steady_state(params, scenario.initial_flow)
-            check_schedule(params, flows)
-        except (ParameterError, SteadyStateError) as error:
-            results[index] = RunResult(error=error)
-            continue
-        starts[index] = (state, coefficients(params))
-        groups[lead if is_stable(params, state, scenario.initial_flow) else 0].append(index)
-    for skipped, ready in groups.items():
-        for first in range(0, len(ready), max(1, lanes)):
-            group = ready[first:first + max(1, lanes)]
-            records, errors = advance_lanes(
-                np.array([starts[index][0] for index in group]),
-                flows[skipped:],
-                [starts[index][1] for index in group],
-                step_size,
-                record_every,
-                time=skipped * step_size,
-            )
-            for lane, index in enumerate(group):
-                results[index] = RunResult(error=errors[lane]) if errors[lane] else RunResult(
-                    _waveforms(
-                        starts[index][0],
-                        records[lane],
-                        flows,
-                        record_every,
-                        step_size,
-                        scenario.initial_flow,
-                        held=skipped // record_every,
-                    )
-                )
-    return results
 
 
 def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5, step_times=()):

@@ -40,13 +40,13 @@ from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import brentq, root
+from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, ParameterError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
 from valve_sim.core.model import (
-    coefficients,
     derivatives,
     flows,
     net_forces,
