@@ -17,7 +17,9 @@
 import numpy as np
 import pytest
 from valve_sim.core import newton
+from valve_sim.core.model import P_S
 from valve_sim.core.newton import find_root
+from valve_sim.core.steady_state import cracking_pressure, steady_state
 
 
 def circle_and_line(x):
@@ -88,3 +90,23 @@ def test_find_root_uses_newton_alone_when_it_converges(monkeypatch):
 def test_find_root_reports_an_unsolvable_system_after_both_fail():
     result = find_root(lambda x: x ** 2 + 1.0, [0.5], 1e-10)
     assert not result.converged and result.residual >= 1.0 - 1e-6
+
+
+def test_the_default_start_is_solved_by_newton_alone(monkeypatch, reference):
+    # valve_node's start: the preset's cracking point and the steady state at 5 L/min
+    def no_hybr(*_):
+        raise AssertionError('hybr (scipy.optimize) called at the default start')
+
+    monkeypatch.setattr(newton, 'hybr', no_hybr)
+    assert cracking_pressure(reference) > 0.0
+    assert steady_state(reference, 5.0 / 60000.0)[P_S] > cracking_pressure(reference)
+
+
+def test_the_steady_state_falls_back_to_hybr_and_finds_the_same_state(monkeypatch, reference):
+    by_newton = steady_state(reference, 5.0 / 60000.0)
+
+    def failing(function, x0, tolerance, jacobian=None):
+        return newton.NewtonResult(np.asarray(x0, float), np.inf, 0, False, 'newton')
+
+    monkeypatch.setattr(newton, 'newton', failing)
+    assert steady_state(reference, 5.0 / 60000.0) == pytest.approx(by_newton, rel=1e-12)
