@@ -12,9 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark valve_node's start-up after a colcon build, warm and cold, beside a bare node's."""
+"""
+Benchmark valve_node's start-up after a colcon build, warm and cold, beside a bare node's.
 
-# The summary above is also this script's --help description.
+Over 400 lines: the build, the kinds of start, the baseline checkout and the phase
+probe are one run, side by side, so that load from other work spreads over all.
+"""
+
+# The summary line above is also this script's --help description.
 #
 #     python bench/bench_startup.py [--warm 5] [--cold 1] [--json out/bench_startup.json]
 #                                   [--baseline /path/to/other/checkout] [--phases 3]
