@@ -12,11 +12,17 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark valve_node's start-up after a colcon build, warm and cold, beside a bare node's."""
+"""
+Benchmark valve_node's start-up after a colcon build, warm and cold, beside a bare node's.
 
-# The summary above is also this script's --help description.
+Over 400 lines: the build, the kinds of start, the baseline checkout and the phase
+probe are one run, side by side, so that load from other work spreads over all.
+"""
+
+# The summary line above is also this script's --help description.
 #
 #     python bench/bench_startup.py [--warm 5] [--cold 1] [--json out/bench_startup.json]
+#                                   [--baseline /path/to/other/checkout] [--phases 3]
 #
 # Measures, in one run on a ROS domain of its own (localhost only), the time from
 # starting a node process to receiving its first supply_pressure message here:
@@ -31,10 +37,26 @@
 #   (python -m valve_sim.core.precompile fills it first, as `run.py install` does);
 # - cold: valve_node of this checkout with an empty kernel cache (NUMBA_CACHE_DIR a new
 #   empty folder), which compiles at its start: what a start costs without the build's
-#   or run.py's compile.
+#   or run.py's compile;
+# - baseline (--baseline DIR): valve_node of another checkout DIR (e.g. main), warm, run
+#   with this interpreter; its kernels and byte code are cached in this run's temporary
+#   folder (NUMBA_CACHE_DIR, PYTHONPYCACHEPREFIX: nothing is written into DIR), filled by
+#   its precompile and one start that is not counted. Its runs join the bare/warm
+#   rotation, so a change is measured against the code before it side by side.
 #
-# After one bare start that is not counted (the probe's discovery warms up in it), the
-# built node starts first, right after the build; then runs alternate between
+# --phases N: after those runs, N more warm starts (and N baseline ones) through a probe
+# (PHASE_PROBE) that says where a warm start's time goes: imports by package (python -X
+# importtime's own times, summed per package: ROS (rclpy and the messages), numba
+# (llvmlite included), numpy, scipy, valve_sim, other), the node's steady state and
+# kernel load (its "ready" line), the rest of the node's build, and the first state
+# (from the node built to its first message here); imports made during the build (numba's
+# target set-up loads scipy.linalg, for one) are shown within it. importtime slows imports
+# a little, so these starts are not in the figures above.
+#
+# Nodes run with Python's byte code written and read (PYTHONDONTWRITEBYTECODE dropped),
+# as an installed package's is. After one bare start that is not counted (the probe's
+# discovery warms up in it) and one warm (and baseline) start that fills the byte-code
+# cache, the built node starts first, right after the build; then runs alternate between
 # bare and warm, so load from other work on the machine spreads over both; the cold
 # runs come last. The load average at start and end is printed. valve_node's own
 # "ready" log line gives the part spent computing the steady state and compiling or
@@ -73,6 +95,25 @@ BARE_NODE = (
     '    pass\n'
 )
 READY = re.compile(r'compiled or loaded in ([0-9.]+) s')
+# Starts valve_node as `python -m valve_sim.ros.valve_node` does, stamping (time.monotonic,
+# one clock for all processes) when its imports are done and its node is built.
+PHASE_PROBE = (
+    'import sys, time\n'
+    'from valve_sim.ros import valve_node\n'
+    "print(f'PHASE imports {time.monotonic()}', file=sys.stderr, flush=True)\n"
+    'build = valve_node.ReliefValveNode.__init__\n'
+    'def stamped(self, *args, **kwargs):\n'
+    "    print(f'PHASE init {time.monotonic()}', file=sys.stderr, flush=True)\n"
+    '    build(self, *args, **kwargs)\n'
+    "    print(f'PHASE built {time.monotonic()}', file=sys.stderr, flush=True)\n"
+    'valve_node.ReliefValveNode.__init__ = stamped\n'
+    "sys.argv[0] = 'valve_node'\n"
+    'sys.exit(valve_node.main())\n'
+)
+PHASE = re.compile(r'^PHASE (\w+) ([0-9.]+)$', re.M)
+IMPORT_TIME = re.compile(r'^import time:\s+(\d+) \|\s+\d+ \|\s+(\S.*)$', re.M)
+IMPORT_GROUPS = ('ROS', 'numba', 'numpy', 'scipy', 'valve_sim', 'other')
+LATER_IMPORTS = '  of which imports during the build'  # not a phase of its own
 TARGETS = {'built': 2.0, 'warm': 0.5}  # [s] above the bare node's median
 
 
@@ -117,8 +158,40 @@ def colcon_build(workspace):
     return workspace / 'install' / 'valve_sim', time.monotonic() - started
 
 
-def node_command(kind, prefix):
+def import_group(module):
+    """Which of IMPORT_GROUPS a module's import time counts to."""
+    top = module.strip().split('.')[0]
+    if top in ('numba', 'llvmlite'):
+        return 'numba'
+    if top in ('numpy', 'scipy', 'valve_sim'):
+        return top
+    ros = ('rclpy', 'rpyutils', 'rosidl', 'ament', 'rcl_')
+    if top.startswith(ros) or top.endswith(('_msgs', '_interfaces', '_srvs')):
+        return 'ROS'
+    return 'other'
+
+
+def phases(log, started, arrived, ready):
+    """Where one probed start's seconds went: {phase: s} from its log (PHASE_PROBE)."""
+    stamps = {name: float(value) for name, value in PHASE.findall(log)}
+    before, after = log.split('PHASE imports', 1)
+    spent = {f'import {group}': 0.0 for group in IMPORT_GROUPS}
+    for microseconds, module in IMPORT_TIME.findall(before):
+        spent[f'import {import_group(module)}'] += int(microseconds) * 1e-6
+    imported = stamps['imports'] - started
+    spent['interpreter and unlisted'] = imported - sum(spent.values())
+    spent['steady state + kernels'] = ready
+    spent[LATER_IMPORTS] = sum(int(us) for us, _ in IMPORT_TIME.findall(after)) * 1e-6
+    spent['node build, the rest'] = stamps['built'] - stamps['init'] - ready
+    spent['rclpy.init and the rest'] = stamps['init'] - stamps['imports']
+    spent['first state'] = arrived - stamps['built']
+    return spent
+
+
+def node_command(kind, prefix, baseline=None):
     """Return (command, environment changes) that start a node of kind."""
+    if kind == 'baseline':
+        return [sys.executable, '-m', 'valve_sim.ros.valve_node'], baseline_env(baseline)
     if kind == 'bare':
         return [sys.executable, '-c', BARE_NODE], {}
     if kind == 'built':  # as `source install/setup.bash` and `ros2 run` would start it
@@ -129,16 +202,33 @@ def node_command(kind, prefix):
     return [sys.executable, '-m', 'valve_sim.ros.valve_node_main'], {}
 
 
-def start_up(probe, kind, index, command, changes, cache=None):
+def baseline_env(baseline):
+    """Return the environment changes that run baseline.tree, caches in baseline.cache."""
+    return {
+        'PYTHONPATH': os.pathsep.join([str(baseline.tree), os.environ.get('PYTHONPATH', '')]),
+        'NUMBA_CACHE_DIR': str(baseline.cache / 'numba'),
+        'PYTHONPYCACHEPREFIX': str(baseline.cache / 'pyc'),
+    }
+
+
+def probed(command):
+    """Return the command that runs a `python -m valve_sim.ros.valve_node` via PHASE_PROBE."""
+    return [command[0], '-X', 'importtime', '-c', PHASE_PROBE]
+
+
+def start_up(probe, kind, index, command, changes, cache=None, keep_log=False):
     """
     Start one node; return its seconds to the first message, ready seconds and CPU seconds.
 
     ready: from its log line (None for the bare node); CPU: user + system time it had
     used by then, which the load of other work stretches less than the wall time.
+    keep_log: also return the log and the start and arrival times (for phases).
     """
     namespace = f'/{kind}{index}'
     subscription = probe.watch(namespace)
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
+    for name in ('PYTHONPYCACHEPREFIX', 'PYTHONDONTWRITEBYTECODE'):  # byte code as installed
+        env.pop(name, None)
     env.update(changes, PYTHONUNBUFFERED='1')
     if cache is not None:
         env['NUMBA_CACHE_DIR'] = str(cache)
@@ -159,9 +249,12 @@ def start_up(probe, kind, index, command, changes, cache=None):
             process.terminate()
             process.wait(timeout=60)
         log.seek(0)
-        ready = READY.search(log.read())
+        text = log.read()
+        ready = READY.search(text)
     probe.node.destroy_subscription(subscription)
-    return probe.arrived[namespace] - started, float(ready[1]) if ready else None, cpu
+    arrived = probe.arrived[namespace]
+    figures = (arrived - started, float(ready[1]) if ready else None, cpu)
+    return figures + (text, started, arrived) if keep_log else figures
 
 
 def cpu_seconds(pid):
@@ -184,25 +277,42 @@ LABELS = {
     'built': 'valve_node, first start after colcon build',
     'warm': 'valve_node, kernels cached',
     'cold': 'valve_node, empty kernel cache',
+    'baseline': 'valve_node of --baseline, kernels cached',
 }
+
+
+class Baseline:
+    """Another checkout to start beside this one: its tree and its caches' folder."""
+
+    def __init__(self, tree, folder):
+        self.tree, self.cache = tree.resolve(), folder / 'baseline'
 
 
 def measure(args, folder):
     """Build, then start the nodes as planned; return {kind: [(seconds, ready, cpu)]}."""
     precompile = [sys.executable, '-m', 'valve_sim.core.precompile']
     subprocess.run(precompile, check=True, env=dict(os.environ), timeout=BUILD_TIMEOUT)
+    baseline = Baseline(args.baseline, folder) if args.baseline else None
+    if baseline:
+        subprocess.run(
+            precompile, check=True, env={**os.environ, **baseline_env(baseline)},
+            timeout=BUILD_TIMEOUT, cwd=tempfile.gettempdir(),
+        )
     prefix, build_seconds = colcon_build(folder)
     print(f"colcon build: {build_seconds:.1f} s, the kernels' compile included", flush=True)
     probe = FirstMessage()
     start_up(probe, 'bare', 'warmup', *node_command('bare', prefix))  # warms DDS and the probe
+    rotation = ('bare', 'warm') + (('baseline',) if baseline else ())
+    for kind in rotation[1:]:  # fill their byte-code caches, as an installed package has
+        start_up(probe, kind, 'warmup', *node_command(kind, prefix, baseline))
     plan = (
         [('built', 0)]
-        + [(kind, i) for i in range(args.warm) for kind in ('bare', 'warm')]
+        + [(kind, i) for i in range(args.warm) for kind in rotation]
         + [('cold', i) for i in range(args.cold)]
     )
     runs = {kind: [] for kind in LABELS}
     for kind, i in plan:
-        command, changes = node_command(kind, prefix)
+        command, changes = node_command(kind, prefix, baseline)
         cache = folder / f'cold{i}' if kind == 'cold' else None
         seconds, ready, cpu = start_up(probe, kind, i, command, changes, cache)
         runs[kind].append((seconds, ready, cpu))
@@ -211,7 +321,34 @@ def measure(args, folder):
             + (f' (steady state + kernels {ready:.2f} s)' if ready else ''),
             flush=True,
         )
-    return runs, build_seconds
+    spent = {kind: [] for kind in rotation[1:]}
+    for i in range(args.phases):
+        for kind in spent:
+            command, changes = node_command(kind, prefix, baseline)
+            seconds, ready, _, log, started, arrived = start_up(
+                probe, f'{kind}phases', i, probed(command), changes, keep_log=True
+            )
+            spent[kind].append(phases(log, started, arrived, ready))
+            print(f'{kind} phases run {i + 1}: first state after {seconds:6.2f} s', flush=True)
+    return runs, build_seconds, spent
+
+
+def phase_table(spent):
+    """Print the median seconds of each phase per kind; return them as {kind: {phase: s}}."""
+    medians = {
+        kind: {phase: statistics.median(run[phase] for run in runs) for phase in runs[0]}
+        for kind, runs in spent.items() if runs
+    }
+    if not medians:
+        return medians
+    kinds = list(medians)
+    print()
+    print(f'{"where a warm start goes (median s)":<36}' + ''.join(f'{k:>10}' for k in kinds))
+    for phase in medians[kinds[0]]:
+        print(f'{phase:<36}' + ''.join(f'{medians[k][phase]:10.3f}' for k in kinds))
+    totals = [sum(s for phase, s in medians[k].items() if phase != LATER_IMPORTS) for k in kinds]
+    print(f'{"total":<36}' + ''.join(f'{total:10.3f}' for total in totals))
+    return medians
 
 
 def main():
@@ -219,6 +356,14 @@ def main():
     parser.add_argument('--warm', type=int, default=5, help='warm runs (and bare runs)')
     parser.add_argument('--cold', type=int, default=1, help='cold runs (empty kernel cache)')
     parser.add_argument('--json', type=Path, help='also write the figures as JSON')
+    parser.add_argument(
+        '--baseline', type=Path,
+        help="another checkout (e.g. main's) whose valve_node joins the warm rotation",
+    )
+    parser.add_argument(
+        '--phases', type=int, default=0,
+        help='probed warm starts (and baseline ones) that say where the time goes',
+    )
     args = parser.parse_args()
     claim_domain(keep_existing=False)
     os.environ['PYTHONPATH'] = os.pathsep.join(
@@ -226,7 +371,7 @@ def main():
     )
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix='bench_startup_') as folder:
-        runs, build_seconds = measure(args, Path(folder))
+        runs, build_seconds, spent = measure(args, Path(folder))
     figures = {
         'load_average_start': load_start,
         'load_average_end': os.getloadavg(),
@@ -269,6 +414,7 @@ def main():
             f'target {LABELS[kind]} <= bare + {target["target_above_bare_s"]:g} s: '
             f'{target["above_bare_s"]:+.2f} s, {"met" if target["met"] else "NOT met"}'
         )
+    figures['phases'] = phase_table(spent)
     print(
         f'load average {load_start[0]:.2f} at start, {figures["load_average_end"][0]:.2f} at end'
     )

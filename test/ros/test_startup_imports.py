@@ -15,10 +15,11 @@
 """
 valve_node imports only what its start needs (issue 29: a node that starts at once).
 
-Its start needs rclpy and the messages, numba (the cached kernels) and
-scipy.optimize (the steady state, scipy.optimize.root); plotting, bag writers,
-studies, the FMU, the analysis and the commands would each add tenths of a second
-to every start. Checked in a fresh interpreter: the modules loaded by importing
+Its start needs rclpy and the messages, numba (the cached kernels) and numpy;
+plotting, bag writers, studies, the FMU, the analysis and the commands would each
+add tenths of a second to every start, and so would scipy.optimize (the steady state
+uses valve_sim.core.newton, scipy's hybr only if Newton fails) and scipy.linalg (only
+the linear modes need it). Checked in a fresh interpreter: the modules loaded by importing
 valve_node and parsing its command line.
 """
 
@@ -41,6 +42,8 @@ NOT_AT_START = (
     'websockets',
     'scipy.integrate',
     'scipy.interpolate',
+    'scipy.linalg',
+    'scipy.optimize',
     'scipy.signal',
     'scipy.stats',
     'valve_sim.analysis',

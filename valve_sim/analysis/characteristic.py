@@ -227,11 +227,8 @@ def _monotone_interp(grid, flow, pressure):
 
 def steady_marks(params, rated_flow, max_flow):
     """Return the steady state's cracking (lift-off, 1 % main-stage flow) and rated pressures."""
-    from valve_sim.core.steady_state import (
-        cracking_pressure,
-        flow_for_main_stage_flow,
-        steady_state,
-    )
+    from valve_sim.core.steady_curve import flow_for_main_stage_flow
+    from valve_sim.core.steady_state import cracking_pressure, steady_state
 
     marks = {'lift_off_pressure': None, 'cracking_pressure': None, 'cracking_flow': None}
     try:

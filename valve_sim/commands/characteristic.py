@@ -162,7 +162,7 @@ def run(args):
 def write_outputs(out, params, waveforms, main, marks, steady, report, max_flow):
     """CSV files, JSON and the figure into out."""
     from valve_sim.analysis.plotting import plot_characteristic
-    from valve_sim.core.steady_state import steady_curve
+    from valve_sim.core.steady_curve import steady_curve
 
     make_folder(out)
     q_in, p_s = waveforms.inlet_flow, waveforms['supply_pressure']

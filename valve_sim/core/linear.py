@@ -28,7 +28,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-import scipy.linalg
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.model import state_derivative
 from valve_sim.core.parameters import PARAMETERS
@@ -105,6 +104,8 @@ def modes(params, inlet_flow, tank_pressure=0.0):
     tank_pressure: the back pressure [Pa, gauge]. One Mode per real eigenvalue and per
     complex pair, slowest (smallest |lambda|) first.
     """
+    import scipy.linalg  # here, not at the top: valve_node's start needs only jacobian
+
     state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
     eigenvalues, left, right = scipy.linalg.eig(
         jacobian(params, state, inlet_flow, tank_pressure=tank_pressure), left=True, right=True

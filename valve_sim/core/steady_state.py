@@ -17,13 +17,14 @@ Exact steady state of the valve for a constant inlet flow.
 
 At steady state every chamber's net flow and every net force vanish (Eqs. 1-7
 with all time derivatives zero). The solution is found by Newton's method
-(scipy.optimize.root) on those balances, started from an estimate that follows
-the valve's own logic (poppet force balance -> p_s, main-valve force balance ->
-p_p, pilot flow -> p_c and y, the rest through the main valve). If that fails,
-Newton restarts from a pseudo-transient: the model integrated with a small supply
-volume V_s and added valve damping, which change how fast the valve settles but
-not where. Either valve may rest on its seat or end stop; then its
-position is fixed there and its force balance is replaced by the contact condition.
+(valve_sim.core.newton: damped Newton, scipy's hybr only where it fails) on those
+balances, started from an estimate that follows the valve's own logic (poppet force
+balance -> p_s, main-valve force balance -> p_p, pilot flow -> p_c and y, the rest
+through the main valve). If that fails, Newton restarts from a pseudo-transient: the
+model integrated with a small supply volume V_s and added valve damping, which change
+how fast the valve settles but not where. Either valve may rest on its seat or end
+stop; then its position is fixed there and its force balance is replaced by the
+contact condition.
 
 A tank pressure p_t [Pa, gauge] enters the balances as it enters the model; the
 estimates are made relative to the tank and shifted by it. Since every force and flow
@@ -34,12 +35,15 @@ the solver does not assume it, the tests check it.
 Faults (valve_sim.core.faults) change the balances as they change the model; a stuck
 main valve is solved as free (it then sticks where the solution puts it), and friction
 is left out: the frictionless rest state is one of the states friction holds.
+
+Over 400 lines because the steady state, the cracking point and the preset share
+the balances, their scaling and the design estimate; the static characteristic built
+on them lives in valve_sim.core.steady_curve.
 """
 
 from dataclasses import replace
 
 import numpy as np
-from scipy.optimize import brentq, root
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, ParameterError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
@@ -57,6 +61,7 @@ from valve_sim.core.model import (
     X,
     Y,
 )
+from valve_sim.core.newton import find_root
 from valve_sim.core.parameters import SPECS, validate
 
 
@@ -94,9 +99,11 @@ def _residuals(state, inlet_flow, c, flow_scale, force_scale, tank_pressure):
     return residuals
 
 
-def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tiny_flow=False):
+def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tolerance, tiny_flow=False):
     """
-    Solve the balances from guess; a valve whose fixed position is not None rests there.
+    Solve the balances from guess to tolerance, (state, max relative residual).
+
+    A valve whose fixed position is not None rests there.
 
     Flows are scaled by at least 1e-7 m^3/s and a free position by its stroke; with
     tiny_flow, by the inlet flow and the guessed position (a poppet open by 1e-15 m at
@@ -128,10 +135,8 @@ def _newton(guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tiny_flow=Fal
         state = compose(u)
         return _residuals(state, inlet_flow, c, flow_scale, force_scale, tank_pressure)[equations]
 
-    solution = root(
-        residual, np.asarray(guess)[free] / scale, method='hybr', options={'xtol': 1e-13}
-    )
-    return compose(solution.x), np.max(np.abs(residual(solution.x)))
+    solution = find_root(residual, np.asarray(guess)[free] / scale, tolerance)
+    return compose(solution.x), solution.residual
 
 
 def _contacts(position, stroke):
@@ -230,7 +235,7 @@ def _solve_from(guess, inlet_flow, c, tank_pressure, tiny_flow=False):
     for fixed_x in _contacts(guess[X], c.main_valve_stroke):
         for fixed_y in _contacts(guess[Y], c.poppet_stroke):
             candidate, error = _newton(
-                guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tiny_flow
+                guess, inlet_flow, c, fixed_x, fixed_y, tank_pressure, tolerance, tiny_flow
             )
             if error < tolerance and _contact_is_consistent(candidate, c, tank_pressure):
                 return candidate, error
@@ -322,9 +327,9 @@ def _cracking_problem(state, error, poppet_stroke):
     """
     Why a solution of the cracking balances is no cracking point (None if it is one).
 
-    The residual and the poppet's place decide, not hybr's progress flag: with
-    xtol 1e-13 hybr often sits on the root (residual ~1e-16) yet reports that it
-    is "not making good progress".
+    The residual and the poppet's place decide, not a solver's progress flag: with
+    xtol 1e-13 hybr (find_root's fallback) often sits on the root (residual ~1e-16)
+    yet reports that it is "not making good progress".
     """
     if not error <= TOLERANCE:  # also NaN
         return (
@@ -372,11 +377,9 @@ def cracking_pressure(params, faults=HEALTHY, tank_pressure=0.0):
             compose(u), 0.0, c, 1e-5, c.back_area * pressure_scale, tank_pressure
         )[[2, 3, 4, 5]]
 
-    solution = root(
-        residual, guess[[P_S, P_P, P_C, Y]] / scale, method='hybr', options={'xtol': 1e-13}
-    )
+    solution = find_root(residual, guess[[P_S, P_P, P_C, Y]] / scale, TOLERANCE)
     state = compose(solution.x)
-    problem = _cracking_problem(state, np.max(np.abs(residual(solution.x))), c.poppet_stroke)
+    problem = _cracking_problem(state, solution.residual, c.poppet_stroke)
     if problem:
         raise SteadyStateError(f'no cracking point found: {problem}')
     return float(state[P_S])
@@ -435,39 +438,3 @@ def with_preset_pressure(params, pressure):
     preset_pressure and the study's held preset all mean this cracking pressure.
     """
     return {**params, 'pilot_spring_preload': preload_for_cracking_pressure(params, pressure)}
-
-
-def steady_curve(params, inlet_flows):
-    """
-    Exact static characteristic: (p_s [Pa], main-stage flow q_m2 [m^3/s]) at each inlet flow.
-
-    NaN where no steady state is found.
-    """
-    c = coefficients(params)
-    pressure, main = np.full(len(inlet_flows), np.nan), np.full(len(inlet_flows), np.nan)
-    for k, inlet_flow in enumerate(inlet_flows):
-        try:
-            state = steady_state(params, inlet_flow)
-        except SteadyStateError:
-            continue
-        pressure[k], main[k] = state[P_S], flows(state, c)[1]
-    return pressure, main
-
-
-def flow_for_main_stage_flow(params, main_flow, max_flow):
-    """
-    Inlet flow [m^3/s] at which the steady main-stage flow q_m2 equals main_flow [m^3/s].
-
-    Searched between 0 and max_flow [m^3/s] (Brent's method on the exact steady
-    state); raises SteadyStateError if the main stage does not pass main_flow there.
-    """
-    c = coefficients(params)
-
-    def excess(inlet_flow):
-        return flows(steady_state(params, inlet_flow), c)[1] - main_flow
-
-    if excess(max_flow) < 0.0:
-        raise SteadyStateError(
-            f'the main stage passes less than {main_flow:g} m^3/s up to {max_flow:g} m^3/s'
-        )
-    return brentq(excess, main_flow, max_flow, xtol=1e-15, rtol=1e-13)
