@@ -29,9 +29,12 @@
 #   valve_sim.ros.lockstep.Lockstep: the DDS round trip and the driver, the floor any
 #   lockstep run here has;
 # - lockstep: valve_node alone in lockstep (every tick topic published at 1 kHz, no
-#   recorder): model + publishing + round trip;
-# - scenario: `scenario run` of scenarios/paper_step.yaml, analyser_node recording
-#   every topic: all of it.
+#   recorder), one tick per /clock: model + publishing + round trip;
+# - lockstep_jumps: the same with /clock stepping TICKS_PER_CLOCK ticks at once
+#   (valve_sim.ros.clock_jumps): a round trip per TICKS_PER_CLOCK ticks;
+# - scenario_one_tick: `scenario run` of scenarios/paper_step.yaml, analyser_node
+#   recording every topic, one tick per /clock (as with --wait-topic);
+# - scenario: the same as `scenario run` does it, TICKS_PER_CLOCK ticks per /clock.
 #
 # Each reports its real-time factor (model time per wall time of the stepping), its
 # wall time per tick, and the CPU time per tick of each process over the stepping
@@ -40,7 +43,9 @@
 # --baseline DIR runs every kind also with the valve_sim of another checkout (e.g.
 # `git archive main | tar -x -C DIR`), its processes on PYTHONPATH=DIR, alternating
 # with this checkout's in the same run: before and after side by side under the same
-# load. The load average at start and end is printed: the machine is shared.
+# load (the two jump kinds only where the checkout has clock jumps; a checkout without
+# them runs `scenario` one tick per /clock). The load average at start and end is
+# printed: the machine is shared.
 
 import argparse
 import json
@@ -55,7 +60,9 @@ import time
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'scenarios' / 'paper_step.yaml'
-KINDS = ('model', 'round_trip', 'lockstep', 'scenario')
+KINDS = ('model', 'round_trip', 'lockstep', 'lockstep_jumps', 'scenario_one_tick',
+         'scenario')
+JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick')  # need valve_sim.ros.clock_jumps
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
 BARE_RESPONDER = (
     'import rclpy\n'
@@ -125,7 +132,7 @@ def model_alone(scenario, folder):
     return time.perf_counter() - started, cpu_used(cpu, cpu_seconds())
 
 
-def lockstep_run(scenario, folder, name):
+def lockstep_run(scenario, folder, name, ticks_per_clock=1):
     """Drive one node process (valve_node or the bare node) on /clock for the scenario's ticks."""
     import rclpy
     from valve_sim.ros import node_command
@@ -152,8 +159,11 @@ def lockstep_run(scenario, folder, name):
             driver.set_flow(scenario.inputs['inlet_flow'].initial)
         driver.start(period_ns=scenario.period_ns)
         cpu, started = cpu_seconds(), time.perf_counter()
-        for _ in range(scenario.ticks):
-            driver.tick()
+        for done in range(0, scenario.ticks, ticks_per_clock):
+            if ticks_per_clock == 1:
+                driver.tick()  # as a checkout without clock jumps can
+            else:
+                driver.tick(min(ticks_per_clock, scenario.ticks - done))
         return time.perf_counter() - started, cpu_used(cpu, cpu_seconds())
     finally:
         if driver is not None:
@@ -162,7 +172,7 @@ def lockstep_run(scenario, folder, name):
         processes.stop()
 
 
-def scenario_run(scenario, folder):
+def scenario_run(scenario, folder, **options):
     """Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU."""
     from valve_sim.ros.scenario_runner import run_scenario
 
@@ -174,7 +184,7 @@ def scenario_run(scenario, folder):
         elif text.startswith('waiting for analyser_node to record'):
             cpu['end'] = cpu_seconds()
 
-    record = run_scenario(scenario, folder, progress=progress)
+    record = run_scenario(scenario, folder, progress=progress, **options)
     assert record.passed, [check.name for check in record.checks if not check.passed]
     return record.wall_s, cpu_used(cpu['start'], cpu['end'])
 
@@ -189,6 +199,12 @@ def measure(kind, folder):
         wall, cpu = model_alone(scenario, folder)
     elif kind == 'scenario':
         wall, cpu = scenario_run(scenario, folder)
+    elif kind == 'scenario_one_tick':
+        wall, cpu = scenario_run(scenario, folder, ticks_per_clock=1)
+    elif kind == 'lockstep_jumps':
+        from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
+
+        wall, cpu = lockstep_run(scenario, folder, 'valve_node', TICKS_PER_CLOCK)
     else:
         wall, cpu = lockstep_run(scenario, folder,
                                  'bare_responder' if kind == 'round_trip' else 'valve_node')
@@ -218,25 +234,32 @@ def summary(runs):
                                 for name in names}}
 
 
+def kinds_of(checkout):
+    """Return the kinds a checkout can run: the jump kinds only with ros.clock_jumps."""
+    jumps = (Path(checkout) / 'valve_sim' / 'ros' / 'clock_jumps.py').exists()
+    return [kind for kind in KINDS if jumps or kind not in JUMP_KINDS]
+
+
 def split(results):
-    """Where a scenario's tick goes [ms], from the differences of the kinds' wall times."""
-    tick = {kind: results[kind]['per_tick_ms'] for kind in KINDS}
+    """Where a one-tick-per-/clock scenario's tick goes [ms], from the kinds' wall times."""
+    tick = {kind: result['per_tick_ms'] for kind, result in results.items()}
+    one_tick = tick.get('scenario_one_tick', tick['scenario'])
     return {
         'model': tick['model'],
         'round_trip_floor': tick['round_trip'],
         'valve_node_publishing_and_executor': tick['lockstep'] - tick['round_trip']
         - tick['model'],
-        'analyser_and_runner': tick['scenario'] - tick['lockstep'],
+        'analyser_and_runner': one_tick - tick['lockstep'],
     }
 
 
 def report(label, results):
     print(f'{label}:')
-    for kind in KINDS:
+    for kind in filter(results.__contains__, KINDS):
         result = results[kind]
         cpu = ', '.join(f'{name} {value:.3f}'
                         for name, value in result['cpu_per_tick_ms'].items())
-        print(f'  {kind:<11} {result["real_time_factor"]:7.2f}x real time, '
+        print(f'  {kind:<17} {result["real_time_factor"]:7.2f}x real time, '
               f'{result["per_tick_ms"]:.3f} ms a tick; CPU ms a tick: {cpu}')
     print('  where a scenario tick goes [ms of wall]: ' + ', '.join(
         f'{name} {value:.3f}' for name, value in results['split_per_tick_ms'].items()))
@@ -260,11 +283,12 @@ def main():
     if args.baseline:
         checkouts['baseline'] = args.baseline.resolve()
     print(f'load average at start: {os.getloadavg()}', flush=True)
-    runs = {label: {kind: [] for kind in KINDS} for label in checkouts}
+    runs = {label: {kind: [] for kind in kinds_of(checkout)}
+            for label, checkout in checkouts.items()}
     with tempfile.TemporaryDirectory() as temporary:
         for repeat in range(args.repeats):
             for label, checkout in checkouts.items():
-                for kind in KINDS:
+                for kind in runs[label]:
                     folder = Path(temporary) / str(repeat) / label.replace(' ', '_') / kind
                     runs[label][kind].append(run_kind(kind, folder, checkout))
                 print(f'run {repeat + 1}, {label}: ' + ', '.join(

@@ -18,8 +18,9 @@
 Each run is the command as a user types it, in a process of its own: the shipped
 examples (one passes as shipped, one with two added expectations fails on purpose),
 each judged by its exit code, report.json and JUnit file; the same scenario twice,
-compared message by message; a use_sim_time controller of the test's own that the
-runner waits for (--wait-topic); malformed files, each one line naming the key.
+ten ticks per /clock and one, compared message by message; batch_starts' steps; a
+use_sim_time controller of the test's own that the runner waits for (--wait-topic);
+malformed files, each one line naming the key.
 """
 
 import json
@@ -35,6 +36,7 @@ from valve_sim.analysis.scenario_file import load_scenario
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import TICK_TOPICS
+from valve_sim.ros.scenario_runner import batch_starts
 
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -75,12 +77,17 @@ def recorded(folder):
 
 @pytest.fixture(scope='module')
 def stuck_valve_runs(tmp_path_factory, valve_node_kernels):
-    """Run the shipped stuck_main_valve example twice: [(CompletedProcess, output folder)]."""
+    """
+    Run the shipped stuck_main_valve example twice: [(CompletedProcess, output folder)].
+
+    The first as `scenario run` does by default (TICKS_PER_CLOCK ticks per /clock), the
+    second one tick per /clock.
+    """
     runs = []
-    for attempt in range(2):
+    for attempt, options in enumerate(((), ('--ticks-per-clock', '1'))):
         folder = tmp_path_factory.mktemp(f'stuck_{attempt}') / 'out'
         runs.append((scenario_command('run', str(EXAMPLES / 'stuck_main_valve.yaml'),
-                                      '--out', str(folder), cwd=ROOT), folder))
+                                      '--out', str(folder), *options, cwd=ROOT), folder))
     return runs
 
 
@@ -104,8 +111,14 @@ def test_the_stuck_valve_example_passes_with_its_reports(stuck_valve_runs):
     assert all(failure is None and out.startswith('measured ') for _, failure, out in cases)
 
 
-def test_the_same_scenario_twice_records_the_same_messages_bit_for_bit(stuck_valve_runs):
-    """Header stamps and data of every state and inlet flow message: equal bytes, in order."""
+def test_ten_ticks_per_clock_and_one_record_the_same_messages_bit_for_bit(stuck_valve_runs):
+    """
+    The same scenario twice, k = 10 and k = 1 ticks per /clock: equal bytes, in order.
+
+    Header stamps and data of every state and inlet flow message; the event (0.2 s)
+    and the flow step (0.3 s) land on the same tick either way.
+    """
+    assert stuck_valve_runs[1][0].returncode == 0, stuck_valve_runs[1][0].stdout
     first, second = (recorded(folder) for _, folder in stuck_valve_runs)
     assert sorted(first) == sorted(f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow'))
     for topic in TICK_TOPICS:
@@ -234,6 +247,16 @@ MALFORMED = [
     (TANK + '  tank_pressure: 1 bar\nevents: [{t: 0.2, set: {ambient_pressure: 0.9 bar}}]\n',
      'events.set.ambient_pressure'),
 ]
+
+
+@pytest.mark.parametrize('ticks, breaks, size, expected', [
+    (25, (), 10, [0, 10, 20]),
+    (25, (3, 15), 10, [0, 3, 13, 15]),
+    (25, (0, 10, 25, 40), 10, [0, 10, 20]),  # the ends and beyond split nothing
+    (5, (2,), 1, [0, 1, 2, 3, 4]),
+])
+def test_batch_starts_split_the_steps_at_every_break(ticks, breaks, size, expected):
+    assert batch_starts(ticks, breaks, size) == expected
 
 
 @pytest.mark.parametrize('text, key', MALFORMED)

@@ -17,9 +17,10 @@ Bench tests as files: run a scenario on valve_node in lockstep and judge it, or 
 
 `valve-sim scenario run FILE.yaml` starts valve_node and analyser_node over DDS (in
 ROS_DOMAIN_ID if set, else a domain of its own; with --wait-topic in the environment's
-domain as it is, where the user's other nodes run), drives /clock tick by tick as fast
-as the nodes go (--rate: at most that many times real time), feeds the scenario's inputs
-and events, and judges its expectations on the recording. Into --out it writes the bag,
+domain as it is, where the user's other nodes run), drives /clock in steps of a few
+ticks (--ticks-per-clock; tick by tick with --wait-topic) as fast as the nodes go
+(--rate: at most that many times real time), feeds the scenario's inputs and events,
+and judges its expectations on the recording. Into --out it writes the bag,
 report.txt, report.json, scenario.png, junit.xml and both nodes' logs; it exits 0 only
 if every expectation holds. `valve-sim scenario check FILE.yaml` reads and checks a file
 without running it. The file format: docs/scenarios.md.
@@ -31,6 +32,7 @@ import time
 
 from valve_sim.commands.options import number
 from valve_sim.core.output_files import make_folder
+from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK, TICKS_PER_CLOCK
 
 
 def progress(text):
@@ -53,6 +55,11 @@ def add_arguments(parser):
     run_parser.add_argument('--wait-topic', action='append', default=[], metavar='TOPIC',
                             help='a topic another use_sim_time node (your controller) publishes '
                             'once per tick: each tick waits for its message (repeatable)')
+    run_parser.add_argument('--ticks-per-clock', metavar='N',
+                            type=number('a tick count', '', 1, MAX_TICKS_PER_CLOCK, integer=True),
+                            help='tick periods per /clock message at most (default '
+                            f'{TICKS_PER_CLOCK}, 1 with --wait-topic; the states are the same '
+                            'either way, fewer round trips are faster)')
     run_parser.add_argument('--junit', type=Path, metavar='FILE.xml',
                             help='write the JUnit report here instead of DIR/junit.xml')
     check_parser = actions.add_parser('check', help='read and check a scenario without running',
@@ -96,7 +103,7 @@ def run(args):
         domain = claim_domain()
     progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={domain}')
     record, paths = run_and_report(scenario, folder, args.rate, args.wait_topic, args.junit,
-                                   progress)
+                                   progress, args.ticks_per_clock)
     print()
     print(paths['report'].read_text(), end='')
     for path in (record.bag, *paths.values()):

@@ -21,6 +21,9 @@ a message of that tick on each wait topic (the topics that other use_sim_time no
 such as a controller under test, publish once per tick); only then does the next
 tick go. Inputs and parameter changes go between ticks, so they act from the tick
 after the state just received: the same run twice gives the same states, bit for bit.
+tick(count) steps /clock count periods at once: valve_node ticks such a jump period
+by period (ros.clock_jumps), publishing the same states as count single steps, and
+the driver saves count - 1 round trips; inputs and changes then go between steps.
 
 A tick is complete when the last of the tick topics valve_node publishes
 (valve_topics.TICK_TOPICS) has come with its stamp, so every topic of the tick was
@@ -253,9 +256,15 @@ class Lockstep:
         self.tank_publisher.publish(message)
         self.tank = float(absolute)
 
-    def tick(self):
-        """Advance the valve by one tick period; returns the new state's stamp [ns]."""
-        time_ns = self.clock_ns + self.period_ns
+    def tick(self, count=1):
+        """
+        Advance the valve by count tick periods in one /clock; returns the last state's stamp.
+
+        valve_node ticks a jump of up to clock_jumps.MAX_TICKS_PER_CLOCK periods period
+        by period, a state each; this waits for the last. The inputs set before apply
+        to all of them; the wait topics must have a message of the last.
+        """
+        time_ns = self.clock_ns + count * self.period_ns
         if self.rate:
             wall, clock = self._paced_from
             delay = wall + (time_ns - clock) / NS_PER_S / self.rate - time.monotonic()

@@ -17,11 +17,13 @@ Run a bench scenario over DDS: valve_node and analyser_node in lockstep, then th
 
 run_scenario() starts both nodes (valve_node on use_sim_time with the scenario's
 parameters, analyser_node recording into the output folder), waits until the analyser
-records every topic of the valve, and drives the valve tick by tick (Lockstep): the
-inlet flow of each tick published before it (and the tank pressure, when the scenario
-gives one: its gauge value + ambient_pressure, as the topic is absolute, stamped with
-the tick's start), each event's parameter changes applied
-after the state of the tick it falls on. Then it waits until the analyser reports
+records every topic of the valve, and drives the valve in steps of up to TICKS_PER_CLOCK
+ticks per /clock (Lockstep; one tick per /clock with wait topics), split so that each
+input change and event starts a step (batch_starts): the same states as tick by tick.
+The inlet flow of each tick is published before it (and the tank pressure, when the
+scenario gives one: its gauge value + ambient_pressure, as the topic is absolute,
+stamped with the tick's start), each event's parameter changes applied after the
+state of the tick it falls on. Then it waits until the analyser reports
 (on /diagnostics) that it has recorded every state, since in lockstep the valve runs
 ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
 analyser closed, checks that it holds every state of the run, and judges
@@ -32,11 +34,14 @@ valve_sim.analysis.scenario_report.
 from dataclasses import dataclass, field
 import time
 
+import numpy as np
+
 from valve_sim.analysis.expectations import evaluate
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
+from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.lockstep import Lockstep, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import start_valve_and_analyser
 
@@ -114,7 +119,28 @@ class AnalyserStatus:
         return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
 
-def drive(scenario, driver, progress):
+def batch_starts(ticks, breaks, size):
+    """
+    Return the first tick of each /clock step of a run of ticks ticks, steps of at most size.
+
+    breaks: the ticks before which the driver acts (an event, a new or republished
+    input): a step starts at each, so none crosses one and every input and change lands
+    on the tick it does with one tick per step.
+    """
+    bounds = [0, *sorted({tick for tick in breaks if 0 < tick < ticks}), ticks]
+    return [tick for start, end in zip(bounds, bounds[1:]) for tick in range(start, end, size)]
+
+
+def apply_event(driver, scenario, tick, changes):
+    """Set an event's parameter changes after the state of tick; refused: IncompleteRunError."""
+    try:
+        driver.set_parameters(changes)
+    except ValueError as error:
+        raise IncompleteRunError(f'the event at {tick * scenario.period_ns / NS_PER_S:g} '
+                                 f's: {error}') from None
+
+
+def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK):
     """Run the scenario's ticks on a connected Lockstep; returns the wall time [s] it took."""
     flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
     tank = scenario.inputs.get('tank_pressure')
@@ -122,31 +148,36 @@ def drive(scenario, driver, progress):
         scenario.ambient_pressure)  # [Pa absolute], as the topic takes it
     events = scenario.event_ticks()
     republish = max(round(FLOW_REPUBLISH * NS_PER_S / scenario.period_ns), 1)
+    breaks = {*events, *range(0, scenario.ticks, republish), *change_ticks(flows)}
+    if tanks is not None:
+        breaks.update(change_ticks(tanks))
+    starts = batch_starts(scenario.ticks, breaks, ticks_per_clock)
     driver.set_flow(flows[0])
     if tanks is not None:
         driver.set_tank_pressure(tanks[0], START_NS)
     driver.start(START_NS, scenario.period_ns)
     started = last_report = time.monotonic()
-    for tick in range(scenario.ticks + 1):
+    for tick, end in zip(starts, [*starts[1:], scenario.ticks]):
         if tick in events:
-            try:
-                driver.set_parameters(events[tick])
-            except ValueError as error:
-                raise IncompleteRunError(f'the event at {tick * scenario.period_ns / NS_PER_S:g} '
-                                         f's: {error}') from None
-        if tick == scenario.ticks:
-            break
+            apply_event(driver, scenario, tick, events[tick])
         if flows[tick] != driver.flow or tick % republish == 0:
             driver.set_flow(flows[tick])
         if tanks is not None and (tanks[tick] != driver.tank or tick % republish == 0):
             driver.set_tank_pressure(tanks[tick], driver.clock_ns)
-        driver.tick()
+        driver.tick(end - tick)
         if time.monotonic() - last_report > PROGRESS_INTERVAL:
             last_report = time.monotonic()
-            model = (tick + 1) * scenario.period_ns / NS_PER_S
+            model = end * scenario.period_ns / NS_PER_S
             progress(f't = {model:.3f} s of {scenario.duration:g} s '
                      f'({model / (last_report - started):.2f}x real time)')
+    if scenario.ticks in events:
+        apply_event(driver, scenario, scenario.ticks, events[scenario.ticks])
     return time.monotonic() - started
+
+
+def change_ticks(values):
+    """Return the ticks whose input value differs from the tick before's."""
+    return (np.flatnonzero(values[1:] != values[:-1]) + 1).tolist()
 
 
 def check_complete(series, scenario, start_ns):
@@ -163,12 +194,15 @@ def check_complete(series, scenario, start_ns):
             raise IncompleteRunError(f'the bag lacks {name} at {gaps} of the ticks of the run')
 
 
-def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
+def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
+                 ticks_per_clock=None):
     """
     Run a BenchScenario in folder (created); returns its RunRecord with the checks judged.
 
     rate: model time per wall time to keep to at most (None: as fast as it goes);
-    wait_topics: topics other use_sim_time nodes publish once per tick. Raises the
+    wait_topics: topics other use_sim_time nodes publish once per tick;
+    ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
+    with wait topics, whose nodes must see every tick's /clock). Raises the
     errors of a run that cannot complete (a node died, a refused event, a timeout,
     an incomplete bag), after stopping both nodes.
     """
@@ -192,7 +226,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
                           'analyser_node recording every topic', READY_TIMEOUT)
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
-        record.wall_s = drive(scenario, driver, progress)
+        record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
+            1 if wait_topics else TICKS_PER_CLOCK))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (once a second) says when it has all.
         progress('waiting for analyser_node to record every state')
@@ -216,7 +251,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print):
     return record
 
 
-def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print):
+def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
+                   ticks_per_clock=None):
     """
     Run a scenario and write its reports (scenario_report); returns (RunRecord, paths).
 
@@ -228,7 +264,7 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
 
     started = time.monotonic()
     try:
-        record = run_scenario(scenario, folder, rate, wait_topics, progress)
+        record = run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock)
     except (*USER_ERRORS, TimeoutError, RuntimeError) as error:
         (junit or folder / 'junit.xml').write_bytes(
             junit_document(scenario, [], time.monotonic() - started, str(error)))

@@ -51,6 +51,7 @@ from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status
 from valve_sim.ros import diagnostics
 from valve_sim.ros.clock_guard import GuardedTimeSource
+from valve_sim.ros.clock_jumps import tick_times
 from valve_sim.ros.fault_injection import (
     declare_fault_parameters,
     FaultInjection,
@@ -203,24 +204,39 @@ class ReliefValveNode(Node):
         return self.create_timer(1.0 / self.settings['publish_rate'], self._tick)
 
     def _tick(self):
-        """Advance the model to the clock and publish its state."""
+        """
+        Advance the model to the clock and publish its state: once per period of a jump.
+
+        A /clock jump of a few whole tick periods (clock_jumps) is ticked period by
+        period, each tick with its own stamp, as if /clock had come once per period;
+        the inputs are taken once, before the first of them.
+        """
         started = time.perf_counter_ns()
         now_ns = self.get_clock().now().nanoseconds
         self.take_inputs(started)
+        *earlier, _ = tick_times(self.model.time_ns, now_ns, self._tick_timer.timer_period_ns,
+                                 self.get_clock().ros_time_is_active)
+        for time_ns in earlier:  # each in its own timer slot: neither late nor missing any
+            self._tick_at(time_ns, started, time_ns)
+            started = time.perf_counter_ns()
+        self._tick_at(now_ns, started)
+        self.housekeeping.after_tick()
+
+    def _tick_at(self, now_ns, started, slot_ns=None):
+        """One tick at the clock time now_ns [ns] (started: its perf_counter_ns start)."""
         starting = self.model.time_ns is None or now_ns < self.model.time_ns
         if starting:
             self._start(now_ns)
         self.input.stamp(now_ns)
         self.tank_input.stamp(now_ns)
         if not starting:
-            self._count_lateness(now_ns)
+            self._count_lateness(now_ns, slot_ns)
             self._advance(now_ns)
         self._inject()
         self.outputs.publish_tick(
             self.model, self.applied_flow, self.ambient_pressure, self.injection
         )
         self.status.tick_done(time.perf_counter_ns() - started, self._tick_timer.timer_period_ns)
-        self.housekeeping.after_tick()
 
     def _start(self, now_ns):
         """
@@ -244,11 +260,16 @@ class ReliefValveNode(Node):
         self.tank_input.received_ns = self.tank_input.received_ns or now_ns
         self.status.previous_slot_ns = None
 
-    def _count_lateness(self, now_ns):
-        """Count this tick as late or not, and the timer slots that passed without a tick."""
+    def _count_lateness(self, now_ns, slot_ns=None):
+        """
+        Count this tick as late or not, and the timer slots that passed without a tick.
+
+        slot_ns: the tick's own slot [ns] in a clock jump; None: the timer's newest slot.
+        """
         period_ns = self._tick_timer.timer_period_ns
-        newest_slot_ns = now_ns + self._tick_timer.time_until_next_call() - period_ns
-        self.status.tick_started(now_ns, newest_slot_ns, period_ns)
+        if slot_ns is None:
+            slot_ns = now_ns + self._tick_timer.time_until_next_call() - period_ns
+        self.status.tick_started(now_ns, slot_ns, period_ns)
 
     def _advance(self, now_ns):
         """Advance the model to now_ns; count, log and follow through the Outcome it returns."""

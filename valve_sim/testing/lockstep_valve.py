@@ -18,8 +18,9 @@ A valve_node in lockstep for a test: advance it, set its flow and parameters, re
 LockstepValve starts valve_node on use_sim_time in a process of its own (its log in
 folder/valve_node.log) and drives its /clock from the calling thread with
 valve_sim.ros.lockstep.Lockstep, as `valve-sim scenario run` does: advance(seconds)
-returns once the valve's state of that time has arrived, every state of the way
-kept. Flows and parameter changes act from the next tick, so a test repeats exactly.
+steps /clock up to TICKS_PER_CLOCK ticks at a time (ros.clock_jumps) and returns once
+the valve's state of that time has arrived, every state of the way kept. Flows and
+parameter changes act from the next tick, so a test repeats exactly.
 Values are SI, or text with a unit ('20 L/min', '21 MPa'); parameters by ROS name or
 paper symbol. Pressures read back are gauge [Pa], as the model's (tick_series).
 
@@ -42,6 +43,7 @@ from valve_sim.core.quantities import FLOW, parse_quantity
 from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import node_command
+from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.isolation import claim_domain
 from valve_sim.ros.lockstep import Lockstep, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import NodeProcesses
@@ -123,8 +125,8 @@ class LockstepValve:
         ticks = round(float(seconds) / self.period)
         if ticks < 0:
             raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
-        for _ in range(ticks):
-            self._driver.tick()
+        for done in range(0, ticks, TICKS_PER_CLOCK):  # a /clock step of several ticks
+            self._driver.tick(min(TICKS_PER_CLOCK, ticks - done))
         self._await_row(self._driver.time_ns)
         return self.time
 
