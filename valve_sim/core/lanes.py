@@ -34,18 +34,8 @@ from valve_sim.core.integrator import (
 )
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import state_check, STATE_OK
-from valve_sim.core.model import (
-    Coefficients,
-    HEALTHY_TERMS,
-    P_C,
-    P_M,
-    P_P,
-    P_S,
-    X,
-    X_DOT,
-    Y,
-    Y_DOT,
-)
+from valve_sim.core.model import Coefficients, HEALTHY_TERMS
+from valve_sim.core.model import P_C, P_M, P_P, P_S, X, X_DOT, Y, Y_DOT  # the state's indices
 
 
 # Valves rk4_lanes advances together: a few vector registers' worth (4 doubles each).

@@ -24,8 +24,8 @@ state, does not import scipy.optimize (brentq) with it.
 
 import numpy as np
 from scipy.optimize import brentq
-from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.coefficients import coefficients
+from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.model import flows, P_S
 from valve_sim.core.steady_state import steady_state
 

@@ -38,6 +38,7 @@ from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
+from valve_sim.core.output_files import make_folder
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.core.quantities import FLOW, parse_quantity
 from valve_sim.recording.tick_bags import state_values
@@ -76,8 +77,7 @@ class LockstepValve:
             raise ValueError(f'lockstep valve: {error}') from None
         self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
         self._temporary = None if folder else tempfile.TemporaryDirectory(prefix='valve_')
-        self.folder = Path(folder or self._temporary.name)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        self.folder = make_folder(Path(folder or self._temporary.name))
         claim_domain()
         ros_args = ['--params-file', str(params_file)] if params_file else []
         if namespace:
