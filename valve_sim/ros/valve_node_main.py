@@ -20,6 +20,11 @@ main() parses the node's own options (--executor, --receive-threads, --foxglove,
 and spins it until SIGINT or SIGTERM. A start-up error (STARTUP_ERRORS) is logged as
 fatal and ends the process with exit code 1. Run it as `valve_node` or
 `python -m valve_sim.ros.valve_node_main` (valve_sim.ros.node_command).
+
+Automatic garbage collection is off from the import of the node's module (numba, numpy)
+on: the start makes about 200,000 objects and little garbage (about a thousand), and
+collections during it only cost CPU (docs/benchmarks.md, start-up). The start-up objects
+are frozen before the node spins; its housekeeping collects the young generations.
 """
 
 import argparse
@@ -35,7 +40,6 @@ from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MA
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.ros import live_view, spinning
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, POLICIES
-from valve_sim.ros.valve_node import ReliefValveNode
 
 
 STARTUP_ERRORS = (ParameterError, SteadyStateError, ParameterException, InputFileError)
@@ -94,6 +98,9 @@ def parse_arguments(args):
 def main(args=None):
     """Run valve_node until SIGINT or SIGTERM; returns the exit code."""
     options = parse_arguments(args)
+    gc.disable()  # the node collects in its housekeeping, between ticks
+    from valve_sim.ros.valve_node import ReliefValveNode  # here: imported without collections
+
     stop = spinning.init(args)
     try:
         node = ReliefValveNode(sys.argv if args is None else args)
@@ -106,8 +113,7 @@ def main(args=None):
             node.serve_live_view(options.foxglove, options.foxglove_host)
         node.get_logger().info(f'executor: {options.executor}')
         node.use_receive_thread_policy(options.receive_threads)
-        gc.freeze()  # start-up objects stay out of the garbage collector's scans
-        gc.disable()  # the node collects in its housekeeping, between ticks
+        gc.freeze()  # start-up objects stay out of the housekeeping's scans
         spinning.spin_until(node, spinning.EXECUTORS[options.executor](), stop)
     except InputFileError as error:  # the live view's port or foxglove-sdk
         node.get_logger().fatal(f'cannot start: {error}')
