@@ -95,11 +95,11 @@ BARE_NODE = (
     '    pass\n'
 )
 READY = re.compile(r'compiled or loaded in ([0-9.]+) s')
-# Starts valve_node as `python -m valve_sim.ros.valve_node` does, stamping (time.monotonic,
+# Starts valve_node as `python -m valve_sim.ros.valve_node_main` does, stamping (time.monotonic,
 # one clock for all processes) when its imports are done and its node is built.
 PHASE_PROBE = (
     'import sys, time\n'
-    'from valve_sim.ros import valve_node\n'
+    'from valve_sim.ros import valve_node, valve_node_main\n'
     "print(f'PHASE imports {time.monotonic()}', file=sys.stderr, flush=True)\n"
     'build = valve_node.ReliefValveNode.__init__\n'
     'def stamped(self, *args, **kwargs):\n'
@@ -108,7 +108,7 @@ PHASE_PROBE = (
     "    print(f'PHASE built {time.monotonic()}', file=sys.stderr, flush=True)\n"
     'valve_node.ReliefValveNode.__init__ = stamped\n'
     "sys.argv[0] = 'valve_node'\n"
-    'sys.exit(valve_node.main())\n'
+    'sys.exit(valve_node_main.main())\n'
 )
 PHASE = re.compile(r'^PHASE (\w+) ([0-9.]+)$', re.M)
 IMPORT_TIME = re.compile(r'^import time:\s+(\d+) \|\s+\d+ \|\s+(\S.*)$', re.M)
@@ -191,7 +191,7 @@ def phases(log, started, arrived, ready):
 def node_command(kind, prefix, baseline=None):
     """Return (command, environment changes) that start a node of kind."""
     if kind == 'baseline':
-        return [sys.executable, '-m', 'valve_sim.ros.valve_node'], baseline_env(baseline)
+        return [sys.executable, '-m', 'valve_sim.ros.valve_node_main'], baseline_env(baseline)
     if kind == 'bare':
         return [sys.executable, '-c', BARE_NODE], {}
     if kind == 'built':  # as `source install/setup.bash` and `ros2 run` would start it
@@ -212,7 +212,7 @@ def baseline_env(baseline):
 
 
 def probed(command):
-    """Return the command that runs a `python -m valve_sim.ros.valve_node` via PHASE_PROBE."""
+    """Return the command that runs `python -m valve_sim.ros.valve_node_main` via PHASE_PROBE."""
     return [command[0], '-X', 'importtime', '-c', PHASE_PROBE]
 
 
