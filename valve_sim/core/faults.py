@@ -35,8 +35,7 @@ from dataclasses import dataclass, fields, replace
 
 from valve_sim.core.catalogue import FAULT_PREFIX as PREFIX, section
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.input_files import shown
-from valve_sim.core.parameters import checked_number, unit_suffix
+from valve_sim.core.parameters import checked_number, checked_switch, unit_suffix
 
 
 FAULT_SPECS = section('fault')  # the catalogue's fault.* entries
@@ -95,11 +94,7 @@ HEALTHY = FaultSet()
 def check_fault(name, value):
     """Return value checked for the fault parameter name; raise ParameterError naming it."""
     if name in FAULT_SWITCH_SPECS:
-        if not isinstance(value, bool):
-            raise ParameterError(
-                f"fault parameter '{name}' must be true or false, got {shown(value)}"
-            )
-        return value
+        return checked_switch(name, value, 'fault parameter')
     spec = FAULT_DOUBLE_SPECS.get(name)
     if spec is None:
         raise ParameterError(f"unknown fault '{name}'; known: {', '.join(FAULT_NAMES)}")

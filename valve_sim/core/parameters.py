@@ -139,6 +139,13 @@ def checked_number(spec, value, kind='parameter'):
     return value
 
 
+def checked_switch(name, value, kind='parameter'):
+    """Return value if it is a bool; raise ParameterError naming the switch (kind, name)."""
+    if not isinstance(value, bool):
+        raise ParameterError(f"{kind} '{name}' must be true or false, got {shown(value)}")
+    return value
+
+
 def validate(params):
     """
     Check a complete parameter set; return a new dict of floats or raise ParameterError.

@@ -53,7 +53,7 @@ from valve_sim.core.errors import ParameterError
 from valve_sim.core.input_files import shown
 from valve_sim.core.jit import jit
 from valve_sim.core.model import P_C, P_S
-from valve_sim.core.parameters import checked_number
+from valve_sim.core.parameters import checked_number, checked_switch
 
 
 NOISE_BLOCK = 1024  # standard normal draws taken from the generator at a time
@@ -79,11 +79,7 @@ def default_settings():
 def check_sensor(name, value):
     """Return value checked for the sensor parameter name; raise ParameterError naming it."""
     if name in SENSOR_SWITCH_SPECS:
-        if not isinstance(value, bool):
-            raise ParameterError(
-                f"sensor parameter '{name}' must be true or false, got {shown(value)}"
-            )
-        return value
+        return checked_switch(name, value, 'sensor parameter')
     if name == NOISE_SEED.name:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(
