@@ -98,6 +98,31 @@ def test_no_message_is_taken_after_the_deadline():
     assert len(queued.queue) == 1 and received.accepted == 0
 
 
+def test_outside_a_tick_the_node_takes_its_inputs_whatever_the_time():
+    """
+    A paused clock's housekeeping and a reset take the flow sent to them: no tick deadline.
+
+    In a tick, a share of the period that passed before the first take leaves the message
+    for the next tick; outside a tick there is no next tick to leave it to (stress run of
+    2026-12-06: a flow sent to a paused clock was not taken for 60 s).
+    """
+    from types import SimpleNamespace
+
+    from valve_sim.ros.valve_node import ReliefValveNode
+
+    node = SimpleNamespace(
+        input=InletFlowInput(1e-4, MAX_FLOW),
+        tank_input=TankPressureInput(AMBIENT, BURST),
+        inlet_subscription=QueuedSubscription([2e-4]),
+        tank_subscription=QueuedSubscription([]),
+        _tick_timer=SimpleNamespace(timer_period_ns=1_000_000),
+    )
+    ReliefValveNode.take_inputs(node, time.perf_counter_ns() - 10**9)  # a tick, its share past
+    assert node.input.accepted == 0
+    ReliefValveNode.take_inputs(node)  # the housekeeping's and the reset's call
+    assert (node.input.accepted, node.input.flow) == (1, 2e-4)
+
+
 def test_messages_a_single_publisher_sent_that_never_came_are_counted_lost():
     received = InletFlowInput(1e-4, MAX_FLOW)
     received.take(QueuedSubscription([2e-4, 3e-4], [1, 2]), 10, time.perf_counter_ns() + 10**9)

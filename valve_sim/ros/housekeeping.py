@@ -68,7 +68,7 @@ class Housekeeping:
         if not self._calls.due(time.monotonic_ns()):
             return
         if self._due or self._node.status.counters.ticks == self._ticks_at_last:
-            self._node.take_inputs(time.perf_counter_ns())
+            self._node.take_inputs()
             self.run()
         else:
             self._due = True

@@ -368,15 +368,24 @@ class ReliefValveNode(Node):
         """Serve the tick topics and /diagnostics over Foxglove's WebSocket protocol."""
         self.outputs.serve_live_view(port, host, self.diagnostics.publisher.topic_name)
 
-    def take_inputs(self, started_ns):
-        """Take queued input messages: INPUTS_PER_TICK each, within INPUT_SHARE of a period."""
-        deadline_ns = started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns
+    def take_inputs(self, started_ns=None):
+        """
+        Take queued input messages: INPUTS_PER_TICK each.
+
+        In a tick (started_ns: its perf_counter_ns start) none after INPUT_SHARE of its
+        period, so that a flood cannot delay the tick; outside a tick (the housekeeping of a
+        paused clock, a reset) no deadline: on a loaded machine the share could pass before
+        the first take, and a paused clock would then never take the flow sent to it.
+        """
+        deadline_ns = None if started_ns is None else (
+            started_ns + INPUT_SHARE * self._tick_timer.timer_period_ns
+        )
         self.input.take(self.inlet_subscription, INPUTS_PER_TICK, deadline_ns)
         self.tank_input.take(self.tank_subscription, INPUTS_PER_TICK, deadline_ns)
 
     def _on_reset(self, request, response):
         """~/reset: re-initialise at the exact steady state of the current inlet flow."""
-        self.take_inputs(time.perf_counter_ns())  # a flow sent just before the reset counts
+        self.take_inputs()  # a flow sent just before the reset counts
         try:
             self.model.reset(self.inlet_flow, self.tank_pressure)
         except SteadyStateError as error:
