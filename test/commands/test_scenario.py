@@ -324,3 +324,21 @@ def test_expectations_judge_a_series_with_what_they_measured():
     assert [check.passed for check in checks] == [True, False, True, False, False, True]
     assert checks[1].measured == 7e6 and checks[2].measured == pytest.approx(7.1e6)
     assert 'never' in checks[3].detail and 'no such step' in checks[4].detail
+
+
+def test_a_run_that_cannot_complete_still_writes_its_junit_with_the_error(tmp_path, monkeypatch):
+    """run_and_report: the error becomes the JUnit file's one case, then is raised again."""
+    from valve_sim.ros import scenario_runner
+
+    def no_state(*_):
+        raise TimeoutError('no state of the valve within the limit')
+
+    monkeypatch.setattr(scenario_runner, 'run_scenario', no_state)
+    scenario = load_scenario(EXAMPLES / 'paper_step.yaml')
+    for junit in (None, tmp_path / 'ci.xml'):
+        with pytest.raises(TimeoutError):
+            scenario_runner.run_and_report(scenario, tmp_path, junit=junit)
+        counts, _ = junit_cases(junit or tmp_path / 'junit.xml')
+        assert counts['errors'] == 1, counts
+        error = ElementTree.parse(junit or tmp_path / 'junit.xml').find('.//error')
+        assert error.get('message') == 'no state of the valve within the limit'

@@ -152,6 +152,14 @@ def plot_run(path, run):
     save_figure(figure, path, dpi=110)
 
 
+def write_junit(document, folder, junit_path=None):
+    """Write JUnit XML bytes to junit_path (the user's, a link followed) or folder/junit.xml."""
+    path = junit_path or folder / 'junit.xml'
+    with replacing(path, 'wb', explicit=junit_path is not None) as stream:
+        stream.write(document)
+    return path
+
+
 def write_reports(run, junit_path=None):
     """Write report.txt, report.json, scenario.png and junit.xml (or junit_path); return paths."""
     folder = run.folder
@@ -159,11 +167,11 @@ def write_reports(run, junit_path=None):
         'report': folder / 'report.txt',
         'json': folder / 'report.json',
         'figure': folder / 'scenario.png',
-        'junit': junit_path or folder / 'junit.xml',
     }
     write_text(paths['report'], report_text(run))
     write_text(paths['json'], json_text(report_document(run)) + '\n')
     plot_run(paths['figure'], run)
-    with replacing(paths['junit'], 'wb', explicit=junit_path is not None) as stream:
-        stream.write(junit_document(run.scenario, run.checks, run.wall_s))
+    paths['junit'] = write_junit(
+        junit_document(run.scenario, run.checks, run.wall_s), folder, junit_path
+    )
     return paths

@@ -259,15 +259,14 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
     A run that cannot complete still gets its JUnit file, with the error as its one
     case; the error is then raised again.
     """
-    from valve_sim.analysis.scenario_report import junit_document, write_reports
+    from valve_sim.analysis.scenario_report import junit_document, write_junit, write_reports
     from valve_sim.core.errors import USER_ERRORS
-    from valve_sim.core.output_files import replacing
 
     started = time.monotonic()
     try:
         record = run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock)
     except (*USER_ERRORS, TimeoutError, RuntimeError) as error:
-        with replacing(junit or folder / 'junit.xml', 'wb', explicit=junit is not None) as stream:
-            stream.write(junit_document(scenario, [], time.monotonic() - started, str(error)))
+        write_junit(junit_document(scenario, [], time.monotonic() - started, str(error)),
+                    folder, junit)
         raise
     return record, write_reports(record, junit)
