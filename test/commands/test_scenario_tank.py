@@ -22,6 +22,7 @@ stamped with each tick's start) and as applied. Malformed tank entries are in
 test_scenario.MALFORMED (one line naming the key).
 """
 
+import json
 from pathlib import Path
 import subprocess
 import sys
@@ -32,7 +33,9 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure
 from valve_sim.analysis.scenario_file import load_scenario
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate, TankPressure
+from valve_sim.core.simulation import (
+    LITRE_PER_MINUTE, RELIEF_COLUMNS, relief_flows, Scenario, simulate, TankPressure
+)
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.tick_bags import tick_series
 
@@ -45,7 +48,11 @@ STEP = """duration: 0.3
 inputs:
   inlet_flow: 5 L/min
   tank_pressure: {initial: 0 bar, changes: [{at: 0.1, step: 5 bar}]}  # gauge
-expect: [{no_alarm: {}}]
+expect:
+  - no_alarm: {}
+  - never_above: {signal: tank_pressure, value: 5.01 bar}
+  - never_below: {signal: tank_pressure, value: 4.99 bar, from: 0.101}
+  - steady: {signal: relief_flow, flow: 5 L/min, min: 4.9 L/min, max: 5.1 L/min}
 """
 
 
@@ -99,6 +106,17 @@ def test_a_tank_pressure_step_in_a_scenario_is_the_offline_one(tmp_path, valve_n
     ends = [START_NS + k * PERIOD_NS for k in range(1, 301)]  # stamped at the tick's end
     np.testing.assert_allclose([applied[t] - ambient for t in ends],
                                [5 * BAR if k > 100 else 0.0 for k in range(1, 301)], atol=1e-6)
+
+    # the series' tank_pressure and relief_flow columns, which the report's checks read
+    np.testing.assert_allclose(series['tank_pressure'][1:], [applied[t] - ambient for t in ends],
+                               atol=1e-6)
+    assert series['relief_flow'][0] == pytest.approx(flow, rel=1e-6), 'q_r = q_in when steady'
+    offline_relief = relief_flows(params, offline)[:301, RELIEF_COLUMNS.index('relief_flow')]
+    np.testing.assert_allclose(series['relief_flow'], offline_relief, rtol=1e-3)
+    checks = json.loads((tmp_path / 'out' / 'report.json').read_text())['checks']
+    assert len(checks) == 4 and all(check['passed'] for check in checks), checks
+    assert [check['measured'] for check in checks[1:3]] == [
+        pytest.approx(5 * BAR, rel=1e-9), pytest.approx(5 * BAR, rel=1e-9)]
 
 
 BASE = 'duration: 1\nexpect: [{no_alarm: {}}]\ninputs:\n  inlet_flow: 5 L/min\n'

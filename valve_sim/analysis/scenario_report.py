@@ -112,14 +112,18 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
 
 
 def plot_run(path, run):
-    """Draw p_s, x and y, and the inlet flow over the run, with events and signal limits."""
+    """Draw p_s (and p_t if driven), x and y, q_in and q_r over the run, with events and limits."""
     from valve_sim.analysis.expectations import Bound
     from valve_sim.analysis.plotting import plt, save_figure
 
     series, scenario = run.series, run.scenario
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 8), constrained_layout=True)
-    axes[0].plot(series.time, series['supply_pressure'] * 1e-6, color='tab:blue', linewidth=0.9)
-    axes[0].set_ylabel('p_s [MPa, gauge]')
+    axes[0].plot(series.time, series['supply_pressure'] * 1e-6, color='tab:blue', linewidth=0.9,
+                 label='p_s, supply')
+    if 'tank_pressure' in scenario.inputs:  # the back pressure the scenario drives
+        axes[0].plot(series.time, series['tank_pressure'] * 1e-6, color='tab:brown',
+                     linewidth=0.9, label='p_t, tank (applied)')
+    axes[0].set_ylabel('pressure [MPa, gauge]')
     for expectation in scenario.expectations:
         if isinstance(expectation, Bound) and expectation.signal == 'supply_pressure':
             axes[0].axhline(expectation.value * 1e-6, color='tab:red', linestyle='--',
@@ -128,15 +132,19 @@ def plot_run(path, run):
     if np.any(limits > 0):
         axes[0].step(series.time, np.where(limits > 0, limits, np.nan) * 1e-6, where='pre',
                      color='0.4', linestyle=':', linewidth=0.8, label='supply_pressure_limit')
-        axes[0].legend(loc='best', fontsize='small')
+    axes[0].legend(loc='best', fontsize='small')
     axes[1].plot(series.time, series['main_valve'] * 1e3, color='tab:red', linewidth=0.9,
                  label='x, main valve')
     axes[1].plot(series.time, series['pilot_poppet'] * 1e3, color='tab:green', linewidth=0.9,
                  label='y, pilot poppet')
     axes[1].set_ylabel('position [mm]')
     axes[1].legend(loc='best', fontsize='small')
-    axes[2].plot(series.time, series['inlet_flow'] * 6e4, color='tab:purple', linewidth=0.9)
-    axes[2].set_ylabel('applied q_in [L/min]')
+    axes[2].plot(series.time, series['inlet_flow'] * 6e4, color='tab:purple', linewidth=0.9,
+                 label='q_in, inlet (applied)')
+    axes[2].plot(series.time, series['relief_flow'] * 6e4, color='tab:cyan', linewidth=0.9,
+                 label='q_r, relief to the tank')
+    axes[2].set_ylabel('flow [L/min]')
+    axes[2].legend(loc='best', fontsize='small')
     axes[2].set_xlabel('time from the first tick [s]')
     for event in scenario.events:
         for axis in axes:

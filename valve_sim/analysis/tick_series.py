@@ -39,6 +39,8 @@ SIGNALS = {  # name: (dimension, symbol)
     'main_valve_velocity': (VELOCITY, 'x_dot'),
     'pilot_poppet_velocity': (VELOCITY, 'y_dot'),
     'inlet_flow': (FLOW, 'q_in'),  # applied over the tick ending at the row's time
+    'tank_pressure': (PRESSURE, 'p_t'),  # applied over that tick too (gauge)
+    'relief_flow': (FLOW, 'q_r'),  # all the valve passes to the tank at the row's state
 }
 
 

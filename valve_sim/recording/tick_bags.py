@@ -15,7 +15,7 @@
 """
 A bag's valve_node states as a TickSeries, and one recorded column of a bag as an input.
 
-tick_series() reads the six tick topics of a valve (in a namespace) by header stamp:
+tick_series() reads the tick topics of a valve (in a namespace) by header stamp:
 a lockstep run records every topic at every tick, so its rows are exact.
 bag_column() gives the times and values of one topic's field, for a scenario that
 replays a rig's recorded flow (valve_sim.core.input_profile, series).
@@ -59,7 +59,12 @@ def state_values(topic, message, ambient_pressure=STANDARD_ATMOSPHERE):
         return {topic: message.fluid_pressure - ambient_pressure}
     if topic == 'applied_inlet_flow':
         return {'inlet_flow': message.velocity[0]}
-    if topic not in ('joint_states',):  # the tank's and the relief flow's: not in SIGNALS
+    if topic == 'applied_tank_pressure':
+        return {'tank_pressure': message.fluid_pressure - ambient_pressure}
+    if topic == 'relief_flow':  # q_r, the whole relief flow, beside its parts
+        flows = dict(zip(message.name, message.velocity))
+        return {'relief_flow': flows['relief_flow']} if 'relief_flow' in flows else {}
+    if topic != 'joint_states':
         return {}
     values = {}
     for joint, position, velocity in zip(message.name, message.position, message.velocity):
