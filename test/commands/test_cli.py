@@ -23,7 +23,7 @@ import sys
 from figure5 import outside_tolerance
 import pytest
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.commands.cli import SUBCOMMANDS
+from valve_sim.commands.cli import negative_values_joined, SUBCOMMANDS
 
 
 TABLE2 = Path(__file__).resolve().parents[2] / 'config' / 'table2.yaml'
@@ -88,6 +88,8 @@ def test_simulate_from_a_closed_valve_with_a_ramp():
         (('--set', 'm_m'), 'NAME=VALUE'),
         (('--params', '/nonexistent/params.yaml'), 'cannot read parameter file'),
         (('--initial-flow=-5L/min',), 'flow must be in [0, '),
+        (('--initial-flow', '-5L/min'), 'flow must be in [0, '),  # a value, not an option
+        (('--tank-pressure', '-2bar'), 'below vacuum'),
         (('--final-flow', 'lots'), 'not a flow'),
         (('--step-size', '1e-3'), 'step size'),
         (('--set', 'V_c=1e-9'), 'diverged'),
@@ -175,6 +177,18 @@ def test_operating_point_reports_balances_and_modes():
     out = valve_sim('operating-point', '--flow', '5L/min').stdout
     assert 'cracking pressure: 7.0000 MPa' in out  # the paper's preset
     assert 'p_s 7.0' in out and 'linear modes' in out and 'zeta' in out
+
+
+def test_a_negative_value_follows_its_option_as_a_separate_argument():
+    argv = ['operating-point', '--tank-pressure', '-0.5bar', '--flow', '-.5', '--', '-1']
+    assert negative_values_joined(argv) == [
+        'operating-point', '--tank-pressure=-0.5bar', '--flow=-.5', '--', '-1'
+    ]
+    assert negative_values_joined(['--set=x', '-5', '-h']) == ['--set=x', '-5', '-h']
+    document = json.loads(
+        valve_sim('operating-point', '--tank-pressure', '-0.5bar', '--json').stdout
+    )
+    assert document['operating_points'][0]['tank_pressure'] == -0.5e5  # below ambient
 
 
 def test_operating_point_json_has_the_documented_keys_and_the_pilot_flow_is_small():

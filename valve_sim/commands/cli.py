@@ -26,9 +26,11 @@ project's errors into one clear line on stderr and exit code 1.
 import argparse
 import importlib
 import os
+import re
 import sys
 
 
+NEGATIVE_VALUE = re.compile(r'-\.?\d')  # -5e5, -0.5bar, -.5: a value, never an option
 SUBCOMMANDS = {
     'simulate': (
         'valve_sim.commands.simulate',
@@ -120,10 +122,30 @@ def explained(error):
     return str(error)
 
 
+def negative_values_joined(argv):
+    """
+    Return argv with each `--option -5e5` written `--option=-5e5`.
+
+    argparse takes a token that starts with '-' for an option unless it is a plain
+    negative number (-5, -0.5), so `--tank-pressure -5e5` or `-0.5bar` would be refused
+    with "expected one argument". No option of valve-sim starts with a digit: a minus
+    and a digit (or '.' and a digit) is a value.
+    """
+    joined = []
+    for token in argv:
+        option = joined[-1] if joined else ''
+        if (NEGATIVE_VALUE.match(token) and option.startswith('--') and option != '--'
+                and '=' not in option):
+            joined[-1] = f'{option}={token}'
+        else:
+            joined.append(token)
+    return joined
+
+
 def main(argv=None):
     from valve_sim.core.errors import USER_ERRORS
 
-    argv = sys.argv[1:] if argv is None else argv
+    argv = negative_values_joined(sys.argv[1:] if argv is None else argv)
     args = build_parser(argv).parse_args(argv)
     try:
         return args.run(args)
