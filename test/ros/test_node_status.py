@@ -14,9 +14,11 @@
 
 """valve_node's counts: late and missed ticks against their slots, and what the model did."""
 
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus
 from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.realtime_model import Outcome, Status
-from valve_sim.ros.node_status import NodeStatus
+from valve_sim.ros.node_status import InputReport, NodeStatus
 
 
 PERIOD = 1_000_000  # [ns] 1 kHz
@@ -63,3 +65,25 @@ def test_an_outcome_counts_its_failure_by_kind_and_its_skipped_lag_in_periods():
     assert (counters.skipped_ticks, counters.skipped_time_s) == (2, 0.0025)
     assert (counters.overpressures, counters.integration_failures) == (1, 1)
     assert status.last_failure == 'diverged'
+
+
+def test_a_window_warns_of_each_counter_that_grew_in_it_and_only_in_it():
+    status = NodeStatus(0)
+    inputs = InputReport(inlet_flow=1e-4, seconds_since_input=0.1, stale=False)
+
+    def report():
+        array = status.report(Time(), 'valve', 'hw', 1_000_000_000, 0, inputs, {})
+        return array.status[0].level, array.status[0].message
+
+    status.count(Outcome(Status.PROGRESS, 10, 2 * PERIOD), PERIOD)
+    status.counters.refused_clock_messages += 3
+    status.counters.refused_fault_schedules += 1
+    status.schedule_refused = 'events[0]: {at: -1} is before the start'  # braces kept as they are
+    level, message = report()
+    assert level == DiagnosticStatus.WARN
+    assert message == (
+        '2 tick periods skipped (lag beyond the catch-up limit); '
+        'fault schedule refused: events[0]: {at: -1} is before the start; '
+        '3 /clock messages ignored (a time the node cannot represent)'
+    )
+    assert report() == (DiagnosticStatus.OK, 'running')  # the next window: nothing grew

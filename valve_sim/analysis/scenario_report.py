@@ -118,12 +118,6 @@ def plot_run(path, run):
 
     series, scenario = run.series, run.scenario
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 8), constrained_layout=True)
-    axes[0].plot(series.time, series['supply_pressure'] * 1e-6, color='tab:blue', linewidth=0.9,
-                 label='p_s, supply')
-    if 'tank_pressure' in scenario.inputs:  # the back pressure the scenario drives
-        axes[0].plot(series.time, series['tank_pressure'] * 1e-6, color='tab:brown',
-                     linewidth=0.9, label='p_t, tank (applied)')
-    axes[0].set_ylabel('pressure [MPa, gauge]')
     for expectation in scenario.expectations:
         if isinstance(expectation, Bound) and expectation.signal == 'supply_pressure':
             axes[0].axhline(expectation.value * 1e-6, color='tab:red', linestyle='--',
@@ -132,19 +126,16 @@ def plot_run(path, run):
     if np.any(limits > 0):
         axes[0].step(series.time, np.where(limits > 0, limits, np.nan) * 1e-6, where='pre',
                      color='0.4', linestyle=':', linewidth=0.8, label='supply_pressure_limit')
-    axes[0].legend(loc='best', fontsize='small')
-    axes[1].plot(series.time, series['main_valve'] * 1e3, color='tab:red', linewidth=0.9,
-                 label='x, main valve')
-    axes[1].plot(series.time, series['pilot_poppet'] * 1e3, color='tab:green', linewidth=0.9,
-                 label='y, pilot poppet')
-    axes[1].set_ylabel('position [mm]')
-    axes[1].legend(loc='best', fontsize='small')
-    axes[2].plot(series.time, series['inlet_flow'] * 6e4, color='tab:purple', linewidth=0.9,
-                 label='q_in, inlet (applied)')
-    axes[2].plot(series.time, series['relief_flow'] * 6e4, color='tab:cyan', linewidth=0.9,
-                 label='q_r, relief to the tank')
-    axes[2].set_ylabel('flow [L/min]')
-    axes[2].legend(loc='best', fontsize='small')
+    pressures = [('supply_pressure', 'tab:blue', 'p_s, supply')]
+    if 'tank_pressure' in scenario.inputs:  # the back pressure the scenario drives
+        pressures.append(('tank_pressure', 'tab:brown', 'p_t, tank (applied)'))
+    _traces(axes[0], series, pressures, 1e-6, 'pressure [MPa, gauge]')
+    _traces(axes[1], series, [('main_valve', 'tab:red', 'x, main valve'),
+                              ('pilot_poppet', 'tab:green', 'y, pilot poppet')],
+            1e3, 'position [mm]')
+    _traces(axes[2], series, [('inlet_flow', 'tab:purple', 'q_in, inlet (applied)'),
+                              ('relief_flow', 'tab:cyan', 'q_r, relief to the tank')],
+            6e4, 'flow [L/min]')
     axes[2].set_xlabel('time from the first tick [s]')
     for event in scenario.events:
         for axis in axes:
@@ -158,6 +149,14 @@ def plot_run(path, run):
     axes[0].set_title(f'scenario {scenario.name}: {word} '
                       f'({len(run.checks) - failed} of {len(run.checks)} checks hold)')
     save_figure(figure, path, dpi=110)
+
+
+def _traces(axis, series, signals, scale, label):
+    """Plot signals [(name, colour, legend text)] of series times scale, labelled, on axis."""
+    for name, colour, text in signals:
+        axis.plot(series.time, series[name] * scale, color=colour, linewidth=0.9, label=text)
+    axis.set_ylabel(label)
+    axis.legend(loc='best', fontsize='small')
 
 
 def write_junit(document, folder, junit_path=None):

@@ -226,18 +226,19 @@ class NodeStatus:
                 f'input stale: no inlet_flow for {inputs.seconds_since_input:.1f} s, '
                 f'holding {inputs.inlet_flow:g} m^3/s'
             )
-        skipped = counters.skipped_ticks - previous.skipped_ticks
-        if skipped:
-            level = max(level, DiagnosticStatus.WARN)
-            problems.append(f'{skipped} tick periods skipped (lag beyond the catch-up limit)')
-        refused = counters.refused_fault_schedules - previous.refused_fault_schedules
-        if refused:
-            level = max(level, DiagnosticStatus.WARN)
-            problems.append(f'fault schedule refused: {self.schedule_refused}')
-        clocks = counters.refused_clock_messages - previous.refused_clock_messages
-        if clocks:
-            level = max(level, DiagnosticStatus.WARN)
-            problems.append(f'{clocks} /clock messages ignored (a time the node cannot represent)')
+        warnings = (  # a counter that grew in the window: WARN, with its text
+            ('skipped_ticks', lambda n: f'{n} tick periods skipped (lag beyond the catch-up '
+             'limit)'),
+            ('refused_fault_schedules', lambda n: f'fault schedule refused: '
+             f'{self.schedule_refused}'),
+            ('refused_clock_messages', lambda n: f'{n} /clock messages ignored (a time the '
+             'node cannot represent)'),
+        )
+        for counter, text in warnings:
+            grown = getattr(counters, counter) - getattr(previous, counter)
+            if grown:
+                level = max(level, DiagnosticStatus.WARN)
+                problems.append(text(grown))
         late = counters.late_ticks - previous.late_ticks
         if late:
             problems.append(f'{late} late ticks')
