@@ -20,7 +20,10 @@ plain virtual environment `pip install -e .[wheels,test]` brings them from PyPI.
 
 `setup.py install`, which a plain `colcon build` runs, also compiles the numba kernels
 beside the installed code (valve_sim.core.precompile), so that the installed valve_node
-starts at once; run.py does the same for its .venv.
+starts at once; `setup.py develop`, which `colcon build --symlink-install` runs, compiles
+them where the developed package is imported from (colcon's build folder, whose valve_sim
+is a symlink to the sources). run.py compiles them for its .venv: its `pip install -e`
+builds a PEP 660 editable wheel and runs neither command.
 """
 
 from glob import glob
@@ -30,6 +33,7 @@ import subprocess
 import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.develop import develop
 from setuptools.command.install import install
 
 
@@ -81,34 +85,36 @@ TEST_DEPENDENCIES = [
 COMPILE_TIMEOUT = 1800  # [s] a cold compile takes 30 s on a quiet machine, minutes loaded
 
 
-def compile_kernels(site_packages):
+def compile_kernels(import_path):
     """
-    Compile the kernels of the valve_sim installed in site_packages into numba's cache there.
+    Compile the kernels of the valve_sim in folder import_path into numba's cache.
 
-    Run with this interpreter, in a process of its own that imports the installed copy
-    (not the source tree). A failure is reported and the install goes on: the node then
-    compiles its kernels at its first start. Returns the cache files written.
+    Run with this interpreter, in a process of its own that imports that copy (installed
+    or developed, not the source tree) from import_path, as the node will: numba caches
+    beside the path it imports from (or under NUMBA_CACHE_DIR, by that path). A failure
+    is reported and the build goes on: the node then compiles its kernels at its first
+    start. Returns the cache files written beside that copy.
     """
-    before = set(Path(site_packages, PACKAGE).rglob('*.nb[ic]'))
+    before = set(Path(import_path, PACKAGE).rglob('*.nb[ic]'))
     env = dict(os.environ)  # NUMBA_CACHE_DIR, if set, is where the node will look too
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [site_packages, env.get('PYTHONPATH')]))
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [import_path, env.get('PYTHONPATH')]))
     command = [sys.executable, '-m', PACKAGE + '.core.precompile']
     try:
         done = subprocess.run(
-            command, cwd=site_packages, env=env, capture_output=True, text=True,
+            command, cwd=import_path, env=env, capture_output=True, text=True,
             timeout=COMPILE_TIMEOUT,
         )
     except (OSError, subprocess.SubprocessError) as error:
-        print(f'valve_sim: kernels not compiled at install ({error}); valve_node compiles '
+        print(f'valve_sim: kernels not compiled at build ({error}); valve_node compiles '
               'them at its first start', file=sys.stderr)
         return []
     if done.returncode != 0:
-        print(f'valve_sim: kernels not compiled at install (exit code {done.returncode}); '
+        print(f'valve_sim: kernels not compiled at build (exit code {done.returncode}); '
               f'valve_node compiles them at its first start:\n{done.stderr[-2000:]}',
               file=sys.stderr)
         return []
     print(done.stdout.strip())
-    return sorted(set(Path(site_packages, PACKAGE).rglob('*.nb[ic]')) - before)
+    return sorted(set(Path(import_path, PACKAGE).rglob('*.nb[ic]')) - before)
 
 
 class InstallCompilingKernels(install):
@@ -122,6 +128,19 @@ class InstallCompilingKernels(install):
         if written and self.record:  # colcon's install.log: what the install wrote
             with open(self.record, 'a') as record:
                 record.writelines(f'{path}\n' for path in written)
+
+
+class DevelopCompilingKernels(develop):
+    """setup.py develop, then the numba kernels compiled where the developed code is imported."""
+
+    def run(self):
+        super().run()
+        # egg_path: the folder the package is imported from (colcon's build folder). No
+        # compile to undo at --uninstall; setuptools >= 80's develop runs pip (a PEP 660
+        # editable wheel), has no egg_path, and colcon then runs install instead.
+        import_path = getattr(self, 'egg_path', None)
+        if import_path and not self.uninstall and not self.dry_run:
+            compile_kernels(import_path)
 
 
 setup(
@@ -147,7 +166,7 @@ setup(
         'test': TEST_DEPENDENCIES,
     },
     zip_safe=True,
-    cmdclass={'install': InstallCompilingKernels},
+    cmdclass={'install': InstallCompilingKernels, 'develop': DevelopCompilingKernels},
     maintainer='valve_sim developers',
     maintainer_email='dev@valve-sim.local',
     description=(
