@@ -21,7 +21,8 @@ with the environment that sourcing install/setup.bash gives (AMENT_PREFIX_PATH,
 PYTHONPATH), and must publish. The build compiled its kernels into numba's cache
 beside the installed sources (setup.py, valve_sim.core.precompile): the first start
 finds every kernel there and writes none. The launch file, LICENSE and rosdep keys
-are checked against the same install.
+are checked against the same install. A `colcon build --symlink-install` (setup.py
+develop) of another copy must likewise compile the kernels its installed node loads.
 """
 
 import ast
@@ -86,19 +87,27 @@ ROSDEP_KEYS = {
 @pytest.fixture(scope='module')
 def install(tmp_path_factory):
     """Build a copy of the package with plain `colcon build`; returns install/valve_sim."""
-    workspace = tmp_path_factory.mktemp('colcon_ws')
+    return colcon_build(tmp_path_factory.mktemp('colcon_ws'))
+
+
+def colcon_build(workspace, *options, **environment):
+    """Run `colcon build OPTIONS` on a copy of the package in workspace; return its prefix."""
     shutil.copytree(
         REPO, workspace / 'src' / 'valve_sim', ignore=shutil.ignore_patterns(*NOT_SOURCES)
     )
     colcon = Path(sys.executable).parent / 'colcon'
     assert colcon.exists(), f'{colcon} missing: colcon-core is a test dependency (setup.py)'
     result = subprocess.run(
-        [str(colcon), 'build'],
+        [str(colcon), 'build', *options],
         cwd=workspace,
         capture_output=True,
         text=True,
         timeout=BUILD_TIMEOUT,
-        env=dict(plain_environment(), PATH=f'{colcon.parent}{os.pathsep}{os.environ["PATH"]}'),
+        env=dict(
+            plain_environment(),
+            PATH=f'{colcon.parent}{os.pathsep}{os.environ["PATH"]}',
+            **environment,
+        ),
     )
     assert result.returncode == 0, result.stdout + result.stderr
     return workspace / 'install' / 'valve_sim'
@@ -110,14 +119,31 @@ def plain_environment():
 
 
 def sourced(prefix):
-    """Return the environment `source install/setup.bash` gives for this one package."""
-    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
+    """
+    Return the environment `source install/setup.bash` gives for this one package.
+
+    As colcon's setup scripts do, it follows the package's hooks (share/valve_sim/
+    package.dsv): AMENT_PREFIX_PATH and PYTHONPATH, with colcon's build folder first
+    on PYTHONPATH after a --symlink-install build.
+    """
+    paths = {}
+    hook_paths(prefix / 'share' / 'valve_sim' / 'package.dsv', prefix, paths)
     return dict(
         plain_environment(),
-        AMENT_PREFIX_PATH=str(prefix),
-        PYTHONPATH=str(site / 'site-packages'),
+        **{name: os.pathsep.join(values) for name, values in paths.items()},
         PYTHONUNBUFFERED='1',
     )
+
+
+def hook_paths(hook, prefix, paths):
+    """Prepend the paths a colcon hook file (.dsv) and those it sources set: {variable: [path]}."""
+    for line in hook.read_text().splitlines():
+        kind, *arguments = line.split(';')
+        if kind == 'source' and arguments[0].endswith('.dsv'):
+            hook_paths(prefix / arguments[0], prefix, paths)
+        elif kind == 'prepend-non-duplicate':
+            name, value = arguments
+            paths.setdefault(name, []).insert(0, str(prefix / value))  # an absolute value stays
 
 
 def test_the_install_space_has_its_code_config_and_launch_file(install):
@@ -141,11 +167,11 @@ def test_the_install_space_has_its_code_config_and_launch_file(install):
         assert (share / name).is_file(), name
 
 
-def kernel_cache(prefix):
-    """Return {path: (size, mtime_ns)} of numba's cache files in the install space."""
+def kernel_cache(folder):
+    """Return {path: (size, mtime_ns)} of numba's cache files in folder."""
     return {
         path: (path.stat().st_size, path.stat().st_mtime_ns)
-        for path in prefix.rglob('*.nb[ic]')
+        for path in folder.rglob('*.nb[ic]')
     }
 
 
@@ -156,17 +182,41 @@ def test_installed_valve_node_starts_from_another_folder_and_publishes(
     core = next(install.glob('lib/python*/site-packages/valve_sim/core'))
     assert {path.parent for path in built} == {core / '__pycache__'}, 'the build compiled them'
     assert any(path.name.startswith('integrator.rk4_steps-') for path in built)
-    log_path = tmp_path / 'valve_node.log'
+    start_installed_node(install, sourced(install), context, tmp_path, '/installed')
+    assert kernel_cache(install) == built, 'the first start compiled (and cached) kernels'
+
+
+def test_symlink_install_compiles_the_kernels_its_valve_node_loads(context, tmp_path):
+    """--symlink-install runs setup.py develop: the node imports the sources via build/."""
+    cache = tmp_path / 'numba_cache'  # empty: not the caches beside this checkout's sources
+    cache.mkdir()
+    install = colcon_build(
+        tmp_path / 'colcon_ws', '--symlink-install', NUMBA_CACHE_DIR=str(cache)
+    )
+    built = kernel_cache(cache)
+    assert any(path.name.startswith('integrator.rk4_steps-') for path in built), (
+        'the build compiled the kernels'
+    )
+    run = tmp_path / 'run'
+    run.mkdir()
+    environment = dict(sourced(install), NUMBA_CACHE_DIR=str(cache))
+    start_installed_node(install, environment, context, run, '/symlinked')
+    assert kernel_cache(cache) == built, 'the first start compiled (and cached) kernels'
+
+
+def start_installed_node(install, environment, context, folder, namespace):
+    """Start the installed valve_node in folder; check its states and its clean stop."""
+    log_path = folder / 'valve_node.log'
     with open(log_path, 'w') as log:
         process = subprocess.Popen(
             [str(install / 'lib' / 'valve_sim' / 'valve_node'), '--ros-args', '-r',
-             '__ns:=/installed'],
+             f'__ns:={namespace}'],
             stdout=log,
             stderr=subprocess.STDOUT,
-            env=sourced(install),
-            cwd=tmp_path,
+            env=environment,
+            cwd=folder,
         )
-    probe = Probe(context, '/installed')
+    probe = Probe(context, namespace)
     try:
         probe.wait_for(
             lambda: probe.pressures['supply_pressure'] or process.poll() is not None,
@@ -182,7 +232,6 @@ def test_installed_valve_node_starts_from_another_folder_and_publishes(
         exit_code = stop_node(process)
     assert exit_code == 0, log_path.read_text()
     assert 'ready: model kernels compiled or loaded' in log_path.read_text()
-    assert kernel_cache(install) == built, 'the first start compiled (and cached) kernels'
 
 
 def test_installed_analyser_help_exits_0_and_writes_nothing(install, tmp_path):
