@@ -33,6 +33,10 @@ probe are one run, side by side, so that load from other work spreads over all.
 #   checkout built into a temporary workspace, from the installed executable with the
 #   environment that sourcing install/setup.bash gives): its kernels were compiled
 #   by the build (setup.py, valve_sim.core.precompile); once per run, as it is first;
+# - symlinked: the same after `colcon build --symlink-install` (setup.py develop, which
+#   compiles the kernels where colcon's build folder links to the sources), into a
+#   workspace of its own and an empty numba cache (NUMBA_CACHE_DIR, for the build and
+#   the start: the cache beside the sources is the warm one); once per run, second;
 # - warm: valve_node of this checkout, its kernels in numba's cache beside the sources
 #   (python -m valve_sim.core.precompile fills it first, as `run.py install` does);
 # - cold: valve_node of this checkout with an empty kernel cache (NUMBA_CACHE_DIR a new
@@ -56,13 +60,14 @@ probe are one run, side by side, so that load from other work spreads over all.
 # Nodes run with Python's byte code written and read (PYTHONDONTWRITEBYTECODE dropped),
 # as an installed package's is. After one bare start that is not counted (the probe's
 # discovery warms up in it) and one warm (and baseline) start that fills the byte-code
-# cache, the built node starts first, right after the build; then runs alternate between
-# bare and warm, so load from other work on the machine spreads over both; the cold
-# runs come last. The load average at start and end is printed. valve_node's own
-# "ready" log line gives the part spent computing the steady state and compiling or
-# loading the kernels.
+# cache, the built and then the symlinked node start first, right after the builds; then
+# runs alternate between bare and warm, so load from other work on the machine spreads
+# over both; the cold runs come last. The load average at start and end is printed.
+# valve_node's own "ready" log line gives the part spent computing the steady state and
+# compiling or loading the kernels.
 # Targets (issue 29), against the bare node's median in the same run:
-#   first start after a plain colcon build <= bare + 2 s; warm <= bare + 0.5 s.
+#   first start after a plain colcon build <= bare + 2 s (and after a --symlink-install one);
+#   warm <= bare + 0.5 s.
 
 import argparse
 import json
@@ -114,7 +119,7 @@ PHASE = re.compile(r'^PHASE (\w+) ([0-9.]+)$', re.M)
 IMPORT_TIME = re.compile(r'^import time:\s+(\d+) \|\s+\d+ \|\s+(\S.*)$', re.M)
 IMPORT_GROUPS = ('ROS', 'numba', 'numpy', 'scipy', 'valve_sim', 'other')
 LATER_IMPORTS = '  of which imports during the build'  # not a phase of its own
-TARGETS = {'built': 2.0, 'warm': 0.5}  # [s] above the bare node's median
+TARGETS = {'built': 2.0, 'symlinked': 2.0, 'warm': 0.5}  # [s] above the bare node's median
 
 
 class FirstMessage:
@@ -142,15 +147,22 @@ class FirstMessage:
         )
 
 
-def colcon_build(workspace):
-    """Build this checkout with a plain `colcon build` in workspace; return (prefix, seconds)."""
+def colcon_build(workspace, *options, cache=None):
+    """
+    Build this checkout with `colcon build OPTIONS` in workspace; return (prefix, seconds).
+
+    cache: the numba cache folder (NUMBA_CACHE_DIR) of the build, None for numba's own.
+    """
     colcon = Path(sys.executable).parent / 'colcon'
     env = {key: value for key, value in os.environ.items() if key != 'NUMBA_CACHE_DIR'}
     env['PATH'] = f'{colcon.parent}{os.pathsep}{env["PATH"]}'
+    if cache is not None:
+        env['NUMBA_CACHE_DIR'] = str(cache)
+    workspace.mkdir(exist_ok=True)
     started = time.monotonic()
     done = subprocess.run(
         [str(colcon), 'build', '--paths', str(REPO), '--build-base', 'build',
-         '--install-base', 'install'],
+         '--install-base', 'install', *options],
         cwd=workspace, env=env, capture_output=True, text=True, timeout=BUILD_TIMEOUT,
     )
     if done.returncode != 0:
@@ -189,15 +201,18 @@ def phases(log, started, arrived, ready):
 
 
 def node_command(kind, prefix, baseline=None):
-    """Return (command, environment changes) that start a node of kind."""
+    """Return (command, environment changes) that start a node of kind (prefix: {kind: path})."""
     if kind == 'baseline':
         return [sys.executable, '-m', 'valve_sim.ros.valve_node_main'], baseline_env(baseline)
     if kind == 'bare':
         return [sys.executable, '-c', BARE_NODE], {}
-    if kind == 'built':  # as `source install/setup.bash` and `ros2 run` would start it
-        site = next(prefix.glob('lib/python*/site-packages'))
-        return [str(prefix / 'lib' / 'valve_sim' / 'valve_node')], {
-            'AMENT_PREFIX_PATH': str(prefix), 'PYTHONPATH': str(site)
+    if kind in ('built', 'symlinked'):  # as `source install/setup.bash`, `ros2 run` start it
+        site = next(prefix[kind].glob('lib/python*/site-packages'))
+        # --symlink-install: colcon's hook puts its build folder (links to the sources) first
+        paths = [prefix[kind].parent.parent / 'build' / 'valve_sim'] if kind == 'symlinked' else []
+        return [str(prefix[kind] / 'lib' / 'valve_sim' / 'valve_node')], {
+            'AMENT_PREFIX_PATH': str(prefix[kind]),
+            'PYTHONPATH': os.pathsep.join(map(str, paths + [site])),
         }
     return [sys.executable, '-m', 'valve_sim.ros.valve_node_main'], {}
 
@@ -275,6 +290,7 @@ def summary(values):
 LABELS = {
     'bare': 'bare rclpy node',
     'built': 'valve_node, first start after colcon build',
+    'symlinked': 'valve_node, first start, --symlink-install',
     'warm': 'valve_node, kernels cached',
     'cold': 'valve_node, empty kernel cache',
     'baseline': 'valve_node of --baseline, kernels cached',
@@ -298,22 +314,27 @@ def measure(args, folder):
             precompile, check=True, env={**os.environ, **baseline_env(baseline)},
             timeout=BUILD_TIMEOUT, cwd=tempfile.gettempdir(),
         )
-    prefix, build_seconds = colcon_build(folder)
-    print(f"colcon build: {build_seconds:.1f} s, the kernels' compile included", flush=True)
+    prefix, build_seconds = {}, {}
+    prefix['built'], build_seconds['built'] = colcon_build(folder)
+    prefix['symlinked'], build_seconds['symlinked'] = colcon_build(
+        folder / 'symlinked', '--symlink-install', cache=folder / 'symlinked_cache'
+    )
+    for kind, seconds in build_seconds.items():
+        print(f"colcon build, {kind}: {seconds:.1f} s, the kernels' compile included", flush=True)
     probe = FirstMessage()
     start_up(probe, 'bare', 'warmup', *node_command('bare', prefix))  # warms DDS and the probe
     rotation = ('bare', 'warm') + (('baseline',) if baseline else ())
     for kind in rotation[1:]:  # fill their byte-code caches, as an installed package has
         start_up(probe, kind, 'warmup', *node_command(kind, prefix, baseline))
     plan = (
-        [('built', 0)]
+        [('built', 0), ('symlinked', 0)]
         + [(kind, i) for i in range(args.warm) for kind in rotation]
         + [('cold', i) for i in range(args.cold)]
     )
     runs = {kind: [] for kind in LABELS}
     for kind, i in plan:
         command, changes = node_command(kind, prefix, baseline)
-        cache = folder / f'cold{i}' if kind == 'cold' else None
+        cache = {'cold': folder / f'cold{i}', 'symlinked': folder / 'symlinked_cache'}.get(kind)
         seconds, ready, cpu = start_up(probe, kind, i, command, changes, cache)
         runs[kind].append((seconds, ready, cpu))
         print(
@@ -375,7 +396,8 @@ def main():
     figures = {
         'load_average_start': load_start,
         'load_average_end': os.getloadavg(),
-        'colcon_build_s': build_seconds,
+        'colcon_build_s': build_seconds['built'],
+        'colcon_build_symlink_install_s': build_seconds['symlinked'],
         **{kind: summary([s for s, _, _ in values]) for kind, values in runs.items() if values},
         **{
             f'{kind}_kernels': summary([r for _, r, _ in values if r is not None])
