@@ -250,9 +250,9 @@ def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(referen
 
 def test_the_window_holds_its_edge_samples_however_their_times_were_rounded(reference):
     """
-    One series stamped in ns (valve_node's stamps / 1e9, also at epoch times) and at
-    k * step_size (simulate) gives one result, over a full window.
+    Samples timed in ns / 1e9 (valve_node's stamps, epoch too) and k * step_size agree.
 
+    One series gives one result over a full window, however its times were computed.
     For a step at an odd millisecond t_step + 1.0 rounds below the sample at the
     window's end: it was in one series and not in the other, P_o 2e-3 apart, and the
     window was noted truncated (test_journeys failed so when the flow took two ticks).
@@ -277,7 +277,7 @@ def test_the_window_holds_its_edge_samples_however_their_times_were_rounded(refe
         for measure in MEASURE_NAMES:
             # epoch times are 0.24 us apart: the peaks' times within 1 us, their fits 1e-5
             epoch = 'epoch' in name
-            tolerance = dict(abs=1e-3) if epoch and measure.endswith('_ms') else {}
+            tolerance = {'abs': 1e-3} if epoch and measure.endswith('_ms') else {}
             assert result.values[measure] == pytest.approx(
                 results['k * step_size'].values[measure], rel=1e-5 if epoch else 1e-9,
                 **tolerance,
