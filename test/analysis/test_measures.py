@@ -246,3 +246,39 @@ def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(referen
     assert down.values['T_1_ms'] > 0.0 and down.values['r_d'] > 0.0
     docs = Path(__file__).resolve().parents[2] / 'docs' / 'measures.md'
     assert 'for a step down P_1 is negative' in ' '.join(docs.read_text().split())
+
+
+def test_the_window_holds_its_edge_samples_however_their_times_were_rounded(reference):
+    """
+    Samples timed in ns / 1e9 (valve_node's stamps, epoch too) and k * step_size agree.
+
+    One series gives one result over a full window, however its times were computed.
+    For a step at an odd millisecond t_step + 1.0 rounds below the sample at the
+    window's end: it was in one series and not in the other, P_o 2e-3 apart, and the
+    window was noted truncated (test_journeys failed so when the flow took two ticks).
+    """
+    from valve_sim.core.simulation import Scenario, simulate
+
+    run = simulate(reference, Scenario(step_time=0.051, end_time=1.1), record_interval=1e-3)
+    ticks = np.arange(len(run.time), dtype=np.int64) * 1_000_000  # [ns]
+    epoch_ns = 1_795_953_600_000_000_000
+    series = {
+        'k * step_size': (run.time, 0.051),
+        'ns stamps': (ticks / 1e9, 51_000_000 / 1e9),
+        'epoch ns stamps': ((epoch_ns + ticks) / 1e9, (epoch_ns + 51_000_000) / 1e9),
+    }
+    results = {
+        name: step_measures(t, run['supply_pressure'], run['main_valve_displacement'], t_step)
+        for name, (t, t_step) in series.items()
+    }
+    for name, result in results.items():
+        assert result.details['window_s'] == 1.0 and 'note' not in result.details, name
+        assert result.details['p_inf'] == results['k * step_size'].details['p_inf'], name
+        for measure in MEASURE_NAMES:
+            # epoch times are 0.24 us apart: the peaks' times within 1 us, their fits 1e-5
+            epoch = 'epoch' in name
+            tolerance = {'abs': 1e-3} if epoch and measure.endswith('_ms') else {}
+            assert result.values[measure] == pytest.approx(
+                results['k * step_size'].values[measure], rel=1e-5 if epoch else 1e-9,
+                **tolerance,
+            ), (name, measure)
