@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
+from valve_sim.analysis.sample_window import between, last_span, TIME_TOLERANCE, window_end
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
@@ -62,11 +63,6 @@ SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
 NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
-# [s] a sample this close to an edge of the window (t_step, its end, its last 50 ms) is
-# on it, however its time was rounded: ns stamps / 1e9 and k * step_size differ in their
-# last bits, so the sample at the end was in one series and not in the other (P_o 2e-3
-# apart). Epoch times (1.8e9 s) are 0.24 us apart; sample intervals are 10 us or more.
-TIME_TOLERANCE = 1e-6
 
 
 @dataclass
@@ -161,7 +157,7 @@ def _settling_time(t, x, x_0, x_inf, t_step, width=None, signal='the main valve'
     if len(outside) == 0:
         return 0.0, None
     last = outside[-1]
-    if last >= len(x) - 1 or _settled_span(t[last], t[-1]):
+    if last >= len(x) - 1 or last_span(t[last], t[-1], SETTLED_SPAN):
         return (
             None,
             f'{signal} does not settle inside the window '
@@ -217,7 +213,7 @@ def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction
     if 'p_inf' not in details or details['window_s'] >= window:
         return measures
     t = np.asarray(t)
-    inside = _between(t, t_step, t_step + details['window_s'])
+    inside = between(t, t_step, t_step + details['window_s'])
     settled = settled_at_the_end(t[inside], np.asarray(supply_pressure)[inside],
                                  details['p_inf'])
     details['final_value_settled'] = settled
@@ -240,29 +236,8 @@ def settled_at_the_end(t, supply_pressure, p_inf):
     largest |p_s - p_inf| (5 % of the first overshoot, about, as T_s judges p_s).
     """
     deviation = np.abs(np.asarray(supply_pressure, dtype=float) - p_inf)
-    last = _settled_span(np.asarray(t), t[-1])
+    last = last_span(np.asarray(t), t[-1], SETTLED_SPAN)
     return bool(np.max(deviation[last]) <= SETTLING_BAND * np.max(deviation))
-
-
-def _window_end(t, t_step, window):
-    """
-    Return (end [s], full): where the window after t_step [s] ends in the samples t [s].
-
-    full: the samples reach t_step + window (to within TIME_TOLERANCE), the end; else
-    the window is truncated at the last sample.
-    """
-    full = bool(t[-1] >= t_step + window - TIME_TOLERANCE)
-    return (t_step + window if full else float(t[-1])), full
-
-
-def _between(t, start, end):
-    """Return the mask of the samples t [s] from start to end [s], both edges in."""
-    return (t >= start - TIME_TOLERANCE) & (t <= end + TIME_TOLERANCE)
-
-
-def _settled_span(t, end):
-    """Return the mask of the samples t [s] in the SETTLED_SPAN before end [s], its edges in."""
-    return t >= end - SETTLED_SPAN - TIME_TOLERANCE
 
 
 def _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction, window):
@@ -285,14 +260,14 @@ def _step_measures(t, supply_pressure, main_valve_displacement, t_step, directio
             )
         )
         return StepMeasures(values, reasons)
-    end, full = _window_end(t, t_step, window)
+    end, full = window_end(t, t_step, window)
     # The state before the step acts: the last sample at or before t_step (a step located
     # between samples has not moved the one before it; interpolating would mix in the
     # rise). The window starts with it, so that the response begins at its first sample.
     before = max(int(np.searchsorted(t, t_step + TIME_TOLERANCE, side='right')) - 1, 0)
-    inside = _between(t, t[before], end)
+    inside = between(t, t[before], end)
     tw, pw, xw = t[inside], p[inside], x[inside]
-    settled = _settled_span(tw, end)
+    settled = last_span(tw, end, SETTLED_SPAN)
     if not settled.any():  # a gap in the recording over the window's end: no p_inf
         reasons.update(
             dict.fromkeys(
@@ -393,12 +368,12 @@ def envelope_decay_rate(t, supply_pressure, main_valve_displacement, t_step, win
     """
     t = np.asarray(t, dtype=float)
     x = None if main_valve_displacement is None else np.asarray(main_valve_displacement, float)
-    end, _ = _window_end(t, t_step, window)
-    inside = _between(t, t_step, end)
+    end, _ = window_end(t, t_step, window)
+    inside = between(t, t_step, end)
     use_x = x is not None and bool(np.all(np.isfinite(x[inside])))
     tw = t[inside]
     signal = (x if use_x else np.asarray(supply_pressure, dtype=float))[inside]
-    settled = _settled_span(tw, end)
+    settled = last_span(tw, end, SETTLED_SPAN)
     if len(tw) < 3 or not settled.any():
         return None, 'no settled value in the window'
     e = signal - float(np.mean(signal[settled]))

@@ -30,6 +30,7 @@ import math
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.analysis.sample_window import between, TIME_TOLERANCE
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis, tank_details
 
 
@@ -97,7 +98,7 @@ def plot_steps(path, recording, records, first_number=1):
     for k, record in enumerate(records, start=first_number):
         target = path if len(records) == 1 else path.with_name(f'{path.stem}_step{k}{path.suffix}')
         t_step = record['t_step']
-        shown = (recording.time >= t_step - PLOT_LEAD) & (recording.time <= t_step + WINDOW)
+        shown = between(recording.time, t_step - PLOT_LEAD, t_step + WINDOW)
         flows = {
             name: flow[shown]
             for name, flow in (('inlet', recording.inlet_flow), ('relief', recording.relief_flow))
@@ -203,7 +204,8 @@ def flows_around(recording, t_step):
     if recording.relief_flow is None:
         return None
     before = max(int(np.searchsorted(recording.time, t_step, side='right')) - 1, 0)
-    end = max(int(np.searchsorted(recording.time, t_step + WINDOW, side='right')) - 1, 0)
+    end = max(int(np.searchsorted(recording.time, t_step + WINDOW + TIME_TOLERANCE,
+                                  side='right')) - 1, 0)
     values = (
         recording.inlet_flow[before], recording.inlet_flow[end],
         recording.relief_flow[before], recording.relief_flow[end],
@@ -218,7 +220,7 @@ def sampling_problem(times, t_step, values):
     values: the step's measures, whose T_1 and T_d place its peaks (where those are
     undefined, every sample counts as next to a peak).
     """
-    shown = times[(times >= t_step) & (times <= t_step + WINDOW)]
+    shown = times[between(times, t_step, t_step + WINDOW)]
     if shown.size < 2:
         return 'no samples in its window'
     t_1, t_d = values.get('T_1_ms'), values.get('T_d_ms')
