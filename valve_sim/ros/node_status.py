@@ -226,19 +226,18 @@ class NodeStatus:
                 f'input stale: no inlet_flow for {inputs.seconds_since_input:.1f} s, '
                 f'holding {inputs.inlet_flow:g} m^3/s'
             )
-        warnings = (  # a counter that grew in the window: WARN, with its text
-            ('skipped_ticks', lambda n: f'{n} tick periods skipped (lag beyond the catch-up '
-             'limit)'),
-            ('refused_fault_schedules', lambda n: f'fault schedule refused: '
-             f'{self.schedule_refused}'),
-            ('refused_clock_messages', lambda n: f'{n} /clock messages ignored (a time the '
-             'node cannot represent)'),
+        skipped, refused, clocks = (
+            getattr(counters, name) - getattr(previous, name)
+            for name in ('skipped_ticks', 'refused_fault_schedules', 'refused_clock_messages')
         )
-        for counter, text in warnings:
-            grown = getattr(counters, counter) - getattr(previous, counter)
+        for grown, text in (  # a counter that grew in the window: WARN, with its text
+            (skipped, f'{skipped} tick periods skipped (lag beyond the catch-up limit)'),
+            (refused, f'fault schedule refused: {self.schedule_refused}'),
+            (clocks, f'{clocks} /clock messages ignored (a time the node cannot represent)'),
+        ):
             if grown:
                 level = max(level, DiagnosticStatus.WARN)
-                problems.append(text(grown))
+                problems.append(text)
         late = counters.late_ticks - previous.late_ticks
         if late:
             problems.append(f'{late} late ticks')
