@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from valve_sim.analysis.sample_window import between, last_span, TIME_TOLERANCE, window_end
+from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
@@ -264,7 +264,7 @@ def _step_measures(t, supply_pressure, main_valve_displacement, t_step, directio
     # The state before the step acts: the last sample at or before t_step (a step located
     # between samples has not moved the one before it; interpolating would mix in the
     # rise). The window starts with it, so that the response begins at its first sample.
-    before = max(int(np.searchsorted(t, t_step + TIME_TOLERANCE, side='right')) - 1, 0)
+    before = last_at_or_before(t, t_step)
     inside = between(t, t[before], end)
     tw, pw, xw = t[inside], p[inside], x[inside]
     settled = last_span(tw, end, SETTLED_SPAN)

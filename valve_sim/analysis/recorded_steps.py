@@ -30,7 +30,7 @@ import math
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.analysis.sample_window import between, TIME_TOLERANCE
+from valve_sim.analysis.sample_window import between, last_at_or_before
 from valve_sim.analysis.step_analysis import step_record, StepAnalysis, tank_details
 
 
@@ -203,9 +203,8 @@ def flows_around(recording, t_step):
     """
     if recording.relief_flow is None:
         return None
-    before = max(int(np.searchsorted(recording.time, t_step, side='right')) - 1, 0)
-    end = max(int(np.searchsorted(recording.time, t_step + WINDOW + TIME_TOLERANCE,
-                                  side='right')) - 1, 0)
+    before = last_at_or_before(recording.time, t_step)
+    end = last_at_or_before(recording.time, t_step + WINDOW)
     values = (
         recording.inlet_flow[before], recording.inlet_flow[end],
         recording.relief_flow[before], recording.relief_flow[end],

@@ -23,7 +23,15 @@ edge is on it: far below any sample interval (10 us or more) and above the round
 epoch times (1.8e9 s: 0.24 us).
 """
 
+import numpy as np
+
+
 TIME_TOLERANCE = 1e-6  # [s]
+
+
+def last_at_or_before(t, time):
+    """Return the index of the last sample of t [s] at or before time [s] (0 if none)."""
+    return max(int(np.searchsorted(t, time + TIME_TOLERANCE, side='right')) - 1, 0)
 
 
 def window_end(t, t_step, window):
