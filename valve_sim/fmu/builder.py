@@ -34,7 +34,7 @@ def parameter_file(params, settings):
     import yaml
 
     values = {**params, **{n: settings[n] for n in ('step_size', 'initial_inlet_flow',
-                                                    'tank_pressure')}}
+                                                    'tank_pressure', 'ambient_pressure')}}
     document = {f'/**/{NODE_NAME}': {'ros__parameters': values}}
     return (
         '# The defaults of this FMU, written by `valve-sim fmu` (valve_sim '

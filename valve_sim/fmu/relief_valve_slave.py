@@ -39,21 +39,39 @@ once), then applied. An overpressure halts the model as it halts valve_node
 divergence keeps the last good state: fmi2Discard with the reason logged, until an input
 or a parameter changes. An invalid input (NaN, negative, beyond the limits), a refused
 parameter change or a failed start: fmi2Discard, nothing integrated, the reason logged
-with status error; the instance stays usable. No call lets an exception out: pythonfmu
-0.7 returns fmi2Fatal for one and releases the slave object, which ends the instance.
+with status error; the instance stays usable (a failed start is tried again at each step).
+No call lets an exception out (fmi_calls.guarded): pythonfmu 0.7 returns fmi2Fatal for one
+and releases the slave object, which crashes the master at its next call.
+
+scipy.linalg is imported before valve_sim (and so before numba): loaded after numba, its
+Fortran runtime's exit handler aborts a C master at exit (docs/fmu.md).
 """
 
+import math
 from pathlib import Path
-from xml.etree.ElementTree import Element, SubElement
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
+from pythonfmu import (
+    Boolean,
+    DefaultExperiment,
+    Fmi2Causality,
+    Fmi2Slave,
+    Fmi2Variability,
+    String,
+)
 from pythonfmu.enums import Fmi2Status
+import scipy.linalg  # noqa: F401 (first: the load order a C master needs, see above)
 from valve_sim import __version__
 from valve_sim.core.errors import (
     IntegrationError,
     OverpressureError,
     ParameterError,
     SteadyStateError,
+)
+from valve_sim.fmu.fmi_calls import advance_streaming, check_step, guarded
+from valve_sim.fmu.model_description import (
+    parameter_description,
+    Quantity,
+    with_units_and_unknowns,
 )
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 from valve_sim.core.model import STATE_NAMES
@@ -73,24 +91,8 @@ from valve_sim.core.steady_state import cracking_pressure
 
 PARAMETER_FILE = 'parameters.yaml'  # in the FMU's resources/: the defaults it was built with
 INITIAL_STATES = ('steady', 'closed')
-NEVER_SKIP_NS = 2**62  # the master's clock is the model's: no lag is ever skipped
 REFUSED = (ParameterError, SteadyStateError, IntegrationError)  # what a start or change meets
 
-# The SI base-unit exponents of each unit used (FMI 2.0 UnitDefinitions).
-BASE_UNITS = {
-    'm': {'m': 1},
-    'm^3': {'m': 3},
-    'm^3/s': {'m': 3, 's': -1},
-    'Pa': {'kg': 1, 'm': -1, 's': -2},
-    'Pa*s': {'kg': 1, 'm': -1, 's': -1},
-    'kg': {'kg': 1},
-    'kg/m^3': {'kg': 1, 'm': -3},
-    'N*s/m': {'kg': 1, 's': -1},
-    'N/m': {'kg': 1, 's': -2},
-    'rad': {'rad': 1},
-    's': {'s': 1},
-    '1': {},
-}
 OUTPUT_STATES = {  # the states that are outputs: description
     'supply_pressure': 'p_s: supply pressure at the inlet port, gauge',
     'intermediate_pressure': 'p_m: pressure between the main throttles, gauge',
@@ -107,30 +109,6 @@ OUTPUT_FLOWS = {  # RealTimeModel.relief_flows(), in its order: description
 }
 
 
-class Quantity(Real):
-    """A Real with its unit and range in modelDescription.xml, its start to full precision."""
-
-    def __init__(self, name, unit, minimum=None, maximum=None, **kwargs):
-        super().__init__(name, **kwargs)
-        self.unit, self.minimum, self.maximum = unit, minimum, maximum
-
-    def to_xml(self):
-        element = super().to_xml()
-        real = element.find('Real')
-        real.set('unit', self.unit)
-        if self.start is not None:
-            real.set('start', repr(float(self.start)))
-        for key, value in (('min', self.minimum), ('max', self.maximum)):
-            if value is not None:
-                real.set(key, repr(float(value)))
-        return element
-
-
-def parameter_description(spec):
-    """Return a catalogue spec as one description line: meaning, symbol, unit and source."""
-    return f'{spec.describe()}; source: {spec.source}'
-
-
 class ReliefValve(Fmi2Slave):
     """The direct-pressure-sensing water-hydraulic relief valve of valve_sim (one instance)."""
 
@@ -141,6 +119,8 @@ class ReliefValve(Fmi2Slave):
         'valve_sim relief valve: inlet flow and tank pressure in; chamber pressures (gauge), '
         'valve positions and the relief flow out. Needs Python with valve_sim installed.'
     )
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=1e-3)
+    ERROR = Fmi2Status.error
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -149,7 +129,9 @@ class ReliefValve(Fmi2Slave):
         loaded = load_parameters(path if path.is_file() else None)
         self._defaults, settings = loaded.params, loaded.settings
         self._default_preset = cracking_pressure(self._defaults)
+        self._ambient = settings['ambient_pressure']  # [Pa] the tank is refused below vacuum
         self.model = None
+        self._terminated = False
         self._start_ns = 0
         self._clock_ns = None
         self._applied = None  # (inlet flow, tank pressure) of the last step
@@ -210,32 +192,69 @@ class ReliefValve(Fmi2Slave):
         ))
 
     def to_xml(self, model_options=None):
-        """
-        Return pythonfmu's XML with the units and the initial unknowns FMI 2.0 asks for.
-
-        UnitDefinitions (after CoSimulation) with SI base units; the outputs, calculated
-        at initialisation, as ModelStructure/InitialUnknowns.
-        """
-        root = super().to_xml(model_options or {})
-        structure = root.find('ModelStructure')
-        initial = SubElement(structure, 'InitialUnknowns')
-        for element in structure.find('Outputs'):
-            SubElement(initial, 'Unknown', index=element.get('index'))
-        used = sorted({v.unit for v in self.vars.values() if isinstance(v, Quantity)})
-        units = Element('UnitDefinitions')
-        for name in used:
-            unit = SubElement(units, 'Unit', name=name)
-            SubElement(unit, 'BaseUnit', {k: str(v) for k, v in BASE_UNITS[name].items()})
-        root.insert(list(root).index(root.find('CoSimulation')) + 1, units)
-        return root
+        """Return pythonfmu's XML with the units and initial unknowns (model_description)."""
+        return with_units_and_unknowns(super().to_xml(model_options or {}), self.vars.values())
 
     # --- FMI calls: none lets an exception out (pythonfmu would end the instance) ------------
 
+    @guarded(lambda slave, *args: None)
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        if not abs(start_time) <= 1e9:
+            raise ParameterError(f'startTime must be finite, at most 1e9 s, got {start_time!r}')
         self._start_ns = round(start_time * NS_PER_S)
 
+    @guarded(lambda slave, *args: None)
     def exit_initialization_mode(self):
-        """Start the model: the steady state at the inputs, or the closed valve."""
+        """
+        Start the model: the steady state at the inputs, or the closed valve.
+
+        Its kernels are compiled (or loaded from numba's cache) here, not in the first
+        step. A start that fails is logged with status error and tried again at each step.
+        """
+        self._start()
+
+    @guarded(lambda slave, *args: False)
+    def do_step(self, current_time, step_size):
+        """
+        Integrate from current_time over step_size [s]; True: fmi2OK, False: fmi2Discard.
+
+        Discarded, with the reason logged: a step refused (an invalid input, a refused
+        parameter change, a start that failed, a step not from the FMU's time, not finite
+        or over MAX_COMMUNICATION_STEP, after terminate), of which nothing is integrated,
+        and a divergence, of which the last good state is kept. Either way the FMU stays
+        at current_time; the master may redo the step.
+        """
+        try:
+            self._step(current_time, step_size)
+        except IntegrationError as error:
+            self.log(f'{error} The last good state is held; the step is discarded, as are '
+                     'the next until an input or a parameter changes.', Fmi2Status.discard)
+            return False
+        except REFUSED as error:
+            self.log(f'doStep at t = {current_time!r} s refused, nothing integrated: {error}',
+                     Fmi2Status.error)
+            return False
+        return True
+
+    @guarded(lambda slave, *args: None)
+    def terminate(self):
+        self._terminated = True
+
+    get_real = guarded(lambda slave, vrs: [math.nan] * len(vrs))(Fmi2Slave.get_real)
+    get_integer = guarded(lambda slave, vrs: [0] * len(vrs))(Fmi2Slave.get_integer)
+    get_boolean = guarded(lambda slave, vrs: [False] * len(vrs))(Fmi2Slave.get_boolean)
+    get_string = guarded(lambda slave, vrs: [''] * len(vrs))(Fmi2Slave.get_string)
+    set_real = guarded(lambda slave, *args: None)(Fmi2Slave.set_real)
+    set_integer = guarded(lambda slave, *args: None)(Fmi2Slave.set_integer)
+    set_boolean = guarded(lambda slave, *args: None)(Fmi2Slave.set_boolean)
+    set_string = guarded(lambda slave, *args: None)(Fmi2Slave.set_string)
+
+    def log(self, msg, status=Fmi2Status.ok, category=None, debug=None):
+        """Queue a message for the master; '%' doubled: its logger takes it as a format."""
+        super().log(str(msg).replace('%', '%%'), status, category)
+
+    def _start(self):
+        """Start the model at the inputs as set; log why not (status error) if it cannot."""
         try:
             if self.initial_state not in INITIAL_STATES:
                 raise ParameterError(
@@ -251,47 +270,27 @@ class ReliefValve(Fmi2Slave):
             model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
         except REFUSED as error:
             self._failed = f'the FMU could not start: {error}'
-            self.log(self._failed, Fmi2Status.error)
-            return
+            self.log(f'{self._failed}; it starts at the first step after the cause is gone',
+                     Fmi2Status.error)
+            return False
+        self._failed = None
         self.model = model
+        compile_kernels(model, start_flow, tank_pressure)
         model.start(self._start_ns)
         self._clock_ns = self._start_ns
         self._applied = (start_flow, tank_pressure)
         self._show(params, preset)
         self._update_outputs()
-
-    def do_step(self, current_time, step_size):
-        """
-        Integrate from current_time over step_size [s]; True: fmi2OK, False: fmi2Discard.
-
-        Discarded, with the reason logged: a step refused (an invalid input, a refused
-        parameter change, a start that failed, a step not from the FMU's time), of which
-        nothing is integrated, and a divergence, of which the last good state is kept.
-        Either way the FMU stays at current_time; the master may redo the step.
-        """
-        try:
-            self._step(current_time, step_size)
-        except IntegrationError as error:
-            self.log(f'{error} The last good state is held; the step is discarded, as are '
-                     'the next until an input or a parameter changes.', Fmi2Status.discard)
-            return False
-        except REFUSED as error:
-            self.log(f'doStep at t = {current_time!r} s refused, nothing integrated: {error}',
-                     Fmi2Status.error)
-            return False
         return True
 
     def _step(self, current_time, step_size):
         """do_step's work; raises what refuses the step or IntegrationError."""
+        if self._terminated:
+            raise ParameterError('doStep after terminate: the instance has ended')
+        if self.model is None and not self._start():
+            raise ParameterError(self._failed)
         model = self.model
-        if model is None:
-            raise ParameterError(self._failed or 'doStep before the FMU was initialised')
-        begin_ns = round(current_time * NS_PER_S)
-        if begin_ns != self._clock_ns or not step_size >= 0.0:
-            raise ParameterError(
-                f'a step over {step_size!r} s from t = {current_time!r} s: the FMU is at '
-                f't = {self._clock_ns / NS_PER_S!r} s and steps forward from there only'
-            )
+        now_ns = check_step(current_time, step_size, self._clock_ns)
         inlet_flow, tank_pressure = self._inputs(model.params)
         retuned = self._retune(inlet_flow, tank_pressure)
         if retuned or (inlet_flow, tank_pressure) != self._applied:
@@ -299,9 +298,8 @@ class ReliefValve(Fmi2Slave):
         self._applied = (inlet_flow, tank_pressure)
         if model.halted is not None and not self._saturated:
             raise IntegrationError('The model is halted after a divergence (logged before).')
-        now_ns = round((current_time + step_size) * NS_PER_S)
         try:
-            model.advance_to(now_ns, inlet_flow, NEVER_SKIP_NS, tank_pressure)
+            advance_streaming(model, now_ns, inlet_flow, tank_pressure)
         except OverpressureError as error:
             model.hold_until(now_ns)
             model.halt(str(error))
@@ -325,7 +323,7 @@ class ReliefValve(Fmi2Slave):
         """Return the inputs (inlet flow, tank pressure) as floats; ParameterError if invalid."""
         flow, tank = self.inlet_flow, self.tank_pressure
         problem = inlet_flow_problem(flow, params['max_inlet_flow']) or tank_pressure_problem(
-            tank, params['burst_pressure']
+            tank, params['burst_pressure'], self._ambient
         )
         if problem:
             raise ParameterError(f'input refused: {problem}')
@@ -353,7 +351,7 @@ class ReliefValve(Fmi2Slave):
         """Apply changed parameters or step size as valve_node would; True if any changed."""
         model = self.model
         settings = {'step_size': model.step_size, 'tank_pressure': tank_pressure,
-                    'ambient_pressure': None}  # pressures gauge: no vacuum limit checked
+                    'ambient_pressure': self._ambient}
         try:
             changes = self._changes(model.params, self._preset, model.step_size)
             if not changes:
@@ -394,3 +392,11 @@ class ReliefValve(Fmi2Slave):
         for name, value in zip(OUTPUT_FLOWS, flows):
             setattr(self, name, float(value))
         self.halted = self.model.halted is not None
+
+
+def compile_kernels(model, inlet_flow, tank_pressure):
+    """Run the integration kernels once on a copy (numba compiles or loads them now)."""
+    try:
+        model.trial(model.params, model.step_size, inlet_flow, tank_pressure=tank_pressure)
+    except IntegrationError:
+        pass  # compiled all the same; the divergence is met, and reported, by the steps
