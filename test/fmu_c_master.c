@@ -14,14 +14,19 @@
  * limitations under the License.
  *
  * A minimal FMI 2.0 co-simulation master in C, as OpenModelica, Hopsan and fmi_adapter
- * load an FMU: dlopen the binary, instantiate, step. test_fmu.py compiles and runs it.
+ * load an FMU: dlopen the binary, instantiate, step, terminate, free, dlclose; then exit
+ * normally (the exit status tells whether the FMU lets its master end cleanly).
+ * test_fmu.py compiles and runs it.
  *
- *   fmu_c_master BINARY RESOURCE_URI GUID VR_INLET VR_OUT Q0 Q1 STEP_TIME END_TIME DT
+ *   fmu_c_master BINARY RESOURCE_URI GUID VR_INLET VR_OUT Q0 Q1 STEP_TIME END_TIME DT [refuse]
  *
  * Runs the inlet-flow step Q0 -> Q1 [m^3/s] at STEP_TIME [s] to END_TIME at the
  * communication step DT [s]; prints "time value" of the output VR_OUT after each step
- * (%.17g) and exits 1 at the first status that is not fmi2OK. On Linux the binary needs
- * libpython loaded first (LD_PRELOAD) and PYTHONPATH to reach valve_sim (docs/fmu.md).
+ * (%.17g) and exits 1 at the first status that is not fmi2OK. With "refuse", it first
+ * asks for three steps the FMU must refuse with fmi2Discard (an infinite step, a NaN
+ * time, a step of 1e6 s; exit 3 otherwise), then runs as above. The logger prints the
+ * category and aborts on a NULL one. On Linux the binary needs libpython loaded first
+ * (LD_PRELOAD) and the environment docs/fmu.md gives (valve_sim.fmu.environment).
  */
 #include <dlfcn.h>
 #include <stdarg.h>
@@ -36,8 +41,11 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
 {
     va_list args;
     (void)env;
-    (void)category;
-    fprintf(stderr, "[%s status %d] ", instance, (int)status);
+    if (!category) {
+        fprintf(stderr, "NULL category from %s\n", instance);
+        abort();
+    }
+    fprintf(stderr, "[%s status %d %s] ", instance, (int)status, category);
     va_start(args, message);
     vfprintf(stderr, message, args);
     va_end(args);
@@ -50,7 +58,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
 
 int main(int argc, char **argv)
 {
-    if (argc != 11) {
+    if (argc != 11 && argc != 12) {
         fprintf(stderr, "usage: see the comment of fmu_c_master.c\n");
         return 2;
     }
@@ -62,6 +70,7 @@ int main(int argc, char **argv)
     LOAD(fmi2Instantiate) LOAD(fmi2SetupExperiment) LOAD(fmi2EnterInitializationMode)
     LOAD(fmi2ExitInitializationMode) LOAD(fmi2SetReal) LOAD(fmi2GetReal) LOAD(fmi2DoStep)
     LOAD(fmi2Terminate) LOAD(fmi2FreeInstance)
+    int refuse = argc == 12;
     fmi2ValueReference inlet = (fmi2ValueReference)atoi(argv[4]);
     fmi2ValueReference out = (fmi2ValueReference)atoi(argv[5]);
     double q0 = atof(argv[6]), q1 = atof(argv[7]), step_time = atof(argv[8]);
@@ -80,6 +89,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "initialisation failed\n");
         return 1;
     }
+    double bad[3][2] = {{0.0, INFINITY}, {NAN, dt}, {0.0, 1e6}};  /* (time, step) */
+    for (int i = 0; refuse && i < 3; ++i) {
+        fmi2Status status = fmi2DoStep(c, bad[i][0], bad[i][1], fmi2True);
+        fprintf(stderr, "refused step %d: status %d\n", i, (int)status);
+        if (status != fmi2Discard) return 3;
+    }
     long steps = lround(end_time / dt);
     for (long k = 0; k < steps; ++k) {
         double t = k * dt, value;
@@ -94,7 +109,9 @@ int main(int argc, char **argv)
     }
     fmi2Status terminated = fmi2Terminate(c);
     fmi2FreeInstance(c);
+    int closed = dlclose(library);
     fflush(stdout);
-    fprintf(stderr, "fmi2Terminate: status %d; fmi2FreeInstance returned\n", (int)terminated);
-    return terminated == fmi2OK ? 0 : 1;
+    fprintf(stderr, "fmi2Terminate: status %d; fmi2FreeInstance returned; dlclose %d\n",
+            (int)terminated, closed);
+    return terminated == fmi2OK && closed == 0 ? 0 : 1;
 }

@@ -29,20 +29,21 @@ import math
 import os
 from pathlib import Path
 import shutil
-import site
 import subprocess
-import sysconfig
+import sys
+import tracemalloc
 
 import numpy as np
 import pytest
 from test_cli import valve_sim
-import valve_sim as valve_sim_package
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import PARAMETERS, SPECS
 from valve_sim.core.simulation import Scenario, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
+from valve_sim.fmu.environment import master_environment
+from valve_sim.fmu.fmi_calls import MAX_COMMUNICATION_STEP
 
 fmpy = pytest.importorskip('fmpy')
 from fmpy.fmi1 import calloc, FMICallException, free  # noqa: E402, I100 (only with fmpy)
@@ -289,6 +290,103 @@ def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on
     good.close()
 
 
+def test_bad_steps_a_tank_below_vacuum_and_steps_after_terminate_are_discarded_with_reasons(
+    unzipped
+):
+    valve = Valve(unzipped, 'bad steps').initialise()
+    held = valve.get(*OUTPUTS[:3])
+    bad = [  # (time, step, what the reason names)
+        (0.0, math.inf, 'communicationStepSize must be finite, got inf'),
+        (math.nan, INTERVAL, 'currentCommunicationPoint must be finite, got nan'),
+        (0.0, 1e6, f'0 to {MAX_COMMUNICATION_STEP:g} s'),
+        (0.0, -INTERVAL, 'communicationStepSize must be 0 to'),
+        (0.5, INTERVAL, 'steps forward from there only'),
+    ]
+    for time, size, reason in bad:
+        with pytest.raises(FMICallException) as refusal:
+            valve.fmu.doStep(currentCommunicationPoint=time, communicationStepSize=size)
+        assert refusal.value.status == fmi2Discard, reason  # not fmi2Fatal
+        assert valve.log[-1][0] == fmi2Error and reason in valve.log[-1][1]
+    valve.set_values(tank_pressure=-1e6)  # gauge: 0.9 MPa below vacuum at 101325 Pa ambient
+    with pytest.raises(FMICallException) as refusal:
+        valve.step()
+    assert refusal.value.status == fmi2Discard and 'below vacuum' in valve.log[-1][1]
+    assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
+    assert math.isnan(valve.fmu.getReal([10**6])[0])  # no such variable: logged, not fatal
+    assert valve.log[-1][0] == fmi2Error and 'get_real failed' in valve.log[-1][1]
+    valve.set_values(tank_pressure=0.0)
+    valve.step()  # the instance goes on
+    valve.fmu.terminate()
+    with pytest.raises(FMICallException) as refusal:
+        valve.step()
+    assert refusal.value.status == fmi2Discard and 'after terminate' in valve.log[-1][1]
+    valve.fmu.freeInstance()
+
+
+def test_a_failed_start_is_logged_and_the_instance_starts_once_the_input_is_corrected(
+    unzipped, reference
+):
+    valve = Valve(unzipped, 'failed start', {'inlet_flow': math.nan}).initialise()
+    assert valve.log[-1][0] == fmi2Error and 'could not start' in valve.log[-1][1]
+    with pytest.raises(FMICallException) as refusal:
+        valve.step()
+    assert refusal.value.status == fmi2Discard and 'could not start' in valve.log[-1][1]
+    valve.set_values(inlet_flow=Q1)
+    valve.time = 0.0  # nothing was integrated: the same step again
+    start = steady_state(reference, Q1)
+    valve.step()
+    assert valve.get('supply_pressure')[0] == pytest.approx(start[P_S], rel=1e-6)
+    valve.close()
+
+
+def slave(tmp_path, name, **values):
+    """A ReliefValve of this process, started (its calls as the FMI calls make them)."""
+    from valve_sim.fmu.relief_valve_slave import ReliefValve
+
+    valve = ReliefValve(instance_name=name, resources=str(tmp_path))
+    for key, value in values.items():
+        setattr(valve, key, value)
+    valve.setup_experiment(0.0)
+    valve.exit_initialization_mode()
+    return valve
+
+
+def test_a_long_step_streams_memory_bounded_and_equals_short_steps(tmp_path):
+    """10 s in one doStep at a 0.1 ms internal step: 1e5 steps, not an array of them."""
+    long, short = (slave(tmp_path, name, step_size=1e-4, inlet_flow=Q1)
+                   for name in ('long', 'short'))
+    tracemalloc.start()
+    try:
+        assert long.do_step(0.0, 10.0), long.log_queue
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 400_000  # one array of the whole step: 1.6 MB
+    for k in range(100):
+        assert short.do_step(k * 0.1, 0.1)
+    assert np.array_equal(long.model.state, short.model.state)
+    assert long.model.time_ns == short.model.time_ns == 10 * 10**9
+
+
+def test_the_kernels_are_compiled_at_the_start_not_in_the_first_step(tmp_path):
+    """In a fresh process: after exitInitializationMode, doStep compiles nothing more."""
+    script = (
+        'import sys\n'
+        'from valve_sim.core import integrator\n'
+        'from valve_sim.fmu.relief_valve_slave import ReliefValve\n'
+        f'valve = ReliefValve(instance_name="fresh", resources={str(tmp_path)!r})\n'
+        'valve.setup_experiment(0.0)\n'
+        'valve.exit_initialization_mode()\n'
+        'before = len(integrator.rk4_steps.signatures)\n'
+        'assert valve.do_step(0.0, 1e-3)\n'
+        'print(before, len(integrator.rk4_steps.signatures))\n'
+    )
+    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                            timeout=300, check=True)
+    before, after = map(int, result.stdout.split())
+    assert before == after == 1
+
+
 def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, reference):
     valve = Valve(unzipped, 'overpressure', {'max_inlet_flow': 10.0}).initialise()
     valve.set_values(inlet_flow=1.0)
@@ -378,39 +476,52 @@ def test_fmpy_ends_a_run_at_a_nan_input_with_what_came_before(fmu):
     assert np.all(np.isfinite(result['supply_pressure']))
 
 
-def test_a_c_master_runs_the_papers_step_with_libpython_preloaded(unzipped, offline, tmp_path):
-    """
-    The FMU loaded as OpenModelica, Hopsan and fmi_adapter load it: dlopen from C.
-
-    The binary needs libpython loaded first (LD_PRELOAD) and valve_sim on PYTHONPATH
-    (docs/fmu.md). Not asserted: the exit status. The process ends with SIGSEGV or
-    SIGABRT after fmi2FreeInstance, when pythonfmu finalises the embedded interpreter:
-    any pythonfmu slave that imports numpy does (docs/fmu.md), the results are complete.
-    """
+def c_master(unzipped, tmp_path, path, *flows):
+    """Compile test/fmu_c_master.c, run it with PATH and the environment of docs/fmu.md."""
     compiler = shutil.which('cc') or shutil.which('gcc')
     if compiler is None:
         pytest.skip('no C compiler')
     folder, description = unzipped
     master = tmp_path / 'fmu_c_master'
-    headers = Path(fmpy.__file__).parent / 'c-code'
-    subprocess.run([compiler, '-O1', f'-I{headers}', '-o', str(master),
-                    str(Path(__file__).parents[1] / 'fmu_c_master.c'), '-ldl', '-lm'], check=True)
+    if not master.exists():
+        headers = Path(fmpy.__file__).parent / 'c-code'
+        subprocess.run([compiler, '-O1', f'-I{headers}', '-o', str(master),
+                        str(Path(__file__).parents[1] / 'fmu_c_master.c'), '-ldl', '-lm'],
+                       check=True)
     refs = {v.name: v.valueReference for v in description.modelVariables}
-    library = Path(sysconfig.get_config_var('LIBDIR')) / sysconfig.get_config_var('LDLIBRARY')
-    paths = [str(Path(valve_sim_package.__file__).parents[1]), *site.getsitepackages()]
-    result = subprocess.run(
+    return subprocess.run(
         [str(master), str(folder / 'binaries' / 'linux64' / 'ReliefValve.so'),
          (folder / 'resources').as_uri(), description.guid, str(refs['inlet_flow']),
-         str(refs['supply_pressure']), repr(Q0), repr(Q1), repr(STEP_TIME), repr(END_TIME),
-         repr(INTERVAL)],
-        env={**os.environ, 'LD_PRELOAD': str(library), 'PYTHONPATH': os.pathsep.join(paths)},
+         str(refs['supply_pressure']), *map(repr, flows)],
+        env={**os.environ, 'PATH': path, **master_environment()},
         capture_output=True, text=True, timeout=300,
     )
-    assert 'fmi2Terminate: status 0; fmi2FreeInstance returned' in result.stderr, result.stderr
+
+
+def test_a_c_master_runs_the_papers_step_and_exits_cleanly_from_any_shell(
+    unzipped, offline, tmp_path
+):
+    """
+    The FMU loaded as OpenModelica, Hopsan and fmi_adapter load it: dlopen from C.
+
+    With the environment of docs/fmu.md (valve_sim.fmu.environment), from a shell with
+    this environment's bin/ first on PATH (activated) and from one with no Python on
+    PATH: the paper's step as `simulate` gives it, three bad steps refused with
+    fmi2Discard first, a logger that aborts on a NULL category, and after fmi2Terminate,
+    fmi2FreeInstance and dlclose, a normal exit: status 0.
+    """
+    activated = os.pathsep.join([str(Path(sys.executable).parent), os.environ['PATH']])
+    result = c_master(unzipped, tmp_path, activated, Q0, Q1, STEP_TIME, END_TIME, INTERVAL,
+                      'refuse')
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert result.stderr.count(': status 2\n') == 3  # the three bad steps: fmi2Discard
     pressures = np.array([float(line.split()[1]) for line in result.stdout.splitlines()])
     rows, _ = offline
     expected = np.array([float(row['supply_pressure_Pa']) for row in rows[1:]])
     np.testing.assert_allclose(pressures, expected, rtol=1e-9, atol=0)
+    bare = c_master(unzipped, tmp_path, '/usr/bin:/bin', Q0, Q1, STEP_TIME, 0.01, INTERVAL)
+    assert bare.returncode == 0, bare.stderr[-3000:]
+    assert len(bare.stdout.splitlines()) == 10
 
 
 def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
