@@ -29,6 +29,7 @@ import math
 import os
 from pathlib import Path
 import shutil
+import site
 import subprocess
 import sys
 import tracemalloc
@@ -88,8 +89,8 @@ def unzipped(fmu, tmp_path_factory):
 LOGS = {}  # instance name: [(status, message)] it logged
 
 
-def _logged(_environment, instance, status, _category, message):
-    LOGS[instance.decode()].append((status, message.decode()))
+def _logged(_environment, instance, status, category, message):
+    LOGS.setdefault(instance.decode(), []).append((status, message.decode(), category))
 
 
 # One set for all instances: FMPy's logger proxy (which formats the message as a C
@@ -105,7 +106,7 @@ addLoggerProxy(byref(CALLBACKS))
 class Valve:
     """One FMU instance driven by FMI 2.0 calls through FMPy, its log kept."""
 
-    def __init__(self, unzipped, name, parameters=None, strings=None):
+    def __init__(self, unzipped, name, parameters=None, strings=None, logging=True):
         folder, self.description = unzipped
         self.refs = {v.name: v.valueReference for v in self.description.modelVariables}
         assert name not in LOGS, 'one name per instance: the log is kept by name'
@@ -114,7 +115,7 @@ class Valve:
             guid=self.description.guid, unzipDirectory=str(folder),
             modelIdentifier=self.description.coSimulation.modelIdentifier, instanceName=name,
         )
-        self.fmu.instantiate(callbacks=CALLBACKS, loggingOn=True)
+        self.fmu.instantiate(callbacks=CALLBACKS, loggingOn=logging)
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()
         self.set_values(**(parameters or {}))
@@ -146,6 +147,9 @@ def test_fmpy_validates_the_fmu_and_its_variables_carry_units_and_sources(fmu, r
     assert validate_fmu(str(fmu)) == []
     description = fmpy.read_model_description(str(fmu), validate=True)
     assert description.fmiVersion == '2.0' and description.coSimulation is not None
+    experiment = description.defaultExperiment
+    assert (experiment.startTime, experiment.stopTime, experiment.stepSize) == ('0.0', '1.0',
+                                                                              '0.001')
     variables = {v.name: v for v in description.modelVariables}
     for spec in PARAMETERS:
         variable = variables[spec.name]
@@ -275,7 +279,7 @@ def test_a_bad_input_or_parameter_change_is_refused_logged_and_the_valve_goes_on
         with pytest.raises(FMICallException) as refusal:
             valve.step()
         assert refusal.value.status == fmi2Discard  # not fmi2OK, and no crash
-        status, message = valve.log[-1]
+        status, message, _ = valve.log[-1]
         assert status == fmi2Error and 'refused' in message, values
         assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
         valve.set_values(inlet_flow=Q0, tank_pressure=0.0)
@@ -339,6 +343,35 @@ def test_a_failed_start_is_logged_and_the_instance_starts_once_the_input_is_corr
     valve.close()
 
 
+def test_errors_reach_the_master_with_debug_logging_off_and_each_message_a_category(unzipped):
+    valve = Valve(unzipped, 'quiet', {'inlet_flow': math.nan}, logging=False).initialise()
+    with pytest.raises(FMICallException):
+        valve.step()
+    assert [(status, category) for status, _, category in valve.log] == [
+        (fmi2Error, b'logStatusError')] * 2  # the failed start, the refused step
+    valve.close()
+
+
+def test_without_valve_sim_the_fmu_says_why_at_error_level_and_what_to_do(fmu, tmp_path):
+    """FMPy with debug logging off, in a Python that has FMPy but not valve_sim."""
+    script = (
+        'import fmpy\n'
+        'try:\n'
+        f'    fmpy.simulate_fmu({str(fmu)!r}, stop_time=0.01)\n'
+        'except Exception as error:\n'
+        '    print("raised:", error)\n'
+    )
+    # -S: no site, so not valve_sim's editable install; the packages by PYTHONPATH.
+    result = subprocess.run(
+        [sys.executable, '-S', '-c', script], cwd=tmp_path, capture_output=True, text=True,
+        env={**os.environ, 'PYTHONPATH': os.pathsep.join(site.getsitepackages())}, timeout=300,
+    )
+    assert "[ERROR] the valve_sim FMU cannot start: ModuleNotFoundError: No module named " \
+        "'valve_sim'" in result.stdout, result.stdout + result.stderr
+    assert 'pip install' in result.stdout and 'docs/fmu.md' in result.stdout
+    assert 'raised: Failed to instantiate' in result.stdout
+
+
 def slave(tmp_path, name, **values):
     """A ReliefValve of this process, started (its calls as the FMI calls make them)."""
     from valve_sim.fmu.relief_valve_slave import ReliefValve
@@ -393,7 +426,7 @@ def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, referen
     trace(valve, 3)  # fmi2OK throughout: no exception
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [True]
     assert valve.get('supply_pressure') == [reference['burst_pressure']]
-    warnings = [message for status, message in valve.log if status == fmi2Warning]
+    warnings = [message for status, message, _ in valve.log if status == fmi2Warning]
     assert len(warnings) == 1 and 'overpressure' in warnings[0]
     valve.set_values(inlet_flow=Q0)  # a new input: the valve advances again
     pressures = trace(valve, 50)
@@ -440,7 +473,7 @@ def test_the_start_closed_or_at_the_steady_state_of_the_inputs(unzipped, referen
         wrong.step()
     assert refusal.value.status == fmi2Discard
     assert any(status == fmi2Error and 'initial_state must be one of steady, closed' in message
-               for status, message in wrong.log)
+               for status, message, _ in wrong.log)
     for valve in (closed, steady, wrong):
         valve.close()
 

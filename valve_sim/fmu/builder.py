@@ -26,7 +26,8 @@ from valve_sim.core.errors import ParameterError
 from valve_sim.core.parameters import NODE_NAME
 
 
-SLAVE = 'valve_sim.fmu.relief_valve_slave'  # the module pythonfmu packs: ReliefValve
+ENTRY = 'valve_sim.fmu.relief_valve_fmu'  # the module pythonfmu packs: ReliefValve
+MASTER_LOGGER = 'valve_sim.fmu.master_logger'  # packed with it, in resources/
 
 
 def parameter_file(params, settings):
@@ -62,8 +63,8 @@ def build(out, params, settings):
         defaults = Path(folder) / PARAMETER_FILE
         write_text(defaults, parameter_file(params, settings))
         built = FmuBuilder.build_FMU(
-            find_spec(SLAVE).origin, dest=Path(folder) / 'build' / out.name,
-            project_files=[defaults], needsExecutionTool=True,
+            find_spec(ENTRY).origin, dest=Path(folder) / 'build' / out.name,
+            project_files=[defaults, find_spec(MASTER_LOGGER).origin], needsExecutionTool=True,
             canHandleVariableCommunicationStepSize=True,
             canBeInstantiatedOnlyOncePerProcess=False,
         )

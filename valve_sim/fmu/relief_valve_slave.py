@@ -68,6 +68,7 @@ from valve_sim.core.errors import (
     SteadyStateError,
 )
 from valve_sim.fmu.fmi_calls import advance_streaming, check_step, guarded
+from valve_sim.fmu.master_logger import MasterLogger
 from valve_sim.fmu.model_description import (
     parameter_description,
     Quantity,
@@ -124,6 +125,7 @@ class ReliefValve(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._master = MasterLogger.attach(kwargs.get('logger'), self.instance_name)
         self.modelName = 'ReliefValve'
         path = Path(self.resources or '.') / PARAMETER_FILE
         loaded = load_parameters(path if path.is_file() else None)
@@ -250,11 +252,18 @@ class ReliefValve(Fmi2Slave):
     set_string = guarded(lambda slave, *args: None)(Fmi2Slave.set_string)
 
     def log(self, msg, status=Fmi2Status.ok, category=None, debug=None):
-        """Queue a message for the master; '%' doubled: its logger takes it as a format."""
-        super().log(str(msg).replace('%', '%%'), status, category)
+        """
+        Log for the master: through its logger directly, errors always (master_logger).
 
-    def _start(self):
-        """Start the model at the inputs as set; log why not (status error) if it cannot."""
+        Else queued for pythonfmu, '%' doubled: the master's logger takes it as a format.
+        """
+        if self._master is None:
+            super().log(str(msg).replace('%', '%%'), status, category)
+        elif self._master.wants(status.value):
+            self._master.log(msg, status.value, category)
+
+    def _start(self, quiet=False):
+        """Start the model at the inputs as set; if it cannot, say why (status error) unless quiet."""
         try:
             if self.initial_state not in INITIAL_STATES:
                 raise ParameterError(
@@ -270,8 +279,9 @@ class ReliefValve(Fmi2Slave):
             model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
         except REFUSED as error:
             self._failed = f'the FMU could not start: {error}'
-            self.log(f'{self._failed}; it starts at the first step after the cause is gone',
-                     Fmi2Status.error)
+            if not quiet:
+                self.log(f'{self._failed}; it starts at the first step after the cause is gone',
+                         Fmi2Status.error)
             return False
         self._failed = None
         self.model = model
@@ -287,7 +297,7 @@ class ReliefValve(Fmi2Slave):
         """do_step's work; raises what refuses the step or IntegrationError."""
         if self._terminated:
             raise ParameterError('doStep after terminate: the instance has ended')
-        if self.model is None and not self._start():
+        if self.model is None and not self._start(quiet=True):  # the step says why
             raise ParameterError(self._failed)
         model = self.model
         now_ns = check_step(current_time, step_size, self._clock_ns)
