@@ -148,8 +148,8 @@ def test_fmpy_validates_the_fmu_and_its_variables_carry_units_and_sources(fmu, r
     description = fmpy.read_model_description(str(fmu), validate=True)
     assert description.fmiVersion == '2.0' and description.coSimulation is not None
     experiment = description.defaultExperiment
-    assert (experiment.startTime, experiment.stopTime, experiment.stepSize) == ('0.0', '1.0',
-                                                                              '0.001')
+    start_stop_step = (experiment.startTime, experiment.stopTime, experiment.stepSize)
+    assert start_stop_step == ('0.0', '1.0', '0.001')
     variables = {v.name: v for v in description.modelVariables}
     for spec in PARAMETERS:
         variable = variables[spec.name]
@@ -353,27 +353,28 @@ def test_errors_reach_the_master_with_debug_logging_off_and_each_message_a_categ
 
 
 def test_without_valve_sim_the_fmu_says_why_at_error_level_and_what_to_do(fmu, tmp_path):
-    """FMPy with debug logging off, in a Python that has FMPy but not valve_sim."""
+    """Run FMPy with debug logging off, in a Python that has FMPy but not valve_sim."""
     script = (
         'import fmpy\n'
         'try:\n'
         f'    fmpy.simulate_fmu({str(fmu)!r}, stop_time=0.01)\n'
         'except Exception as error:\n'
-        '    print("raised:", error)\n'
+        "    print('raised:', error)\n"
     )
     # -S: no site, so not valve_sim's editable install; the packages by PYTHONPATH.
     result = subprocess.run(
         [sys.executable, '-S', '-c', script], cwd=tmp_path, capture_output=True, text=True,
         env={**os.environ, 'PYTHONPATH': os.pathsep.join(site.getsitepackages())}, timeout=300,
     )
-    assert "[ERROR] the valve_sim FMU cannot start: ModuleNotFoundError: No module named " \
-        "'valve_sim'" in result.stdout, result.stdout + result.stderr
+    reason = "ModuleNotFoundError: No module named 'valve_sim'"
+    assert f'[ERROR] the valve_sim FMU cannot start: {reason}' in result.stdout, (
+        result.stdout + result.stderr)
     assert 'pip install' in result.stdout and 'docs/fmu.md' in result.stdout
     assert 'raised: Failed to instantiate' in result.stdout
 
 
 def slave(tmp_path, name, **values):
-    """A ReliefValve of this process, started (its calls as the FMI calls make them)."""
+    """Return a ReliefValve of this process, started (its calls as the FMI calls make them)."""
     from valve_sim.fmu.relief_valve_slave import ReliefValve
 
     valve = ReliefValve(instance_name=name, resources=str(tmp_path))

@@ -40,6 +40,7 @@ BASE_UNITS = {
     '1': {},
 }
 
+
 class Quantity(Real):
     """A Real with its unit and range in modelDescription.xml, its start to full precision."""
 

@@ -67,13 +67,6 @@ from valve_sim.core.errors import (
     ParameterError,
     SteadyStateError,
 )
-from valve_sim.fmu.fmi_calls import advance_streaming, check_step, guarded
-from valve_sim.fmu.master_logger import MasterLogger
-from valve_sim.fmu.model_description import (
-    parameter_description,
-    Quantity,
-    with_units_and_unknowns,
-)
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
 from valve_sim.core.model import STATE_NAMES
 from valve_sim.core.parameters import (
@@ -88,6 +81,13 @@ from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
 from valve_sim.core.retuning import plan_change, planned_parameters
 from valve_sim.core.sensors import SensorStage
 from valve_sim.core.steady_state import cracking_pressure
+from valve_sim.fmu.fmi_calls import advance_streaming, check_step, guarded
+from valve_sim.fmu.master_logger import MasterLogger
+from valve_sim.fmu.model_description import (
+    parameter_description,
+    Quantity,
+    with_units_and_unknowns,
+)
 
 
 PARAMETER_FILE = 'parameters.yaml'  # in the FMU's resources/: the defaults it was built with
@@ -263,7 +263,7 @@ class ReliefValve(Fmi2Slave):
             self._master.log(msg, status.value, category)
 
     def _start(self, quiet=False):
-        """Start the model at the inputs as set; if it cannot, say why (status error) unless quiet."""
+        """Start the model at the inputs as set; else say why (status error) unless quiet."""
         try:
             if self.initial_state not in INITIAL_STATES:
                 raise ParameterError(
