@@ -29,11 +29,18 @@
 #    p_s) at communication steps of 1 ms and 0.1 ms: the cost of one doStep.
 # Reported: wall time of each, its ratio to the offline run, the doStep rate and the
 # real-time factor (model time / wall time). The FMU is built once, first.
+# 4. one doStep of 0.1 s, 1 s and 10 s (10 us internal steps: 1e4 to 1e6 steps) by FMI
+#    calls, from the steady state at 20 L/min, against doSteps of 10 ms over the same
+#    time (the time grows with the step as theirs does), and the peak of Python's
+#    traced memory during the one call (tracemalloc: numpy's arrays included), which
+#    must not grow with the step.
 
 import argparse
 import json
+import math
 import tempfile
 import time
+import tracemalloc
 
 import fmpy
 from fmpy.fmi2 import FMU2Slave
@@ -93,6 +100,41 @@ def direct_calls(folder, description, interval):
     return run
 
 
+def long_steps(folder, description, repeats, lengths=(0.1, 1.0, 10.0), split=0.01):
+    """
+    Return {length [s]: (wall of one doStep, wall of doSteps of split [s], peak memory [B])}.
+
+    Each from the steady state at 20 L/min, best of repeats; the same model time
+    integrated both ways, so equal walls mean a time proportional to the step.
+    """
+    refs = {v.name: v.valueReference for v in description.modelVariables}
+    results = {}
+    for length in lengths:
+        walls, peak = {1: math.inf, round(length / split): math.inf}, 0
+        for steps in [steps for steps in walls for _ in range(repeats)]:
+            fmu = FMU2Slave(guid=description.guid, unzipDirectory=folder,
+                            modelIdentifier=description.coSimulation.modelIdentifier,
+                            instanceName='long')
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+            fmu.setReal([refs['inlet_flow']], [SCENARIO.final_flow])
+            fmu.exitInitializationMode()
+            tracemalloc.start()
+            start = time.perf_counter()
+            for k in range(steps):
+                fmu.doStep(currentCommunicationPoint=k * length / steps,
+                           communicationStepSize=length / steps)
+            walls[steps] = min(walls[steps], time.perf_counter() - start)
+            if steps == 1:
+                peak = max(peak, tracemalloc.get_traced_memory()[1])
+            tracemalloc.stop()
+            fmu.terminate()
+            fmu.freeInstance()
+        results[length] = (*walls.values(), peak)
+    return results
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip())
     parser.add_argument('--repeats', type=int, default=5)
@@ -116,6 +158,7 @@ def main():
             'FMI calls, 0.1 ms steps': (
                 best_time(direct_calls(unzipped, description, 1e-4), args.repeats), 1e-4),
         }
+        long = long_steps(unzipped, description, args.repeats)
     results = {}
     print(f"the paper's {SCENARIO.end_time:g} s step, 10 us RK4 steps; best of {args.repeats}")
     print(f'{"run":<34}{"wall [s]":>10}{"/ offline":>11}{"doStep/s":>11}{"x real time":>13}')
@@ -126,6 +169,12 @@ def main():
         print(f'{name:<34}{wall:>10.4f}{wall / offline:>11.2f}'
               + (f'{rate:>11.0f}' if rate else f'{"-":>11}')
               + f'{SCENARIO.end_time / wall:>13.1f}')
+    print(f'{"model time [s]":<20}{"one doStep [s]":>16}{"10 ms doSteps [s]":>19}'
+          f'{"ratio":>8}{"peak memory":>14}')
+    for length, (one, split, peak) in long.items():
+        results[f'one doStep of {length:g} s'] = {
+            'wall_s': one, 'wall_10ms_steps_s': split, 'peak_traced_bytes': peak}
+        print(f'{length:<20g}{one:>16.3f}{split:>19.3f}{one / split:>8.2f}{peak / 1e3:>11.0f} kB')
     if args.json:
         with open(args.json, 'w') as stream:
             json.dump(results, stream, indent=2)
