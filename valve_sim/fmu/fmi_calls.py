@@ -42,12 +42,14 @@ def guarded(refusal):
     Decorate an FMI method so that no exception leaves it: logged, refusal returned.
 
     refusal(slave, *args): the value returned instead (a callable, so get_real can
-    return one value per reference asked for).
+    return one value per reference asked for). slave._master: its MasterLogger or None.
     """
 
     def decorate(method):
         @wraps(method)
         def call(slave, *args):
+            if slave._master is not None:  # debug logging set on since: ours, not pythonfmu's
+                slave._master.wants(0)
             try:
                 return method(slave, *args)
             except Exception as error:  # noqa: B902 (the FMI boundary: nothing may pass)
