@@ -561,7 +561,7 @@ def test_a_c_master_runs_the_papers_step_and_exits_cleanly_from_any_shell(
 def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
     path = tmp_path / 'tuned.fmu'
     valve_sim('fmu', '--out', str(path), '--set', 'd_c=1.2e-3', '--preset-pressure', '6.5e6',
-              '--step-size', '5e-6')
+              '--step-size', '5e-6', '--set', 'ambient_pressure=9e4')
     variables = {v.name: v for v in fmpy.read_model_description(str(path)).modelVariables}
     params = with_preset_pressure({**reference, 'damping_orifice_diameter': 1.2e-3}, 6.5e6)
     assert {name: float(variables[name].start) for name in SPECS} == params
@@ -570,6 +570,10 @@ def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
     result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
                                output=['supply_pressure'])
     assert result['supply_pressure'][0] == steady_state(params, Q0)[P_S]
+    for tank, started in ((-8.9e4, True), (-9.1e4, False)):  # vacuum at its ambient: -9e4
+        result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
+                                   start_values={'tank_pressure': tank})
+        assert (len(result) == 3 and result['supply_pressure'].all()) == started, tank
     refused = valve_sim('fmu', '--out', str(tmp_path / 'valve.zip'), check=False)
     assert refused.returncode == 1 and '--out must name a .fmu file' in refused.stderr
 
