@@ -24,8 +24,10 @@ tank at ambient (a back pressure then moves no measure of the valve's own respon
 valve_sim.analysis.step_detection.StepDetector finds the steps (up and down, any
 number); a step between two flow samples further apart than 1.5 pressure sample
 intervals (a coarse flowmeter) is located inside them from the pressure
-(step_detection.locate_step). Once a step's window (measures.WINDOW after it) is
-complete, valve_sim.analysis.measures.step_measures gives its six measures. Only the
+(step_detection.locate_step). A step's window ends measures.WINDOW after it, or at
+the next change of any input first (measure_windows: the next flow step, a change
+of p_t, an event given to add_event); once it has ended,
+valve_sim.analysis.measures.step_measures gives its six measures. Only the
 rows from step_detection.PRE_STEP_SPAN before the oldest open step on are kept, so
 memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
@@ -47,7 +49,9 @@ import os
 from pathlib import Path
 
 import numpy as np
+from valve_sim.analysis.measure_windows import Cut, InputChanges
 from valve_sim.analysis.measures import step_measures, WINDOW
+from valve_sim.analysis.sample_window import TIME_TOLERANCE
 from valve_sim.analysis.signals import seconds
 from valve_sim.analysis.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
 from valve_sim.core.output_files import json_text, replacing, write_text
@@ -73,10 +77,13 @@ class StepAnalysis:
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
+        self.changes = InputChanges(self.merge_time)  # the other inputs' changes, events
         self.rows = deque()  # (t, p_s - p_t, x, p_t), PRE_STEP_SPAN before the oldest open step on
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row
+        self.last_change = None  # the latest Cut: an open step's since
+        self.since = {}  # t_step: the last change before it (a Cut)
 
     def add(self, t, supply_pressure, main_valve, inlet_flow, flow_time=None, tank_pressure=None):
         """
@@ -90,23 +97,39 @@ class StepAnalysis:
         if self.rows and t <= self.rows[-1][0]:
             records = self.finish()  # time went back (a new run): close the open steps
         flow_time = t if flow_time is None else flow_time
-        step = self.detector.update(t, inlet_flow)
+        step, own = self.detector.update(t, inlet_flow), None
+        cuts = self.changes.update(t, tank_pressure)
         if step:
             self.open_steps.append(step)
             if self.flow_time is not None:
                 self.brackets[step[0]] = (self.flow_time, flow_time)
+            edge = min(step[0], self.brackets.get(step[0], step)[0])  # the old flow's last
+            own = Cut(edge, f'the inlet-flow step at {step[0]:.6f} s')
+            self.since[step[0]] = self.last_change
+            cuts.append(own)
         self.flow_time = flow_time
         known = tank_pressure is not None and tank_pressure == tank_pressure
         self.rows.append(
             (t, supply_pressure - tank_pressure if known else supply_pressure, main_valve,
              tank_pressure if known else np.nan)
         )
+        for cut in cuts:  # a change ends the window of every step before it (not its own)
+            self.last_change = cut
+            for cut_step in [open_step for open_step in self.open_steps
+                             if not (open_step is step and cut is own)
+                             and open_step[0] <= cut.time + TIME_TOLERANCE]:
+                self.open_steps.remove(cut_step)
+                records.append(self._measure(cut_step, cut))
         complete = [step for step in self.open_steps if t >= step[0] + self.window]
         for step in complete:
             self.open_steps.remove(step)
             records.append(self._measure(step))
         self._trim()
         return records
+
+    def add_event(self, time, what):
+        """Note a fault or parameter change that acts from time [s] on (what: its name)."""
+        self.changes.add_event(time, what)
 
     def add_rows(self, rows):
         """
@@ -150,7 +173,7 @@ class StepAnalysis:
         while self.rows[0][0] < oldest - PRE_STEP_SPAN:
             self.rows.popleft()
 
-    def _measure(self, step):
+    def _measure(self, step, cut=None):
         t_step, flow_before, direction = step
         t, p, x, tank = np.array(self.rows, dtype=float).T
         bracket, timing = self.brackets.pop(t_step, None), {}
@@ -162,7 +185,8 @@ class StepAnalysis:
                 't_step_from': 'supply_pressure' if located else 'last_row_before_new_flow',
                 't_step_uncertainty_s': located[1] if located else bracket[1] - bracket[0],
             }
-        measures = step_measures(t, p, x, t_step, direction, self.window)
+        since = self.since.pop(step[0], None)
+        measures = step_measures(t, p, x, t_step, direction, self.window, cut, since)
         measures.details.update(timing)
         measures.details.update(tank_details(t, tank, t_step))
         return step_record(t_step, flow_before, direction, measures)
