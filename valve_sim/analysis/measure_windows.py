@@ -93,15 +93,12 @@ def early_end(measures, t, supply_pressure, main_valve, window, cut=None, lobes_
     for needed, names in ((1, FIRST_PEAK_MEASURES), (2, SECOND_PEAK_MEASURES)):
         if lobes_closed < needed:
             for name in names:
-                if values.get(name) is not None:
+                if values.get(name) is not None:  # (no peak at all keeps its own reason)
                     undefined.setdefault(name, (
                         f'{why} before the {"first" if needed == 1 else "second"} overshoot '
                         'has swung back, so its peak is not known'))
-    for name, reason in undefined.items():
-        if values.get(name) is not None or name not in reasons:
-            values[name], reasons[name] = None, reason
-        elif cut is not None:  # undefined anyway: say that the cut is why
-            reasons[name] = reason
+    for name, reason in undefined.items():  # undefined anyway: the early end is why
+        values[name], reasons[name] = None, reason
     return measures
 
 
@@ -158,6 +155,11 @@ def at_rest(measures, t, supply_pressure, since):
                 f'came to rest: it moves by {moves:.4g} Pa in the {SETTLED_SPAN * 1e3:g} ms '
                 f'before, more than 5 % of {"the pressure step" if name == "P_o_percent" else "the first overshoot"}')
     return measures
+
+
+def event_name(changes):
+    """Return how a reason names an event that changes {parameter name: value}."""
+    return 'the event ' + ', '.join(f'{name} = {value}' for name, value in changes.items())
 
 
 class InputChanges:
