@@ -107,6 +107,7 @@ class CalibrationResult:
     interrupted: bool = False
     ties: dict = field(default_factory=dict)
     rank: int = None  # combinations of the fitted parameters the target determines
+    jacobian: np.ndarray = None  # d(residuals)/du at the result (calibration_verdict)
 
     @property
     def satisfied(self):
@@ -236,7 +237,7 @@ def calibrate(problem, settings=FitSettings(), progress=None, should_stop=None):
         relative = _relative_step(problem, settings)
         residual, jacobian = central_jacobian(objective, u, max(relative, 1e-6))
         objective.use_step_times(u)  # the Jacobian moved them
-        result.residuals = residual
+        result.residuals, result.jacobian = residual, jacobian
         add_uncertainty(result, problem.target, jacobian, start)
     return _finished(result, objective, began)
 
@@ -287,14 +288,27 @@ def _fit_from_starts(objective, settings):
         if objective.progress and run['values'] is not None:
             passed = all(check['satisfied'] for check in run['checks'])
             objective.progress(
-                f'{objective.label}: cost {run["cost"]:.6g} after {objective.count} evaluations, '
-                f'constraints and checks {"met" if passed else "NOT met"}'
+                f'{objective.label}: cost {run["cost"]:.6g} after {objective.count} evaluations; '
+                + start_fit_text(problem.target, run['cost'])
+                + f'; constraints and checks: {"all met" if passed else "NOT all met"}'
             )
         if objective.stopped:
             break
     if not runs:
         raise CalibrationError('interrupted before any evaluation finished')
     return runs
+
+
+def start_fit_text(target, cost):
+    """Say how far a start's residual RMS lies from the noise (tolerance) it is counted in."""
+    from valve_sim.analysis.calibration_verdict import FAR_ABOVE
+
+    count = len(target.residual_names)
+    rms = math.sqrt(2.0 * cost / max(count, 1))
+    unit = 'noise' if target.kind == 'recording' else 'tolerance'
+    limit = FAR_ABOVE if target.kind == 'recording' else 1.0
+    return f'residual RMS {rms:.3g} x {unit}' + (
+        f', far above {limit:g}: the fit does NOT explain its target' if rms > limit else '')
 
 
 def _fit_from(objective, point, bounds, settings):

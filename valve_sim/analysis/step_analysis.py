@@ -34,7 +34,8 @@ The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
 Step records (the JSON file beside a bag, `valve-sim analyse --json`): t_step [s],
-direction (+1 up, -1 down), flow_before [m^3/s], then the six measures
+direction (+1 up, -1 down), flow_before and flow_after [m^3/s] (the flow at the end of
+its window; `valve-sim calibrate --target-measures` simulates that step), the six measures
 (None where undefined), 'reasons' and 'details' of measures.StepMeasures.as_dict().
 A step between coarse flow samples adds to its details 't_step_bracket' [s, s] (those
 samples), 't_step_from' ('supply_pressure' where located, else
@@ -51,18 +52,19 @@ from pathlib import Path
 import numpy as np
 from valve_sim.analysis.measure_windows import Cut, InputChanges
 from valve_sim.analysis.measures import step_measures, WINDOW
-from valve_sim.analysis.sample_window import TIME_TOLERANCE
+from valve_sim.analysis.sample_window import last_at_or_before, TIME_TOLERANCE
 from valve_sim.analysis.signals import seconds
 from valve_sim.analysis.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
 from valve_sim.core.output_files import json_text, replacing, write_text
 
 
-def step_record(t_step, flow_before, direction, measures):
-    """JSON-ready record of one step and its StepMeasures."""
+def step_record(t_step, flow_before, direction, measures, flow_after=None):
+    """JSON-ready record of one step and its StepMeasures; flow_after: at its window's end."""
     return {
         't_step': t_step,
         'direction': direction,
         'flow_before': flow_before,
+        'flow_after': flow_after,
         **measures.as_dict(),
     }
 
@@ -78,7 +80,7 @@ class StepAnalysis:
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
         self.changes = InputChanges(self.merge_time)  # the other inputs' changes, events
-        self.rows = deque()  # (t, p_s - p_t, x, p_t), PRE_STEP_SPAN before the oldest open step on
+        self.rows = deque()  # (t, p_s - p_t, x, p_t, q), PRE_STEP_SPAN before the oldest open step on
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row
@@ -111,7 +113,7 @@ class StepAnalysis:
         known = tank_pressure is not None and tank_pressure == tank_pressure
         self.rows.append(
             (t, supply_pressure - tank_pressure if known else supply_pressure, main_valve,
-             tank_pressure if known else np.nan)
+             tank_pressure if known else np.nan, inlet_flow)
         )
         for cut in cuts:  # a change ends the window of every step before it (not its own)
             self.last_change = cut
@@ -175,7 +177,7 @@ class StepAnalysis:
 
     def _measure(self, step, cut=None):
         t_step, flow_before, direction = step
-        t, p, x, tank = np.array(self.rows, dtype=float).T
+        t, p, x, tank, flow = np.array(self.rows, dtype=float).T
         bracket, timing = self.brackets.pop(t_step, None), {}
         if bracket and _coarser_than_rows(bracket, t):
             located = locate_step(t, p, bracket, direction)
@@ -189,7 +191,9 @@ class StepAnalysis:
         measures = step_measures(t, p, x, t_step, direction, self.window, cut, since)
         measures.details.update(timing)
         measures.details.update(tank_details(t, tank, t_step))
-        return step_record(t_step, flow_before, direction, measures)
+        end = t_step + measures.details.get('window_s', 0.0)
+        return step_record(t_step, flow_before, direction, measures,
+                           float(flow[last_at_or_before(t, end)]))
 
 
 def tank_details(time, tank_pressure, t_step):
