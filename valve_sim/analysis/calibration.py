@@ -128,6 +128,7 @@ class _Objective:
         self.size = None
         self.label, self.last_report = '', 0.0
         self.failure = None  # why the last failed evaluation failed
+        self.failed, self.largest = False, 0.0  # the last evaluation failed; largest |residual|
 
     def parameters(self, u):
         problem = self.problem
@@ -161,10 +162,13 @@ class _Objective:
             self.size = len(residual)
         if residual is not None and not np.all(np.isfinite(residual)):
             residual, self.failure = None, _non_finite(target, residual)
-        if residual is None:
-            residual = np.full(self.size or 1, FAILED_RESIDUAL)
+        self.failed = residual is None
+        if residual is None:  # worse than any residual seen, so that the search leaves it
+            residual = np.full(self.size or 1, max(FAILED_RESIDUAL, 10.0 * self.largest))
+        else:
+            self.largest = max(self.largest, float(np.max(np.abs(residual), initial=0.0)))
         cost = 0.5 * float(residual @ residual)
-        if cost < self.best[0]:
+        if cost < self.best[0] and not self.failed:
             self.best = (cost, np.array(u, dtype=float))
         now = clock.monotonic()
         if self.progress and now - self.last_report >= 0.5:
@@ -249,14 +253,15 @@ def _relative_step(problem, settings):
 def _check_identifiable(objective):
     """Raise CalibrationError if the start cannot be run or a fitted parameter is flat."""
     fitted = objective.problem.fitted
-    base, jacobian = central_jacobian(objective, np.ones(len(fitted)), 0.01)
-    if np.all(base == FAILED_RESIDUAL):
+    base = objective(np.ones(len(fitted)))
+    if objective.failed:
         if objective.failure.startswith('the model'):
             raise CalibrationError(
                 'the model cannot run the target with the start values (no steady state or a '
                 f'diverging run): check the parameter file and --params ({objective.failure})'
             )
         raise CalibrationError(f'the target cannot be compared: {objective.failure}')
+    base, jacobian = central_jacobian(objective, np.ones(len(fitted)), 0.01)
     flat = [
         p
         for p, column in zip(fitted, jacobian.T)
@@ -320,7 +325,8 @@ def _fit_from(objective, point, bounds, settings):
     """
     problem, start = objective.problem, objective.start
     try:
-        if np.all(objective(point) == FAILED_RESIDUAL):
+        objective(point)
+        if objective.failed:
             return {'start': list(point * start), 'values': None, 'cost': math.inf,
                     'message': 'skipped: the model cannot run at this start',
                     'checks': [], 'u': None}
@@ -337,6 +343,8 @@ def _fit_from(objective, point, bounds, settings):
             max_nfev=settings.max_evaluations,
         )
         cost, u, message = float(solution.cost), solution.x, solution.message
+        if objective.best[0] < cost:  # it ended where the model cannot run: its best run
+            (cost, u), message = objective.best, f'{message} (its best evaluation that ran)'
     except _Stopped:
         (cost, u), message = objective.best, 'interrupted: best evaluation so far'
     if u is None:
