@@ -359,7 +359,11 @@ def run(args):
 
     recorded = args.bag or (args.target_measures and (
         Path(args.target_measures).is_dir() or args.target_measures.endswith('.mcap')))
-    signal_map = signal_map_from(args, 'calibrate') if recorded else None
+    signal_map = None
+    if recorded:  # the signal options apply to the bag either option names
+        bag, args.bag = args.bag, args.bag or args.target_measures
+        signal_map = signal_map_from(args, 'calibrate')
+        args.bag = bag
     loaded = load_from_arguments(args)  # in the bag's namespace, if any
     params, settings = loaded.params, loaded.settings
     preset = args.preset_pressure or None
