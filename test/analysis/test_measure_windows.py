@@ -57,7 +57,7 @@ def midpoints(end):
 
 
 def steps_of(waves, events=()):
-    """The step records of a run, as the scenario report and the test kit take them."""
+    """Return the step records of a run, as the scenario report and the test kit take them."""
     columns = {name: np.full(len(waves.time), np.nan) for name in SIGNALS}
     columns.update(supply_pressure=waves['supply_pressure'],
                    main_valve=waves['main_valve_displacement'], inlet_flow=waves.inlet_flow,

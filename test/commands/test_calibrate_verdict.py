@@ -13,9 +13,11 @@
 # limitations under the License.
 
 """
-A calibration judges its own fit (docs/calibration.md), on a valve the model's free
-parameters cannot explain: another sensing rod and a heavier main valve, fitted with
-d_c and k_p. It used to end with "constraints and checks met".
+A calibration judges its own fit (docs/calibration.md).
+
+On a valve the model's free parameters cannot explain: another sensing rod and a
+heavier main valve, fitted with d_c and k_p. It used to end with "constraints and
+checks met".
 """
 
 import json
@@ -46,7 +48,7 @@ def valve_sim(*args, code=0):
 
 @pytest.fixture(scope='module')
 def other(tmp_path_factory):
-    """The issue's recording of another valve, and its analyse --json."""
+    """Write the issue's recording of another valve, and its analyse --json."""
     folder = tmp_path_factory.mktemp('other')
     valve_sim('simulate', '--set', 'sensing_rod_diameter=0.0048', '--set',
               'main_valve_mass=0.085', '--mcap', folder / 'other.mcap',

@@ -65,7 +65,7 @@ def fit_verdict(result, target):
         figure = float(np.max(np.abs(residuals)))
         explains = figure <= 1.0
         rule = 'every measure within its tolerance (|model - target| <= tolerance)'
-        text = f'the largest miss is {figure:.3g} times its measure\'s tolerance'
+        text = f"the largest miss is {figure:.3g} times its measure's tolerance"
         return {'explains': explains, 'figure': figure, 'rule': rule, 'text': text}
     names = np.asarray(target.residual_names)
     verdict = {'rule': f'residual RMS at most {FAR_ABOVE:g} times the noise estimate'}
@@ -204,7 +204,7 @@ def suggestion_lines(freeing, fitted_names):
     if not top:
         return ['no parameter left to free']
     lines = [
-        'parameters whose freeing would lower the residual most: the six measures\' residual '
+        "parameters whose freeing would lower the residual most: the six measures' residual "
         f'RMS is {freeing["figure"]:.3g} tolerances at the fit (first-order prediction from '
         f'its sensitivities: {freeing["runs"]} runs, {freeing["wall_time_s"]:.1f} s):'
     ]

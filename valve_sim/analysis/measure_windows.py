@@ -149,17 +149,37 @@ def at_rest(measures, t, supply_pressure, since):
     scales['P_o_percent'] = abs(p_inf - p_0)
     for name, scale in scales.items():
         if values[name] is not None and moves > SETTLING_BAND * scale:
+            of = 'the pressure step' if name == 'P_o_percent' else 'the first overshoot'
             values[name] = None
             reasons[name] = (
                 f'the step comes {t_step - since.time:.3f} s after {since.what}, before p_s '
                 f'came to rest: it moves by {moves:.4g} Pa in the {SETTLED_SPAN * 1e3:g} ms '
-                f'before, more than 5 % of {"the pressure step" if name == "P_o_percent" else "the first overshoot"}')
+                f'before, more than 5 % of {of}')
     return measures
 
 
 def event_name(changes):
     """Return how a reason names an event that changes {parameter name: value}."""
     return 'the event ' + ', '.join(f'{name} = {value}' for name, value in changes.items())
+
+
+class SettingChanges:
+    """
+    The events in snapshots of settings, as valve_node's fault_status publishes them.
+
+    Each snapshot holds every fault and sensor setting in effect from its time on; the
+    first is the state at the start, each later one that differs an event.
+    """
+
+    def __init__(self):
+        self.settings = None
+
+    def update(self, time, settings):
+        """Return (time [s], what) if settings {name: value} changed, else None."""
+        last, self.settings = self.settings, dict(settings)
+        changed = {name: value for name, value in settings.items()
+                   if last is not None and last.get(name) != value}
+        return (time, event_name(changed)) if changed else None
 
 
 class InputChanges:

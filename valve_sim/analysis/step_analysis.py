@@ -80,7 +80,8 @@ class StepAnalysis:
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
         self.changes = InputChanges(self.merge_time)  # the other inputs' changes, events
-        self.rows = deque()  # (t, p_s - p_t, x, p_t, q), PRE_STEP_SPAN before the oldest open step on
+        # (t, p_s - p_t, x, p_t, q), PRE_STEP_SPAN before the oldest open step on
+        self.rows = deque()
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row
