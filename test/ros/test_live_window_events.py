@@ -57,3 +57,37 @@ def test_a_fault_status_change_ends_the_window_live(reference, tmp_path):
     assert 'the event fault.damping_orifice_blockage = 0.3 at 0.500000 s' in \
         step['details']['window_cut']['by']
     assert len(published) == 1 and step['T_1_ms'] is not None
+
+
+def test_a_fault_status_change_in_a_bag_ends_the_window_offline(tmp_path):
+    """valve-sim analyse reads fault_status beside the valve's topics: the same rule."""
+    import subprocess
+    import sys
+
+    from valve_sim.analysis.recorded_steps import analyse
+    from valve_sim.recording.bag import BagReader, BagWriter
+    from valve_sim.recording.signal_reader import read_recording
+
+    plain, faulted = tmp_path / 'plain.mcap', tmp_path / 'faulted.mcap'
+    subprocess.run([sys.executable, '-m', 'valve_sim.commands.cli', 'simulate', '--end-time',
+                    '1.3', '--mcap', str(plain)], check=True, capture_output=True, timeout=300)
+    reader, writer = BagReader(plain), BagWriter(faulted)
+    try:
+        for channel, schema, message in reader.messages():
+            if channel.topic not in writer.channels:
+                writer.add_topic(channel.topic, schema.name)
+            writer.write(writer.channels[channel.topic], message.data, message.log_time,
+                         message.publish_time)
+        status = writer.add_topic('/fault_status', 'diagnostic_msgs/msg/DiagnosticArray')
+        start = round(read_recording(plain).time[0] * 1e9)  # [ns] the first tick's stamp
+        for time, blockage in ((0.0, 0.0), (0.5, 0.3)):
+            stamp = start + round(time * 1e9)
+            writer.write(status, fault_status(stamp / 1e9, blockage), stamp, stamp)
+    finally:
+        writer.close()
+    (plain_step,) = analyse(read_recording(plain))
+    (step,) = analyse(read_recording(faulted))
+    assert 'window_cut' not in plain_step['details'] and plain_step['T_s_ms'] is not None
+    assert step['details']['window_cut']['by'].startswith(
+        'the event fault.damping_orifice_blockage = 0.3 at ')
+    assert step['T_s_ms'] is None and step['T_1_ms'] == pytest.approx(plain_step['T_1_ms'])
