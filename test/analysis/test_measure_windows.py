@@ -111,6 +111,21 @@ def test_each_step_of_a_staircase_measures_as_the_same_step_alone_or_not_at_all(
         assert first['P_o_percent'] is None and first['details']['final_value_settled'] is False
 
 
+def test_a_scenario_check_on_a_cut_window_fails_with_the_change_named(reference):
+    """The issue's check: step 3 of the 0.7 s staircase "settled" in 762 ms and passed."""
+    from valve_sim.analysis.expectations import evaluate, parse_expectations
+
+    waves = run(reference, staircase(0.7), STAIRCASE[0] * LITRE_PER_MINUTE)
+    columns = {name: np.full(len(waves.time), np.nan) for name in SIGNALS}
+    columns.update(supply_pressure=waves['supply_pressure'], inlet_flow=waves.inlet_flow,
+                   main_valve=waves['main_valve_displacement'])
+    series = TickSeries(waves.time, np.round(waves.time * 1e9).astype(np.int64), columns)
+    expect = parse_expectations([{'measures': {'step': 3, 'T_s_ms': {'max': 800}}}])
+    (check,) = evaluate(expect, series, np.zeros(len(series)))
+    assert not check.passed and check.measured is None
+    assert 'the inlet-flow step at 0.950000 s' in check.detail, check.detail  # not at rest
+
+
 def test_a_ramp_ends_the_window_of_the_step_before_and_its_pieces_measure_nothing(
         reference, alone):
     t = midpoints(2.0)
