@@ -157,6 +157,11 @@ def freeing_suggestions(problem, result, progress=None):
     residual = measures_residual(problem.target)
     r = residual(result.parameters)
     runs = 1
+    if not len(r):
+        return {'suggestions': [], 'runs': runs, 'figure': None, 'measures': [],
+                'wall_time_s': time.monotonic() - began, 'skipped': {},
+                'note': "no parameter ranked: the recording's first step has none of the six "
+                        'measures (docs/measures.md says why)'}
     fitted = [p for p in result.fitted if not p.name.startswith('step_time_')]
     columns, skipped = {}, {}
     names = [p.name for p in fitted] + candidates(problem)
@@ -202,7 +207,7 @@ def suggestion_lines(freeing, fitted_names):
     """Return the text naming the parameters to free first, and what it cost."""
     top = freeing['suggestions'][:SHOWN]
     if not top:
-        return ['no parameter left to free']
+        return [freeing.get('note', 'no parameter left to free')]
     lines = [
         "parameters whose freeing would lower the residual most: the six measures' residual "
         f'RMS is {freeing["figure"]:.3g} tolerances at the fit (first-order prediction from '
