@@ -158,8 +158,11 @@ class LockstepValve:
                             for name, value in {**(changes or {}), **named}.items())
         except (ParameterError, ProfileError, InputFileError) as error:
             raise ValueError(str(error)) from None
+        before = self._driver.get_parameters(list(resolved))
         self._driver.set_parameters(resolved)
-        self._events.append((self.time + self.period, resolved))  # ends a step's window
+        changed = {name: value for name, value in resolved.items() if before[name] != value}
+        if changed:  # a change ends a step's window (docs/measures.md)
+            self._events.append((self.time + self.period, changed))
 
     def inject(self, fault, value=True):
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
