@@ -105,10 +105,10 @@ def test_freeing_the_named_parameters_brings_the_recorded_measures_within_tolera
 
 
 def test_a_recorded_target_step_must_exist(other):
-    from valve_sim.commands.calibrate import chosen_step
+    from valve_sim.analysis.calibration_targets import MeasuresTarget
     from valve_sim.core.errors import CalibrationError
 
     steps = json.loads((other / 'other.json').read_text())['steps']
-    assert chosen_step(steps, 1) is steps[0]
+    assert MeasuresTarget.from_step(steps, 1).scenario.final_flow == steps[0]['flow_after']
     with pytest.raises(CalibrationError, match=r'no step 2: the recording has 1 step\(s\)'):
-        chosen_step(steps, 2)
+        MeasuresTarget.from_step(steps, 2)

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 from valve_sim.analysis.calibration_parameters import BEARING_INPUTS
-from valve_sim.analysis.calibration_verdict import suggestion_lines, verdict_line
+from valve_sim.analysis.calibration_verdict import verdict_line, verdict_lines
 from valve_sim.analysis.plotting import plot_measures_fit, plot_recording_fit
 from valve_sim.core.bearing import COEFFICIENTS
 from valve_sim.core.parameters import NODE_NAME
@@ -191,11 +191,7 @@ def report_text(report):
             f'{r["pressure_noise_estimate_Pa"]:.4g} Pa); main valve '
             + ('recorded' if r['main_valve_recorded'] else 'not recorded')
         )
-    if 'verdict' in report:
-        lines.append(report['verdict']['line'])
-    if 'freeing' in report:
-        lines += suggestion_lines(report['freeing'], [e['symbol'] for e in report['fitted']
-                                                      if not e['name'].startswith('step_time_')])
+    lines += verdict_lines(report)
     for status in report['constraints']:
         lines.append(
             f'{"met" if status["satisfied"] else "NOT MET"}: {status["constraint"]}: '

@@ -107,13 +107,17 @@ class MeasuresTarget:
         return cls(values, tolerances, weights, step_size=step_size)
 
     @classmethod
-    def from_step(cls, record, step_size=1e-5):
+    def from_step(cls, records, number=1, step_size=1e-5):
         """
-        Build from a step record (analyse --json, a bag's): its measures, the paper's tolerances.
+        Build from step number (from 1) of step records, with the paper's tolerances.
 
-        The model runs the same step (flow_before -> flow_after, from its steady state,
-        a full window); the record's undefined measures are left out.
+        records: analyse --json's or a bag's. The model runs the same step (flow_before ->
+        flow_after, from its steady state, a full window); the record's undefined
+        measures are left out.
         """
+        if not 1 <= number <= len(records) or not isinstance(records[number - 1], dict):
+            raise CalibrationError(f'no step {number}: the recording has {len(records)} step(s)')
+        record = records[number - 1]
         if record.get('flow_before') is None or record.get('flow_after') is None:
             raise CalibrationError('the step record has no flow_before and flow_after (an '
                                    'analyse --json output of this version has them)')

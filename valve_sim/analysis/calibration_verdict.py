@@ -90,6 +90,25 @@ def verdict_line(verdict, fitted_names):
             f'{verdict["text"]}, outside the rule ({verdict["rule"]})')
 
 
+def judged(problem, result, progress=None):
+    """Return (fit_verdict, freeing_suggestions or None) of a finished calibration."""
+    verdict = fit_verdict(result, problem.target)
+    if verdict['explains'] or result.interrupted:
+        return verdict, None
+    if progress:
+        progress(verdict_line(verdict, [p.symbol for p in problem.fitted]) + ': finding the '
+                 'parameters whose freeing would lower the residual most')
+    return verdict, freeing_suggestions(problem, result, progress)
+
+
+def verdict_lines(report):
+    """Return the verdict and, where computed, the parameters to free: the report's lines."""
+    fitted = [entry['symbol'] for entry in report['fitted']
+              if not entry['name'].startswith('step_time_')]
+    lines = [report['verdict']['line']] if 'verdict' in report else []
+    return lines + (suggestion_lines(report['freeing'], fitted) if 'freeing' in report else [])
+
+
 def candidates(problem):
     """Return the model parameters a fit could free: not fitted, tied, or NOT_CANDIDATES."""
     from valve_sim.core.catalogue import section_of

@@ -233,13 +233,11 @@ def _target(args, step_size, signal_map):
         path = Path(args.target_measures)
         try:
             if path.is_dir() or path.suffix == '.mcap':  # a recording: analyse it
-                return MeasuresTarget.from_step(
-                    chosen_step(analyse(read_recording(path, signal_map)), args.target_step),
-                    step_size)
+                steps = analyse(read_recording(path, signal_map))
+                return MeasuresTarget.from_step(steps, args.target_step, step_size)
             document = read_json(path, TARGET_MEASURES)
             if isinstance(document, dict) and isinstance(document.get('steps'), list):
-                return MeasuresTarget.from_step(
-                    chosen_step(document['steps'], args.target_step), step_size)
+                return MeasuresTarget.from_step(document['steps'], args.target_step, step_size)
             return MeasuresTarget.from_document(document, step_size)
         except CalibrationError as error:
             raise CalibrationError(f'{args.target_measures}: {error}') from None
@@ -261,15 +259,6 @@ def _target(args, step_size, signal_map):
         )
     except CalibrationError as error:
         raise CalibrationError(f'{args.bag}: {error}') from None
-
-
-def chosen_step(records, number):
-    """Return step number (from 1) of a recording's step records; CalibrationError if none."""
-    from valve_sim.core.errors import CalibrationError
-
-    if not 1 <= number <= len(records) or not isinstance(records[number - 1], dict):
-        raise CalibrationError(f'no step {number}: the recording has {len(records)} step(s)')
-    return records[number - 1]
 
 
 def located_steps(recording):
@@ -340,12 +329,6 @@ def run(args):
         report_document,
         report_text,
     )
-    from valve_sim.analysis.calibration_verdict import (
-        fit_verdict,
-        freeing_suggestions,
-        suggestion_lines,
-        verdict_line,
-    )
     from valve_sim.analysis.calibration_requirements import (
         CaseRelieves,
         LandsInsideBore,
@@ -354,6 +337,7 @@ def run(args):
         PilotFlowLimit,
         StudyRelieves,
     )
+    from valve_sim.analysis.calibration_verdict import judged, verdict_lines
     from valve_sim.commands.options import ctrl_c_stops
     from valve_sim.core.errors import CalibrationError
 
@@ -398,13 +382,7 @@ def run(args):
     search = FitSettings(args.starts, args.spread, args.seed, args.tolerance)
     with ctrl_c_stops() as should_stop:  # Ctrl-C ends the fit with its best result so far
         result = calibrate(problem, search, progress, should_stop)
-    verdict = fit_verdict(result, target)
-    freeing = None
-    if not verdict['explains'] and not result.interrupted:
-        if progress:
-            progress(verdict_line(verdict, [p.symbol for p in fitted]) + ': finding the '
-                     'parameters whose freeing would lower the residual most')
-        freeing = freeing_suggestions(problem, result, progress)
+    verdict, freeing = judged(problem, result, progress)
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_text(out / 'calibrated.yaml', parameter_file_text(result, settings, command))
@@ -427,9 +405,7 @@ def run(args):
         )
         return 1
     if not verdict['explains']:
-        print(f'valve-sim calibrate: {report["verdict"]["line"]}', file=sys.stderr)
-        for line in suggestion_lines(freeing, [p.symbol for p in fitted
-                                               if not p.name.startswith('step_time_')]):
+        for line in verdict_lines(report):
             print(f'valve-sim calibrate: {line}', file=sys.stderr)
         return 1
     return 0
