@@ -343,7 +343,8 @@ def _fit_from(objective, point, bounds, settings):
             max_nfev=settings.max_evaluations,
         )
         cost, u, message = float(solution.cost), solution.x, solution.message
-        if objective.best[0] < cost:  # it ended where the model cannot run: its best run
+        failed = np.all(solution.fun == solution.fun[0]) and solution.fun[0] >= FAILED_RESIDUAL
+        if failed and objective.best[1] is not None:  # it ended where the model cannot run
             (cost, u), message = objective.best, f'{message} (its best evaluation that ran)'
     except _Stopped:
         (cost, u), message = objective.best, 'interrupted: best evaluation so far'
