@@ -42,7 +42,8 @@ def test_a_fault_status_change_ends_the_window_live(reference, tmp_path):
     measures = StepMeasures(node, SignalMap(), 1e-6, 0.05, 'test', tmp_path / 'run.mcap')
     extractor = measures.extractor('/fault_status', 'diagnostic_msgs/msg/DiagnosticArray')
     assert measures.extractor('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray') is None
-    recorded = SimpleNamespace(extractor=extractor, type_name='diagnostic_msgs/msg/DiagnosticArray',
+    recorded = SimpleNamespace(extractor=extractor,
+                               type_name='diagnostic_msgs/msg/DiagnosticArray',
                                subscription=SimpleNamespace(msg_type=DiagnosticArray))
     measures.add(recorded, fault_status(0.0, 0.0), 0)  # the settings at the start: no event
     measures.add(recorded, fault_status(0.0, 0.0), 0)  # the same again: no event either

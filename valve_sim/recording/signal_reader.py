@@ -167,8 +167,8 @@ def fault_event(settings, decode, data):
     except Exception:  # noqa: B902 (a message that does not decode is no event)
         return []
     stamp = status.header.stamp
-    event = settings.update(stamp.sec + stamp.nanosec * 1e-9,
-                            {pair.key: pair.value for part in status.status for pair in part.values})
+    values = {pair.key: pair.value for part in status.status for pair in part.values}
+    event = settings.update(stamp.sec + stamp.nanosec * 1e-9, values)
     return [event] if event else []
 
 
