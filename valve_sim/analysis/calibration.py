@@ -107,6 +107,7 @@ class CalibrationResult:
     interrupted: bool = False
     ties: dict = field(default_factory=dict)
     rank: int = None  # combinations of the fitted parameters the target determines
+    jacobian: np.ndarray = None  # d(residuals)/du at the result (calibration_verdict)
 
     @property
     def satisfied(self):
@@ -127,6 +128,7 @@ class _Objective:
         self.size = None
         self.label, self.last_report = '', 0.0
         self.failure = None  # why the last failed evaluation failed
+        self.failed, self.largest = False, 0.0  # the last evaluation failed; largest |residual|
 
     def parameters(self, u):
         problem = self.problem
@@ -160,10 +162,13 @@ class _Objective:
             self.size = len(residual)
         if residual is not None and not np.all(np.isfinite(residual)):
             residual, self.failure = None, _non_finite(target, residual)
-        if residual is None:
-            residual = np.full(self.size or 1, FAILED_RESIDUAL)
+        self.failed = residual is None
+        if residual is None:  # worse than any residual seen, so that the search leaves it
+            residual = np.full(self.size or 1, max(FAILED_RESIDUAL, 10.0 * self.largest))
+        else:
+            self.largest = max(self.largest, float(np.max(np.abs(residual), initial=0.0)))
         cost = 0.5 * float(residual @ residual)
-        if cost < self.best[0]:
+        if cost < self.best[0] and not self.failed:
             self.best = (cost, np.array(u, dtype=float))
         now = clock.monotonic()
         if self.progress and now - self.last_report >= 0.5:
@@ -236,7 +241,7 @@ def calibrate(problem, settings=FitSettings(), progress=None, should_stop=None):
         relative = _relative_step(problem, settings)
         residual, jacobian = central_jacobian(objective, u, max(relative, 1e-6))
         objective.use_step_times(u)  # the Jacobian moved them
-        result.residuals = residual
+        result.residuals, result.jacobian = residual, jacobian
         add_uncertainty(result, problem.target, jacobian, start)
     return _finished(result, objective, began)
 
@@ -248,14 +253,15 @@ def _relative_step(problem, settings):
 def _check_identifiable(objective):
     """Raise CalibrationError if the start cannot be run or a fitted parameter is flat."""
     fitted = objective.problem.fitted
-    base, jacobian = central_jacobian(objective, np.ones(len(fitted)), 0.01)
-    if np.all(base == FAILED_RESIDUAL):
+    base = objective(np.ones(len(fitted)))
+    if objective.failed:
         if objective.failure.startswith('the model'):
             raise CalibrationError(
                 'the model cannot run the target with the start values (no steady state or a '
                 f'diverging run): check the parameter file and --params ({objective.failure})'
             )
         raise CalibrationError(f'the target cannot be compared: {objective.failure}')
+    base, jacobian = central_jacobian(objective, np.ones(len(fitted)), 0.01)
     flat = [
         p
         for p, column in zip(fitted, jacobian.T)
@@ -287,14 +293,27 @@ def _fit_from_starts(objective, settings):
         if objective.progress and run['values'] is not None:
             passed = all(check['satisfied'] for check in run['checks'])
             objective.progress(
-                f'{objective.label}: cost {run["cost"]:.6g} after {objective.count} evaluations, '
-                f'constraints and checks {"met" if passed else "NOT met"}'
+                f'{objective.label}: cost {run["cost"]:.6g} after {objective.count} evaluations; '
+                + start_fit_text(problem.target, run['cost'])
+                + f'; constraints and checks: {"all met" if passed else "NOT all met"}'
             )
         if objective.stopped:
             break
     if not runs:
         raise CalibrationError('interrupted before any evaluation finished')
     return runs
+
+
+def start_fit_text(target, cost):
+    """Say how far a start's residual RMS lies from the noise (tolerance) it is counted in."""
+    from valve_sim.analysis.calibration_verdict import FAR_ABOVE
+
+    count = len(target.residual_names)
+    rms = math.sqrt(2.0 * cost / max(count, 1))
+    unit = 'noise' if target.kind == 'recording' else 'tolerance'
+    limit = FAR_ABOVE if target.kind == 'recording' else 1.0
+    return f'residual RMS {rms:.3g} x {unit}' + (
+        f', far above {limit:g}: the fit does NOT explain its target' if rms > limit else '')
 
 
 def _fit_from(objective, point, bounds, settings):
@@ -306,7 +325,8 @@ def _fit_from(objective, point, bounds, settings):
     """
     problem, start = objective.problem, objective.start
     try:
-        if np.all(objective(point) == FAILED_RESIDUAL):
+        objective(point)
+        if objective.failed:
             return {'start': list(point * start), 'values': None, 'cost': math.inf,
                     'message': 'skipped: the model cannot run at this start',
                     'checks': [], 'u': None}
@@ -323,6 +343,9 @@ def _fit_from(objective, point, bounds, settings):
             max_nfev=settings.max_evaluations,
         )
         cost, u, message = float(solution.cost), solution.x, solution.message
+        failed = np.all(solution.fun == solution.fun[0]) and solution.fun[0] >= FAILED_RESIDUAL
+        if failed and objective.best[1] is not None:  # it ended where the model cannot run
+            (cost, u), message = objective.best, f'{message} (its best evaluation that ran)'
     except _Stopped:
         (cost, u), message = objective.best, 'interrupted: best evaluation so far'
     if u is None:

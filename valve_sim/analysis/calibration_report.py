@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 from valve_sim.analysis.calibration_parameters import BEARING_INPUTS
+from valve_sim.analysis.calibration_verdict import verdict_line, verdict_lines
 from valve_sim.analysis.plotting import plot_measures_fit, plot_recording_fit
 from valve_sim.core.bearing import COEFFICIENTS
 from valve_sim.core.parameters import NODE_NAME
@@ -69,8 +70,12 @@ def parameter_file_text(result, settings, command):
     return '\n'.join(lines) + '\n'
 
 
-def report_document(result, target, target_name, command):
-    """Return the report as a JSON-ready dict; target_name: the measures file or the bag."""
+def report_document(result, target, target_name, command, verdict=None, freeing=None):
+    """
+    Return the report as a JSON-ready dict; target_name: the measures file or the bag.
+
+    verdict: calibration_verdict.fit_verdict's; freeing: its freeing_suggestions (or None).
+    """
     fitted = []
     for k, p in enumerate(result.fitted):
         entry = {
@@ -107,6 +112,11 @@ def report_document(result, target, target_name, command):
     }
     if result.uncertainty_note:
         document['uncertainty_note'] = result.uncertainty_note
+    if verdict is not None:
+        document['verdict'] = dict(verdict, line=verdict_line(
+            verdict, [p.symbol for p in result.fitted]))
+    if freeing is not None:
+        document['freeing'] = freeing
     if target.kind == 'measures':
         measures, _ = target.model_output(result.parameters)
         document['measures'] = [
@@ -181,6 +191,7 @@ def report_text(report):
             f'{r["pressure_noise_estimate_Pa"]:.4g} Pa); main valve '
             + ('recorded' if r['main_valve_recorded'] else 'not recorded')
         )
+    lines += verdict_lines(report)
     for status in report['constraints']:
         lines.append(
             f'{"met" if status["satisfied"] else "NOT MET"}: {status["constraint"]}: '

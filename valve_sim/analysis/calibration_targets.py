@@ -16,7 +16,8 @@
 """
 What a calibration fits to: a target gives the residuals of a parameter set.
 
-- MeasuresTarget: the six step measures of the paper's test (value and tolerance each);
+- MeasuresTarget: the six step measures of the paper's test (value and tolerance each),
+  or of a recorded step (from_step: that step run by the model, the paper's tolerances);
   residual = weight (model - value) / tolerance.
 - RecordingTarget: a recorded step. The model is driven by the recorded inlet flow
   itself (core.simulation.simulate_recorded_flow) and compared with the recorded
@@ -37,10 +38,15 @@ from valve_sim.analysis.step_detection import detect_steps
 from valve_sim.core.errors import CalibrationError
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
+from valve_sim.core.scenario import Scenario
 from valve_sim.core.simulation import simulate, simulate_recorded_flow
 
 
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
+# The paper's tolerances (config/calibration/figure5.json), in each measure's unit: those of a
+# measure taken from a recording (MeasuresTarget.from_step, calibration_verdict).
+PAPER_TOLERANCES = {'P_o_percent': 0.0432, 'P_1_percent': 0.477, 'T_1_ms': 0.67, 'r_d': 0.03,
+                    'T_d_ms': 2.51, 'T_s_ms': 108.0}
 
 
 class MeasuresTarget:
@@ -100,6 +106,29 @@ class MeasuresTarget:
             raise CalibrationError('the measures target names none of ' + ', '.join(MEASURE_NAMES))
         return cls(values, tolerances, weights, step_size=step_size)
 
+    @classmethod
+    def from_step(cls, records, number=1, step_size=1e-5):
+        """
+        Build from step number (from 1) of step records, with the paper's tolerances.
+
+        records: analyse --json's or a bag's. The model runs the same step (flow_before ->
+        flow_after, from its steady state, a full window); the record's undefined
+        measures are left out.
+        """
+        if not 1 <= number <= len(records) or not isinstance(records[number - 1], dict):
+            raise CalibrationError(f'no step {number}: the recording has {len(records)} step(s)')
+        record = records[number - 1]
+        if record.get('flow_before') is None or record.get('flow_after') is None:
+            raise CalibrationError('the step record has no flow_before and flow_after (an '
+                                   'analyse --json output of this version has them)')
+        values = {name: record[name] for name in MEASURE_NAMES if record.get(name) is not None}
+        if not values:
+            raise CalibrationError('the step has none of the six measures: '
+                                   + '; '.join(f'{k}: {v}' for k, v in record['reasons'].items()))
+        scenario = Scenario(float(record['flow_before']), float(record['flow_after']),
+                            REFERENCE_SCENARIO.step_time, REFERENCE_SCENARIO.end_time)
+        return cls(values, PAPER_TOLERANCES, scenario=scenario, step_size=step_size)
+
     def model_output(self, params):
         """Measures (StepMeasures.as_dict) and waveforms of the model's step test."""
         waveforms = simulate(params, self.scenario, self.step_size, 1e-4)
@@ -108,6 +137,7 @@ class MeasuresTarget:
             waveforms['supply_pressure'],
             waveforms['main_valve_displacement'],
             self.scenario.step_time,
+            1 if self.scenario.final_flow >= self.scenario.initial_flow else -1,
         ).as_dict()
         return measures, waveforms
 

@@ -49,17 +49,15 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
+from valve_sim.analysis.measure_windows import (  # noqa: F401 (the measures' constants)
+    at_rest, early_end, FINAL_VALUE_MEASURES, SETTLED_SPAN, SETTLING_BAND,
+)
 from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
-# The measures taken relative to the settled final value p_inf (x_inf); T_1 and T_d are
-# times of peaks and need only the peaks inside the window.
-FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
 ENVELOPE_DECAY = 'envelope_decay_per_s'  # T_s's continuous companion (docs/measures.md)
 WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
-SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
-SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
 NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
@@ -195,49 +193,33 @@ def _parabola_exit(t, deviation, band):
     return t[1] + min(root, tc[-1])
 
 
-def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
+def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW,
+                  cut=None, since=None):
     """
     Compute the six measures of the step at t_step [s] (docs/measures.md), as StepMeasures.
 
     t [s], supply_pressure p_s [Pa], main_valve_displacement x [m]: equal-length
     arrays; x may be None or NaN where not recorded (T_s then from p_s). direction:
     +1 for a rising inlet flow (overshoot peaks are maxima), -1 for a falling one
-    (they are minima; P_1 is then negative). window [s]: normally WINDOW. Samples that
-    end before it (a truncated recording) are reported in details; there the measures
-    that need the final value (FINAL_VALUE_MEASURES) are undefined unless p_s has
-    settled in the last 50 ms (settled_at_the_end).
+    (they are minima; P_1 is then negative). window [s]: normally WINDOW. cut: the next
+    change of an input (measure_windows.Cut), where the window ends if it comes first;
+    since: the last change before the step (a Cut). A window that ends early (cut, or
+    the recording ends) carries only the measures whose final value and peaks lie inside
+    it (measure_windows.early_end); a step soon after a change has P_o only if it starts
+    from rest (measure_windows.at_rest).
     """
+    end = window if cut is None else min(window, max(cut.time - t_step, 0.0))
     measures = _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction,
-                              window)
-    details = measures.details
-    if 'p_inf' not in details or details['window_s'] >= window:
+                              end)
+    lobes_closed = measures.details.pop('lobes_closed', 0)
+    if cut is not None and 'p_inf' not in measures.details and end < window:
+        reason = f'the window is cut to {end:.3f} s by {cut.what}'
+        measures.reasons.update({name: f'{reason}: {measures.reasons.get(name, "")}'.rstrip(': ')
+                                 for name in MEASURE_NAMES})
+        measures.details.update(window_cut={'time': cut.time, 'by': cut.what})
         return measures
-    t = np.asarray(t)
-    inside = between(t, t_step, t_step + details['window_s'])
-    settled = settled_at_the_end(t[inside], np.asarray(supply_pressure)[inside],
-                                 details['p_inf'])
-    details['final_value_settled'] = settled
-    if not settled:
-        reason = (
-            f'the window is truncated to {details["window_s"]:.3f} s (the recording ends) and '
-            f'p_s has not settled in its last {SETTLED_SPAN * 1e3:g} ms, so it has no final '
-            'value p_inf'
-        )
-        measures.values.update(dict.fromkeys(FINAL_VALUE_MEASURES))
-        measures.reasons.update(dict.fromkeys(FINAL_VALUE_MEASURES, reason))
-    return measures
-
-
-def settled_at_the_end(t, supply_pressure, p_inf):
-    """
-    Whether p_s [Pa] has settled by the end of its samples t [s] at p_inf [Pa].
-
-    Settled: over the last SETTLED_SPAN, |p_s - p_inf| stays within SETTLING_BAND of the
-    largest |p_s - p_inf| (5 % of the first overshoot, about, as T_s judges p_s).
-    """
-    deviation = np.abs(np.asarray(supply_pressure, dtype=float) - p_inf)
-    last = last_span(np.asarray(t), t[-1], SETTLED_SPAN)
-    return bool(np.max(deviation[last]) <= SETTLING_BAND * np.max(deviation))
+    early_end(measures, t, supply_pressure, main_valve_displacement, window, cut, lobes_closed)
+    return at_rest(measures, t, supply_pressure, since)
 
 
 def _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction, window):
@@ -327,6 +309,7 @@ def _step_measures(t, supply_pressure, main_valve_displacement, t_step, directio
                 'a first overshoot for its band'
             )
         return StepMeasures(values, reasons, details)
+    details['lobes_closed'] = sum(stop < len(e) for _, stop in lobes[:2])
     t_1, e_1 = _refined_extreme(tw, e, *lobes[0])
     if not x_recorded:
         _set_settling_time(

@@ -53,6 +53,8 @@ WINDOW_GAP_LIMIT = 0.01
 def analyse(recording, threshold=1e-6, merge_time=0.05):
     """Step records of every step in a Recording (step_analysis.StepAnalysis over its rows)."""
     analysis, records = StepAnalysis(threshold, merge_time), []
+    for event in getattr(recording, 'events', None) or ():  # fault_status changes
+        analysis.add_event(*event)
     flow_time = recording.time if recording.inlet_flow_time is None else recording.inlet_flow_time
     for row in zip(
         recording.time,

@@ -24,15 +24,18 @@ tank at ambient (a back pressure then moves no measure of the valve's own respon
 valve_sim.analysis.step_detection.StepDetector finds the steps (up and down, any
 number); a step between two flow samples further apart than 1.5 pressure sample
 intervals (a coarse flowmeter) is located inside them from the pressure
-(step_detection.locate_step). Once a step's window (measures.WINDOW after it) is
-complete, valve_sim.analysis.measures.step_measures gives its six measures. Only the
+(step_detection.locate_step). A step's window ends measures.WINDOW after it, or at
+the next change of any input first (measure_windows: the next flow step, a change
+of p_t, an event given to add_event); once it has ended,
+valve_sim.analysis.measures.step_measures gives its six measures. Only the
 rows from step_detection.PRE_STEP_SPAN before the oldest open step on are kept, so
 memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
 offline gives what the analyser computed while recording it.
 
 Step records (the JSON file beside a bag, `valve-sim analyse --json`): t_step [s],
-direction (+1 up, -1 down), flow_before [m^3/s], then the six measures
+direction (+1 up, -1 down), flow_before and flow_after [m^3/s] (the flow at the end of
+its window; `valve-sim calibrate --target-measures` simulates that step), the six measures
 (None where undefined), 'reasons' and 'details' of measures.StepMeasures.as_dict().
 A step between coarse flow samples adds to its details 't_step_bracket' [s, s] (those
 samples), 't_step_from' ('supply_pressure' where located, else
@@ -47,18 +50,21 @@ import os
 from pathlib import Path
 
 import numpy as np
+from valve_sim.analysis.measure_windows import Cut, InputChanges
 from valve_sim.analysis.measures import step_measures, WINDOW
+from valve_sim.analysis.sample_window import last_at_or_before, TIME_TOLERANCE
 from valve_sim.analysis.signals import seconds
 from valve_sim.analysis.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
 from valve_sim.core.output_files import json_text, replacing, write_text
 
 
-def step_record(t_step, flow_before, direction, measures):
-    """JSON-ready record of one step and its StepMeasures."""
+def step_record(t_step, flow_before, direction, measures, flow_after=None):
+    """JSON-ready record of one step and its StepMeasures; flow_after: at its window's end."""
     return {
         't_step': t_step,
         'direction': direction,
         'flow_before': flow_before,
+        'flow_after': flow_after,
         **measures.as_dict(),
     }
 
@@ -73,10 +79,14 @@ class StepAnalysis:
 
     def _restart(self):
         self.detector = StepDetector(self.threshold, self.merge_time)
-        self.rows = deque()  # (t, p_s - p_t, x, p_t), PRE_STEP_SPAN before the oldest open step on
+        self.changes = InputChanges(self.merge_time)  # the other inputs' changes, events
+        # (t, p_s - p_t, x, p_t, q), PRE_STEP_SPAN before the oldest open step on
+        self.rows = deque()
         self.open_steps = []  # (t_step, flow_before, direction) whose window is not complete
         self.brackets = {}  # t_step: (last flow sample before it, first after) [s]
         self.flow_time = None  # [s] time of the flow sample of the last row
+        self.last_change = None  # the latest Cut: an open step's since
+        self.since = {}  # t_step: the last change before it (a Cut)
 
     def add(self, t, supply_pressure, main_valve, inlet_flow, flow_time=None, tank_pressure=None):
         """
@@ -90,23 +100,39 @@ class StepAnalysis:
         if self.rows and t <= self.rows[-1][0]:
             records = self.finish()  # time went back (a new run): close the open steps
         flow_time = t if flow_time is None else flow_time
-        step = self.detector.update(t, inlet_flow)
+        step, own = self.detector.update(t, inlet_flow), None
+        cuts = self.changes.update(t, tank_pressure)
         if step:
             self.open_steps.append(step)
             if self.flow_time is not None:
                 self.brackets[step[0]] = (self.flow_time, flow_time)
+            edge = min(step[0], self.brackets.get(step[0], step)[0])  # the old flow's last
+            own = Cut(edge, f'the inlet-flow step at {step[0]:.6f} s')
+            self.since[step[0]] = self.last_change
+            cuts.append(own)
         self.flow_time = flow_time
         known = tank_pressure is not None and tank_pressure == tank_pressure
         self.rows.append(
             (t, supply_pressure - tank_pressure if known else supply_pressure, main_valve,
-             tank_pressure if known else np.nan)
+             tank_pressure if known else np.nan, inlet_flow)
         )
+        for cut in cuts:  # a change ends the window of every step before it (not its own)
+            self.last_change = cut
+            for cut_step in [open_step for open_step in self.open_steps
+                             if not (open_step is step and cut is own)
+                             and open_step[0] <= cut.time + TIME_TOLERANCE]:
+                self.open_steps.remove(cut_step)
+                records.append(self._measure(cut_step, cut))
         complete = [step for step in self.open_steps if t >= step[0] + self.window]
         for step in complete:
             self.open_steps.remove(step)
             records.append(self._measure(step))
         self._trim()
         return records
+
+    def add_event(self, time, what):
+        """Note a fault or parameter change that acts from time [s] on (what: its name)."""
+        self.changes.add_event(time, what)
 
     def add_rows(self, rows):
         """
@@ -150,9 +176,9 @@ class StepAnalysis:
         while self.rows[0][0] < oldest - PRE_STEP_SPAN:
             self.rows.popleft()
 
-    def _measure(self, step):
+    def _measure(self, step, cut=None):
         t_step, flow_before, direction = step
-        t, p, x, tank = np.array(self.rows, dtype=float).T
+        t, p, x, tank, flow = np.array(self.rows, dtype=float).T
         bracket, timing = self.brackets.pop(t_step, None), {}
         if bracket and _coarser_than_rows(bracket, t):
             located = locate_step(t, p, bracket, direction)
@@ -162,10 +188,13 @@ class StepAnalysis:
                 't_step_from': 'supply_pressure' if located else 'last_row_before_new_flow',
                 't_step_uncertainty_s': located[1] if located else bracket[1] - bracket[0],
             }
-        measures = step_measures(t, p, x, t_step, direction, self.window)
+        since = self.since.pop(step[0], None)
+        measures = step_measures(t, p, x, t_step, direction, self.window, cut, since)
         measures.details.update(timing)
         measures.details.update(tank_details(t, tank, t_step))
-        return step_record(t_step, flow_before, direction, measures)
+        end = t_step + measures.details.get('window_s', 0.0)
+        return step_record(t_step, flow_before, direction, measures,
+                           float(flow[last_at_or_before(t, end)]))
 
 
 def tank_details(time, tank_pressure, t_step):

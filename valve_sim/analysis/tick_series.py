@@ -25,6 +25,7 @@ first tick (start_ns, the stamp of t = 0).
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.analysis.measure_windows import event_name
 from valve_sim.analysis.step_analysis import StepAnalysis
 from valve_sim.core.quantities import FLOW, LENGTH, PRESSURE, VELOCITY
 
@@ -82,15 +83,20 @@ class TickSeries:
             mask &= self.time <= end + 1e-12
         return mask
 
-    def steps(self, threshold=1e-6, merge_time=0.05):
+    def steps(self, threshold=1e-6, merge_time=0.05, events=()):
         """
         Return the step records of every inlet-flow step, times [s] from the first tick.
 
         The analyser's own StepAnalysis (analyser_node measures live with it), on
-        these rows; a step whose window runs past the end is measured on what there is.
+        these rows, the tank pressure included; events: (time [s], changes {name: value})
+        of the faults and parameters changed, each from its time on, which end a step's
+        window as any input change does (measure_windows). A step whose window runs past
+        the end is measured on what there is.
         """
         analysis, records = StepAnalysis(threshold, merge_time), []
+        for time, changes in events:
+            analysis.add_event(time, event_name(changes))
         for row in zip(self.time, self['supply_pressure'], self['main_valve'],
-                       self['inlet_flow']):
+                       self['inlet_flow'], self.time, self['tank_pressure']):
             records += analysis.add(*row)
         return records + analysis.finish()

@@ -164,13 +164,18 @@ case_value.bounds = f'each PERCENT in (-100, {MAX_CHANGE_PERCENT:g}]'
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
     target = parser.add_mutually_exclusive_group(required=True)
-    target.add_argument('--target-measures', metavar='FILE.json',
+    target.add_argument('--target-measures', metavar='FILE',
                         help='the six measures to fit: '
                         '{"T_1_ms": {"value": 6.7, "tolerance": 0.67}, ...} (JSON, '
-                        f'{TARGET_MEASURES.limits()})')
+                        f'{TARGET_MEASURES.limits()}), or those of a recorded step, the '
+                        "paper's tolerances: an analyse --json output or a bag (.mcap or a "
+                        'bag folder; --target-step)')
     target.add_argument('--bag', metavar='BAG',
                         help='a recorded step to fit: an .mcap file or a rosbag2 bag folder '
                         '(topics mapped as in analyse)')
+    parser.add_argument('--target-step', type=number('a step number', '', 1, 10**6, integer=True),
+                        default=1, metavar='N',
+                        help='with --target-measures from a recording: its step N (default 1)')
     parser.add_argument('--fit', required=True, metavar='NAMES',
                         help='comma-separated parameters to fit (ROS names, paper symbols or '
                         'preset_pressure)')
@@ -225,8 +230,14 @@ def _target(args, step_size, signal_map):
     from valve_sim.core.errors import CalibrationError
 
     if args.target_measures:
-        document = read_json(args.target_measures, TARGET_MEASURES)
+        path = Path(args.target_measures)
         try:
+            if path.is_dir() or path.suffix == '.mcap':  # a recording: analyse it
+                steps = analyse(read_recording(path, signal_map))
+                return MeasuresTarget.from_step(steps, args.target_step, step_size)
+            document = read_json(path, TARGET_MEASURES)
+            if isinstance(document, dict) and isinstance(document.get('steps'), list):
+                return MeasuresTarget.from_step(document['steps'], args.target_step, step_size)
             return MeasuresTarget.from_document(document, step_size)
         except CalibrationError as error:
             raise CalibrationError(f'{args.target_measures}: {error}') from None
@@ -326,10 +337,17 @@ def run(args):
         PilotFlowLimit,
         StudyRelieves,
     )
+    from valve_sim.analysis.calibration_verdict import judged, verdict_lines
     from valve_sim.commands.options import ctrl_c_stops
     from valve_sim.core.errors import CalibrationError
 
-    signal_map = signal_map_from(args, 'calibrate') if args.bag else None
+    recorded = args.bag or (args.target_measures and (
+        Path(args.target_measures).is_dir() or args.target_measures.endswith('.mcap')))
+    signal_map = None
+    if recorded:  # the signal options apply to the bag either option names
+        bag, args.bag = args.bag, args.bag or args.target_measures
+        signal_map = signal_map_from(args, 'calibrate')
+        args.bag = bag
     loaded = load_from_arguments(args)  # in the bag's namespace, if any
     params, settings = loaded.params, loaded.settings
     preset = args.preset_pressure or None
@@ -364,10 +382,12 @@ def run(args):
     search = FitSettings(args.starts, args.spread, args.seed, args.tolerance)
     with ctrl_c_stops() as should_stop:  # Ctrl-C ends the fit with its best result so far
         result = calibrate(problem, search, progress, should_stop)
+    verdict, freeing = judged(problem, result, progress)
     out = make_folder(Path(args.out))
     command = 'valve-sim calibrate ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
     write_text(out / 'calibrated.yaml', parameter_file_text(result, settings, command))
-    report = report_document(result, target, args.target_measures or args.bag, command)
+    report = report_document(result, target, args.target_measures or args.bag, command,
+                             verdict, freeing)
     write_text(out / 'report.json', json_text(report) + '\n')
     text = report_text(report)
     write_text(out / 'report.txt', text)
@@ -383,5 +403,9 @@ def run(args):
             '(see report.txt); wrote the best one anyway',
             file=sys.stderr,
         )
+        return 1
+    if not verdict['explains']:
+        for line in verdict_lines(report):
+            print(f'valve-sim calibrate: {line}', file=sys.stderr)
         return 1
     return 0

@@ -29,6 +29,7 @@ time axis; the result is a Recording of arrays, what the step analysis
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.analysis.measure_windows import SettingChanges
 from valve_sim.analysis.signals import (
     Extractor,
     FLUID_PRESSURE,
@@ -62,6 +63,7 @@ class Recording:
     inlet_flow_time: np.ndarray = None  # [s] time of each row's flow sample (None: the row's)
     tank_pressure: np.ndarray = None  # [Pa] gauge, NaN where the bag has none
     relief_flow: np.ndarray = None  # [m^3/s], NaN where the bag has none
+    events: list = None  # [(time [s], what)]: changes in valve_node's fault_status
 
     def valve_pressure(self):
         """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
@@ -91,10 +93,16 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED, decoder_factori
     optional = [role.name for role in ROLES if role.name not in required]
     joiner, rows = Joiner(required, optional), []
     wanted = {signal_map.topics[role] for role in (*required, *optional)}
-    found, problems = set(), []
+    # valve_node's fault_status beside its supply pressure: its changes end a step's window
+    status_topic = signal_map.topics['supply_pressure'].rsplit('/', 1)[0] + '/fault_status'
+    found, problems, settings, events = set(), [], SettingChanges(), []
     for file in bag_files(path):  # a file, or the files of a bag folder in order
         reader, extractors = BagReader(file), {}
-        for channel, schema, message in reader.messages(wanted):
+        for channel, schema, message in reader.messages(wanted | {status_topic}):
+            if channel.topic == status_topic:
+                events += fault_event(settings, decoder_for(file, channel, schema,
+                                                            decoder_factories), message.data)
+                continue
             if channel.id not in extractors:
                 decode = decoder_for(file, channel, schema, decoder_factories)
                 roles = signal_map.roles_of(channel.topic)
@@ -147,8 +155,21 @@ def read_recording(path, signal_map=None, required=BAG_REQUIRED, decoder_factori
         np.array([seconds(time_ns) for time_ns, _ in rows]),
         problem='; '.join(problems) or None,
         inlet_flow_time=np.array([seconds(time_ns) for time_ns in flow_times]),
+        events=events,
         **column,
     )
+
+
+def fault_event(settings, decode, data):
+    """Return [(time [s], what)] if a fault_status message changes settings, else []."""
+    try:
+        status = decode(data)
+    except Exception:  # noqa: B902 (a message that does not decode is no event)
+        return []
+    stamp = status.header.stamp
+    values = {pair.key: pair.value for part in status.status for pair in part.values}
+    event = settings.update(stamp.sec + stamp.nanosec * 1e-9, values)
+    return [event] if event else []
 
 
 def decoder_for(path, channel, schema, decoder_factories):

@@ -16,7 +16,8 @@
 analyser_node's measures publisher: every inlet-flow step measured, saved and published.
 
 StepMeasures joins the analysed signals (valve_sim.analysis.signals), finds and
-measures each step of the applied inlet flow (valve_sim.analysis.step_analysis),
+measures each step of the applied inlet flow (valve_sim.analysis.step_analysis; a
+change in valve_node's fault_status ends a step's window as any input change does),
 appends each record to the recording's .measures.json and publishes it on
 step_measures (MEASURES_QOS: reliable, transient local) as one DiagnosticArray
 (measures_message; measures_from_message reads one back). The status is named
@@ -29,6 +30,7 @@ import struct
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from valve_sim.analysis.measure_windows import SettingChanges
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
@@ -36,9 +38,11 @@ from valve_sim.core.errors import InputFileError
 from valve_sim.recording.cdr import read_message
 from valve_sim.recording.valve_topics import TOPIC_TYPES
 from valve_sim.ros import diagnostics
+from valve_sim.ros.fault_injection import FAULT_STATUS_TOPIC
 
 
 MEASURES_TASK = 'step measures'  # /diagnostics-style status '<node name>: step measures'
+DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
 MEASURES_QOS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
@@ -144,6 +148,9 @@ class StepMeasures:
         None for the others, or (logged) for a type it cannot read.
         """
         roles = self.signal_map.roles_of(topic)
+        if not roles and topic.rsplit('/', 1)[-1] == FAULT_STATUS_TOPIC \
+                and type_name == DIAGNOSTIC_ARRAY:
+            return SettingChanges()  # its events end a step's window (measure_windows)
         try:
             return Extractor(topic, type_name, roles, self.signal_map) if roles else None
         except InputFileError as error:
@@ -153,6 +160,14 @@ class StepMeasures:
     def add(self, recorded, data, received_ns):
         """Analyse a message of an analysed topic (a RecordedTopic), received at received_ns."""
         message = self._message(recorded, data)
+        if isinstance(recorded.extractor, SettingChanges):  # fault_status: an event?
+            stamp = message.header.stamp
+            event = recorded.extractor.update(
+                stamp.sec + stamp.nanosec * 1e-9,
+                {pair.key: pair.value for status in message.status for pair in status.values})
+            if event:
+                self.analysis.add_event(*event)
+            return
         for role, time_ns, value in recorded.extractor.samples(message, received_ns):
             self._measured(self.analysis.add_rows(self.joiner.add(role, time_ns, value)))
 

@@ -245,7 +245,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     record.series = tick_series(record.bag, start_ns=START_NS,
                                 ambient_pressure=scenario.ambient_pressure)
     check_complete(record.series, scenario, START_NS)
-    record.steps = record.series.steps()
+    record.steps = record.series.steps(events=[(event.time_ns / 1e9, event.changes)
+                                               for event in scenario.events])
     record.checks = evaluate(scenario.expectations, record.series,
                              scenario.supply_pressure_limits(), record.steps)
     return record

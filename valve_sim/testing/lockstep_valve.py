@@ -86,7 +86,7 @@ class LockstepValve:
                   **{name: ros_value(value) for name, value in start.items()}}
         self.processes = NodeProcesses(self.folder, {
             'valve_node': node_command('valve_node', parameters=values, ros_args=ros_args)})
-        self._rows, self._latest = {}, {}
+        self._rows, self._latest, self._events = {}, {}, []
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self._driver = None
@@ -158,7 +158,11 @@ class LockstepValve:
                             for name, value in {**(changes or {}), **named}.items())
         except (ParameterError, ProfileError, InputFileError) as error:
             raise ValueError(str(error)) from None
+        before = self._driver.get_parameters(list(resolved))
         self._driver.set_parameters(resolved)
+        changed = {name: value for name, value in resolved.items() if before[name] != value}
+        if changed:  # a change ends a step's window (docs/measures.md)
+            self._events.append((self.time + self.period, changed))
 
     def inject(self, fault, value=True):
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
@@ -185,7 +189,7 @@ class LockstepValve:
 
         at: the time [s] of one step; then that step's record, or LookupError.
         """
-        steps = self.series.steps()
+        steps = self.series.steps(events=self._events)
         if at is None:
             return steps
         near = [step for step in steps if abs(step['t_step'] - at) <= 1.5 * self.period]
