@@ -232,7 +232,7 @@ def run(args):
         )
     problem, protocol = problem_from(args)
     check_sizes(args)
-    out = make_folder(Path(args.out))
+    out = make_folder(Path(args.out), subfolders=('evaluations', 'params'))  # links not followed
     runs = args.population * args.generations * (problem.samples + 1)
     print(
         f"optimise: protocol {protocol['protocol']}, preset "

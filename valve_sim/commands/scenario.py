@@ -31,7 +31,7 @@ from pathlib import Path
 import time
 
 from valve_sim.commands.options import number
-from valve_sim.core.output_files import make_folder
+from valve_sim.core.output_files import make_folder, safe_name
 from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK, TICKS_PER_CLOCK
 
 
@@ -95,7 +95,7 @@ def run(args):
     from valve_sim.ros.scenario_runner import run_and_report
 
     stamp = time.strftime('%Y%m%d-%H%M%S')
-    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{scenario.name}_{stamp}'
+    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{safe_name(scenario.name)}_{stamp}'
     folder = make_folder(folder).resolve()
     if args.wait_topic:  # the user's nodes are in the environment's domain: join them
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')
