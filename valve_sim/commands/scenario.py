@@ -26,13 +26,30 @@ if every expectation holds. `valve-sim scenario check FILE.yaml` reads and check
 without running it. The file format: docs/scenarios.md.
 """
 
+import argparse
 import os
 from pathlib import Path
+import re
 import time
 
 from valve_sim.commands.options import number
 from valve_sim.core.output_files import make_folder, safe_name
 from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK, TICKS_PER_CLOCK
+
+
+def topic_name(text):
+    """argparse type: a ROS topic name, checked before any node starts (rcl's rules)."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.expand_topic_name import expand_topic_name
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    try:
+        validate_full_topic_name(expand_topic_name(text, 'scenario_driver', '/'))
+    except (ValueError, NameValidationException) as error:  # rcl's, then rclpy's
+        reason = re.sub(r'^.*(?:is invalid|Invalid topic name): |, at \S+$', '',
+                        str(error).splitlines()[0]).rstrip(':')
+        raise argparse.ArgumentTypeError(f'{text!r} is not a ROS topic name: {reason}') from None
+    return text
 
 
 def progress(text):
@@ -53,6 +70,7 @@ def add_arguments(parser):
                             help='at most R times real time (1: real time, 0.5: half speed; '
                             'default: as fast as the nodes go)')
     run_parser.add_argument('--wait-topic', action='append', default=[], metavar='TOPIC',
+                            type=topic_name,
                             help='a topic another use_sim_time node (your controller) publishes '
                             'once per tick: each tick waits for its message (repeatable)')
     run_parser.add_argument('--ticks-per-clock', metavar='N',
