@@ -45,6 +45,7 @@ from pathlib import Path
 import re
 import stat
 import tempfile
+import time
 import xml.etree.ElementTree as ElementTree
 
 from valve_sim.core.errors import output_error, OutputFileError
@@ -59,6 +60,7 @@ KINDS = ((stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'),
 NOT_XML = re.compile('[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]')
 NOT_IN_NAME = re.compile(r'[^\w.+-]+')
 NAME_LENGTH = 100  # [characters] of a name made from a file's text
+FIFO_WAIT = 5.0  # [s] for a FIFO the user named to have a reader
 
 
 def _umask():
@@ -140,13 +142,18 @@ def replacing(path, mode='w', explicit=False, **options):
 
 
 def _write_in_place(path, data):
-    """Write data to the device or FIFO at path; a FIFO with no reader is refused at once."""
-    try:
-        descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError as error:
-        if error.errno == errno.ENXIO:
-            raise OutputFileError(f'{path} is a FIFO with no reader: not written') from None
-        raise output_error(error, path) from None
+    """Write data to the device or FIFO at path; a FIFO with no reader by FIFO_WAIT is refused."""
+    deadline = time.monotonic() + FIFO_WAIT
+    while True:
+        try:
+            descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+            break
+        except OSError as error:
+            if error.errno != errno.ENXIO:
+                raise output_error(error, path) from None
+            if time.monotonic() > deadline:
+                raise OutputFileError(f'{path} is a FIFO with no reader: not written') from None
+            time.sleep(0.02)
     try:
         os.set_blocking(descriptor, True)
         view = memoryview(data)
