@@ -344,10 +344,11 @@ def attack_outputs(report, folder):
                'through the FIFO')
     work = folder / 'work'
     work.mkdir()
-    scenario.write_text(scenario.read_text().replace('bell\\a esc\\e[31m', '../../x\\0y'))
+    escape = '../' * 2 + 'x\\0y'  # out of the working folder, a NUL
+    scenario.write_text(scenario.read_text().replace('bell\\a esc\\e[31m', escape))
     code, line, seconds = valve_sim('scenario', 'run', scenario, cwd=work, timeout=300)
     made = [path.name for path in work.iterdir()]
-    report.add('7 outputs', 'scenario: ../../x<NUL>y with no --out',
+    report.add('7 outputs', 'scenario: a name up two folders, a NUL, no --out',
                code in (0, 1) and len(made) == 1 and not (folder / 'x').exists(),
                f'{seconds:.1f} s: wrote {made}')
     elsewhere = folder / 'elsewhere'

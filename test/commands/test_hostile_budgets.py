@@ -119,6 +119,7 @@ def test_one_divergence_after_another_logs_at_most_once_a_second():
         lines = []
 
         class Logger:
+
             def error(self, text):
                 lines.append(text)
 

@@ -38,18 +38,19 @@ import xml.etree.ElementTree as ElementTree
 import pytest
 from valve_sim.analysis.scenario_report import junit_document, write_junit
 from valve_sim.commands.cli import main
-from valve_sim.core.errors import OutputFileError
 from valve_sim.core import output_files
+from valve_sim.core.errors import OutputFileError
 from valve_sim.ros.node_processes import NodeProcesses
 
 
 pytestmark = pytest.mark.timeout(120)
 
 SCENARIO = SimpleNamespace(name='s', path=Path('s.yaml'))
+UP = '../' * 3  # out of the working folder and two above
 
 
 def fifo_behind_link(folder):
-    """A FIFO in folder and a link to it: (fifo, link)."""
+    """Make a FIFO in folder and a link to it: (fifo, link)."""
     fifo, link = folder / 'pipe', folder / 'link.xml'
     os.mkfifo(fifo)
     link.symlink_to(fifo)
@@ -124,6 +125,7 @@ def test_fmu_out_through_a_link_to_a_fifo_is_one_line_and_the_fifo_kept(
     built.write_bytes(b'PK fmu')
 
     class Builder:  # the FMU's content does not matter here, only where it goes
+
         @staticmethod
         def build_FMU(*args, **options):
             return built
@@ -173,14 +175,14 @@ def test_optimise_does_not_follow_links_at_params_and_evaluations(tmp_path, monk
 
 
 @pytest.mark.parametrize('name, expected', [
-    ('../../../tmp/x/y', '_.._.._tmp_x_y'), ('a\0b', 'a_b'), ('..', 'unnamed'),
+    (UP + 'tmp/x/y', '_.._.._tmp_x_y'), ('a\0b', 'a_b'), ('..', 'unnamed'),
     ('step\x1b[31m', 'step_31m'), ('Ventilprüfung 2', 'Ventilprüfung_2'),
 ])
 def test_names_from_files_become_one_safe_path_component(name, expected):
     assert output_files.safe_name(name) == expected
 
 
-@pytest.mark.parametrize('name', ['../../../tmp/x/y', 'nul\\0byte'])  # YAML: a NUL
+@pytest.mark.parametrize('name', [UP + 'tmp/x/y', 'nul\\0byte'])  # YAML: a NUL
 def test_a_scenario_name_names_a_folder_inside_the_working_folder(
     tmp_path, monkeypatch, capsys, name
 ):

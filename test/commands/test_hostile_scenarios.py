@@ -32,7 +32,8 @@ from valve_sim.analysis.tick_series import TickSeries
 from valve_sim.core.errors import InputFileError
 
 
-BASE = 'duration: 0.8\ninputs:\n  inlet_flow: {initial: 5 L/min, changes: [%s]}\n%sexpect:\n  - %s\n'
+BASE = ('duration: 0.8\ninputs:\n  inlet_flow: {initial: 5 L/min, changes: [%s]}\n'
+        '%sexpect:\n  - %s\n')
 REFUSED = [  # (changes, events, expectation, the key named)
     ('', '', 'no_alarm: {from: 0.8, to: 0.3}', 'inverted'),
     ('', '', 'no_alarm: {from: 5, to: 10}', 'no_alarm.from'),

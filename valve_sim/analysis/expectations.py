@@ -150,7 +150,7 @@ def _bounds_text(low, high, dimension):
 
 
 def _no_samples(label, dimension, limit, start, end, series):
-    """The failed Check of a window (start, end) [s] that holds no sample of series."""
+    """Return the failed Check of a window (start, end) [s] without a sample of series."""
     held = (f'the run has samples from {series.time[0]:.6g} to {series.time[-1]:.6g} s'
             if len(series) else 'the run has no samples')
     return _check(label, False, None, dimension, limit,
@@ -290,8 +290,8 @@ class Alarm:
         if problem:
             raise ProfileError(f'{self.key}.after', problem)
         if self.within < 0:
-            raise ProfileError(f'{self.key}.within',
-                               f'must be a time >= 0 s after {self.after:g} s, got {self.within:g}')
+            raise ProfileError(f'{self.key}.within', f'must be a time >= 0 s after '
+                               f'{self.after:g} s, got {self.within:g}')
 
     def evaluate(self, series, context):
         label = f'overpressure alarm within {self.within:g} s after {self.after:g} s'

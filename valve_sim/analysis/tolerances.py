@@ -95,7 +95,7 @@ class Distribution:
 
 
 def _half_width(number, text):
-    """The X of ±X: a size, never negative (±-1% is no tolerance); ParameterError."""
+    """Return the X of ±X: a size, never negative (±-1% is no tolerance); ParameterError."""
     if float(number) < 0.0:
         raise ParameterError(f'variation {text!r}: the X of ±X must be >= 0, got {number}')
     return float(number)

@@ -29,7 +29,6 @@ without running it. The file format: docs/scenarios.md.
 import argparse
 import os
 from pathlib import Path
-import re
 import time
 
 from valve_sim.commands.options import number
@@ -38,17 +37,12 @@ from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK, TICKS_PER_CLOCK
 
 
 def topic_name(text):
-    """argparse type: a ROS topic name, checked before any node starts (rcl's rules)."""
-    from rclpy.exceptions import NameValidationException
-    from rclpy.expand_topic_name import expand_topic_name
-    from rclpy.validate_full_topic_name import validate_full_topic_name
+    """Check a --wait-topic before any node starts (argparse type): rcl's rules."""
+    from valve_sim.ros.topic_names import topic_problem
 
-    try:
-        validate_full_topic_name(expand_topic_name(text, 'scenario_driver', '/'))
-    except (ValueError, NameValidationException) as error:  # rcl's, then rclpy's
-        reason = re.sub(r'^.*(?:is invalid|Invalid topic name): |, at \S+$', '',
-                        str(error).splitlines()[0]).rstrip(':')
-        raise argparse.ArgumentTypeError(f'{text!r} is not a ROS topic name: {reason}') from None
+    problem = topic_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a ROS topic name: {problem}')
     return text
 
 
@@ -113,7 +107,8 @@ def run(args):
     from valve_sim.ros.scenario_runner import run_and_report
 
     stamp = time.strftime('%Y%m%d-%H%M%S')
-    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{safe_name(scenario.name)}_{stamp}'
+    name = safe_name(scenario.name)  # one path component, whatever the file says
+    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{name}_{stamp}'
     folder = make_folder(folder).resolve()
     if args.wait_topic:  # the user's nodes are in the environment's domain: join them
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')

@@ -93,8 +93,8 @@ class Profile:
         flat_times, flat_values = times.ravel()[order], values.ravel()
         edges = np.searchsorted(flat_times, [change.start for change in self.changes], 'left')
         base = self.initial
-        for number, (change, following) in enumerate(zip(self.changes,
-                                                          self.changes[1:] + (None,))):
+        followers = self.changes[1:] + (None,)
+        for number, (change, following) in enumerate(zip(self.changes, followers)):
             end = math.inf if following is None else following.start
             last = edges[number + 1] if following is not None else len(flat_times)
             inside = order[edges[number]:last]

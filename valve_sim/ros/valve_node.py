@@ -331,8 +331,9 @@ class ReliefValveNode(Node):
         Log a failure the model held its last good state after; follow a roll-back through.
 
         Logged at most once a second (a flapping input can fail every tick), with how
-        many were not; every failure is counted in the diagnostics. After a roll-back the node's other values of the undone change (settings, sensor
-        settings, the declared parameters) return too, and the inputs' limits follow.
+        many were not; every failure is counted in the diagnostics. After a roll-back
+        the node's other values of the undone change (settings, sensor settings, the
+        declared parameters) return too, and the inputs' limits follow.
         """
         error = outcome.error
         log = self._failure_logs.due(time.monotonic_ns())
