@@ -209,3 +209,14 @@ def test_junit_is_well_formed_whatever_the_text():
     suite = ElementTree.fromstring(document).find('testsuite')
     assert suite.get('name') == 'bell\\x07 esc\\x1b[31m nul\\x00'
     assert suite.find('.//error').get('message') == 'diverged \\x01\\x02 \\ufffe here'
+
+
+def test_a_recording_named_as_a_fifo_is_refused_in_one_line(tmp_path):
+    """simulate --mcap FIFO: the MCAP writer seeks; it hung, or crashed with 'Illegal seek'."""
+    from valve_sim.recording.bag import BagWriter
+
+    fifo = tmp_path / 'live.mcap'
+    os.mkfifo(fifo)
+    with pytest.raises(OutputFileError, match='is a FIFO, not a regular file'):
+        BagWriter(fifo)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)

@@ -25,7 +25,7 @@ A path that exists must be a regular file: a device or a FIFO the user named is
 written to directly (/dev/stdout, a pipe with a reader), never replaced; one inside an
 output folder is refused (target()). create_new(), fresh_file() and append_to() open
 files that grow while they are written (a recording, a node's log, a results file)
-without following a link. json_text() is strict JSON: a number that is not finite is
+without following a link; named_file() a recording the user named (a regular file). json_text() is strict JSON: a number that is not finite is
 written as null, never as NaN or Infinity; xml_bytes() is well-formed XML whatever the
 text (characters XML cannot hold replaced). safe_name() makes a name read from a file
 (a scenario's) one path component. A file that cannot be written is an
@@ -96,8 +96,11 @@ def target(path, explicit=False):
         raise IsADirectoryError(21, 'is a directory, not a file', str(path))
     if explicit and (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
         return path, True
-    kind = next(name for test, name in KINDS if test(mode))
-    raise OutputFileError(f'{path} is {kind}, not a regular file: not written there')
+    raise OutputFileError(f'{path} is {_kind(mode)}, not a regular file: not written there')
+
+
+def _kind(mode):
+    return next(name for test, name in KINDS if test(mode))
 
 
 @contextmanager
@@ -141,21 +144,26 @@ def replacing(path, mode='w', explicit=False, **options):
         raise
 
 
-def _write_in_place(path, data):
-    """Write data to the device or FIFO at path; a FIFO with no reader by FIFO_WAIT is refused."""
+def _open_in_place(path):
+    """Open the device or FIFO at path to write; a FIFO with no reader by FIFO_WAIT is refused."""
     deadline = time.monotonic() + FIFO_WAIT
     while True:
         try:
             descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-            break
+            os.set_blocking(descriptor, True)
+            return descriptor
         except OSError as error:
             if error.errno != errno.ENXIO:
                 raise output_error(error, path) from None
             if time.monotonic() > deadline:
                 raise OutputFileError(f'{path} is a FIFO with no reader: not written') from None
             time.sleep(0.02)
+
+
+def _write_in_place(path, data):
+    """Write data to the device or FIFO at path (_open_in_place())."""
+    descriptor = _open_in_place(path)
     try:
-        os.set_blocking(descriptor, True)
         view = memoryview(data)
         while view:
             view = view[os.write(descriptor, view):]
@@ -169,6 +177,23 @@ def write_text(path, text, explicit=False):
     """Replace path with text (replacing())."""
     with replacing(path, 'w', explicit) as stream:
         stream.write(text)
+
+
+def named_file(path):
+    """
+    Open a file the user named to record into, in binary; its writer seeks in it.
+
+    A link is followed; a device, FIFO, folder or socket is refused in one line (a
+    recording cannot seek in a pipe). An OutputFileError if it cannot be opened.
+    """
+    written, in_place = target(path, explicit=True)
+    if in_place:
+        raise OutputFileError(f'{path} is {_kind(os.stat(path).st_mode)}, not a regular file: '
+                              'a recording needs a file it can seek in')
+    try:
+        return open(written, 'wb')
+    except OSError as error:
+        raise output_error(error, path) from None
 
 
 def create_new(path):
