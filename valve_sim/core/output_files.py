@@ -114,6 +114,8 @@ def replacing(path, mode='w', explicit=False, **options):
     written an OutputFileError.
     """
     written, in_place = target(path, explicit)
+    if 'b' not in mode:  # text from anywhere (a path's undecodable bytes) written, escaped
+        options.setdefault('errors', 'backslashreplace')
     if in_place:
         buffer = io.BytesIO()
         stream = buffer if 'b' in mode else io.TextIOWrapper(buffer, **options)
