@@ -15,7 +15,7 @@
 """
 Attack valve_node and the tools with every class of hostile input (issue 25); report.
 
-    python bench/attack.py [--json out/attack.json]      (bench/attack.sh runs it)
+    python bench/attack.py [--json out/attack.json] [--only STEP]   (bench/attack.sh runs it)
 
 Starts valve_node (wall clock, and one on /clock) and applies each class:
   1 files      every hostile file of test/hostile_inputs.py set live as fault_schedule,
@@ -490,6 +490,8 @@ def measure(args):
         for step, module, error in check_imports():
             report.add('imports', f'{step}: {module}', False, error[:200])
         for name, step in steps.items():
+            if args.only and name not in args.only:
+                continue
             (folder / name).mkdir()
             try:
                 step(folder / name)
@@ -502,6 +504,8 @@ def measure(args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--json', type=Path, default=REPO / 'out' / 'attack.json')
+    parser.add_argument('--only', action='append', choices=tuple(CLASS_MODULES),
+                        help='run only this attack step (repeatable; default: all)')
     parser.add_argument('--check-imports', action='store_true',
                         help="only import each class's suite modules; exit 1 naming any that fail")
     args = parser.parse_args()
