@@ -212,7 +212,7 @@ def test_junit_is_well_formed_whatever_the_text():
 
 
 def test_a_recording_named_as_a_fifo_is_refused_in_one_line(tmp_path):
-    """simulate --mcap FIFO: the MCAP writer seeks; it hung, or crashed with 'Illegal seek'."""
+    """A FIFO as `simulate --mcap`: the MCAP writer seeks (it hung, or died: Illegal seek)."""
     from valve_sim.recording.bag import BagWriter
 
     fifo = tmp_path / 'live.mcap'

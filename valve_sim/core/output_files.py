@@ -25,9 +25,10 @@ A path that exists must be a regular file: a device or a FIFO the user named is
 written to directly (/dev/stdout, a pipe with a reader), never replaced; one inside an
 output folder is refused (target()). create_new(), fresh_file() and append_to() open
 files that grow while they are written (a recording, a node's log, a results file)
-without following a link; named_file() a recording the user named (a regular file). json_text() is strict JSON: a number that is not finite is
-written as null, never as NaN or Infinity; xml_bytes() is well-formed XML whatever the
-text (characters XML cannot hold replaced). safe_name() makes a name read from a file
+without following a link; named_file() a recording the user named (a regular file).
+json_text() is strict JSON: a number that is not finite is written as null, never as
+NaN or Infinity; xml_bytes() is well-formed XML whatever the text (characters XML
+cannot hold written as escapes). safe_name() makes a name read from a file
 (a scenario's) one path component. A file that cannot be written is an
 OutputFileError naming the path the user knows (a user's error, core.errors), raised
 here where the file is opened. make_folder() creates an output folder and its
