@@ -15,7 +15,7 @@
 """
 Attack valve_node and the tools with every class of hostile input (issue 25); report.
 
-    python bench/attack.py [--json out/attack.json]      (bench/attack.sh runs it)
+    python bench/attack.py [--json out/attack.json] [--only STEP]   (bench/attack.sh runs it)
 
 Starts valve_node (wall clock, and one on /clock) and applies each class:
   1 files      every hostile file of test/hostile_inputs.py set live as fault_schedule,
@@ -26,6 +26,13 @@ Starts valve_node (wall clock, and one on /clock) and applies each class:
   4 wire       a resolution of 1e-320, a stuck sensor beyond its range, inf samples
   5 recordings a bit flip in a chunk length, a sparse hole, a full disk, a rogue type
   6 options    meaningless numbers, huge --samples and --workers, --plot DIR, a link
+  7 outputs    (issue 43) --junit and fmu --out through links to FIFOs, node logs and
+               optimise's subfolders planted as links, hostile scenario names
+  8 checks     windows and bounds outside the run, a window without samples, a scenario
+               of 25,000 changes over 3,600 s checked in time linear in the file
+  9 budgets    a 50 MB results line under ulimit -v, NaN, ±-1%, bad wait topics, a
+               missing extra, a tank pressure flipping every tick (valve_node's log)
+The suite's modules each class uses must import (--check-imports, a test runs it).
 Each attack reports whether everything survived it (the node alive and publishing,
 its largest gap between published stamps; a command's one-line refusal and its time)
 and the table goes to stdout and --json. Exit code 0 only if everything survived.
@@ -36,6 +43,7 @@ import json
 import os
 from pathlib import Path
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -44,7 +52,21 @@ import time
 from common import isolated_environment, REPO, write_figures
 
 
-sys.path.insert(0, str(REPO / 'test'))  # the suite's probe and hostile inputs
+# The suite's probe and hostile inputs, and the test modules the classes take their cases from.
+TEST_FOLDERS = ('test', 'test/ros', 'test/commands', 'test/recording')
+sys.path[:0] = [str(REPO / folder) for folder in TEST_FOLDERS]
+CLASS_MODULES = {  # attack step: the suite's modules it imports
+    'live': ('test_hostile_node', 'hostile_inputs', 'valve_harness'),
+    'readers': ('hostile_inputs',),
+    'sim': ('test_hostile_node', 'valve_harness'),
+    'wire': ('hostile_inputs',),
+    'recordings': ('hostile_inputs', 'test_hostile_options', 'test_recovery'),
+    'rogue_type': ('test_analyser',),
+    'options': ('test_hostile_options',),
+    'outputs': (),
+    'checks': ('test_hostile_scenarios',),
+    'budgets': ('valve_harness',),
+}
 
 NS_PER_S = 1_000_000_000
 
@@ -286,6 +308,165 @@ def attack_options(report, folder):
                code == 0 and victim.read_text() == 'precious', 'the link replaced, not followed')
 
 
+def attack_outputs(report, folder):
+    """Class 7: outputs only where the user said, only into regular files."""
+    import xml.etree.ElementTree as ElementTree
+
+    fifo, victim = folder / 'pipe', folder / 'victim.txt'
+    os.mkfifo(fifo)
+    victim.write_text('precious')
+    (folder / 'valve.fmu').symlink_to(fifo)
+    code, line, seconds = valve_sim('fmu', '--out', folder / 'valve.fmu')
+    report.add('7 outputs', 'fmu --out LINK to a FIFO with no reader',
+               code == 1 and 'no reader' in line and stat.S_ISFIFO(os.stat(fifo).st_mode),
+               f'{seconds:.2f} s: {line[-60:]}')
+    out = folder / 'run'
+    out.mkdir()
+    for name in ('valve_node.log', 'analyser_node.log', 'report.txt'):
+        (out / name).symlink_to(victim)
+    scenario = folder / 'named.yaml'
+    scenario.write_text('scenario: "bell\\a esc\\e[31m"\nduration: 0.5\ninputs: {inlet_flow: '
+                        '{initial: 5 L/min, changes: [{at: 0.2, step: 20 L/min}]}}\n'
+                        'expect: [{no_alarm: {}}]\n')
+    reader = subprocess.Popen(['cat', str(fifo)], stdout=subprocess.PIPE)
+    code, line, seconds = valve_sim('scenario', 'run', scenario, '--out', out,
+                                    '--junit', folder / 'valve.fmu', timeout=300)
+    junit = reader.communicate(timeout=60)[0]
+    try:
+        ElementTree.fromstring(junit)
+        formed = True
+    except ElementTree.ParseError:
+        formed = False
+    report.add('7 outputs', 'scenario run: node logs planted as links, --junit to a FIFO',
+               code in (0, 1) and victim.read_text() == 'precious' and formed
+               and stat.S_ISFIFO(os.stat(fifo).st_mode),
+               f'{seconds:.1f} s: victim kept, JUnit {"well-formed" if formed else "BROKEN"} '
+               'through the FIFO')
+    work = folder / 'work'
+    work.mkdir()
+    escape = '../' * 2 + 'x\\0y'  # out of the working folder, a NUL
+    scenario.write_text(scenario.read_text().replace('bell\\a esc\\e[31m', escape))
+    code, line, seconds = valve_sim('scenario', 'run', scenario, cwd=work, timeout=300)
+    made = [path.name for path in work.iterdir()]
+    report.add('7 outputs', 'scenario: a name up two folders, a NUL, no --out',
+               code in (0, 1) and len(made) == 1 and not (folder / 'x').exists(),
+               f'{seconds:.1f} s: wrote {made}')
+    elsewhere = folder / 'elsewhere'
+    for name in ('params', 'evaluations'):
+        (elsewhere / name).mkdir(parents=True)
+        (folder / 'optimise' / name).parent.mkdir(exist_ok=True)
+        (folder / 'optimise' / name).symlink_to(elsewhere / name)
+    code, line, seconds = valve_sim(
+        'optimise', '--design', 'd_c=±5%', '--minimise', 'P_1_percent', '--tolerance',
+        'd_c=±5um', '--out', folder / 'optimise', '--population', '4', '--generations', '1',
+        '--samples', '2', '--confirm-samples', '2', '--workers', '1', timeout=900)
+    strays = [path.name for path in elsewhere.rglob('*') if path.is_file()]
+    report.add('7 outputs', 'optimise with DIR/params and DIR/evaluations as links',
+               code in (0, 1) and not strays, f'{seconds:.1f} s: outside --out: {strays}')
+
+
+def attack_checks(report, folder):
+    """Class 8: every window and bound within the run; check time linear in the file."""
+    from test_hostile_scenarios import BASE, REFUSED
+
+    for changes, events, expectation, key in REFUSED:
+        path = folder / f'check_{len(os.listdir(folder))}.yaml'
+        path.write_text(BASE % (changes, events, expectation))
+        refusal(report, '8 checks', f'scenario check: {expectation or changes or events}'[:44],
+                'scenario', 'check', path, also=key.split('.')[-1])
+    seconds = {}
+    for changes in (2_500, 25_000):
+        path = folder / f'changes_{changes}.yaml'
+        duration = 3600 * changes // 25_000
+        path.write_text(
+            f'duration: {duration}\ninputs:\n  inlet_flow:\n    initial: 5 L/min\n    changes:\n'
+            + ''.join(f'      - {{at: {(k + 0.5) * duration / changes:.6f}, step: '
+                      f'{5 + k % 10} L/min}}\n' for k in range(changes))
+            + 'expect: [{no_alarm: {}}]\n')
+        code, line, seconds[changes] = valve_sim('scenario', 'check', path, timeout=600)
+    ratio = seconds[25_000] / seconds[2_500]
+    report.add('8 checks', 'scenario check: 25,000 changes over 3,600 s', ratio < 30,
+               f'{seconds[25_000]:.1f} s, {ratio:.1f}x the time of a tenth the file')
+
+
+def attack_budgets(report, context, folder):
+    """Class 9: a 50 MB line, NaN, ±-1%, bad wait topics, a missing extra, a flapping tank."""
+    import resource
+
+    from sensor_msgs.msg import FluidPressure
+    from valve_harness import running_valve
+
+    evaluations = folder / 'opt' / 'evaluations'
+    evaluations.mkdir(parents=True)
+    (evaluations / 'generation_001.jsonl').write_text('{"x": "' + 'x' * 50_000_000 + '"}\n')
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_AS, (6_000_000 * 1024,) * 2)
+    started = time.monotonic()
+    result = subprocess.run(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'optimise', '--design', 'd_c=±5%',
+         '--minimise', 'P_1_percent', '--tolerance', 'd_c=±5um', '--out', str(folder / 'opt'),
+         '--resume', '--population', '4', '--generations', '1', '--samples', '2',
+         '--workers', '1'], capture_output=True, text=True, timeout=900, cwd=REPO,
+        preexec_fn=limited)
+    line = (result.stderr.strip().splitlines() or [''])[-1]
+    report.add('9 budgets', 'optimise --resume: a 50 MB line, ulimit -v 6 GB',
+               result.returncode in (0, 1) and 'Traceback' not in result.stderr
+               and 'MemoryError' not in result.stderr,
+               f'{time.monotonic() - started:.1f} s: {line[-60:]}')
+    refusal(report, '9 budgets', 'simulate --set k_p=nan', 'simulate', '--set', 'k_p=nan',
+            also='got nan')
+    refusal(report, '9 budgets', "optimise --tolerance 'd_c=±-1%'", 'optimise', '--design',
+            'd_c=±5%', '--minimise', 'P_1_percent', '--tolerance', 'd_c=±-1%', '--out',
+            folder / 'neg', also='>= 0')
+    for topic in ('bad topic!!', ''):
+        refusal(report, '9 budgets', f'scenario run --wait-topic {topic!r}', 'scenario', 'run',
+                REPO / 'scenarios/paper_step.yaml', '--wait-topic', topic, '--out',
+                folder / 'wait', also='not a ROS topic name', within=15)
+    blocked = ('import sys; sys.modules["pythonfmu"] = None; '
+               'from valve_sim.commands.cli import main; sys.exit(main(sys.argv[1:]))')
+    result = subprocess.run([sys.executable, '-c', blocked, 'fmu', '--out', str(folder / 'v.fmu')],
+                            capture_output=True, text=True, timeout=120, cwd=REPO)
+    report.add('9 budgets', 'valve-sim fmu without the fmu extra',
+               result.returncode == 1 and "'fmu' extra" in result.stderr
+               and 'Traceback' not in result.stderr, result.stderr.strip()[-70:])
+    log = folder / 'valve_node_tank.log'
+    with running_valve(context, log, namespace='/attack_tank') as (process, probe):
+        node = rclpy_node(context, 'attack_tank_publisher', '/attack_tank')
+        publisher = node.create_publisher(FluidPressure, 'tank_pressure', 100)
+        ambient, flips, deadline = 101_325.0, 0, time.monotonic() + 5.0
+        while time.monotonic() < deadline:
+            publisher.publish(FluidPressure(fluid_pressure=ambient + 30e6 * (flips % 2)))
+            flips += 1
+            time.sleep(0.002)
+        node.destroy_node()
+        alive = process.poll() is None
+    errors = [text for text in log.read_text(errors='replace').splitlines() if 'ERROR' in text]
+    report.add('9 budgets', 'tank pressure flipping 0 / 30 MPa for 5 s',
+               alive and len(errors) <= 20,
+               f'{flips} flips: {len(errors)} ERROR lines, {log.stat().st_size} bytes of log')
+
+
+def rclpy_node(context, name, namespace):
+    import rclpy
+
+    return rclpy.create_node(name, namespace=namespace, context=context)
+
+
+def check_imports():
+    """Import every suite module each class uses; return the failures [(step, module, error)]."""
+    import importlib
+
+    failures = []
+    for step, modules in CLASS_MODULES.items():
+        for module in modules:
+            try:
+                importlib.import_module(module)
+            except Exception as error:  # noqa: B902  (any failure to import is the finding)
+                failures.append((step, module, f'{type(error).__name__}: {error}'))
+    return failures
+
+
 def measure(args):
     import rclpy
 
@@ -302,8 +483,15 @@ def measure(args):
             'recordings': lambda path: attack_recordings(report, path),
             'rogue_type': lambda path: attack_rogue_type(report, context, path),
             'options': lambda path: attack_options(report, path),
+            'outputs': lambda path: attack_outputs(report, path),
+            'checks': lambda path: attack_checks(report, path),
+            'budgets': lambda path: attack_budgets(report, context, path),
         }
+        for step, module, error in check_imports():
+            report.add('imports', f'{step}: {module}', False, error[:200])
         for name, step in steps.items():
+            if args.only and name not in args.only:
+                continue
             (folder / name).mkdir()
             try:
                 step(folder / name)
@@ -316,7 +504,16 @@ def measure(args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--json', type=Path, default=REPO / 'out' / 'attack.json')
+    parser.add_argument('--only', action='append', choices=tuple(CLASS_MODULES),
+                        help='run only this attack step (repeatable; default: all)')
+    parser.add_argument('--check-imports', action='store_true',
+                        help="only import each class's suite modules; exit 1 naming any that fail")
     args = parser.parse_args()
+    if args.check_imports:
+        failures = check_imports()
+        for step, module, error in failures:
+            print(f'{step}: {module}: {error}', file=sys.stderr)
+        return 1 if failures else 0
     isolated_environment()
     figures, report = measure(args)
     write_figures(figures, report.table(figures), args.json)

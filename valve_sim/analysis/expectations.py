@@ -28,6 +28,9 @@ Times [s] count from the first tick; signals are valve_sim.analysis.tick_series.
 analyser's own step analysis finds. Each expectation gives one Check per limit: what
 was measured, the limit, and whether it holds. The alarm is valve_node's overpressure
 alarm (valve_sim.core.faults.at_supply_limit), judged on the recorded supply_pressure.
+check_times() refuses any time or window outside the run (0 .. its duration), inverted,
+or negative, before the run; a check whose window holds no sample fails with that
+reason, in every kind, never passes.
 """
 
 from dataclasses import dataclass
@@ -146,6 +149,39 @@ def _bounds_text(low, high, dimension):
     return f'{_text(low, dimension)} .. {_text(high, dimension)}'
 
 
+def _no_samples(label, dimension, limit, start, end, series):
+    """Return the failed Check of a window (start, end) [s] without a sample of series."""
+    held = (f'the run has samples from {series.time[0]:.6g} to {series.time[-1]:.6g} s'
+            if len(series) else 'the run has no samples')
+    return _check(label, False, None, dimension, limit,
+                  f'no samples from {start or 0:g} s to '
+                  f'{"the end" if end is None else f"{end:g} s"} ({held})')
+
+
+def _time_problem(value, duration, what):
+    """Why a time [s] (None: not given) lies outside the run 0 .. duration, or None."""
+    if value is None or -NEAR <= value <= duration + NEAR:
+        return None
+    where = 'before the start' if value < 0 else 'after the end'
+    return f'{what} {value:g} s is {where} of the run (0 .. {duration:g} s)'
+
+
+def _check_window(start, end, duration, key):
+    """Refuse a window (from, to) [s] outside the run or inverted; ProfileError at key."""
+    for name, value in (('from', start), ('to', end)):
+        problem = _time_problem(value, duration, name)
+        if problem:
+            raise ProfileError(f'{key}.{name}', problem)
+    if start is not None and end is not None and start > end:
+        raise ProfileError(key, f'the window is inverted: from {start:g} s is after to {end:g} s')
+
+
+def check_times(expectations, duration):
+    """Refuse any expectation's time or window that is outside a run of duration [s]."""
+    for expectation in expectations:
+        expectation.check_times(duration)
+
+
 def _window_text(start, end):
     if start is None and end is None:
         return 'the whole run'
@@ -157,6 +193,7 @@ class Measures:
 
     def __init__(self, document, key):
         _keys(document, key, (), ('at', 'step') + MEASURE_NAMES)
+        self.key = key
         if ('at' in document) == ('step' in document):
             raise ProfileError(key, "needs either 'at' (the step's time [s]) or 'step' (its "
                                'number, from 1)')
@@ -171,6 +208,11 @@ class Measures:
         if not self.limits:
             raise ProfileError(key, 'needs a limit of at least one measure '
                                f'({", ".join(MEASURE_NAMES)})')
+
+    def check_times(self, duration):
+        problem = _time_problem(self.at, duration, 'the step at')
+        if problem:
+            raise ProfileError(f'{self.key}.at', problem)
 
     def _step(self, steps):
         """Return (the step record meant or None, which step in words, what was detected)."""
@@ -207,7 +249,10 @@ class Bound:
         self.above, self.signal = above, _signal(document, key)
         self.dimension = SIGNALS[self.signal][0]
         self.value = _quantity(document['value'], f'{key}.value', self.dimension)
-        self.start, self.end = _window(document, key)
+        self.start, self.end, self.key = *_window(document, key), key
+
+    def check_times(self, duration):
+        _check_window(self.start, self.end, duration, self.key)
 
     def evaluate(self, series, context):
         mask = series.window(self.start, self.end) & np.isfinite(series[self.signal])
@@ -216,7 +261,7 @@ class Bound:
         limit = (_bounds_text(None, self.value, self.dimension) if self.above
                  else _bounds_text(self.value, None, self.dimension))
         if not mask.any():
-            return [_check(label, False, None, self.dimension, limit, 'no samples there')]
+            return [_no_samples(label, self.dimension, limit, self.start, self.end, series)]
         values, times = series[self.signal][mask], series.time[mask]
         index = int(np.argmax(values) if self.above else np.argmin(values))
         extreme = float(values[index])
@@ -238,10 +283,21 @@ class Alarm:
         _keys(document, key, ('after', 'within'))
         self.after = _quantity(document['after'], f'{key}.after', TIME)
         self.within = _quantity(document['within'], f'{key}.within', TIME)
+        self.key = key
+
+    def check_times(self, duration):
+        problem = _time_problem(self.after, duration, 'after')
+        if problem:
+            raise ProfileError(f'{self.key}.after', problem)
+        if self.within < 0:
+            raise ProfileError(f'{self.key}.within', f'must be a time >= 0 s after '
+                               f'{self.after:g} s, got {self.within:g}')
 
     def evaluate(self, series, context):
         label = f'overpressure alarm within {self.within:g} s after {self.after:g} s'
         limit = f'<= {self.within:g} s'
+        if not series.window(self.after).any():
+            return [_no_samples(label, TIME, limit, self.after, None, series)]
         raised = context.alarm_times[context.alarm_times >= self.after - NEAR]
         if raised.size:
             delay = float(raised[0] - self.after)
@@ -261,10 +317,15 @@ class NoAlarm:
     def __init__(self, document, key):
         document = document or {}
         _keys(document, key, (), ('from', 'to'))
-        self.start, self.end = _window(document, key)
+        self.start, self.end, self.key = *_window(document, key), key
+
+    def check_times(self, duration):
+        _check_window(self.start, self.end, duration, self.key)
 
     def evaluate(self, series, context):
         label = f'no overpressure alarm ({_window_text(self.start, self.end)})'
+        if not series.window(self.start, self.end).any():
+            return [_no_samples(label, TIME, 'never', self.start, self.end, series)]
         times = context.alarm_times
         end = math.inf if self.end is None else self.end
         inside = times[(times >= (self.start or 0.0) - NEAR) & (times <= end + NEAR)]
@@ -283,6 +344,12 @@ class Steady:
         self.flow = _quantity(document['flow'], f'{key}.flow', FLOW)
         self.low, self.high = _bounds(document, key, self.dimension)
         self.span = _quantity(document.get('window', STEADY_WINDOW), f'{key}.window', TIME)
+        self.key = key
+
+    def check_times(self, duration):
+        if not 0.0 < self.span <= duration + NEAR:
+            raise ProfileError(f'{self.key}.window', f'must be in (0, {duration:g}] s (the run), '
+                               f'got {self.span:g} s')
 
     def evaluate(self, series, context):
         """Judge the mean over the last `window` of the last hold of the flow."""
@@ -302,6 +369,9 @@ class Steady:
                            f'held for {end - start:.6g} s only ({start:.6g} to {end:.6g} s), '
                            f'less than the window of {self.span:g} s')]
         values = series[self.signal][series.window(end - self.span, end)]
+        values = values[~np.isnan(values)]
+        if not values.size:
+            return [_no_samples(label, self.dimension, limit, end - self.span, end, series)]
         mean, spread = float(np.nanmean(values)), float(np.nanmax(values) - np.nanmin(values))
         detail = (f'mean over {end - self.span:.6g} to {end:.6g} s, spread '
                   f'{with_unit(spread, self.dimension)}')

@@ -36,15 +36,16 @@ that names none of a later one keeps working): inlet_flow [m^3/s], and tank_pres
 parameter). Events: valve_sim.core.fault_schedule's format; `set` takes fault.* and
 sensor.* settings and valve_node's live parameters (ROS name or paper symbol, a
 number in SI units or with a unit). Expectations: valve_sim.analysis.expectations.
-Every problem is one line naming the file, the key and what is wrong (ProfileError,
-an InputFileError).
+Every change, event, time and window must lie within the run (0 .. duration). Every
+problem is one line naming the file, the key and what is wrong (ProfileError, an
+InputFileError).
 """
 
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from valve_sim.analysis.expectations import parse_expectations
+from valve_sim.analysis.expectations import check_times, parse_expectations
 from valve_sim.core.catalogue import section_of
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.fault_schedule import (
@@ -194,8 +195,25 @@ def _scenario(document, path, read_bag_column):
         events=events,
         expectations=parse_expectations(document['expect']),
     )
+    _check_times(scenario)
     _check_inputs(scenario, params['max_inlet_flow'], params['burst_pressure'])
     return scenario
+
+
+def _check_times(scenario):
+    """Every change, event and expectation within the run: 0 .. duration [s]."""
+    duration = scenario.duration
+    for name, profile in scenario.inputs.items():
+        for index, change in enumerate(profile.changes):
+            if change.start > duration:
+                raise ProfileError(f'inputs.{name}.changes[{index}].at',
+                                   f'{change.start:g} s is after the end of the run '
+                                   f'({duration:g} s): it would never apply')
+    for event in scenario.events:
+        if event.time_ns > duration * NS_PER_S:
+            raise ProfileError('events', f'the event at {event.time_ns / NS_PER_S:g} s is after '
+                               f'the end of the run ({duration:g} s): it would never apply')
+    check_times(scenario.expectations, duration)
 
 
 def _number(value, key, dimension):

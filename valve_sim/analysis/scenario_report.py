@@ -29,7 +29,7 @@ import xml.etree.ElementTree as ElementTree
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.core.output_files import json_text, replacing, write_text
+from valve_sim.core.output_files import json_text, replacing, write_text, xml_bytes
 
 
 STEP_KEYS = ('t_step', 'direction', 'flow_before', *MEASURE_NAMES, 'reasons')
@@ -107,8 +107,7 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
         case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
                                       name='run', time=f'{wall_s:.3f}')
         ElementTree.SubElement(case, 'error', message=error).text = error
-    ElementTree.indent(suites)
-    return ElementTree.tostring(suites, encoding='utf-8', xml_declaration=True) + b'\n'
+    return xml_bytes(suites)
 
 
 def plot_run(path, run):

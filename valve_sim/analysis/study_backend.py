@@ -33,10 +33,11 @@ import sys
 
 from valve_sim.analysis.study_cases import sample_cases
 from valve_sim.core.errors import StudyError
+from valve_sim.core.extras import EXTRAS, require
 from valve_sim.core.input_files import size_text
 
 
-PIP_INSTALL = "pip install 'dask[distributed]' SALib"
+PIP_INSTALL = f"pip install {EXTRAS['studies']}"
 MAX_RUNS = 1_000_000
 # [bytes] memory of one run in the client: its case and its row, about 2 KiB measured
 # (tracemalloc, 10,000 tolerance cases and rows), doubled for the results on their way
@@ -237,7 +238,7 @@ def open_backend(command, scheduler=None, workers=CORES, dashboard=None, pool_fa
                 file=sys.stderr,
             )
             return PoolBackend(workers)
-        raise StudyError(f'{command} runs on Dask, which is not installed: {PIP_INSTALL}')
+        require(f'{command} on Dask', 'studies', 'distributed', error=StudyError)
     backend = DaskBackend(scheduler, workers, dashboard=dashboard)
     where = scheduler or 'a local cluster (listening on 127.0.0.1 only)'
     print(f'{command}: {backend.workers} Dask workers on {where}', file=sys.stderr)

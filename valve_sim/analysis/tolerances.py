@@ -94,6 +94,13 @@ class Distribution:
         }
 
 
+def _half_width(number, text):
+    """Return the X of ±X: a size, never negative (±-1% is no tolerance); ParameterError."""
+    if float(number) < 0.0:
+        raise ParameterError(f'variation {text!r}: the X of ±X must be >= 0, got {number}')
+    return float(number)
+
+
 def parse_variation(text, params):
     """One NAME=SPEC into a Distribution around params' nominal value; ParameterError if bad."""
     name, separator, spec = text.partition('=')
@@ -102,14 +109,14 @@ def parse_variation(text, params):
     name, spec = resolve_name(name.strip()), spec.strip()
     nominal = params[name]
     if match := _PLUS_MINUS.match(spec):
-        half = abs(float(match[1])) / 100.0 * abs(nominal)
+        half = _half_width(match[1], text) / 100.0 * abs(nominal)
         distribution = Distribution(name, 'uniform', nominal - half, nominal + half, text)
     elif match := _PLUS_MINUS_LENGTH.match(spec):
         if SPECS[name].unit != 'm':
             raise ParameterError(
                 f'variation {text!r}: {match[2]} is a length, and {name} is in {SPECS[name].unit}'
             )
-        half = abs(float(match[1])) * LENGTH_UNITS[match[2]]
+        half = _half_width(match[1], text) * LENGTH_UNITS[match[2]]
         distribution = Distribution(name, 'uniform', nominal - half, nominal + half, text)
     elif match := _RANGE.match(spec):
         distribution = Distribution(name, 'uniform', float(match[1]), float(match[2]), text)

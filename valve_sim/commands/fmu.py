@@ -37,6 +37,9 @@ def add_arguments(parser):
 
 
 def run(args):
+    from valve_sim.core.extras import require
+
+    require('building an FMU', 'fmu', 'pythonfmu')
     from valve_sim.fmu.builder import build
 
     loaded = load_from_arguments(args)

@@ -47,6 +47,7 @@ from valve_sim.commands.options import (
     number,
 )
 from valve_sim.core.errors import StudyError
+from valve_sim.core.extras import require
 from valve_sim.core.input_files import size_text
 from valve_sim.core.output_files import make_folder
 
@@ -224,15 +225,10 @@ def run(args):
     from valve_sim.analysis.optimisation_plots import plot_distributions, plot_pareto_front
     from valve_sim.analysis.optimisation_report import write_outputs
 
-    try:
-        import pymoo  # noqa: F401  (is it installed?)
-    except ImportError:
-        raise StudyError(
-            "optimise needs pymoo, which is not installed: pip install 'pymoo>=0.6.2'"
-        )
+    require('optimise', 'studies', 'pymoo', error=StudyError)
     problem, protocol = problem_from(args)
     check_sizes(args)
-    out = make_folder(Path(args.out))
+    out = make_folder(Path(args.out), subfolders=('evaluations', 'params'))  # links not followed
     runs = args.population * args.generations * (problem.samples + 1)
     print(
         f"optimise: protocol {protocol['protocol']}, preset "

@@ -26,13 +26,24 @@ if every expectation holds. `valve-sim scenario check FILE.yaml` reads and check
 without running it. The file format: docs/scenarios.md.
 """
 
+import argparse
 import os
 from pathlib import Path
 import time
 
 from valve_sim.commands.options import number
-from valve_sim.core.output_files import make_folder
+from valve_sim.core.output_files import make_folder, safe_name
 from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK, TICKS_PER_CLOCK
+
+
+def topic_name(text):
+    """Check a --wait-topic before any node starts (argparse type): rcl's rules."""
+    from valve_sim.ros.topic_names import topic_problem
+
+    problem = topic_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a ROS topic name: {problem}')
+    return text
 
 
 def progress(text):
@@ -53,6 +64,7 @@ def add_arguments(parser):
                             help='at most R times real time (1: real time, 0.5: half speed; '
                             'default: as fast as the nodes go)')
     run_parser.add_argument('--wait-topic', action='append', default=[], metavar='TOPIC',
+                            type=topic_name,
                             help='a topic another use_sim_time node (your controller) publishes '
                             'once per tick: each tick waits for its message (repeatable)')
     run_parser.add_argument('--ticks-per-clock', metavar='N',
@@ -95,7 +107,8 @@ def run(args):
     from valve_sim.ros.scenario_runner import run_and_report
 
     stamp = time.strftime('%Y%m%d-%H%M%S')
-    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{scenario.name}_{stamp}'
+    name = safe_name(scenario.name)  # one path component, whatever the file says
+    folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{name}_{stamp}'
     folder = make_folder(folder).resolve()
     if args.wait_topic:  # the user's nodes are in the environment's domain: join them
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')

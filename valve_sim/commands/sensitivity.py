@@ -37,7 +37,7 @@ import sys
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
 from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.study_backend import check_runs, PIP_INSTALL, run_samples
+from valve_sim.analysis.study_backend import check_runs, run_samples
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_variations, undefined_reasons, write_samples
 from valve_sim.commands.options import (
@@ -47,6 +47,7 @@ from valve_sim.commands.options import (
     load_from_arguments,
 )
 from valve_sim.core.errors import StudyError
+from valve_sim.core.extras import require
 from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.parameters import SPECS
 
@@ -118,10 +119,7 @@ def print_indices(distributions, indices):
 
 
 def run(args):
-    try:
-        import SALib  # noqa: F401  (is it installed?)
-    except ImportError:
-        raise StudyError(f'sensitivity needs SALib, which is not installed: {PIP_INSTALL}')
+    require('sensitivity', 'studies', 'SALib', error=StudyError)
     loaded = load_from_arguments(args)
     params, settings = loaded.params, loaded.settings
     distributions = parse_variations(args.vary or [PAPER_RANGES], params)

@@ -29,6 +29,7 @@ here, once, and imported from here; each keeps the builtin base callers catch it
       InputFileError (ValueError)       a file the user gave cannot be read or is wrong
         ProfileError                     a malformed input profile (input_profile)
       OutputFileError (OSError)         a file or folder the user named cannot be written
+      MissingExtraError (ImportError)   an optional feature's extra is not installed
       IntegrationError (RuntimeError)   a run diverged
         OverpressureError                a chamber pressure passed burst_pressure
       SteadyStateError (RuntimeError)   no steady state
@@ -74,6 +75,10 @@ class OutputFileError(ValveSimError, OSError):
 
     Raised where the file is opened, so that the path is the one the user gave.
     """
+
+
+class MissingExtraError(ValveSimError, ImportError):
+    """An optional feature's extra is not installed (core.extras names it)."""
 
 
 class IntegrationError(ValveSimError, RuntimeError):

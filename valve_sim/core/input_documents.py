@@ -29,7 +29,6 @@ source and the line:
   numbers              integers that fit a float, finite floats
 """
 
-from itertools import accumulate
 import json
 import math
 import re
@@ -183,8 +182,9 @@ def _refuse_number(node, where, what):
 
 # --- JSON -------------------------------------------------------------------------------------
 
-_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
-_NOT_BRACKET = re.compile(r'[^\[\]{}]')
+# A string or a bracket; a string not closed runs to the end. Possessive: the regex keeps no
+# state per character or escape (a backtracking group took ~140 bytes a character).
+_JSON_TOKEN = re.compile(r'"(?:[^"\\]++|\\.)*+"?|[\[\]{}]', re.DOTALL)
 
 
 class _BadNumber(ValueError):
@@ -204,12 +204,19 @@ def parse_json(text, kind, source):
     numbers that fit a float, at most kind.max_nodes values.
     """
     where = f'{kind.name} {source}'
-    brackets = _NOT_BRACKET.sub('', _JSON_STRING.sub('', text))
-    depth = max(accumulate(1 if c in '[{' else -1 for c in brackets), default=0)
-    if depth > MAX_DEPTH:
-        raise InputFileError(f'{where}: nested more than {MAX_DEPTH} levels')
-    if len(brackets) // 2 > kind.max_nodes:
-        raise InputFileError(f'{where}: more than {kind.max_nodes} nested arrays and objects')
+    depth = brackets = 0
+    for token in _JSON_TOKEN.finditer(text):  # memory: one match at a time, none per character
+        bracket = text[token.start()]
+        if bracket in '[{':
+            depth, brackets = depth + 1, brackets + 1
+            if depth > MAX_DEPTH:
+                raise InputFileError(f'{where}: nested more than {MAX_DEPTH} levels')
+            if brackets > kind.max_nodes:
+                raise InputFileError(
+                    f'{where}: more than {kind.max_nodes} nested arrays and objects'
+                )
+        elif bracket in ']}':
+            depth -= 1
     try:
         return json.loads(
             text, parse_constant=_refuse_constant, parse_float=_float, parse_int=_int

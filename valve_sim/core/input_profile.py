@@ -81,14 +81,25 @@ class Profile:
     changes: tuple = ()
 
     def sample(self, times):
-        """Return the input at times [s] (an array): what each tick from there applies."""
+        """
+        Return the input at times [s] (an array): what each tick from there applies.
+
+        Each change shapes only its own span of the times, found by bisection: the time
+        grows with changes + times, not with their product.
+        """
         times = np.asarray(times, dtype=float)
         values = np.full(times.shape, self.initial)
+        order = np.argsort(times.ravel(), kind='stable')
+        flat_times, flat_values = times.ravel()[order], values.ravel()
+        edges = np.searchsorted(flat_times, [change.start for change in self.changes], 'left')
         base = self.initial
-        for change, following in zip(self.changes, self.changes[1:] + (None,)):
+        followers = self.changes[1:] + (None,)
+        for number, (change, following) in enumerate(zip(self.changes, followers)):
             end = math.inf if following is None else following.start
-            inside = (times >= change.start) & (times < end)
-            values[inside] = _shape(change, base, times[inside] - change.start)
+            last = edges[number + 1] if following is not None else len(flat_times)
+            inside = order[edges[number]:last]
+            flat_values[inside] = _shape(change, base, flat_times[edges[number]:last]
+                                         - change.start)
             if following is not None:  # the base of the next change: this one's value there
                 base = float(_shape(change, base, np.array([end - change.start]))[0])
         return values

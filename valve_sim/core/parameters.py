@@ -128,7 +128,9 @@ def checked_number(spec, value, kind='parameter'):
         raise ParameterError(
             f'{label} must be a number{unit and " in" + unit}, got {shown(value)}'
         )
-    value = float(value) if abs(value) <= sys.float_info.max else math.inf
+    if isinstance(value, int) and abs(value) > sys.float_info.max:
+        value = math.inf  # an integer no float holds; a NaN stays nan, reported as given
+    value = float(value)
     if not math.isfinite(value):
         raise ParameterError(f'{label} must be finite, got {value}')
     if not spec.minimum <= value <= spec.maximum:

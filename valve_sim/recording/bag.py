@@ -42,8 +42,8 @@ import sys
 
 from mcap.records import Channel, Message, Schema
 from mcap.writer import CompressionType, Writer
-from valve_sim.core.errors import InputFileError
-from valve_sim.core.output_files import create_new
+from valve_sim.core.errors import InputFileError, OutputFileError
+from valve_sim.core.output_files import create_new, named_file
 from valve_sim.recording import rosbag2_metadata
 from valve_sim.recording.mcap_scan import Scan
 import yaml
@@ -189,11 +189,13 @@ class BagWriter:
         try:
             if folder:
                 self.folder.mkdir(parents=True, exist_ok=False)
-            self._file = create_new(self.path) if new or folder else open(self.path, 'wb')
+            self._file = create_new(self.path) if new or folder else named_file(self.path)
         except FileExistsError as error:
             raise InputFileError(
                 f'{self.folder or self.path} already exists; rosbag2 does not overwrite a bag'
             ) from error
+        except OutputFileError:  # named_file's own words: a FIFO with no reader, a socket
+            raise
         except OSError as error:
             raise InputFileError(f'cannot write {self.path}: {error.strerror}') from error
         self._mcap = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.NONE)

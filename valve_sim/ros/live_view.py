@@ -27,6 +27,7 @@ every topic of the graph instead, and needs nothing from valve_sim.
 from pathlib import Path
 
 from valve_sim.core.errors import InputFileError
+from valve_sim.core.extras import require
 
 
 DEFAULT_PORT = 8765  # Foxglove's default WebSocket port
@@ -88,13 +89,9 @@ class LiveView:
         """
         from valve_sim.recording.bag import message_definition  # a node without a view: no MCAP
 
-        try:
-            import foxglove
-        except ImportError as error:
-            raise InputFileError(
-                'the Foxglove live view needs foxglove-sdk (pip install foxglove-sdk); '
-                'on a ROS install run foxglove_bridge instead'
-            ) from error
+        require('the Foxglove live view (on a ROS install: foxglove_bridge)', 'foxglove',
+                'foxglove', error=InputFileError)
+        import foxglove
         self._subscriptions = set()  # (client id, channel id) of every client subscription
         self._context = foxglove.Context()
         self.channels = {

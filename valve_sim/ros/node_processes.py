@@ -26,6 +26,7 @@ import signal
 import subprocess
 import time
 
+from valve_sim.core.output_files import fresh_file
 from valve_sim.ros import node_command
 
 
@@ -39,7 +40,7 @@ class NodeProcesses:
         """Start each of commands {name: argv} with its output in folder/<name>.log."""
         self.folder, self.processes = folder, {}
         for name, command in commands.items():
-            with open(folder / f'{name}.log', 'wb') as log:
+            with fresh_file(folder / f'{name}.log') as log:  # a link there not followed
                 self.processes[name] = subprocess.Popen(
                     command, stdout=log, stderr=subprocess.STDOUT, env=env
                 )

@@ -115,6 +115,10 @@ class ReliefValveNode(Node):
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
         self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
+        # Failures and resumptions: logged at most once a second each, the rest counted.
+        self._failure_logs = Throttle(WARNING_INTERVAL_NS)
+        self._resume_logs = Throttle(WARNING_INTERVAL_NS)
+        self._failures_unlogged = 0
         self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
         self.status = NodeStatus(time.monotonic_ns())
         self.schedule_loader = ScheduleLoader()
@@ -326,20 +330,30 @@ class ReliefValveNode(Node):
         """
         Log a failure the model held its last good state after; follow a roll-back through.
 
-        After a roll-back the node's other values of the undone change (settings, sensor
-        settings, the declared parameters) return too, and the inputs' limits follow.
+        Logged at most once a second (a flapping input can fail every tick), with how
+        many were not; every failure is counted in the diagnostics. After a roll-back
+        the node's other values of the undone change (settings, sensor settings, the
+        declared parameters) return too, and the inputs' limits follow.
         """
         error = outcome.error
-        self.get_logger().error(f'{error} The last good state is held.')
-        if outcome.rolled_back:
+        log = self._failure_logs.due(time.monotonic_ns())
+        if not log:
+            self._failures_unlogged += 1
+        else:
+            unlogged, self._failures_unlogged = self._failures_unlogged, 0
+            self.get_logger().error(f'{error} The last good state is held.' + (
+                f' ({unlogged} more failure(s) since the last report, at most one a second; '
+                'all counted in /diagnostics)' if unlogged else ''))
+        if outcome.rolled_back and log:
             self.get_logger().error(
                 'parameters rolled back to the ones in use before the last change, '
                 'applied within the trial window before the failure'
             )
+        if outcome.rolled_back:
             self.parameters.restore()
             self.input.max_inlet_flow = self.model.params['max_inlet_flow']
             self.tank_input.burst_pressure = self.model.params['burst_pressure']
-        if outcome.status is not Status.FAILURE:
+        if outcome.status is not Status.FAILURE or not log:
             return
         saturated = self.model.saturated
         self.get_logger().error(
@@ -355,7 +369,7 @@ class ReliefValveNode(Node):
 
     def resume(self, cause):
         """Let a halted model advance again."""
-        if self.model.resume():
+        if self.model.resume() and self._resume_logs.due(time.monotonic_ns()):
             self.get_logger().info(f'the model advances again after {cause}')
 
     # --- inputs and outputs -----------------------------------------------------------------
