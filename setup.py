@@ -177,6 +177,7 @@ setup(
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',
             'valve_node = valve_sim.ros.valve_node_main:main',
+            'managed_valve_node = valve_sim.ros.managed_valve_node:main',
             'analyser_node = valve_sim.ros.analyser_node:main',
         ],
     },
