@@ -193,6 +193,7 @@ setup(
             'valve-sim = valve_sim.commands.cli:main',
             'valve_node = valve_sim.ros.valve_node_main:main',
             'managed_valve_node = valve_sim.ros.managed_valve_node:main',
+            'valve_simulator = valve_sim.ros.simulation_server:main',
             'analyser_node = valve_sim.ros.analyser_node:main',
         ],
     },

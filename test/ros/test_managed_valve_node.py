@@ -71,7 +71,7 @@ class LifecycleClient(Probe):
         return {t.transition.label for t in response.available_transitions}
 
     def transition(self, transition_id):
-        """Ask for a transition (~/change_state); returns whether it succeeded."""
+        """Return whether the transition asked for on ~/change_state succeeded."""
         request = ChangeState.Request(transition=Transition(id=transition_id))
         return self._result(self.change.call_async(request)).success
 

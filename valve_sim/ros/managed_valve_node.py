@@ -241,7 +241,6 @@ class ManagedReliefValveNode(LifecycleNodeMixin, ReliefValveNode):
         return report
 
 
-
 def parse_arguments(args):
     """managed_valve_node's own command line (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
@@ -254,7 +253,7 @@ def parse_arguments(args):
                         help=f'rclpy executor that runs the node (default '
                         f'{spinning.DEFAULT_EXECUTOR})')
     parser.add_argument('--receive-threads', choices=POLICIES, default=DEFAULT_POLICY,
-                        help='scheduling of the middleware receive threads, as valve_node\'s')
+                        help="scheduling of the middleware receive threads, as valve_node's")
     parser.add_argument('--autostart', action='store_true',
                         help='configure and activate at once (for a bench without a '
                         'lifecycle manager); a failure leaves the node unconfigured')

@@ -41,18 +41,24 @@ import time
 
 import rclpy
 from rclpy.action import ActionServer
-from simulation_interfaces.action import SimulateSteps
-from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
-from simulation_interfaces.srv import (
-    GetSimulationState,
-    GetSimulatorFeatures,
-    ResetSimulation,
-    SetSimulationState,
-    StepSimulation,
-)
+try:
+    from simulation_interfaces.action import SimulateSteps
+    from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
+    from simulation_interfaces.srv import (
+        GetSimulationState,
+        GetSimulatorFeatures,
+        ResetSimulation,
+        SetSimulationState,
+        StepSimulation,
+    )
+except ImportError as error:
+    raise ImportError(
+        f'{error}: valve_simulator needs simulation_interfaces: `python3 run.py install` builds '
+        'it into .venv (interfaces/README.md); on a ROS install: ros-jazzy-simulation-interfaces'
+    ) from None
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.ros import node_command, spinning
-from valve_sim.ros.lockstep import Lockstep, LateInputError, NS_PER_S
+from valve_sim.ros.lockstep import LateInputError, Lockstep, NS_PER_S
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import READY_TIMEOUT, ros_value
 from valve_sim.ros.scenario_stepper import ScenarioStepper
