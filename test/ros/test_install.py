@@ -57,6 +57,8 @@ ROSDEP_KEYS = {
             'rcl_interfaces',
             'builtin_interfaces',
             'rosgraph_msgs',
+            'lifecycle_msgs',
+            'simulation_interfaces',
             'ament_index_python',
             'launch',
             'launch_ros',
