@@ -20,10 +20,11 @@ transition in file order: configure (nothing published), activate (ticks at the 
 state of the present inputs), deactivate (silent), activate again at a new inlet flow,
 the halt path (an overpressure deactivates it, the reason on /diagnostics), cleanup,
 a configure that fails on a broken schedule file (ErrorProcessing, then Unconfigured),
-a configure that works again, and shutdown. Each transition is checked on
+a configure that works again, the bring-up client of docs/valve_node.md, and shutdown. Each transition is checked on
 ~/get_state, ~/get_available_transitions and ~/transition_event.
 """
 
+import re
 import subprocess
 import sys
 
@@ -39,6 +40,7 @@ from valve_sim.core.steady_state import steady_state
 pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 NAMESPACE = '/managed'
+VALVE_PAGE = REPO / 'docs' / 'valve_node.md'  # its Python block of node 'bring_up'
 AMBIENT = 101325.0  # [Pa]
 SCHEDULE = 'events:\n  - {t: 1000.0, set: {fault.seat_leakage_diameter: 0.0}}\n'
 
@@ -193,9 +195,23 @@ def test_a_failing_configure_goes_through_errorprocessing_to_unconfigured(manage
     assert client.current() == 'inactive'
 
 
+def test_the_documented_bring_up_client_activates_it(managed, tmp_path):
+    client, *_ = managed
+    (block,) = [block for block in re.findall(r'```python\n(.*?)```', VALVE_PAGE.read_text(),
+                                              flags=re.DOTALL) if "'bring_up'" in block]
+    script = tmp_path / 'bring_up.py'
+    script.write_text(block)
+    done = subprocess.run([sys.executable, str(script), '--ros-args', '-r', f'__ns:={NAMESPACE}'],
+                          capture_output=True, text=True, timeout=TIMEOUT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == 'relief_valve is active\n'
+    assert client.current() == 'active'
+    client.wait_for_new_samples(1)
+
+
 def test_shutdown_finalizes_it_and_the_process_goes_on_until_sigint(managed):
     client, _, log_path, process = managed
-    assert client.transition(Transition.TRANSITION_INACTIVE_SHUTDOWN)
+    assert client.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
     client.wait_for_event('shuttingdown', 'finalized')
     assert client.current() == 'finalized'
     assert process.poll() is None, log_path.read_text()
