@@ -19,9 +19,11 @@ One simulator process, driven in file order: its features, the state machine (st
 paused, a step refused while stopped), 1000 ticks stepped (StepSimulation, then the
 SimulateSteps action with its feedback) with the states read from supply_pressure as
 CDR bytes, playing and pausing, a reset, the same 1000 ticks again in one call: the
-same bytes, and the scenario runner's bytes for the same scenario (its bag). Then quit.
+same bytes, and the scenario runner's bytes for the same scenario (its bag); the client
+of docs/scenarios.md as it stands. Then quit.
 """
 
+import re
 import subprocess
 import sys
 import threading
@@ -49,6 +51,7 @@ from valve_sim.ros.spinning import EXECUTORS
 pytestmark = [pytest.mark.timeout(300), pytest.mark.usefixtures('valve_node_kernels')]
 
 SERVER = '/valve_simulator'
+SCENARIOS_PAGE = REPO / 'docs' / 'scenarios.md'  # its Python block of node 'step_valve'
 TICKS = 1000
 JOIN_ATTEMPTS = 100  # single ticks stepped at most until the client sees states
 JOIN_WAIT = 1.0  # [s] for a tick's state to come before the next is stepped
@@ -291,6 +294,22 @@ def test_after_a_reset_the_same_steps_give_the_same_bytes_as_the_scenario_runner
     assert {stamp: again[stamp] for stamp in both} == {stamp: stepped[stamp] for stamp in both}
     assert len(set(again.values())) > 100, 'the states vary: the step and the event acted'
     assert {stamp: runner[stamp] for stamp in again} == again
+
+
+def test_the_documented_client_steps_it(simulator, tmp_path):
+    client, *_ = simulator
+    (block,) = [block for block in re.findall(r'```python\n(.*?)```', SCENARIOS_PAGE.read_text(),
+                                              flags=re.DOTALL) if "'step_valve'" in block]
+    script = tmp_path / 'step_valve.py'
+    script.write_text(block)
+    with client.condition:
+        before = max(client.states)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=TIMEOUT)
+    assert done.returncode == 0, done.stderr
+    match = re.fullmatch(r'stepped 200 ticks; feedback up to (\d+)/100; state 2\n', done.stdout)
+    assert match and int(match[1]) <= 100, done.stdout
+    client.wait_for_states(before + 200 * PERIOD_NS)
 
 
 def test_quitting_ends_the_simulator(simulator):
