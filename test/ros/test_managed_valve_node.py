@@ -20,8 +20,9 @@ transition in file order: configure (nothing published), activate (ticks at the 
 state of the present inputs), deactivate (silent), activate again at a new inlet flow,
 the halt path (an overpressure deactivates it, the reason on /diagnostics), cleanup,
 a configure that fails on a broken schedule file (ErrorProcessing, then Unconfigured),
-a configure that works again, the bring-up client of docs/valve_node.md, and shutdown. Each transition is checked on
-~/get_state, ~/get_available_transitions and ~/transition_event.
+a configure that works again, the bring-up client of docs/valve_node.md, and shutdown.
+Each transition is checked on ~/get_state, ~/get_available_transitions and
+~/transition_event.
 """
 
 import re
