@@ -54,7 +54,7 @@ SERVER = '/valve_simulator'
 SCENARIOS_PAGE = REPO / 'docs' / 'scenarios.md'  # its Python block of node 'step_valve'
 TICKS = 1000
 JOIN_ATTEMPTS = 100  # single ticks stepped at most until the client sees states
-JOIN_WAIT = 1.0  # [s] for a tick's state to come before the next is stepped
+JOIN_WAIT = 5.0  # [s] for a tick's state to come before the next is stepped
 PERIOD_NS = 1_000_000
 SCENARIO = """
 scenario: stepped
@@ -256,7 +256,7 @@ def stepped(simulator):
 
 def test_a_step_publishes_every_tick_and_the_action_gives_feedback(simulator, stepped):
     client, *_ = simulator
-    assert len(stepped) >= TICKS - 10, 'the client joined late'
+    assert len(stepped) > TICKS - JOIN_ATTEMPTS, 'the client joined late'
     assert client.feedback, 'no feedback'
     done = [(f.completed_steps, f.remaining_steps) for f in client.feedback]
     assert done == sorted(done) and done[-1] == (TICKS - 400, 0)
@@ -290,7 +290,7 @@ def test_after_a_reset_the_same_steps_give_the_same_bytes_as_the_scenario_runner
     end_ns = START_NS + TICKS * PERIOD_NS
     again = contiguous(client.wait_for_states(end_ns), end_ns)
     both = set(again) & set(stepped)
-    assert len(both) >= TICKS - 10
+    assert len(both) > TICKS - JOIN_ATTEMPTS
     assert {stamp: again[stamp] for stamp in both} == {stamp: stepped[stamp] for stamp in both}
     assert len(set(again.values())) > 100, 'the states vary: the step and the event acted'
     assert {stamp: runner[stamp] for stamp in again} == again
