@@ -109,7 +109,6 @@ def managed(context, tmp_path_factory):
     client = LifecycleClient(context)
     try:
         assert client.change.wait_for_service(timeout_sec=TIMEOUT), 'no ~/change_state'
-        client.wait_for(lambda: client.inlet.get_subscription_count() == 0, 'discovery')
         yield client, schedule, log_path, process
     finally:
         client.close()
@@ -197,7 +196,7 @@ def test_a_failing_configure_goes_through_errorprocessing_to_unconfigured(manage
     client.wait_for_event('configuring', 'errorprocessing')
     client.wait_for_event('errorprocessing', 'unconfigured')
     assert client.current() == 'unconfigured'
-    assert 'configure failed' in log_path.read_text()
+    client.wait_for(lambda: 'configure failed' in log_path.read_text(), 'the logged reason')
     schedule.write_text(SCHEDULE)  # repaired: it configures again
     assert client.transition(Transition.TRANSITION_CONFIGURE)
     assert client.current() == 'inactive'
