@@ -111,11 +111,15 @@ class SimulationServer:
         ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
         self.processes = NodeProcesses(self.folder, {
             'valve_node': node_command('valve_node', (), parameters, ros_args)})
-        self.driver = Lockstep(self.context, processes=self.processes,
-                               tank='tank_pressure' in scenario.inputs)
-        self.driver.connect((), READY_TIMEOUT)
-        self.stepper = ScenarioStepper(scenario, self.driver)
-        self.stepper.start()
+        try:
+            self.driver = Lockstep(self.context, processes=self.processes,
+                                   tank='tank_pressure' in scenario.inputs)
+            self.driver.connect((), READY_TIMEOUT)
+            self.stepper = ScenarioStepper(scenario, self.driver)
+            self.stepper.start()
+        except STEP_ERRORS:
+            self.stop_valve()  # no valve_node left running behind
+            raise
         self.node.get_logger().info(
             f'valve_node at {self.stepper.time_ns / NS_PER_S:g} s, stopped; scenario '
             f'{scenario.name}, steps of {scenario.period_ns / NS_PER_S:g} s')
@@ -137,6 +141,8 @@ class SimulationServer:
 
     def step(self, count):
         """Step count ticks; return an error message, or None."""
+        if self.stepper is None:
+            return 'no valve_node: the last reset failed (see the log); reset again'
         try:
             self.stepper.step(count)
         except STEP_ERRORS as error:
@@ -162,6 +168,10 @@ class SimulationServer:
         result.result = Result.RESULT_OK
         if target == self.state:
             result.result = SetSimulationState.Response.ALREADY_IN_TARGET_STATE
+        elif self.stepper is None and target in (SimulationState.STATE_PLAYING,
+                                                 SimulationState.STATE_PAUSED):
+            result.result = SetSimulationState.Response.STATE_TRANSITION_ERROR
+            result.error_message = 'no valve_node: the last reset failed; reset again'
         elif target == SimulationState.STATE_PLAYING:
             self._played_from = (time.monotonic(), self.stepper.tick)
             self.play_timer.reset()
@@ -170,7 +180,11 @@ class SimulationServer:
             self.play_timer.cancel()
             self.state = target
         elif target == SimulationState.STATE_STOPPED:
-            self.reset()
+            try:
+                self.reset()
+            except STEP_ERRORS as error:
+                result.result = SetSimulationState.Response.STATE_TRANSITION_ERROR
+                result.error_message = f'reset failed: {error}'
         elif target == SimulationState.STATE_QUITTING:
             self.play_timer.cancel()
             self.state, self.quit = target, True
@@ -224,6 +238,8 @@ class SimulationServer:
     def _play(self):
         """Playing: step up to real time (at most MAX_PLAY_TICKS at once)."""
         wall, tick = self._played_from
+        if self.stepper is None:
+            return
         due = tick + int((time.monotonic() - wall) * NS_PER_S / self.scenario.period_ns)
         count = min(due - self.stepper.tick, MAX_PLAY_TICKS)
         if count > 0:
@@ -266,7 +282,12 @@ def main(args=None):
     with tempfile.TemporaryDirectory(prefix='valve_simulator_') as temporary:
         folder = options.output_dir or Path(temporary)
         folder.mkdir(parents=True, exist_ok=True)
-        server = SimulationServer(rclpy.get_default_context(), scenario, folder)
+        try:
+            server = SimulationServer(rclpy.get_default_context(), scenario, folder)
+        except STEP_ERRORS as error:
+            print(f'valve_simulator: valve_node did not start: {error}', file=sys.stderr)
+            rclpy.try_shutdown()
+            return 1
         executor = spinning.EXECUTORS['single-threaded']()
         executor.add_node(server.node)
         try:
