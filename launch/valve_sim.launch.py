@@ -26,6 +26,12 @@ applies a section that names the node as it runs: `/**/relief_valve:` (what
 `relief_valve:` only without a namespace; valve_node logs which sections it applied
 and warns of one meant for it that does not apply. output_dir is where
 analyser_node writes its MCAP recordings and measures.
+
+    ros2 launch valve_sim valve_sim.launch.py managed:=true [autostart:=true]
+
+runs the valve as the managed node managed_valve_node instead (docs/valve_node.md,
+"Managed"), unconfigured until a lifecycle manager (or autostart:=true) configures and
+activates it.
 """
 
 import os
@@ -33,18 +39,21 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch.conditions import IfCondition, UnlessCondition
+from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch_ros.actions import LifecycleNode, Node
 
 
 PACKAGE = 'valve_sim'
 
 
 def generate_launch_description():
-    """Declare the four arguments and the two nodes."""
+    """Declare the six arguments and the nodes: the valve (plain or managed) and the analyser."""
     reference = os.path.join(get_package_share_directory(PACKAGE), 'config', 'reference.yaml')
     namespace = LaunchConfiguration('namespace')
     use_sim_time = LaunchConfiguration('use_sim_time')
+    managed = LaunchConfiguration('managed')
+    valve_parameters = [LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}]
     return LaunchDescription([
         DeclareLaunchArgument(
             'params_file',
@@ -64,13 +73,40 @@ def generate_launch_description():
             default_value='.',
             description="folder of analyser_node's recordings (created if missing)",
         ),
+        DeclareLaunchArgument(
+            'managed',
+            default_value='false',
+            description='run the valve as a managed (lifecycle) node, managed_valve_node',
+        ),
+        DeclareLaunchArgument(
+            'autostart',
+            default_value='false',
+            description='managed: configure and activate it at launch',
+        ),
         Node(
             package=PACKAGE,
             executable='valve_node',
             name='relief_valve',
             namespace=namespace,
-            parameters=[LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}],
+            parameters=valve_parameters,
             output='screen',
+            condition=UnlessCondition(managed),
+        ),
+        *(
+            LifecycleNode(
+                package=PACKAGE,
+                executable='managed_valve_node',
+                name='relief_valve',
+                namespace=namespace,
+                parameters=valve_parameters,
+                output='screen',
+                autostart=autostart,
+                condition=IfCondition(PythonExpression([
+                    "'", managed, "' == 'true' and '", LaunchConfiguration('autostart'),
+                    f"' == '{str(autostart).lower()}'",
+                ])),
+            )
+            for autostart in (False, True)
         ),
         Node(
             package=PACKAGE,

@@ -57,6 +57,8 @@ ROSDEP_KEYS = {
             'rcl_interfaces',
             'builtin_interfaces',
             'rosgraph_msgs',
+            'lifecycle_msgs',
+            'simulation_interfaces',
             'ament_index_python',
             'launch',
             'launch_ros',
@@ -204,12 +206,13 @@ def test_symlink_install_compiles_the_kernels_its_valve_node_loads(context, tmp_
     assert kernel_cache(cache) == built, 'the first start compiled (and cached) kernels'
 
 
-def start_installed_node(install, environment, context, folder, namespace):
-    """Start the installed valve_node in folder; check its states and its clean stop."""
-    log_path = folder / 'valve_node.log'
+def start_installed_node(install, environment, context, folder, namespace,
+                         program='valve_node', options=()):
+    """Start the installed valve_node (or program) in folder; check its states and clean stop."""
+    log_path = folder / f'{program}.log'
     with open(log_path, 'w') as log:
         process = subprocess.Popen(
-            [str(install / 'lib' / 'valve_sim' / 'valve_node'), '--ros-args', '-r',
+            [str(install / 'lib' / 'valve_sim' / program), *options, '--ros-args', '-r',
              f'__ns:={namespace}'],
             stdout=log,
             stderr=subprocess.STDOUT,
@@ -232,6 +235,18 @@ def start_installed_node(install, environment, context, folder, namespace):
         exit_code = stop_node(process)
     assert exit_code == 0, log_path.read_text()
     assert 'ready: model kernels compiled or loaded' in log_path.read_text()
+
+
+def test_installed_managed_valve_node_autostarts_and_valve_simulator_answers_help(
+    install, context, tmp_path
+):
+    start_installed_node(install, sourced(install), context, tmp_path, '/installed_managed',
+                         'managed_valve_node', ['--autostart'])
+    result = subprocess.run(
+        [str(install / 'lib' / 'valve_sim' / 'valve_simulator'), '--help'],
+        env=sourced(install), cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert 'usage: valve_simulator' in result.stdout
 
 
 def test_installed_analyser_help_exits_0_and_writes_nothing(install, tmp_path):
@@ -271,7 +286,8 @@ def test_launch_file_compiles_and_names_only_what_is_installed(install):
         for target in statement.targets
     }
     declared = {args[0].value for _, args in launch_calls(tree, 'DeclareLaunchArgument')}
-    assert declared == {'params_file', 'namespace', 'use_sim_time', 'output_dir'}
+    assert declared == {'params_file', 'namespace', 'use_sim_time', 'output_dir', 'managed',
+                        'autostart'}
     used = {args[0].value for _, args in launch_calls(tree, 'LaunchConfiguration')}
     assert used <= declared
     joined = [
@@ -282,17 +298,27 @@ def test_launch_file_compiles_and_names_only_what_is_installed(install):
     assert (install / 'share' / 'valve_sim' / 'config' / 'reference.yaml').is_file()
     node_parameters = {
         'valve_node': {'use_sim_time'},
+        'managed_valve_node': {'use_sim_time'},
         'analyser_node': set(parameter_names()) | {'use_sim_time'},
     }
-    nodes = list(launch_calls(tree, 'Node'))
-    assert len(nodes) == 2
+    assigned = {  # name = value inside the function: the valve's parameter list
+        target.id: statement.value
+        for statement in ast.walk(tree)
+        if isinstance(statement, ast.Assign)
+        for target in statement.targets
+        if isinstance(target, ast.Name)
+    }
+    nodes = list(launch_calls(tree, 'Node')) + list(launch_calls(tree, 'LifecycleNode'))
+    assert len(nodes) == 3
     for keywords, _ in nodes:
         assert constants[keywords['package'].id] == 'valve_sim'
         executable = keywords['executable'].value
         assert os.access(install / 'lib' / 'valve_sim' / executable, os.X_OK), executable
+        parameters = keywords['parameters']
+        parameters = assigned.get(getattr(parameters, 'id', None), parameters)
         names = {
             key.value
-            for element in keywords['parameters'].elts
+            for element in parameters.elts
             if isinstance(element, ast.Dict)
             for key in element.keys
         }

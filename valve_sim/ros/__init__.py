@@ -18,7 +18,9 @@ ROS 2 adapters: valve_node, analyser_node and their helpers.
 Lives here: the nodes, parameter descriptors from specs, diagnostics, spinning, and
 valve_node's fault and sensor parameters (fault_injection) and its ticks of a /clock
 jump (clock_jumps); node processes, lockstep and scenario runs; a replay publisher of
-simulated ticks (replay), and the demo's own node and run (demo_driver).
+simulated ticks (replay), and the demo's own node and run (demo_driver); valve_node as
+a managed node (managed_valve_node) and as a simulator stepped through
+simulation_interfaces (simulation_server, scenario_stepper).
 The home of rclpy (the only wing that uses it, with the testing kit); nodes stay thin
 around valve_sim.core and valve_sim.analysis.
 May import: valve_sim.core, valve_sim.analysis, valve_sim.recording, rclpy.
@@ -39,7 +41,9 @@ import os
 import sys
 
 
-NODE_PROGRAMS = {'valve_node': 'valve_node_main', 'analyser_node': 'analyser_node'}  # module
+NODE_PROGRAMS = {'valve_node': 'valve_node_main', 'analyser_node': 'analyser_node',  # module
+                 'managed_valve_node': 'managed_valve_node',
+                 'valve_simulator': 'simulation_server'}
 
 
 def _exit_quietly(number, _frame):

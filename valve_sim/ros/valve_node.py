@@ -90,6 +90,10 @@ class ReliefValveNode(Node):
         self.inlet_subscription = None  # taken by the tick, left out of subscriptions
         self.tank_subscription = None  # likewise
         super().__init__(NODE_NAME, **kwargs)
+        self.set_up(argv)
+
+    def set_up(self, argv=()):
+        """Everything but the bare node (a managed node runs it when configured)."""
         self.clock_guard = GuardedTimeSource.install(self)
         log_parameter_files(self, argv)  # which sections of its --params-file apply
         started = time.perf_counter()  # the preset's cracking point is the first kernel call
