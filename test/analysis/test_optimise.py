@@ -167,7 +167,10 @@ def test_the_command_writes_the_pareto_set_and_resumes_without_computing(tmp_pat
                '--population', '4', '--generations', '2', '--workers', '1', '--out', str(out)]
     first = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr
-    assert re.search(r'optimise: generation 2/2: 8/8 candidates \(100 %\).*ETA', first.stderr)
+    assert re.search(r'optimise: generation 2/2 \([\d,]+ runs spent, [\d,]+ saved\): 8/8 '
+                     r'candidates \(100 %\).*ETA', first.stderr)
+    assert re.search(r'runs: search [\d,]+ \([\d,]+ saved .*\), confirmation 27 \(3 designs\)',
+                     first.stdout)
     summary = json.loads((out / 'pareto.json').read_text())
     assert summary['candidates_evaluated'] == 8 and summary['pareto']
     for entry in summary['pareto']:
