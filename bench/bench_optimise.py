@@ -143,7 +143,8 @@ def report(name, runs, checks):
     """Print one problem's three searches side by side."""
     print(f'\n== {name} ==')
     for label, run in runs.items():
-        print(f"{label}: search {run['search_runs']:,} runs ({100 * run['search_runs'] / run['full_runs']:.1f} % of full "
+        share = 100 * run['search_runs'] / run['full_runs']
+        print(f"{label}: search {run['search_runs']:,} runs ({share:.1f} % of full "
               f"samples), {run['search_s']:.0f} s; confirmation {run['confirm_runs']:,} runs, "
               f"{run['confirm_s']:.0f} s; decisions {run['decisions']}; "
               f"{len(run['designs'])} of {run['pareto_searched']} Pareto designs meet the yield "
@@ -151,13 +152,14 @@ def report(name, runs, checks):
               f"match to A {run.get('furthest_from', 0):.4f}")
         for design, distance in zip(run['designs'], run.get('nearest_in_A', [])):
             low, high = design['ci95']
-            print(f"   {design['label']:<15} P_1 {design['objectives'][0]:.4f} %  T_s "
-                  f"{design['objectives'][1]:.2f} ms  yield {100 * design['yield']:.1f} % "
-                  f"({100 * low:.1f}-{100 * high:.1f})  nearest in A at {distance:.4f}")
+            p_1, t_s = design['objectives']
+            print(f"   {design['label']:<15} P_1 {p_1:.4f} %  T_s {t_s:.2f} ms  yield "
+                  f'{100 * design["yield"]:.1f} % ({100 * low:.1f}-{100 * high:.1f})  '
+                  f'nearest in A at {distance:.4f}')
     a, n = runs['A'], runs['N']
     print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
           f"{100 * n['search_s'] / a['search_s']:.1f} % of the wall time of the search; "
-          f"checks {checks}")
+          f'checks {checks}')
 
 
 def main():

@@ -16,7 +16,8 @@
 
 # The summary above is also this script's --help description.
 #
-#     .venv/bin/python bench/bench_optimise_scaling.py [--samples 1000] [--generations 2] [--json FILE]
+#     .venv/bin/python bench/bench_optimise_scaling.py [--samples 1000] [--generations 2]
+#         [--json FILE]
 #
 # Measured side by side in one run (the machine is shared: compare the ratios):
 # 1. single: simulate() (the whole 1.25 s with rk4_steps) + step_measures, run after

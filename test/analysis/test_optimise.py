@@ -124,7 +124,7 @@ def test_the_confirmed_yields_of_two_pareto_designs_match_tolerance(reference, t
 
 
 def sequential_candidate(reference, limits, required_yield, front=(), **settings):
-    """The row of one candidate (d_c 1.02 mm) under 16 Sobol valves, rounds of 4, 8, 16."""
+    """Return (problem, row) of one candidate (d_c 1.02 mm): 16 Sobol valves in rounds of 4."""
     problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], limits,
                          ['d_c=±2%,k_p=±5%'], samples=16, seed=3, first_round=4,
                          required_yield=required_yield, **settings)

@@ -43,16 +43,16 @@ import sys
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
+from valve_sim.analysis.robust_yield import (
+    check_candidate_row,
+    evaluate_candidates,
+    MIN_DECAY_RATE,
+)
 from valve_sim.analysis.sequential_yield import (
     dominated,
     FIRST_ROUND,
     RunTally,
     STOP_ALPHA,
-)
-from valve_sim.analysis.robust_yield import (
-    check_candidate_row,
-    evaluate_candidates,
-    MIN_DECAY_RATE,
 )
 from valve_sim.analysis.study_results import fingerprint
 from valve_sim.analysis.study_runner import Progress, run_cases
