@@ -65,17 +65,23 @@ MAX_POPULATION = 10_000
 MAX_GENERATIONS = 10_000
 
 
-def decay_rate_value(text):
-    """'3' -> 3.0 [1/s]; 'off' -> None (argparse type)."""
+def number_or_off(text, accepts, bounds):
+    """A number accepts(value) takes, or None for 'off'; ArgumentTypeError says bounds."""
     if text.strip().lower() == 'off':
         return None
     try:
         value = float(text)
     except ValueError:
         value = float('nan')
-    if not 0.0 <= value <= MAX_DECAY_RATE:
-        raise ArgumentTypeError(f'must be a rate {decay_rate_value.bounds}; got {text!r}')
+    if not accepts(value):
+        raise ArgumentTypeError(f'must be {bounds}; got {text!r}')
     return value
+
+
+def decay_rate_value(text):
+    """'3' -> 3.0 [1/s]; 'off' -> None (argparse type)."""
+    return number_or_off(text, lambda value: 0.0 <= value <= MAX_DECAY_RATE,
+                         f'a rate {decay_rate_value.bounds}')
 
 
 # [1/s] a mode decaying by e in 1 us: faster than the model's steps (10 us) resolve
@@ -85,15 +91,7 @@ decay_rate_value.bounds = f'in [0, {MAX_DECAY_RATE:g}] 1/s, or off'
 
 def alpha_value(text):
     """'0.05' -> 0.05, within (0, 1); 'off' -> None (argparse type)."""
-    if text.strip().lower() == 'off':
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = float('nan')
-    if not 0.0 < value < 1.0:
-        raise ArgumentTypeError(f'must be a chance in (0, 1), or off; got {text!r}')
-    return value
+    return number_or_off(text, lambda value: 0.0 < value < 1.0, 'a chance in (0, 1), or off')
 
 
 def add_arguments(parser):
