@@ -165,7 +165,7 @@ def test_the_stopping_rule_and_the_common_draws(reference):
     (0.99, 0.99, 'below'), (0.99, 0.995, 'below'), (0.9, 0.8999, 'above')])
 def test_a_wrong_early_stop_is_at_most_half_alpha(required, true_yield, wrong):
     # The stated error rates: valves passing independently with the true yield, the
-    # rule's looks at 32, 64 and 128 of 256 valves stop on the wrong side of the target
+    # rule's looks at 16, 32, 64 and 128 of 256 valves stop on the wrong side of the target
     # in at most alpha / 2 of 20,000 candidates (plus the Monte Carlo's 4 sigma).
     counts = rounds(256)
     decided = {n: [look(k, n, required, STOP_ALPHA, len(counts) - 1) for k in range(n + 1)]
@@ -179,7 +179,7 @@ def test_a_wrong_early_stop_is_at_most_half_alpha(required, true_yield, wrong):
         stopped |= verdict != None  # noqa: E711 (elementwise)
     rate, limit = wrong_stops / len(passes), STOP_ALPHA / 2
     assert rate <= limit + 4 * (limit * (1 - limit) / len(passes)) ** 0.5
-    assert rounds(16, 4) == [4, 8, 16] and rounds(8) == [8] and rounds(100) == [32, 64, 100]
+    assert rounds(16, 4) == [4, 8, 16] and rounds(8) == [8] and rounds(100) == [16, 32, 64, 100]
 
 
 def test_the_budget_stops_the_search(reference, tmp_path):

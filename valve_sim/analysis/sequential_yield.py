@@ -18,7 +18,7 @@ Sequential yield: a candidate's valves sampled in rounds, stopped once its yield
 The rounds are prefixes of the candidate's one draw of `samples` valves (the same
 unit-cube points every candidate shares, tolerances.draw): the valves run after k
 rounds are the first rounds[k] of the full sample, so a valve is the same whether
-it runs in one round or several. Rounds double from `first` (32) up to the full
+it runs in one round or several. Rounds double from `first` (16) up to the full
 sample; with Sobol points a power-of-two prefix is itself a balanced Sobol sample.
 
 At each interim look (every round but the last) the yield's two-sided Clopper-Pearson
@@ -42,7 +42,7 @@ decides a yield:
 
 from valve_sim.analysis.tolerances import yield_interval
 
-FIRST_ROUND = 32  # valves in a candidate's first round
+FIRST_ROUND = 16  # valves in a candidate's first round
 STOP_ALPHA = 0.05  # the chance of a wrong early stop, split over the looks
 DECISIONS = ('nominal', 'below', 'above', 'dominated', 'full')
 
