@@ -51,7 +51,14 @@ from valve_sim.analysis.optimisation import (
     search,
 )
 from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.sequential_yield import planned_runs_of, runs_of
+from valve_sim.analysis.sequential_yield import (
+    FIRST_ROUND,
+    look,
+    planned_runs_of,
+    rounds,
+    runs_of,
+    STOP_ALPHA,
+)
 from valve_sim.analysis.study_backend import DaskBackend
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.study_runner import run_cases
@@ -100,10 +107,41 @@ def one_search(problem, backend, folder, population, generations):
         'confirm_runs': sum(runs_of(c) for _, _, c in outcome['pareto'] if c)
         + sum(map(runs_of, outcome['baselines'].values())),
         'decisions': decisions, 'pareto_searched': len(outcome['pareto']),
+        'replayed': {first: replay(rows, problem.required_yield, first)
+                     for first in (16, 32)} if problem.stop_alpha is None else None,
         'designs': [{'label': row['label'], 'design': row['design'],
                      'objectives': problem.scores(row)[0], 'ci95': confirm['ci95'],
                      'yield': confirm['yield']} for row, confirm in designs],
     }
+
+
+def replay(rows, required_yield, first_round=FIRST_ROUND, alpha=STOP_ALPHA):
+    """
+    Replay the stopping rule on full-sample rows' pass strings (dominance left out).
+
+    Return {decision: count}, the runs it would take against the full samples', and the
+    candidates whose early verdict differs from their full sample's.
+    """
+    decisions, runs, full, differ = {}, 0, 0, 0
+    for row in rows:
+        verdicts, decision = row['pass'], 'nominal' if row['error'] else None
+        nominal = row['nominal'] or {}
+        if decision is None and not nominal.get('pass'):
+            decision = 'nominal'
+        counts = rounds(len(verdicts), first_round) if verdicts else [0]
+        used = 0
+        for number, count in enumerate(counts if decision is None else []):
+            used = count
+            decision = ('full' if number == len(counts) - 1 else
+                        look(verdicts[:count].count('1'), count, required_yield, alpha,
+                             len(counts) - 1))
+            if decision is not None:
+                break
+        decisions[decision] = decisions.get(decision, 0) + 1
+        runs, full = runs + used + 1, full + len(verdicts) + 1
+        meets = bool(verdicts) and verdicts.count('1') / len(verdicts) >= required_yield
+        differ += (decision == 'below' and meets) or (decision == 'above' and not meets)
+    return {'decisions': decisions, 'runs': runs, 'full_runs': full, 'differ': differ}
 
 
 def compare(runs):
@@ -161,6 +199,11 @@ def report(name, runs, checks):
             print(f"   {design['label']:<15} P_1 {p_1:.4f} %  T_s {t_s:.2f} ms  yield "
                   f'{100 * design["yield"]:.1f} % ({100 * low:.1f}-{100 * high:.1f})  '
                   f'nearest in A at {distance:.4f}')
+    for label in ('A', 'B'):
+        for first, replayed in runs[label]['replayed'].items():
+            print(f"the rule replayed on {label}'s full samples, first round {first}: "
+                  f"{replayed['decisions']}, {replayed['runs']:,} of {replayed['full_runs']:,} "
+                  f"runs; {replayed['differ']} early verdicts differ from the full sample's")
     a, b, n = runs['A'], runs['B'], runs['N']
     full_s = (a['search_s'] + b['search_s']) / 2  # the load drifts: A and B flank N
     print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
