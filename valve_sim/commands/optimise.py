@@ -19,9 +19,9 @@ NSGA-II (pymoo) over the designed parameters (--design); each candidate's nomina
 measures are the objectives (--minimise, --maximise), and its yield, the share of
 valves made within --tolerance that meet --limits (and whose modes decay), comes from
 a quasi-random Monte Carlo on the Dask runner, sampled in rounds and stopped once
-decided (--sequential, analysis.sequential_yield; --budget caps the runs). The Pareto designs
-and the baselines (the reference valve, Table 2) are then confirmed with more,
-independent samples. See valve_sim.analysis.optimisation. Writes into --out:
+decided (--sequential, analysis.sequential_yield; --budget caps the runs). The
+Pareto designs and the baselines (the reference valve, Table 2) are then confirmed
+with more, independent samples. See valve_sim.analysis.optimisation. Writes into --out:
   evaluations/     the runner's results, one file per generation (--resume)
   pareto.csv       each Pareto design: values, nominal measures, both yields
   pareto.json      the problem, the Pareto set, the baselines, the chosen design
