@@ -26,7 +26,9 @@ its objectives exist, and its yield is at least the required yield.
 search() runs NSGA-II (pymoo: constraint domination, so feasible designs rank first,
 infeasible ones by their violation) generation by generation, with the designs in the
 unit cube of the bounds and a Latin-hypercube first generation. Each generation's
-candidates go to the runner as one study, OUT/generation_NNN.jsonl. The optimiser is
+candidates go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
+as far as its verdict needs (analysis.sequential_yield: rounds, the nominal screen, a
+stop once a feasible design before it dominates it). The optimiser is
 seeded, and the candidates of a generation follow only from the rows of the ones
 before, so --resume replays it: every generation on file is read (the runner checks
 that its fingerprint, hence every design and setting, is the same), only missing
