@@ -97,7 +97,8 @@ def plot_pareto_front(path, problem, records, outcome):
     axes.flat[0].legend(fontsize=7)
     figure.suptitle(
         f'{len(rows)} candidates, nominal measures;\n{int(feasible.sum())} meet the limits and '
-        f'the yield (Monte Carlo of {problem.samples} valves)', fontsize=10)
+        f"the yield (Monte Carlo of {'' if problem.stop_alpha is None else 'up to '}"
+        f'{problem.samples} valves)', fontsize=10)
     save_figure(figure, path, dpi=110)
 
 

@@ -67,7 +67,7 @@ MAX_GENERATIONS = 10_000
 
 
 def number_or_off(text, accepts, bounds):
-    """A number accepts(value) takes, or None for 'off'; ArgumentTypeError says bounds."""
+    """Return the number in text if accepts(value), None for off; else ArgumentTypeError."""
     if text.strip().lower() == 'off':
         return None
     try:
