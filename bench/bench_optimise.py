@@ -12,167 +12,249 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark of `valve-sim optimise`: one candidate's yield, and scaling over Dask workers."""
+"""Benchmark of `valve-sim optimise`'s sequential search: the same Pareto set, fewer runs."""
 
 # The summary above is also this script's --help description.
 #
-#     .venv/bin/python bench/bench_optimise.py [--samples 1000] [--generations 2] [--json FILE]
+#     nice -n 19 .venv/bin/python bench/bench_optimise.py [--problems first,worked]
+#         [--population P] [--generations G] [--samples N] [--confirm-samples M] [--json FILE]
 #
-# Measured side by side in one run (the machine is shared: compare the ratios):
-# 1. single: simulate() (the whole 1.25 s with rk4_steps) + step_measures, run after
-#    run on one core, 32 valves of the candidate's tolerance batch: the single-run
-#    rate; x cores is the reference.
-# 2. candidate: one candidate's --samples-valve yield (Latin hypercube: any count),
-#    as the optimiser's work unit (analysis.robust_yield.evaluate_candidate: preset,
-#    one batch of the lanes kernel, measures, decay rates) in this process, one core.
-# 3. generation: `cores` such candidates on a local Dask cluster of `cores` workers
-#    (started beforehand), as one generation of the optimiser runs them.
-# 4. scaling: the worked answer of docs/optimise.md at a reduced budget
-#    (--generations, no confirmation) end to end with --workers 1 and 2; the
-#    projection beyond assumes what the two runs show, a generation of P candidates
-#    on W workers takes ceil(P / W) candidate times.
+# Side by side in one run, on one local Dask cluster of `cores` workers (started and
+# its kernels loaded first), for each problem of docs/optimise.md (the first example:
+# d_c, k_p, V_c; the worked answer: six parameters), three searches:
+#   A  full samples (--sequential off, today's search), seed 0
+#   B  full samples, seed 1: how far two full-budget searches differ
+#   N  the sequential search (the defaults), seed 0
+# each followed by its confirmation (reported apart). The Pareto designs that meet the
+# yield on confirmation are compared on their nominal objectives, scaled to [0, 1]
+# over the union of the three sets: hypervolume (reference point 1.1 in each
+# objective) and each design's nearest match in A (with both confirmed yield
+# intervals). N passes when it differs from A by no more than B does (hypervolume,
+# largest nearest-match distance either way), and its search stage takes at most
+# 10 % of A's runs and wall time. Without --population/--generations each problem
+# runs at its docs/optimise.md budget (an hour or more per search on 2 cores).
 
 import argparse
 import json
-import math
 import os
 from pathlib import Path
-import subprocess
 import sys
 import tempfile
 import time
 
-from valve_sim.analysis.measures import step_measures
-from valve_sim.analysis.optimisation import parse_design, parse_objectives, RobustProblem
-from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
+import numpy as np
+from valve_sim.analysis.optimisation import (
+    outcome_of,
+    parse_design,
+    parse_objectives,
+    RobustProblem,
+    search,
+)
 from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.sequential_yield import (
+    FIRST_ROUND,
+    look,
+    planned_runs_of,
+    rounds,
+    runs_of,
+    STOP_ALPHA,
+)
 from valve_sim.analysis.study_backend import DaskBackend
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.study_runner import run_cases
-from valve_sim.analysis.tolerances import draw, parse_variations
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import simulate
-from valve_sim.core.steady_state import with_preset_pressure
+
+LIMITS = 'r_d<=0.85,P_o_percent<=0.2'
+PROBLEMS = {
+    'first': {'design': 'd_c=0.8e-3:1.2e-3,k_p=±20%,V_c=±20%',
+              'tolerances': 'd_c=±7um,k_p=±10%,V_c=±5%', 'population': 24, 'generations': 20},
+    'worked': {'design': 'm_m=±20%,m_p=±20%,V_p=±20%,V_c=±20%,d_c=±20%,k_p=±20%',
+               'tolerances': 'd_c=±7um,k_p=±10%,m_m=±2%,m_p=±2%,V_p=±5%,V_c=±5%',
+               'population': 32, 'generations': 40},
+}
+RUNS = (('A', 0, None), ('N', 0, 'default'), ('B', 1, None))  # label, seed, sequential
 
 
-DESIGN = 'm_m=±20%,m_p=±20%,V_p=±20%,V_c=±20%,d_c=±20%,k_p=±20%'
-TOLERANCES = 'd_c=±7um,k_p=±10%,m_m=±2%,m_p=±2%,V_p=±5%,V_c=±5%'
-OBJECTIVES, LIMITS = 'P_1_percent,T_s_ms', 'r_d<=0.85,P_o_percent<=0.2'
-POPULATION = 24
-
-
-def worked_command(out, workers, generations, samples):
-    """Return the worked answer's command (docs/optimise.md) at a budget, no confirmation."""
-    return [sys.executable, '-m', 'valve_sim.commands.cli', 'optimise', '--design', DESIGN,
-            '--minimise', OBJECTIVES, '--limits', LIMITS, '--tolerance', TOLERANCES,
-            '--yield', '0.99', '--samples', str(samples), '--confirm-samples', '0',
-            '--population', str(POPULATION), '--generations', str(generations),
-            '--workers', str(workers), '--out', str(out)]
-
-
-def timed(function):
-    """Return (wall seconds, CPU seconds of this process, result) of function()."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    result = function()
-    return time.perf_counter() - wall, time.process_time() - cpu, result
-
-
-def candidate_problem(params, samples):
-    """Return the worked answer's problem with samples valves per candidate."""
+def problem_of(params, spec, samples, confirm_samples, seed, sequential):
+    """Return the RobustProblem of a problem of docs/optimise.md."""
     preset, _ = preset_protocol('held-preset', params)
+    extra = {} if sequential == 'default' else {'stop_alpha': sequential}
     return RobustProblem(
-        params=params, design=tuple(parse_design([DESIGN], params)),
-        objectives=tuple(parse_objectives([OBJECTIVES], None)), limits=tuple(LIMITS.split(',')),
-        tolerances=tuple(TOLERANCES.split(',')), required_yield=0.99, preset_pressure=preset,
-        samples=samples, sampler='lhs', confirm_samples=0,
-    )
+        params=params, design=tuple(parse_design([spec['design']], params)),
+        objectives=tuple(parse_objectives(['P_1_percent,T_s_ms'], None)),
+        limits=tuple(LIMITS.split(',')), tolerances=tuple(spec['tolerances'].split(',')),
+        required_yield=0.99, preset_pressure=preset, samples=samples, seed=seed,
+        confirm_samples=confirm_samples, **extra,
+    ).check()
 
 
-def single_runs(params, count):
-    """simulate() + step_measures of count valves of the tolerance batch, one after another."""
-    distributions = parse_variations([TOLERANCES], params)
-    values = draw(distributions, count, 5, 'random')
-    valves = [with_preset_pressure({**params, **{d.name: float(v) for d, v in zip(
-        distributions, row)}}, 7e6) for row in values]
-    return [step_measures(w.time, w['supply_pressure'], w['main_valve_displacement'],
-                          SCENARIO.step_time) for w in (simulate(v, SCENARIO) for v in valves)]
+def one_search(problem, backend, folder, population, generations):
+    """Return the measures of one search and its confirmation."""
+    start = time.perf_counter()
+    records = search(problem, backend, folder, population, generations)
+    searched = time.perf_counter()
+    outcome = outcome_of(problem, records, backend, folder, False)
+    confirmed = time.perf_counter()
+    rows = [row for _, row in records]
+    designs = [(row, confirm) for _, row, confirm in outcome['pareto']
+               if confirm is not None and problem.feasible(confirm)]
+    decisions = {}
+    for row in rows:
+        decisions[row.get('decision', 'full')] = decisions.get(row.get('decision', 'full'), 0) + 1
+    return {
+        'search_s': searched - start, 'confirm_s': confirmed - searched,
+        'search_runs': sum(map(runs_of, rows)), 'full_runs': sum(map(planned_runs_of, rows)),
+        'confirm_runs': sum(runs_of(c) for _, _, c in outcome['pareto'] if c)
+        + sum(map(runs_of, outcome['baselines'].values())),
+        'decisions': decisions, 'pareto_searched': len(outcome['pareto']),
+        'replayed': {first: replay(rows, problem.required_yield, first)
+                     for first in (16, 32)} if problem.stop_alpha is None else None,
+        'designs': [{'label': row['label'], 'design': row['design'],
+                     'objectives': problem.scores(row)[0], 'ci95': confirm['ci95'],
+                     'yield': confirm['yield']} for row, confirm in designs],
+    }
+
+
+def replay(rows, required_yield, first_round=FIRST_ROUND, alpha=STOP_ALPHA):
+    """
+    Replay the stopping rule on full-sample rows' pass strings (dominance left out).
+
+    Return {decision: count}, the runs it would take against the full samples', and the
+    candidates whose early verdict differs from their full sample's.
+    """
+    decisions, runs, full, differ = {}, 0, 0, 0
+    for row in rows:
+        verdicts, decision = row['pass'], 'nominal' if row['error'] else None
+        nominal = row['nominal'] or {}
+        if decision is None and not nominal.get('pass'):
+            decision = 'nominal'
+        counts = rounds(len(verdicts), first_round) if verdicts else [0]
+        used = 0
+        for number, count in enumerate(counts if decision is None else []):
+            used = count
+            decision = ('full' if number == len(counts) - 1 else
+                        look(verdicts[:count].count('1'), count, required_yield, alpha,
+                             len(counts) - 1))
+            if decision is not None:
+                break
+        decisions[decision] = decisions.get(decision, 0) + 1
+        runs, full = runs + used + 1, full + len(verdicts) + 1
+        meets = bool(verdicts) and verdicts.count('1') / len(verdicts) >= required_yield
+        differ += (decision == 'below' and meets) or (decision == 'above' and not meets)
+    return {'decisions': decisions, 'runs': runs, 'full_runs': full, 'differ': differ}
+
+
+def compare(runs):
+    """Add hypervolumes and nearest matches in A to runs {label: measures}."""
+    from pymoo.indicators.hv import HV
+
+    points = np.array([d['objectives'] for run in runs.values() for d in run['designs']])
+    if not len(points):
+        for run in runs.values():
+            run.update(hypervolume=0.0, nearest_in_A=[], furthest_from=0.0)
+        return
+    low, span = points.min(axis=0), np.ptp(points, axis=0)
+    span = np.where(span > 0, span, 1.0)
+    scaled = {k: np.array([(np.array(d['objectives']) - low) / span for d in run['designs']])
+              for k, run in runs.items()}
+    indicator = HV(ref_point=np.full(points.shape[1], 1.1))
+    for label, run in runs.items():
+        run['hypervolume'] = float(indicator(scaled[label])) if len(scaled[label]) else 0.0
+        run['nearest_in_A'] = [float(np.min(np.linalg.norm(scaled['A'] - p, axis=1)))
+                               for p in scaled[label]] if len(scaled['A']) else []
+        if not (len(scaled[label]) and len(scaled['A'])):  # one set empty: no match
+            run['furthest_from'] = 0.0 if len(scaled[label]) == len(scaled['A']) else np.inf
+            continue
+        run['furthest_from'] = max(run['nearest_in_A'] + [
+            float(np.min(np.linalg.norm(scaled[label] - p, axis=1))) for p in scaled['A']])
+
+
+def verdict(runs):
+    """Return the checks of N against A and B: same Pareto set, at most 10 % of the search."""
+    a, b, n = runs['A'], runs['B'], runs['N']
+    return {
+        'hypervolume': abs(n['hypervolume'] - a['hypervolume'])
+        <= abs(b['hypervolume'] - a['hypervolume']),
+        'nearest_matches': n['furthest_from'] <= b['furthest_from'],
+        'runs_10_percent': n['search_runs'] <= 0.10 * a['search_runs'],
+        'wall_10_percent': n['search_s'] <= 0.10 * (a['search_s'] + b['search_s']) / 2,
+    }
+
+
+def report(name, runs, checks):
+    """Print one problem's three searches side by side."""
+    print(f'\n== {name} ==')
+    for label, run in runs.items():
+        share = 100 * run['search_runs'] / run['full_runs']
+        print(f"{label}: search {run['search_runs']:,} runs ({share:.1f} % of full "
+              f"samples), {run['search_s']:.0f} s; confirmation {run['confirm_runs']:,} runs, "
+              f"{run['confirm_s']:.0f} s; decisions {run['decisions']}; "
+              f"{len(run['designs'])} of {run['pareto_searched']} Pareto designs meet the yield "
+              f"on confirmation; hypervolume {run.get('hypervolume', 0):.4f}; furthest nearest "
+              f"match to A {run.get('furthest_from', 0):.4f}")
+        distances = run['nearest_in_A'] or [np.nan] * len(run['designs'])
+        for design, distance in zip(run['designs'], distances):
+            low, high = design['ci95']
+            p_1, t_s = design['objectives']
+            print(f"   {design['label']:<15} P_1 {p_1:.4f} %  T_s {t_s:.2f} ms  yield "
+                  f'{100 * design["yield"]:.1f} % ({100 * low:.1f}-{100 * high:.1f})  '
+                  f'nearest in A at {distance:.4f}')
+    for label in ('A', 'B'):
+        for first, replayed in runs[label]['replayed'].items():
+            print(f"the rule replayed on {label}'s full samples, first round {first}: "
+                  f"{replayed['decisions']}, {replayed['runs']:,} of {replayed['full_runs']:,} "
+                  f"runs; {replayed['differ']} early verdicts differ from the full sample's")
+    a, b, n = runs['A'], runs['B'], runs['N']
+    full_s = (a['search_s'] + b['search_s']) / 2  # the load drifts: A and B flank N
+    print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
+          f"{100 * n['search_s'] / full_s:.1f} % of the mean wall time of A's and B's "
+          'searches; '
+          f'checks {checks}')
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
-    parser.add_argument('--samples', type=int, default=1000)
-    parser.add_argument('--generations', type=int, default=2,
-                        help='generations of the scaling runs (default 2)')
-    parser.add_argument('--scaling-samples', type=int, default=128,
-                        help='valves per candidate in the scaling runs (default 128)')
+    parser.add_argument('--problems', default='first,worked')
+    parser.add_argument('--population', type=int, help="default: each problem's own")
+    parser.add_argument('--generations', type=int, help="default: each problem's own")
+    parser.add_argument('--samples', type=int, default=256)
+    parser.add_argument('--confirm-samples', type=int, default=1024)
     parser.add_argument('--json', metavar='FILE')
+    parser.add_argument('--keep', metavar='DIR', help="keep every search's results files here")
     args = parser.parse_args()
-    cores = os.cpu_count() or 1
     params = load_parameters().params
-    problem = candidate_problem(params, args.samples)
-    case = problem.case(0, 'bench', {})
-    single_runs(params, 2)
-    evaluate_candidate({**case, 'samples': 16})  # kernels loaded
-    result = {'cores': cores, 'samples': args.samples, 'load_start': os.getloadavg()[0]}
-    wall, cpu, _ = timed(lambda: single_runs(params, 32))
-    result['single_run_s'] = {'wall': wall / 32, 'cpu': cpu / 32}
-    wall, cpu, row = timed(lambda: evaluate_candidate(case))
-    result['candidate_s'] = {'wall': wall, 'cpu': cpu, 'yield': row['yield']}
-    runs = args.samples + 1
-    single_rate = cores / result['single_run_s']['wall']
-    result['candidate_rate_runs_per_s'] = runs / wall
-    result['candidate_vs_single_x_cores'] = runs / wall / single_rate
+    cores = os.cpu_count() or 1
+    result = {'cores': cores, 'load_start': os.getloadavg()[0], 'settings': vars(args)}
     backend = DaskBackend(workers=cores).start()
     try:
-        cases = [problem.case(i, f'bench {i}', {}) for i in range(cores)]
-        with tempfile.TemporaryDirectory() as folder:
-            warm = [{**case, 'samples': 16} for case in cases]  # each worker loads the kernels
-            run_cases(warm, Path(folder) / 'w.jsonl', backend, batch_size=1,
-                      evaluate=evaluate_candidates, progress_stream=None)
-            wall, _, _ = timed(lambda: run_cases(cases, Path(folder) / 'r.jsonl', backend,
-                                                 batch_size=1, evaluate=evaluate_candidates,
-                                                 progress_stream=None))
+        with tempfile.TemporaryDirectory() as scratch:
+            folder = args.keep or scratch
+            warm = problem_of(params, PROBLEMS['first'], 16, 0, 0, None)
+            evaluate_candidate(warm.case(0, 'warm', {}))
+            run_cases([warm.case(i, f'warm {i}', {}) for i in range(cores)],
+                      Path(folder) / 'warm.jsonl', backend, batch_size=1,
+                      evaluate=evaluate_candidates,
+                      progress_stream=None)
+            for name in args.problems.split(','):
+                spec = PROBLEMS[name]
+                population = args.population or spec['population']
+                generations = args.generations or spec['generations']
+                runs = {}
+                for label, seed, sequential in RUNS:
+                    problem = problem_of(params, spec, args.samples, args.confirm_samples,
+                                         seed, sequential)
+                    print(f'{name} {label}: {generations} x {population} x {args.samples}',
+                          file=sys.stderr, flush=True)
+                    runs[label] = one_search(problem, backend, Path(folder) / name / label,
+                                             population, generations)
+                compare(runs)
+                checks = verdict(runs)
+                report(name, runs, checks)
+                result[name] = {'population': population, 'generations': generations,
+                                'runs': runs, 'checks': checks}
     finally:
         backend.close()
-    result['generation_s'] = wall
-    result['generation_rate_runs_per_s'] = cores * runs / wall
-    result['generation_vs_single_x_cores'] = cores * runs / wall / single_rate
-    scaling = {}
-    for workers in (1, 2):
-        with tempfile.TemporaryDirectory() as folder:
-            command = worked_command(Path(folder) / 'out', workers, args.generations,
-                                     args.scaling_samples)
-            start = time.perf_counter()
-            done = subprocess.run(command, capture_output=True, text=True)
-            scaling[workers] = time.perf_counter() - start
-            if done.returncode:
-                sys.exit(done.stderr)
-    # T(W) = start + generations * ceil(P / W) * candidate, fitted to the two runs
-    candidate = 2.0 * (scaling[1] - scaling[2]) / (args.generations * POPULATION)
-    start = max(0.0, scaling[1] - args.generations * POPULATION * candidate)
-    result['scaling_s'] = scaling
-    result['scaling_speedup_2'] = scaling[1] / scaling[2]
-    result['fitted_start_s'], result['fitted_candidate_s'] = start, candidate
-    result['projection_s'] = {
-        workers: start + args.generations * math.ceil(POPULATION / workers) * candidate
-        for workers in (4, 8, 12, 24, 48)
-    }
     result['load_end'] = os.getloadavg()[0]
-    single = result['single_run_s']['wall']
-    print(f'single run (simulate + measures, one core): {single * 1e3:.1f} ms wall; '
-          f'single-run rate x {cores} cores = {single_rate:.0f} runs/s')
-    print(f'one candidate, {args.samples} valves + nominal, one core: '
-          f"{result['candidate_s']['wall']:.1f} s ({result['candidate_rate_runs_per_s']:.0f} "
-          f"runs/s) = {result['candidate_vs_single_x_cores']:.2f} x the single-run rate x cores")
-    print(f'{cores} candidates on {cores} Dask workers: {wall:.1f} s '
-          f"({result['generation_rate_runs_per_s']:.0f} runs/s) = "
-          f"{result['generation_vs_single_x_cores']:.2f} x the single-run rate x cores")
-    projected = ', '.join(f'{w} workers {t:.0f} s' for w, t in result['projection_s'].items())
-    print(f'worked answer, {args.generations} generations of {POPULATION} x '
-          f'{args.scaling_samples} valves: 1 worker {scaling[1]:.0f} s, 2 workers '
-          f"{scaling[2]:.0f} s (speed-up {result['scaling_speedup_2']:.2f}); "
-          + (f'fitted start {start:.0f} s + {candidate:.2f} s a candidate; projected {projected}'
-             if candidate > 0 else 'no gain from the second worker: no projection (busy cores?)'))
     print(f"load average {result['load_start']:.1f} at the start, {result['load_end']:.1f} at "
           'the end')
     if args.json:

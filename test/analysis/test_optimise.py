@@ -19,11 +19,13 @@ Small budgets throughout: a few candidates of a few sampled valves each.
 """
 
 import csv
+import io
 import json
 import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from valve_sim.analysis.optimisation import (
     outcome_of,
@@ -35,7 +37,8 @@ from valve_sim.analysis.optimisation import (
 )
 from valve_sim.analysis.optimisation_report import parameter_file_text
 from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.study_backend import SerialBackend
+from valve_sim.analysis.sequential_yield import look, rounds, runs_of, STOP_ALPHA
+from valve_sim.analysis.study_backend import DaskBackend, SerialBackend
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_variations, unit_samples
 from valve_sim.commands.cli import main
@@ -85,33 +88,114 @@ def test_the_optimiser_finds_a_known_robust_optimum(reference, tmp_path):
     assert best[1]['yield'] == 1.0 and best[1]['pass'] == '1' * 8
 
 
-def test_the_yield_gives_the_same_pass_or_fail_per_sample_as_tolerance(reference, tmp_path):
-    # One candidate's Monte Carlo against `valve-sim tolerance` on its parameter file,
-    # the same tolerances, sampler, seed and limits: every valve judged the same.
-    tolerances = 'd_c=±2%,k_p=±5%'
-    design = {D_C: 1.02e-3, 'pilot_spring_stiffness': 150e3}
-    probe = problem_of(reference, ['d_c=±20%', 'k_p=±20%'], ['P_1_percent'], ['P_1_percent<=99'],
-                       [tolerances], samples=16, sampler='sobol', seed=3)
-    nominal = evaluate_candidate(probe.case(0, 'c', design))['nominal']['measures']['P_1_percent']
-    limit = f'P_1_percent<={nominal!r}'  # about half the valves overshoot more
-    problem = problem_of(reference, ['d_c=±20%', 'k_p=±20%'], ['P_1_percent'], [limit],
-                         [tolerances], samples=16, sampler='sobol', seed=3)
-    row = evaluate_candidate(problem.case(0, 'c', design))
-    assert 0 < row['passed'] < 16, 'a mix of passing and failing valves makes the test'
-    params_file = tmp_path / 'design.yaml'
-    params_file.write_text(parameter_file_text(problem, design, 'test design'))
-    out = tmp_path / 'tolerance'
-    result = subprocess.run(
-        [sys.executable, '-m', 'valve_sim.commands.cli', 'tolerance', '--params',
-         str(params_file), '--vary', tolerances, '--samples', '16', '--sampler', 'sobol',
-         '--seed', '3', '--limits', limit, '--workers', '1', '--out', str(out)],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
-    with open(out / 'samples.csv') as stream:
-        verdicts = ''.join(line['pass'] for line in csv.DictReader(stream))
-    assert verdicts == row['pass']
-    assert f"yield {row['passed']}/16" in result.stdout
+def test_the_confirmed_yields_of_two_pareto_designs_match_tolerance(reference, tmp_path):
+    # A sequential search (rounds of 4, 8, 16 valves), then the confirmation's 16 fresh
+    # valves of two Pareto designs against `valve-sim tolerance` on each design's
+    # parameter file, the same tolerances, sampler, seed (the next one) and limit:
+    # every valve judged the same, so the confirmed yield means what it meant.
+    tolerances, limit = 'd_c=±7um,k_p=±10%', 'r_d<=0.855'
+    problem = problem_of(reference, ['d_c=±10%', 'k_p=±20%'], ['P_1_percent', 'T_s_ms'],
+                         [limit], [tolerances], samples=8, first_round=4, confirm_samples=16,
+                         required_yield=0.5, seed=3)
+    records = search(problem, SerialBackend(), tmp_path, population=6, generations=2,
+                     stream=None)
+    outcome = outcome_of(problem, records, SerialBackend(), tmp_path, False)
+    pareto = [(row, confirmed) for _, row, confirmed in outcome['pareto']]
+    assert len(pareto) >= 2, 'two Pareto designs make the test'
+    verdicts = set()
+    cluster = DaskBackend(workers=1).start()  # one cluster for both: its worker loads once
+    try:
+        for number, (row, confirmed) in enumerate(pareto[:2]):
+            assert confirmed['samples'] == 16 and confirmed['decision'] == 'full'
+            params_file = tmp_path / f'design{number}.yaml'
+            params_file.write_text(parameter_file_text(problem, row['design'], 'test design'))
+            out = tmp_path / f'tolerance{number}'
+            assert main(['tolerance', '--params', str(params_file), '--vary', tolerances,
+                         '--samples', '16', '--sampler', 'sobol', '--seed', '4', '--limits',
+                         limit, '--scheduler', cluster.cluster.scheduler_address,
+                         '--out', str(out)]) == 0
+            with open(out / 'samples.csv') as stream:
+                judged = ''.join(line['pass'] for line in csv.DictReader(stream))
+            assert judged == confirmed['pass']
+            verdicts |= set(judged)
+    finally:
+        cluster.close()
+    assert verdicts == {'0', '1'}, 'passing and failing valves make the test'
+
+
+def sequential_candidate(reference, limits, required_yield, front=(), **settings):
+    """Return (problem, row) of one candidate (d_c 1.02 mm): 16 Sobol valves in rounds of 4."""
+    problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], limits,
+                         ['d_c=±2%,k_p=±5%'], samples=16, seed=3, first_round=4,
+                         required_yield=required_yield, **settings)
+    return problem, evaluate_candidate(problem.case(0, 'c', {D_C: 1.02e-3}, front=front))
+
+
+def test_the_stopping_rule_and_the_common_draws(reference):
+    problem, every = sequential_candidate(reference, ['P_1_percent<=99'], 0.3, stop_alpha=None)
+    assert (every['decision'], every['samples'], every['runs']) == ('full', 16, 17)
+    nominal = every['nominal']['measures']['P_1_percent']
+    half = [f'P_1_percent<={nominal!r}']  # about half the valves overshoot more
+    _, mixed = sequential_candidate(reference, half, 0.3, stop_alpha=None)
+    assert 0 < mixed['passed'] < 16
+    # far above the target: decided after the first round
+    problem, above = sequential_candidate(reference, ['P_1_percent<=99'], 0.3)
+    assert (above['decision'], above['samples'], above['pass']) == ('above', 4, '1111')
+    assert problem.feasible(above)
+    # far below: stopped early, its valves the first ones of the full sample
+    problem, below = sequential_candidate(reference, half, 0.99)
+    assert below['decision'] == 'below' and below['samples'] < 16
+    assert below['pass'] == mixed['pass'][:below['samples']] and not problem.feasible(below)
+    # at the target: undecided at every look, the full sample, the same valves as one round
+    problem, at = sequential_candidate(reference, half, mixed['yield'])
+    assert (at['decision'], at['pass'], at['yield']) == ('full', mixed['pass'], mixed['yield'])
+    assert problem.feasible(at)
+    # a nominal valve out of spec takes no samples
+    problem, out = sequential_candidate(reference, [f'P_1_percent<={nominal - 0.1!r}'], 0.3)
+    assert (out['decision'], out['samples'], out['runs']) == ('nominal', 0, 1)
+    assert not problem.feasible(out)
+    # dominated by a design already feasible: stopped undecided, not counted as feasible
+    problem, behind = sequential_candidate(reference, ['P_1_percent<=99'], 0.99,
+                                           front=[[nominal - 0.01]])
+    assert (behind['decision'], behind['samples']) == ('dominated', 4)
+    assert behind['yield'] == 1.0 and not problem.feasible(behind)
+
+
+@pytest.mark.parametrize('required, true_yield, wrong', [
+    (0.99, 0.99, 'below'), (0.99, 0.995, 'below'), (0.9, 0.8999, 'above')])
+def test_a_wrong_early_stop_is_at_most_half_alpha(required, true_yield, wrong):
+    # The stated error rates: valves passing independently with the true yield, the
+    # rule's looks at 16, 32, 64 and 128 of 256 valves stop on the wrong side of the target
+    # in at most alpha / 2 of 20,000 candidates (plus the Monte Carlo's 4 sigma).
+    counts = rounds(256)
+    decided = {n: [look(k, n, required, STOP_ALPHA, len(counts) - 1) for k in range(n + 1)]
+               for n in counts[:-1]}
+    passes = np.random.default_rng(0).random((20_000, 256)) < true_yield
+    stopped = np.zeros(len(passes), dtype=bool)
+    wrong_stops = 0
+    for n in counts[:-1]:
+        verdict = np.array(decided[n], dtype=object)[passes[:, :n].sum(axis=1)]
+        wrong_stops += int(np.sum((verdict == wrong) & ~stopped))
+        stopped |= verdict != None  # noqa: E711 (elementwise)
+    rate, limit = wrong_stops / len(passes), STOP_ALPHA / 2
+    assert rate <= limit + 4 * (limit * (1 - limit) / len(passes)) ** 0.5
+    assert rounds(16, 4) == [4, 8, 16] and rounds(8) == [8] and rounds(100) == [16, 32, 64, 100]
+
+
+def test_the_budget_stops_the_search(reference, tmp_path):
+    problem = problem_of(reference, ['d_c=±10%'], ['P_1_percent'], ['r_d<=0.87'],
+                         ['d_c=±7um'], samples=4, required_yield=0.5)
+    stream = io.StringIO()
+    records = search(problem, SerialBackend(), tmp_path, population=4, generations=6,
+                     stream=stream, budget=45)
+    spent = {}
+    for generation, row in records:
+        spent[generation] = spent.get(generation, 0) + runs_of(row)
+    total, last = sum(spent.values()), spent[max(spent)]
+    assert 1 < max(spent) < 6 and total + last > 45
+    assert all(sum(spent[g] for g in range(1, k + 1)) + spent[k] <= 45 for k in spent
+               if k < max(spent)), 'each generation started within the budget'
+    assert f'optimise: budget of 45 runs: {total} spent' in stream.getvalue()
 
 
 class InterruptedBackend(SerialBackend):
@@ -167,7 +251,10 @@ def test_the_command_writes_the_pareto_set_and_resumes_without_computing(tmp_pat
                '--population', '4', '--generations', '2', '--workers', '1', '--out', str(out)]
     first = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr
-    assert re.search(r'optimise: generation 2/2: 8/8 candidates \(100 %\).*ETA', first.stderr)
+    assert re.search(r'optimise: generation 2/2 \([\d,]+ runs spent, [\d,]+ saved\): 8/8 '
+                     r'candidates \(100 %\).*ETA', first.stderr)
+    assert re.search(r'runs: search [\d,]+ \([\d,]+ saved .*\), confirmation 27 \(3 designs\)',
+                     first.stdout)
     summary = json.loads((out / 'pareto.json').read_text())
     assert summary['candidates_evaluated'] == 8 and summary['pareto']
     for entry in summary['pareto']:

@@ -26,7 +26,9 @@ its objectives exist, and its yield is at least the required yield.
 search() runs NSGA-II (pymoo: constraint domination, so feasible designs rank first,
 infeasible ones by their violation) generation by generation, with the designs in the
 unit cube of the bounds and a Latin-hypercube first generation. Each generation's
-candidates go to the runner as one study, OUT/generation_NNN.jsonl. The optimiser is
+candidates go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
+as far as its verdict needs (analysis.sequential_yield: rounds, the nominal screen, a
+stop once a feasible design before it dominates it). The optimiser is
 seeded, and the candidates of a generation follow only from the rows of the ones
 before, so --resume replays it: every generation on file is read (the runner checks
 that its fingerprint, hence every design and setting, is the same), only missing
@@ -47,6 +49,12 @@ from valve_sim.analysis.robust_yield import (
     check_candidate_row,
     evaluate_candidates,
     MIN_DECAY_RATE,
+)
+from valve_sim.analysis.sequential_yield import (
+    dominated,
+    FIRST_ROUND,
+    RunTally,
+    STOP_ALPHA,
 )
 from valve_sim.analysis.study_results import fingerprint
 from valve_sim.analysis.study_runner import Progress, run_cases
@@ -193,11 +201,15 @@ class RobustProblem:
     sampler: str = 'sobol'
     seed: int = 0
     confirm_samples: int = 1024
+    stop_alpha: float = STOP_ALPHA  # the sequential rule's (None: every valve of a candidate)
+    first_round: int = FIRST_ROUND
     min_decay_rate: float = MIN_DECAY_RATE  # [1/s], or None: no stability requirement
     step_size: float = 1e-5
 
     def check(self):
-        """Raise ParameterError if a sample count does not suit the sampler."""
+        """Raise ParameterError if a sample count does not suit the sampler, or alpha (0, 1)."""
+        if self.stop_alpha is not None and not 0.0 < self.stop_alpha < 1.0:
+            raise ParameterError(f'--sequential {self.stop_alpha!r}: alpha must be in (0, 1)')
         if self.sampler not in SAMPLERS:
             raise ParameterError(f'unknown sampler {self.sampler!r}; known: {", ".join(SAMPLERS)}')
         for count in (self.samples, self.confirm_samples):
@@ -209,8 +221,13 @@ class RobustProblem:
         """Return the design {name: value} at a point of the unit cube of the bounds."""
         return {b.name: float(b.values(u)) for b, u in zip(self.design, unit)}
 
-    def case(self, index, label, design, confirming=False):
-        """Return the runner case of a design; confirming: more samples, every row kept."""
+    def case(self, index, label, design, confirming=False, front=()):
+        """
+        Return the runner case of a design; confirming: more samples, every row kept.
+
+        front: the objective points of the designs found feasible so far (a candidate
+        they dominate stops sampling); the confirmation samples every valve.
+        """
         return {
             'index': index,
             'label': label,
@@ -227,6 +244,11 @@ class RobustProblem:
             'scenario': REFERENCE_SCENARIO,
             'step_size': self.step_size,
             'keep_samples': confirming,
+            'stop_alpha': None if confirming else self.stop_alpha,
+            'first_round': self.first_round,
+            'required_yield': self.required_yield,
+            'objectives': [[o.measure, o.sense] for o in self.objectives],
+            'front': [] if confirming else [list(point) for point in front],
         }
 
     def nominal_ok(self, row):
@@ -239,8 +261,13 @@ class RobustProblem:
         )
 
     def feasible(self, row):
-        """Tell whether a candidate meets everything asked: a nominal valve in spec, the yield."""
-        return self.nominal_ok(row) and row['yield'] >= self.required_yield
+        """
+        Tell whether a candidate meets everything asked: a nominal valve in spec, the yield.
+
+        A candidate left undecided because a feasible design dominates it is not.
+        """
+        return (self.nominal_ok(row) and row['yield'] >= self.required_yield
+                and row.get('decision') != 'dominated')
 
     def scores(self, row):
         """Return (objective values to minimise, constraint values <= 0 when met) for pymoo."""
@@ -261,13 +288,16 @@ class RobustProblem:
 
 
 def search(problem, backend, folder, population, generations, resume=False,
-           evaluate=evaluate_candidates, stream=sys.stderr, batch_size=1):
+           evaluate=evaluate_candidates, stream=sys.stderr, batch_size=1, budget=None):
     """
     Run NSGA-II over the design space; return [(generation, row)] of every candidate.
 
     Each generation is a study of the runner in folder/generation_NNN.jsonl; without
-    resume the folder's earlier results are removed first. Progress and an ETA in
-    candidates go to stream.
+    resume the folder's earlier results are removed first. Each generation's cases
+    carry the objective points of the feasible designs before it (a candidate they
+    dominate stops sampling early). budget [runs]: no generation starts once the runs
+    spent plus the last generation's runs would pass it. Progress and an ETA in
+    candidates, with the runs spent and saved, go to stream.
     """
     from pymoo.algorithms.moo.nsga2 import NSGA2
     from pymoo.core.evaluator import Evaluator
@@ -285,19 +315,31 @@ def search(problem, backend, folder, population, generations, resume=False,
     algorithm = NSGA2(pop_size=population, sampling=LHS())
     algorithm.setup(unit_problem, termination=('n_gen', generations), seed=problem.seed)
     progress = Progress('optimise', population * generations, 0, stream, unit='candidates')
-    records, generation, on_file = [], 0, 0
+    tally = RunTally(progress)
+    records, generation, on_file, last = [], 0, 0, 0
     while algorithm.has_next():
+        if budget is not None and generation and tally.spent + last > budget:
+            _say(stream, f'optimise: budget of {budget:,} runs: {tally.spent:,} spent, the '
+                 f'next generation would take about {last:,}; the search stops after '
+                 f'generation {generation}')
+            break
         generation += 1
         offspring = algorithm.ask()
         progress.total -= population - len(offspring)
-        progress.label = f'optimise: generation {generation}/{generations}'
+        tally.generation = f'optimise: generation {generation}/{generations}'
+        tally.add([])
+        front = feasible_front(problem, records)
         cases = [
-            problem.case(len(records) + i, f'candidate {len(records) + i}', problem.values(x))
+            problem.case(len(records) + i, f'candidate {len(records) + i}', problem.values(x),
+                         front=front)
             for i, x in enumerate(offspring.get('X'))
         ]
         path = folder / f'generation_{generation:03d}.jsonl'
-        rows, computed = _run(cases, path, backend, resume, batch_size, evaluate, progress,
-                              f'in generation {generation}')
+        before = tally.spent
+        rows, computed = _run(cases, path, tally.counting(backend), resume, batch_size,
+                              evaluate, progress, f'in generation {generation}')
+        tally.add(rows.values())  # those read back from file
+        last = tally.spent - before
         on_file += len(cases) - computed
         rows = [rows[case['index']] for case in cases]
         objectives, constraints = zip(*(problem.scores(row) for row in rows))
@@ -314,13 +356,13 @@ def search(problem, backend, folder, population, generations, resume=False,
 
 def pareto_front(points):
     """Return the indices of the points (rows to minimise) that no other point dominates."""
-    if not len(points):
-        return []
-    points = np.asarray(points, dtype=float).reshape(len(points), -1)
-    return [
-        i for i, point in enumerate(points)
-        if not np.any(np.all(points <= point, axis=1) & np.any(points < point, axis=1))
-    ]
+    points = [list(np.atleast_1d(point)) for point in points]
+    return [i for i, point in enumerate(points) if not dominated(point, points)]
+
+
+def feasible_front(problem, records):
+    """Return the objective points (to minimise) of the feasible, non-dominated records."""
+    return [problem.scores(row)[0] for _, row in pareto_set(problem, records)]
 
 
 def pareto_set(problem, records):

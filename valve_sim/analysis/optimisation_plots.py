@@ -42,12 +42,14 @@ def plot_pareto_front(path, problem, records, outcome):
     Every candidate's nominal objectives, the Pareto designs and the baselines.
 
     One panel per pair of objectives (one objective: against the candidate number).
-    Grey: candidates that miss the yield or the limits; blue: feasible; black ringed:
+    Grey: candidates that miss the yield or the limits; light brown: stopped with the
+    yield undecided, dominated by a feasible design; blue: feasible; black ringed:
     the Pareto set; green: the chosen design; red star: Table 2; black cross: the
     reference valve.
     """
     rows = [row for _, row in records]
     feasible = np.array([problem.feasible(row) for row in rows], dtype=bool)
+    undecided = np.array([row.get('decision') == 'dominated' for row in rows], dtype=bool)
     pareto = [row for _, row, _ in outcome['pareto']]
     chosen = outcome['chosen']
     count = len(problem.objectives)
@@ -62,8 +64,12 @@ def plot_pareto_front(path, problem, records, outcome):
                  else _objective_values(problem, selected, i))
             return x, _objective_values(problem, selected, j)
         x, y = coordinates(rows)
-        axis.plot(x[~feasible], y[~feasible], '.', color='0.75', markersize=4,
+        missing = ~feasible & ~undecided
+        axis.plot(x[missing], y[missing], '.', color='0.75', markersize=4,
                   label='misses yield or limits')
+        if undecided.any():
+            axis.plot(x[undecided], y[undecided], '.', color='tan', markersize=4,
+                      label='dominated, yield undecided')
         axis.plot(x[feasible], y[feasible], '.', color='tab:blue', markersize=5,
                   label=f'meets yield {100 * problem.required_yield:g} %')
         px, py = coordinates(pareto)
@@ -91,7 +97,8 @@ def plot_pareto_front(path, problem, records, outcome):
     axes.flat[0].legend(fontsize=7)
     figure.suptitle(
         f'{len(rows)} candidates, nominal measures;\n{int(feasible.sum())} meet the limits and '
-        f'the yield (Monte Carlo of {problem.samples} valves)', fontsize=10)
+        f"the yield (Monte Carlo of {'' if problem.stop_alpha is None else 'up to '}"
+        f'{problem.samples} valves)', fontsize=10)
     save_figure(figure, path, dpi=110)
 
 

@@ -23,9 +23,11 @@ any namespace and to `valve-sim ... --params FILE`; under the held preset it als
 holds preset_pressure, which sets the pilot spring preload when the file is loaded.
 """
 
+from collections import Counter
 import csv
 
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.sequential_yield import planned_runs_of, runs_of
 from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.parameters import NODE_NAME, PARAMETERS
 
@@ -108,6 +110,29 @@ def problem_statement(problem, population, generations):
         'yield_interval': 'Clopper-Pearson 95 %, samples taken as independent (conservative '
         'for quasi-random samples)',
         'step_size': problem.step_size,
+        'sequential': None if problem.stop_alpha is None else {
+            'alpha': problem.stop_alpha,
+            'first_round': problem.first_round,
+            'rule': 'rounds doubling from first_round to samples, prefixes of the one draw; '
+            'at each interim look a two-sided Clopper-Pearson interval at 1 - alpha / looks '
+            '(Bonferroni): stop below or above the required yield, each wrong at most '
+            'alpha / 2; a nominal valve out of spec takes no samples; a candidate a '
+            'feasible design dominates stops undecided',
+        },
+    }
+
+
+def runs_statement(records, outcome):
+    """Return the runs of each stage: the search (spent, saved, decisions), the confirmation."""
+    rows = [row for _, row in records]
+    spent = sum(map(runs_of, rows))
+    full = sum(map(planned_runs_of, rows))
+    decisions = Counter(row.get('decision', 'full') for row in rows)
+    confirmed = [c for _, _, c in outcome['pareto'] if c] + list(outcome['baselines'].values())
+    return {
+        'search': {'runs': spent, 'full_sample_runs': full, 'saved': full - spent,
+                   'decisions': dict(sorted(decisions.items()))},
+        'confirmation': {'designs': len(confirmed), 'runs': sum(map(runs_of, confirmed))},
     }
 
 
@@ -149,6 +174,7 @@ def write_outputs(out, problem, outcome, records, population, generations):
         'problem': problem_statement(problem, population, generations),
         'candidates_evaluated': len(records),
         'candidates_feasible': sum(problem.feasible(row) for _, row in records),
+        'runs': runs_statement(records, outcome),
         'pareto': pareto,
         'baselines': baselines,
         'chosen': None if chosen is None else pareto[chosen]['label'],

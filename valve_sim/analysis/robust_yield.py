@@ -27,14 +27,20 @@ Monte Carlo of one design:
   limits           limit texts ('P_1_percent<=3.2'); min_decay_rate [1/s] or None
   scenario, step_size
   keep_samples     whether the row keeps every sampled valve's row (for figures)
+  stop_alpha       the sequential rule's alpha (analysis.sequential_yield), or None:
+                   every valve runs, as in the confirmation
+  first_round, required_yield, objectives ([measure, sense] pairs), front (the
+                   objective points, to minimise, of the designs found feasible so far)
 
 evaluate_candidates(cases) -> rows is the work unit. For each candidate it loads the
 nominal valve as `valve-sim ... --params FILE` loads the design's parameter file
 (optimisation_report.write_parameter_file: the values, then preset_pressure sets the
 pilot spring preload), draws the sampled valves about it as `valve-sim tolerance`
 does (same distributions, sampler and seed, each valve set to the nominal valve's
-cracking pressure), and runs the nominal valve and all samples through
-study_runner.evaluate_batch in one call: one batch of the lanes kernel.
+cracking pressure), runs the nominal valve, and then the samples in rounds through
+study_runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
+analysis.sequential_yield decides (a row does not depend on its batch, so a valve
+is judged the same in any round).
 
 check_candidate_row(row) checks a row read back from a results file (--resume) before
 it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
@@ -47,6 +53,7 @@ with its Clopper-Pearson interval (tolerances.yield_interval).
 """
 
 from valve_sim.analysis.measures import WINDOW
+from valve_sim.analysis.sequential_yield import DECISIONS, dominated, look, rounds
 from valve_sim.analysis.study_cases import preset_protocol, sample_cases
 from valve_sim.analysis.tolerances import (
     draw,
@@ -113,54 +120,92 @@ def evaluate_candidate(case):
 
     row: index, label, design, error (the nominal valve could not be set: then no
     sample runs), preset_pressure (the sampled valves'), nominal (the runner's row of
-    the nominal valve with decay_rate and pass), samples, passed, yield, ci95, pass
-    (one '1' or '0' per sample, in sample order), failures (per limit, failed runs,
-    slow decay), percentiles of the measures over the samples, and sample_rows
-    (every sampled valve's row, with its sampled values) when keep_samples.
+    the nominal valve with decay_rate and pass), samples (the valves run),
+    planned_samples, runs (nominal included), decision (analysis.sequential_yield),
+    passed, yield, ci95, pass (one '1' or '0' per valve run, in sample order),
+    failures (per limit, failed runs, slow decay), percentiles of the measures over
+    the valves run, and sample_rows (every sampled valve's row, with its sampled
+    values) when keep_samples. Without stop_alpha every valve runs, whatever the
+    nominal valve does.
     """
+    planned = case['samples']
     row = {key: case[key] for key in ('index', 'label', 'design')}
-    row['samples'] = case['samples']
+    row.update(samples=0, planned_samples=planned, runs=0, decision='nominal')
     limits = parse_limits(','.join(case['limits']))
     try:
         nominal = nominal_valve(case)
     except MODEL_ERRORS as error:
         return {**row, 'error': str(error), 'passed': 0, 'yield': 0.0,
-                'ci95': yield_interval(0, case['samples']), 'pass': ''}
+                'ci95': yield_interval(0, planned), 'pass': ''}
     preset, _ = preset_protocol(case['protocol'], nominal)
     distributions = parse_variations(case['tolerances'], nominal)
     names = [d.name for d in distributions]
-    values = draw(distributions, case['samples'], case['seed'], case['sampler'])
+    values = draw(distributions, planned, case['seed'], case['sampler'])
     cases = sample_cases(nominal, names, values, preset, case['step_size'])
-    cases.append({**cases[0], 'index': len(cases), 'params': nominal})
-    from valve_sim.analysis.study_runner import evaluate_batch  # numba: on the worker
-
-    runs = evaluate_batch(cases)
-    rate = case['min_decay_rate']
-    for run, valve in zip(runs, cases):
-        run['decay_rate'] = (
-            decay_rate(valve['params'], run, case['scenario']) if rate is not None else None
-        )
-        run['pass'] = valve_passes(run, limits, rate)
-    nominal_row, sample_rows = runs[-1], runs[:-1]
+    (nominal_row,) = _runs(case, limits, [{**cases[0], 'index': planned, 'params': nominal}])
+    alpha = case.get('stop_alpha')
+    point = _objective_point(case, nominal_row)
+    sample_rows, decision = [], 'nominal'
+    if alpha is None or (nominal_row['pass'] and point is not None):
+        counts = rounds(planned, case['first_round']) if alpha is not None else [planned]
+        for number, count in enumerate(counts):
+            sample_rows += _runs(case, limits, cases[len(sample_rows):count])
+            decision = 'full'
+            if number == len(counts) - 1:
+                break
+            passed = sum(run['pass'] for run in sample_rows)
+            decision = look(passed, count, case['required_yield'], alpha, len(counts) - 1)
+            if decision is None and dominated(point, case['front']):
+                decision = 'dominated'
+            if decision is not None:
+                break
     verdicts = [run['pass'] for run in sample_rows]
-    passed = sum(verdicts)
+    passed, count = sum(verdicts), len(verdicts)
     summary = summarise(sample_rows, limits)
-    slow = sum(1 for run in sample_rows if run['error'] is None and not decays(run, rate))
+    slow = sum(1 for run in sample_rows
+               if run['error'] is None and not decays(run, case['min_decay_rate']))
     row.update(
         error=None,
         preset_pressure=preset,
         nominal=nominal_row,
+        samples=count,
+        runs=count + 1,
+        decision=decision,
         passed=passed,
-        ci95=yield_interval(passed, len(verdicts)),
+        ci95=yield_interval(passed, count) if count else [0.0, 1.0],
         failures={**summary['failures'], DECAY_FAILURE: slow},
         percentiles=summary['percentiles'],
-        **{'yield': passed / len(verdicts), 'pass': ''.join('01'[v] for v in verdicts)},
+        **{'yield': passed / count if count else 0.0,
+           'pass': ''.join('01'[v] for v in verdicts)},
     )
     if case['keep_samples']:
         for run, sample in zip(sample_rows, values):
             run['sample'] = dict(zip(names, map(float, sample)))
         row['sample_rows'] = sample_rows
     return row
+
+
+def _runs(case, limits, valves):
+    """Run valves (runner cases) as one batch; return their rows with decay_rate and pass."""
+    from valve_sim.analysis.study_runner import evaluate_batch  # numba: on the worker
+
+    runs = evaluate_batch(valves)
+    rate = case['min_decay_rate']
+    for run, valve in zip(runs, valves):
+        run['decay_rate'] = (
+            decay_rate(valve['params'], run, case['scenario']) if rate is not None else None
+        )
+        run['pass'] = valve_passes(run, limits, rate)
+    return runs
+
+
+def _objective_point(case, nominal_row):
+    """Return the nominal valve's objective values to minimise, or None if one is missing."""
+    measures = nominal_row['measures']
+    point = [measures.get(measure) for measure, _ in case['objectives']]
+    if None in point:
+        return None
+    return [v if sense == 'minimise' else -v for v, (_, sense) in zip(point, case['objectives'])]
 
 
 def check_candidate_row(row):
@@ -180,6 +225,8 @@ def check_candidate_row(row):
             raise ValueError(f"key '{key}' must be an integer >= 0, got {shown(value)}")
     if not isinstance(row.get('label'), str) or not isinstance(row.get('pass'), str):
         raise ValueError("keys 'label' and 'pass' must be text")
+    if row.get('decision', 'full') not in DECISIONS:
+        raise ValueError(f"key 'decision' must be one of {', '.join(DECISIONS)}")
     design = row.get('design')
     if not isinstance(design, dict) or not all(map(is_number, design.values())):
         raise ValueError(f"key 'design' must map parameter names to numbers, got {shown(design)}")

@@ -18,9 +18,10 @@ Robust design optimisation: the best valve within bounds whose machined batch me
 NSGA-II (pymoo) over the designed parameters (--design); each candidate's nominal
 measures are the objectives (--minimise, --maximise), and its yield, the share of
 valves made within --tolerance that meet --limits (and whose modes decay), comes from
-a quasi-random Monte Carlo run as one batch on the Dask runner. The Pareto designs
-and the baselines (the reference valve, Table 2) are then confirmed with more,
-independent samples. See valve_sim.analysis.optimisation. Writes into --out:
+a quasi-random Monte Carlo on the Dask runner, sampled in rounds and stopped once
+decided (--sequential, analysis.sequential_yield; --budget caps the runs). The
+Pareto designs and the baselines (the reference valve, Table 2) are then confirmed
+with more, independent samples. See valve_sim.analysis.optimisation. Writes into --out:
   evaluations/     the runner's results, one file per generation (--resume)
   pareto.csv       each Pareto design: values, nominal measures, both yields
   pareto.json      the problem, the Pareto set, the baselines, the chosen design
@@ -36,6 +37,7 @@ import sys
 
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
+from valve_sim.analysis.sequential_yield import FIRST_ROUND, STOP_ALPHA
 from valve_sim.analysis.study_backend import check_fits, MAX_RUNS, open_backend
 from valve_sim.analysis.study_cases import preset_protocol
 from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
@@ -65,22 +67,33 @@ MAX_POPULATION = 10_000
 MAX_GENERATIONS = 10_000
 
 
-def decay_rate_value(text):
-    """'3' -> 3.0 [1/s]; 'off' -> None (argparse type)."""
+def number_or_off(text, accepts, bounds):
+    """Return the number in text if accepts(value), None for off; else ArgumentTypeError."""
     if text.strip().lower() == 'off':
         return None
     try:
         value = float(text)
     except ValueError:
         value = float('nan')
-    if not 0.0 <= value <= MAX_DECAY_RATE:
-        raise ArgumentTypeError(f'must be a rate {decay_rate_value.bounds}; got {text!r}')
+    if not accepts(value):
+        raise ArgumentTypeError(f'must be {bounds}; got {text!r}')
     return value
+
+
+def decay_rate_value(text):
+    """'3' -> 3.0 [1/s]; 'off' -> None (argparse type)."""
+    return number_or_off(text, lambda value: 0.0 <= value <= MAX_DECAY_RATE,
+                         f'a rate {decay_rate_value.bounds}')
 
 
 # [1/s] a mode decaying by e in 1 us: faster than the model's steps (10 us) resolve
 MAX_DECAY_RATE = 1e6
 decay_rate_value.bounds = f'in [0, {MAX_DECAY_RATE:g}] 1/s, or off'
+
+
+def alpha_value(text):
+    """'0.05' -> 0.05, within (0, 1); 'off' -> None (argparse type)."""
+    return number_or_off(text, lambda value: 0.0 < value < 1.0, 'a chance in (0, 1), or off')
 
 
 def add_arguments(parser):
@@ -110,6 +123,19 @@ def add_arguments(parser):
                         default=256, metavar='N',
                         help='Monte Carlo valves per candidate, run together on one worker '
                         f'({size_text(BYTES_PER_VALVE)} of memory each; default 256)')
+    parser.add_argument('--sequential', type=alpha_value, default=STOP_ALPHA, metavar='ALPHA',
+                        help="sample each candidate's valves in rounds (prefixes of the same "
+                        'draw) and stop once its yield is decided against --yield, each wrong '
+                        f'way with chance at most ALPHA/2 (default {STOP_ALPHA:g}); a nominal '
+                        'valve out of spec takes no samples; off: every candidate its full '
+                        'sample')
+    parser.add_argument('--first-round', default=FIRST_ROUND, metavar='N',
+                        type=number('a sample count', '', 1, MAX_RUNS, integer=True),
+                        help=f'valves in the first round, doubling after (default {FIRST_ROUND})')
+    parser.add_argument('--budget', default=None, metavar='RUNS',
+                        type=number('a run budget', '', 1, 10**12, integer=True),
+                        help='runs the search may spend: no generation starts that would pass '
+                        'it, judged by the last one (default: --generations decides)')
     parser.add_argument('--confirm-samples', default=1024, metavar='N',
                         type=number('a sample count', '', 0, MAX_RUNS, integer=True),
                         help='valves per Pareto design and baseline in the confirmation, with '
@@ -158,6 +184,8 @@ def problem_from(args):
         sampler=args.sampler,
         seed=args.seed,
         confirm_samples=args.confirm_samples,
+        stop_alpha=args.sequential,
+        first_round=args.first_round,
         min_decay_rate=args.min_decay_rate,
         step_size=settings['step_size'],
     )
@@ -230,17 +258,23 @@ def run(args):
     check_sizes(args)
     out = make_folder(Path(args.out), subfolders=('evaluations', 'params'))  # links not followed
     runs = args.population * args.generations * (problem.samples + 1)
+    sampling = ('each' if problem.stop_alpha is None else
+                f'at most each, in rounds from {min(problem.first_round, problem.samples)} '
+                f'(sequential, alpha {problem.stop_alpha:g})')
+    budget = '' if args.budget is None else f', budget {args.budget:,} runs'
     print(
         f"optimise: protocol {protocol['protocol']}, preset "
         f"{protocol['preset_pressure'] / 1e6:.4f} MPa; {args.generations} generations of "
-        f'{args.population} candidates, {problem.samples} valves each ({runs} runs), then the '
-        f'Pareto set and 2 baselines with {problem.confirm_samples} valves each',
+        f'{args.population} candidates, {problem.samples} valves {sampling} ({runs:,} runs '
+        f'with full samples{budget}), then the Pareto set and 2 baselines with '
+        f'{problem.confirm_samples} valves each',
         file=sys.stderr,
     )
     backend = open_backend('optimise', args.scheduler, args.workers, args.dashboard)
     try:
         records = search(problem, backend, out / 'evaluations', args.population,
-                         args.generations, args.resume, batch_size=args.batch_size or 1)
+                         args.generations, args.resume, batch_size=args.batch_size or 1,
+                         budget=args.budget)
         outcome = outcome_of(problem, records, backend, out / 'evaluations', args.resume,
                              batch_size=args.batch_size or 1)
     finally:
@@ -253,5 +287,9 @@ def run(args):
             ('Table 2', outcome['baselines']['table2']),
         ])
     print_outcome(problem, summary)
+    search, confirmation = summary['runs']['search'], summary['runs']['confirmation']
+    print(f"runs: search {search['runs']:,} ({search['saved']:,} saved against full samples: "
+          f"{100 * search['runs'] / max(1, search['full_sample_runs']):.0f} %), confirmation "
+          f"{confirmation['runs']:,} ({confirmation['designs']} designs)")
     print(f'wrote {out}/pareto.csv, {out}/pareto.json, {out}/params/ and figures')
     return 0 if summary['chosen'] is not None else 1
