@@ -96,7 +96,8 @@ def start_nodes(scenario, folder):
     ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
     return start_valve_and_analyser(
         folder, valve_parameters=valve, valve_ros_args=ros_args,
-        analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient})
+        analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient,
+                             'use_sim_time': 'true'})  # the bag's log times: model time
 
 
 class AnalyserStatus:
@@ -342,3 +343,21 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
         write_reports(record, junit)
         raise
     return record, write_reports(record, junit)
+
+
+def lockstep_messages(bag, topics=(*TICK_TOPICS, STAMPED_FLOW_TOPIC, 'tank_pressure')):
+    """
+    Return {topic: [(log_time, publish_time, CDR bytes)]} of the valve's topics in a bag.
+
+    What two runs of a scenario must record alike: each tick topic's and input's
+    messages in order, with their model-time log and publish times (the bag's other
+    topics, /diagnostics and fault_status, say how the run went in wall time).
+    """
+    from valve_sim.recording.bag import BagReader
+
+    wanted = {f'/{topic}' for topic in topics}
+    messages = {}
+    for channel, _, message in BagReader(bag).messages(wanted):
+        messages.setdefault(channel.topic, []).append(
+            (message.log_time, message.publish_time, bytes(message.data)))
+    return messages
