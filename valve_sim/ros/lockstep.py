@@ -420,11 +420,19 @@ class Lockstep:
             raise ValueError(f'valve_node refused {changes}: {result.reason}')
 
     def get_parameters(self, names):
-        """Return valve_node's values of names, as a dict."""
-        future = self.parameters.get_parameters(list(names))
-        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
+        """Return valve_node's values of names, as a dict; ValueError naming any it lacks."""
+        names = list(names)
+        values = self._get(names)
+        if len(values) != len(names):  # one name it lacks fails the whole request
+            missing = [name for name in names if len(self._get([name])) != 1]
+            raise ValueError(f"valve_node has no parameter {', '.join(map(repr, missing))}")
         return {name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
-                for name, value in zip(names, future.result().values)}
+                for name, value in zip(names, values)}
+
+    def _get(self, names):
+        future = self.parameters.get_parameters(names)
+        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
+        return future.result().values
 
     def close(self):
         self.executor.shutdown()
