@@ -81,6 +81,7 @@ def report_document(run):
             'period_s': scenario.period_ns / 1e9,
             'first_stamp_ns': run.start_ns,
             'wall_s': run.wall_s,
+            'clock_steps': run.clock_steps,
             'real_time_factor': run.speed,
             'bag': str(run.bag),
         },

@@ -70,6 +70,7 @@ class RunRecord:
     checks: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     wall_s: float = 0.0  # [s] of the lockstep stepping
+    clock_steps: int = 0  # /clock messages of the stepping (each up to ticks_per_clock ticks)
     start_ns: int = START_NS
     error: str = None  # why the run did not complete
 
@@ -179,6 +180,7 @@ def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=No
         driver.tick(end - tick)
         if record is not None:
             record.wall_s = time.monotonic() - started
+            record.clock_steps += 1
         if time.monotonic() - last_report > PROGRESS_INTERVAL:
             last_report = time.monotonic()
             model = end * scenario.period_ns / NS_PER_S
