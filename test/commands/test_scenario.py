@@ -68,7 +68,7 @@ def junit_cases(path):
 def recorded(folder):
     """Return {topic: [CDR bytes]} of every valve tick topic and the inlet flow in a run's bag."""
     (bag,) = folder.glob('*.mcap')
-    topics = {f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow')}
+    topics = {f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow_stamped')}
     messages = {}
     for channel, _, message in BagReader(bag).messages(topics):
         messages.setdefault(channel.topic, []).append(bytes(message.data))

@@ -38,8 +38,9 @@ live here too.
 Lockstep inputs (lockstep()): each message carries the model time it applies from as
 its header stamp (the flow on inlet_flow_stamped, the tank pressure on tank_pressure);
 a value checked and counted when taken is scheduled, and the tick starting at t_k holds
-the one stamped last at or before t_k (hold_at), once a message stamped at t_k or later
-has come (covers): ros.lockstep_inputs waits for it, so /clock cannot race an input.
+the one stamped last at or before t_k (hold_at; of two at one stamp the later sent),
+once a message stamped later than t_k has come (covers): ros.lockstep_inputs waits for
+it, so /clock cannot race an input.
 """
 
 import bisect
@@ -157,8 +158,8 @@ class CheckedInput(RawTaker):
             bisect.insort(self.scheduled, (stamp_ns, next(self._arrivals), value))
 
     def covers(self, time_ns):
-        """Lockstep: whether a message stamped at time_ns [ns] or later has been taken."""
-        return self.covered_ns is not None and self.covered_ns >= time_ns
+        """Lockstep: whether a message stamped later than time_ns [ns] has been taken."""
+        return self.covered_ns is not None and self.covered_ns > time_ns
 
     def hold_at(self, time_ns):
         """Lockstep: hold the value stamped last at or before time_ns [ns] (the last sent)."""

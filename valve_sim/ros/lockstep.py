@@ -22,9 +22,9 @@ Protocol. valve_node runs with use_sim_time and lockstep_inputs (lockstep_parame
 so it takes its inputs stamped with the model time they apply from (ros.lockstep_inputs).
 set_flow(flow, at_ns) and set_tank_pressure(absolute, at_ns) publish a value stamped at_ns
 (default: the start of the next tick); a batch may hold a value for each of its ticks.
-tick(count) first publishes, for each input, its held value stamped with the start of
-the batch's last tick unless a later stamp was already sent (the cover: it tells the
-node that nothing else comes for the batch), then /clock count tick periods on, and
+tick(count) first publishes, for each input, its held value stamped with the batch's
+end unless a stamp past the start of its last tick was already sent (the cover: it
+tells the node that nothing else comes for the batch), then /clock count periods on, and
 waits until the valve's state of that time has arrived here, and a message of that tick
 on each wait topic (the topics that other use_sim_time nodes, such as a controller under
 test, publish once per tick). valve_node does not start a tick before it has its inputs
@@ -97,8 +97,8 @@ class SentInput:
     """
     One stamped input as the driver sends it: publish(value, stamp_ns), and what a tick applies.
 
-    Stamps never go back (the node's proof that it has them all); a value sent again at
-    the same stamp replaces the one before, at the node too (the later message wins).
+    Stamps never go back (a later stamp is the node's proof that it has them all); a
+    value sent again at the same stamp replaces the one before, at the node too.
     """
 
     def __init__(self, publish):
@@ -117,10 +117,10 @@ class SentInput:
         self.publish(value, stamp_ns)
         self.sent.append((stamp_ns, value))
 
-    def cover(self, time_ns):
-        """Send the held value stamped time_ns unless a stamp as late went already."""
-        if self.sent and self.sent[-1][0] < time_ns:
-            self.send(self.sent[-1][1], time_ns)
+    def cover(self, last_start_ns, end_ns):
+        """Send the held value stamped end_ns unless a stamp past last_start_ns went already."""
+        if self.sent and self.sent[-1][0] <= last_start_ns:
+            self.send(self.sent[-1][1], end_ns)
 
     def at(self, time_ns):
         """Return the value the tick starting at time_ns applies; forget the older ones."""
@@ -301,9 +301,6 @@ class Lockstep:
         (set_flow, set_tank_pressure): valve_node on lockstep_inputs waits for them.
         """
         self.period_ns = period_ns
-        self.clock_ns = start_ns
-        for sent in self._inputs():
-            sent.cover(start_ns)
         self._publish_clock(start_ns)
         self._wait_for(start_ns, 'the first state of valve_node on /clock', ())
         self._paced_from = (time.monotonic(), start_ns)
@@ -356,7 +353,7 @@ class Lockstep:
         time_ns = self.clock_ns + count * self.period_ns
         last_start = time_ns - self.period_ns
         for sent in self._inputs():
-            sent.cover(last_start)
+            sent.cover(last_start, time_ns)
         if self.rate:
             wall, clock = self._paced_from
             delay = wall + (time_ns - clock) / NS_PER_S / self.rate - time.monotonic()

@@ -22,11 +22,13 @@ or both, comma-separated) the node takes those inputs stamped instead: the inlet
 as sensor_msgs/JointState on inlet_flow_stamped (velocity[0] [m^3/s]), the tank
 pressure as sensor_msgs/FluidPressure on tank_pressure, each header.stamp the model
 time the value holds from. The tick from t_k to t_k+1 does not start until a message
-of each such input stamped at t_k or later has been taken (settle): it then applies
-the value stamped last at or before t_k. Messages of one publisher on one topic
-arrive in order (reliable, keep last QUEUE_DEPTH), so a later stamp proves every
-earlier one was taken. A driver thus publishes the values of a batch of ticks, each
-stamped with its tick's start, and then one /clock for the whole batch (ros.lockstep).
+of each such input stamped later than t_k has been taken (settle): it then applies
+the value stamped last at or before t_k (of two with one stamp, the later sent).
+Messages of one publisher on one topic arrive in order (reliable, keep last
+QUEUE_DEPTH), so a later stamp proves that every value for t_k was taken. A driver
+thus publishes the values of a batch of ticks, each stamped with its tick's start,
+then the value held stamped with the batch's end (the cover), then one /clock for the
+whole batch (ros.lockstep).
 Waiting blocks the tick (valve_node runs no other callbacks meanwhile: in lockstep
 the driver waits for the tick anyway) for at most WAIT_TIMEOUT; then the tick applies
 the value held, counted and logged, and the driver reports the difference.
@@ -107,7 +109,7 @@ class LockstepInputs:
         """
         Before the tick starting at time_ns [ns]: wait for each input's value there, hold it.
 
-        Returns at once when every input has a message stamped at time_ns or later;
+        Returns at once when every input has a message stamped later than time_ns;
         otherwise takes and waits for at most WAIT_TIMEOUT in all.
         """
         deadline = None
@@ -125,7 +127,7 @@ class LockstepInputs:
     def _report_late(self, topic, time_ns):
         self.late += 1
         self.node.get_logger().error(
-            f'lockstep: no message on {topic} stamped at {time_ns / 1e9:.6f} s or later '
+            f'lockstep: no message on {topic} stamped after {time_ns / 1e9:.6f} s '
             f'within {WAIT_TIMEOUT:g} s; the tick applies the value held (late inputs: '
             f'{self.late})')
 
