@@ -111,7 +111,8 @@ def main():
                     out = folder / f'{name}_{run}'
                     code, wall, factor, tail = run_once(path, out)
                     bags = sorted(out.glob('*.mcap'))
-                    messages = lockstep_messages(bags[0]) if bags and code == expected_code else None
+                    complete = bags and code == expected_code
+                    messages = lockstep_messages(bags[0]) if complete else None
                     first = first if first is not None else messages
                     same = messages is not None and messages == first
                     count = sum(map(len, messages.values())) if messages else 0

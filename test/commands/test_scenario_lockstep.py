@@ -28,7 +28,6 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
 
-import numpy as np
 import pytest
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.cdr import read_message
@@ -63,7 +62,7 @@ def scenario_run(path, out):
 
 @pytest.fixture(scope='module')
 def profile_runs(tmp_path_factory, valve_node_kernels):
-    """The scenario of PROFILES run twice: (folders, completed processes)."""
+    """Run the scenario of PROFILES twice: (folders, completed processes)."""
     folder = tmp_path_factory.mktemp('profiles')
     path = folder / 'profiles.yaml'
     path.write_text(PROFILES)

@@ -19,9 +19,10 @@ Each expectation's limit is one check with what was measured (valve_sim.analysis
 expectations.Check). The JUnit file has one test case per check (a failure with the
 measured value for one that does not hold, the measured value as its system-out for
 one that holds; for a run that could not complete, the checks of what it measured up
-to the failure and one error case), so any CI shows the result. A failed run's
-report.txt, report.json and figure say the error and show the states recorded. The figure draws p_s, the valve positions and the inlet flow over the
-run, the events and the limits of the checks that bound a signal.
+to the failure and one error case), so any CI shows the result. The figure draws p_s,
+the valve positions and the inlet flow over the run, the events and the limits of the
+checks that bound a signal. A failed run's report.txt, report.json and figure say the
+error and show the states recorded up to it.
 """
 
 from datetime import datetime, timezone

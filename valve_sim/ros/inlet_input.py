@@ -240,7 +240,7 @@ class InletFlowInput(CheckedInput):
         return FLOAT64_CDR.unpack_from(data, CDR_HEADER)[0]
 
     def receive_stamped(self, data, info):
-        """Take a message of inlet_flow_stamped (RawTaker's receive): velocity[0] from its stamp."""
+        """Take a message of inlet_flow_stamped (a RawTaker's receive): velocity[0], stamped."""
         try:
             message = read_message('sensor_msgs/msg/JointState', data)
         except (ValueError, struct.error):

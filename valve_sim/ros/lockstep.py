@@ -320,7 +320,7 @@ class Lockstep:
         return (self.flows,) if self.tanks is None else (self.flows, self.tanks)
 
     def _next_start(self, at_ns):
-        """The stamp of an input: at_ns, by default the start of the next tick."""
+        """Return an input's stamp: at_ns, by default the start of the next tick."""
         return (self.clock_ns or START_NS) if at_ns is None else at_ns
 
     def set_flow(self, flow, at_ns=None):

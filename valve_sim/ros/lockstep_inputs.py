@@ -36,9 +36,9 @@ the value held, counted and logged, and the driver reports the difference.
 
 import time
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import JointState
 from valve_sim.core.errors import ParameterError
 from valve_sim.ros.inlet_input import STAMPED_FLOW_TOPIC
@@ -52,7 +52,7 @@ QOS = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 WAIT_TIMEOUT = 30.0  # [s] for a tick's stamped input, past any load a run survives
 WAIT_SLICE_NS = 100_000_000  # [ns] one wait, between checks that the node still runs
 DESCRIPTION = (
-    "inputs a lockstep driver sends stamped with the model time they apply from: "
+    'inputs a lockstep driver sends stamped with the model time they apply from: '
     "'inlet_flow' (sensor_msgs/JointState on inlet_flow_stamped), 'tank_pressure', "
     "or both, comma-separated; a tick on /clock waits for them (default '': none)"
 )
@@ -101,7 +101,7 @@ class LockstepInputs:
         return QOS if self.tank_input is not None else qos
 
     def add_tank_subscription(self, subscription):
-        """The node's tank_pressure subscription, taken by tank_input itself."""
+        """Wait for the node's tank_pressure subscription too, taken by tank_input itself."""
         if self.tank_input is not None:
             self._add(self.tank_input, subscription, self.tank_input)
 

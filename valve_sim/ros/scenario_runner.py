@@ -31,7 +31,8 @@ analyser closed, checks that it holds every state of the run and that each tick
 applied the flow sent for it, and judges the expectations on it
 (valve_sim.analysis.expectations). The outputs are written by
 valve_sim.analysis.scenario_report, for a run that failed too (run_and_report): with
-what was measured up to the failure, each expectation judged on its own."""
+what was measured up to the failure, each expectation judged on its own.
+"""
 
 from dataclasses import dataclass, field
 import time

@@ -242,7 +242,7 @@ class LockstepValve:
         self.set_parameters({name: value})
 
     def get_parameters(self, *names):
-        """Return valve_node's current values of names (ROS names), as a dict; ValueError if none."""
+        """Return valve_node's values of names (ROS names) as a dict; ValueError if one lacks."""
         return self._live().get_parameters(names)
 
     @property
