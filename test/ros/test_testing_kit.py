@@ -69,9 +69,16 @@ def test_the_context_manager_records_every_tick_and_measures_the_step(valve_node
                                                     'r_d', 'T_d_ms', 'T_s_ms'))
 
 
-def test_the_kit_checks_its_arguments_at_the_call_and_is_alone_in_its_process(
+def test_the_kit_checks_its_arguments_is_alone_and_a_clock_ahead_of_its_inputs_waits(
         valve_node_kernels):
-    """Issue 42: one line at the call for each bad argument; a second kit refused."""
+    """
+    Issue 42: one line at the call for each bad argument; a second kit refused.
+
+    Then the race forced: /clock for ten ticks goes out first, their flows 0.3 s later;
+    valve_node waits for the inputs stamped for its ticks, so each tick applies its own.
+    """
+    import time
+
     from valve_sim.testing import LockstepValve
 
     with lockstep_valve() as valve:
@@ -92,22 +99,7 @@ def test_the_kit_checks_its_arguments_at_the_call_and_is_alone_in_its_process(
         with pytest.raises(RuntimeError, match='already open in this process'):
             LockstepValve()
         assert valve.time == 0.0  # nothing refused moved the valve
-    for call in (lambda: valve.advance(0.1), lambda: valve.set_flow(0.0001),
-                 lambda: valve.state, lambda: valve.get_parameters('k_p')):
-        with pytest.raises(RuntimeError, match='closed'):
-            call()
 
-
-def test_a_clock_ahead_of_its_inputs_waits_for_them_each_tick_applying_its_own(
-        valve_node_kernels):
-    """
-    The race of issue 42 forced: /clock for ten ticks goes out first, their flows 0.3 s later.
-
-    valve_node waits for the inputs stamped for its ticks: each tick applies its own.
-    """
-    import time
-
-    with lockstep_valve() as valve:
         driver = valve._driver
         start, period = driver.clock_ns, driver.period_ns
         ramp = [(5 + k) / 60000 for k in range(10)]  # 5 .. 14 L/min, a tick each
@@ -118,8 +110,11 @@ def test_a_clock_ahead_of_its_inputs_waits_for_them_each_tick_applying_its_own(
         driver.set_flow(ramp[-1], start + 10 * period)
         driver._wait_for(start + 10 * period, 'the ten ticks', ())
         valve._await_row(driver.time_ns)
-        applied = valve.series['inlet_flow']
-    assert applied[1:].tolist() == ramp
+        assert valve.series['inlet_flow'][1:].tolist() == ramp
+    for call in (lambda: valve.advance(0.1), lambda: valve.set_flow(0.0001),
+                 lambda: valve.state, lambda: valve.get_parameters('k_p')):
+        with pytest.raises(RuntimeError, match='closed'):
+            call()
 
 
 def test_kits_in_processes_sharing_an_environment_get_domains_of_their_own(tmp_path):
