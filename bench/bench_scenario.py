@@ -71,6 +71,7 @@ RAMP_SCENARIO = (
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
 JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick')  # need valve_sim.ros.clock_jumps
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
+ATTEMPTS = 5  # runs of a kind that abort before the bench gives up
 BARE_RESPONDER = (
     'import rclpy\n'
     'from rclpy.qos import QoSProfile, ReliabilityPolicy\n'
@@ -224,13 +225,23 @@ def measure(kind, folder):
                       'duration_s': scenario.duration}))
 
 
-def run_kind(kind, folder, checkout):
-    """Measure kind in a fresh process that imports valve_sim from checkout."""
+def run_kind(kind, folder, checkout, aborted):
+    """
+    Measure kind in a fresh process that imports valve_sim from checkout.
+
+    A run that aborts (a checkout whose inputs can race /clock) is noted in aborted
+    and run again, up to ATTEMPTS times.
+    """
     environment = dict(os.environ, PYTHONPATH=str(checkout))
-    output = subprocess.run(
-        [sys.executable, __file__, '--measure', kind, '--folder', str(folder)],
-        env=environment, check=True, capture_output=True, text=True, cwd=checkout).stdout
-    return json.loads(output.strip().splitlines()[-1])
+    for attempt in range(ATTEMPTS):
+        completed = subprocess.run(
+            [sys.executable, __file__, '--measure', kind, '--folder', str(folder / str(attempt))],
+            env=environment, capture_output=True, text=True, cwd=checkout)
+        if completed.returncode == 0:
+            return json.loads(completed.stdout.strip().splitlines()[-1])
+        aborted.append(f'{kind}: ' + (completed.stderr.strip().splitlines() or ['?'])[-1])
+        print(f'  {kind} aborted: {aborted[-1]}', flush=True)
+    raise RuntimeError(f'{kind} aborted {ATTEMPTS} times')
 
 
 def summary(runs):
@@ -323,6 +334,7 @@ def main():
     if args.baseline:
         checkouts['baseline'] = args.baseline.resolve()
     print(f'load average at start: {os.getloadavg()}', flush=True)
+    aborted = {label: [] for label in checkouts}
     runs = {label: {kind: [] for kind in kinds_of(checkout)
                     if not args.kinds or kind in args.kinds}
             for label, checkout in checkouts.items()}
@@ -331,7 +343,7 @@ def main():
             for label, checkout in checkouts.items():
                 for kind in runs[label]:
                     folder = Path(temporary) / str(repeat) / label.replace(' ', '_') / kind
-                    runs[label][kind].append(run_kind(kind, folder, checkout))
+                    runs[label][kind].append(run_kind(kind, folder, checkout, aborted[label]))
                 print(f'run {repeat + 1}, {label}: ' + ', '.join(
                     f'{kind} {values[-1]["wall_s"]:.3f} s'
                     for kind, values in runs[label].items()), flush=True)
@@ -339,12 +351,14 @@ def main():
     for label in checkouts:
         results[label] = {kind: summary(values) for kind, values in runs[label].items()}
         results[label]['split_per_tick_ms'] = split(results[label])
+        results[label]['aborted_runs'] = aborted[label]
     results['load_average_end'] = os.getloadavg()
     scenario = runs['this checkout']['model'][0]
     print(f'{scenario["duration_s"]:g} s of model time, {scenario["ticks"]} ticks '
           f'(scenarios/{SCENARIO.name}), median of {args.repeats}:')
     for label, checkout in checkouts.items():
         report(f'{label} ({checkout})', results[label])
+        print(f'  runs that aborted and were run again: {len(aborted[label])}')
     print(f'load average at end: {results["load_average_end"]}')
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
