@@ -127,6 +127,19 @@ def test_ten_ticks_per_clock_and_one_record_the_same_messages_bit_for_bit(stuck_
         assert second[f'/{topic}'] == first[f'/{topic}'], f'{topic} differs between the runs'
 
 
+def test_both_runs_log_model_time_in_their_bags(stuck_valve_runs):
+    """On /clock a bag's log and publish times are the model's: each state's stamp (issue 42)."""
+    from valve_sim.ros.scenario_runner import lockstep_messages
+
+    first, second = (lockstep_messages(next(folder.glob('*.mcap')), TICK_TOPICS)
+                     for _, folder in stuck_valve_runs)
+    assert first == second  # data and times, message by message
+    stamps = [NS_PER_S + k * 1_000_000 for k in range(801)]
+    for topic in TICK_TOPICS:
+        assert [(log, publish) for log, publish, _ in first[f'/{topic}']] == list(
+            zip(stamps, stamps)), topic
+
+
 def test_a_failing_expectation_fails_the_run_and_its_junit_case(tmp_path, valve_node_kernels):
     """The paper's step with two expectations it cannot meet, at half speed: exit 1, 2 failures."""
     scenario = tmp_path / 'paper_step_too_strict.yaml'
