@@ -105,16 +105,19 @@ class LockstepInputs:
         if self.tank_input is not None:
             self._add(self.tank_input, subscription, self.tank_input)
 
-    def settle(self, time_ns):
+    def settle(self, time_ns, on_clock=True):
         """
         Before the tick starting at time_ns [ns]: wait for each input's value there, hold it.
 
         Returns at once when every input has a message stamped later than time_ns;
-        otherwise takes and waits for at most WAIT_TIMEOUT in all.
+        otherwise takes and waits for at most WAIT_TIMEOUT in all. Off /clock
+        (on_clock False: no driver steps the time) it takes what came, waits for none.
         """
         deadline = None
         for checked, subscription, taker in self.inputs:
-            while not checked.covers(time_ns):
+            if not on_clock:
+                taker.take(subscription)
+            while on_clock and not checked.covers(time_ns):
                 if taker.take(subscription):
                     continue
                 deadline = deadline or time.monotonic() + WAIT_TIMEOUT

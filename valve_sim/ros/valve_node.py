@@ -239,7 +239,8 @@ class ReliefValveNode(Node):
         self.tank_input.stamp(now_ns)
         if not starting:
             self._count_lateness(now_ns, slot_ns)
-            self.lockstep_inputs.settle(self.model.time_ns)  # stamped inputs: wait for t_k's
+            self.lockstep_inputs.settle(  # stamped inputs: on /clock, wait for t_k's
+                self.model.time_ns, self.get_clock().ros_time_is_active)
             self._advance(now_ns)
         self._inject()
         self.outputs.publish_tick(
