@@ -104,6 +104,7 @@ class SentInput:
     def __init__(self, publish):
         self.publish = publish
         self.sent = []  # [(stamp [ns], value)] from the oldest a tick may still apply
+        self.count = 0  # messages sent
 
     @property
     def value(self):
@@ -116,6 +117,7 @@ class SentInput:
                              f'{self.sent[-1][0] / NS_PER_S:.6f} s: stamps never go back')
         self.publish(value, stamp_ns)
         self.sent.append((stamp_ns, value))
+        self.count += 1
 
     def cover(self, last_start_ns, end_ns):
         """Send the held value stamped end_ns unless a stamp past last_start_ns went already."""
@@ -318,6 +320,12 @@ class Lockstep:
 
     def _inputs(self):
         return (self.flows,) if self.tanks is None else (self.flows, self.tanks)
+
+    def input_publishers(self):
+        """Return {topic (full name): (publisher, SentInput)} of the inputs this sends."""
+        pairs = [(self.inlet, self.flows)] + (
+            [] if self.tanks is None else [(self.tank_publisher, self.tanks)])
+        return {publisher.topic_name: (publisher, sent) for publisher, sent in pairs}
 
     def _next_start(self, at_ns):
         """Return an input's stamp: at_ns, by default the start of the next tick."""

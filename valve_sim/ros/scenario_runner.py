@@ -255,6 +255,10 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
                                                        recorded)),
                           'analyser_node recording every topic', READY_TIMEOUT)
+        inputs = driver.input_publishers()  # matched by both nodes: none sent is lost
+        driver.spin_until(lambda: all(publisher.get_subscription_count() >= 2
+                                      for publisher, _ in inputs.values()),
+                          'analyser_node subscribed to the inputs', READY_TIMEOUT)
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
@@ -263,9 +267,11 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         # lose the states still on their way. Its status (once a second) says when it has all.
         progress('waiting for analyser_node to record every state')
         driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
-                                                      TICK_TOPICS), scenario.ticks + 1),
-                          f'analyser_node recording all {scenario.ticks + 1} states',
-                          DRAIN_TIMEOUT)
+                                                      TICK_TOPICS), scenario.ticks + 1)
+                          and all(status.recorded([topic], sent.count)
+                                  for topic, (_, sent) in inputs.items()),
+                          f'analyser_node recording all {scenario.ticks + 1} states and '
+                          'every input sent', DRAIN_TIMEOUT)
     finally:
         if driver is not None:
             driver.close()
