@@ -29,6 +29,7 @@ the results as JSON.
 """
 
 import argparse
+import hashlib
 import json
 import multiprocessing
 import os
@@ -70,6 +71,15 @@ def scenario_files(folder):
         path.write_text(text)
         files[name] = (path, 0)
     return files
+
+
+def digest(messages):
+    """Return a SHA-256 of a run's recorded messages: to compare runs of separate benches."""
+    hashed = hashlib.sha256()
+    for topic in sorted(messages):
+        for log_time, publish_time, data in messages[topic]:
+            hashed.update(f'{topic} {log_time} {publish_time} {len(data)}'.encode() + data)
+    return hashed.hexdigest()
 
 
 def run_once(path, out):
@@ -127,6 +137,7 @@ def main():
                 ok = sum(r['exit'] == expected_code and r['identical'] for r in runs)
                 factors = sorted(r['real_time_factor'] for r in runs if r['real_time_factor'])
                 results[name] = {'runs': runs, 'complete_and_identical': ok,
+                                 'digest': digest(first) if first else None,
                                  'median_real_time_factor':
                                      factors[len(factors) // 2] if factors else None}
                 print(f'{name}: {ok} of {args.runs} runs complete and identical', flush=True)
@@ -139,7 +150,8 @@ def main():
                                      'scenarios': results}, indent=1) + '\n')
     print('summary: ' + '; '.join(
         f'{name} {r["complete_and_identical"]}/{args.runs}'
-        + (f' ({r["median_real_time_factor"]:.2f}x)' if r['median_real_time_factor'] else '')
+        + (f' ({r["median_real_time_factor"]:.2f}x, {(r["digest"] or "-")[:12]})'
+           if r['median_real_time_factor'] else '')
         for name, r in results.items()) + f'; load {load:.1f} at the end')
     return 0 if all(r['complete_and_identical'] == args.runs for r in results.values()) else 1
 
