@@ -353,7 +353,7 @@ def main():
         results[label]['split_per_tick_ms'] = split(results[label])
         results[label]['aborted_runs'] = aborted[label]
     results['load_average_end'] = os.getloadavg()
-    scenario = runs['this checkout']['model'][0]
+    scenario = next(iter(runs['this checkout'].values()))[0]
     print(f'{scenario["duration_s"]:g} s of model time, {scenario["ticks"]} ticks '
           f'(scenarios/{SCENARIO.name}), median of {args.repeats}:')
     for label, checkout in checkouts.items():
