@@ -22,8 +22,9 @@ with `valve-sim scenario run` as a user types it, while a busy loop spins on eve
 core (--no-load: without). A run passes when it exits as its verdict says (0, or 1
 for stuck_main_valve's failing check: never an error) and its bag's valve topics and
 inputs, messages, log and publish times (model time), are the same bytes as the first
-run's (scenario_runner.lockstep_messages). Prints a line per run and a summary; writes
-the results as JSON.
+run's (scenario_runner.lockstep_messages). Prints a line per run and a summary (with a
+digest of each scenario's messages, to compare benches); writes the results as JSON,
+and the logs and reports of a run that fails beside it (bench_determinism_failures/).
 
     nice -n 10 .venv/bin/python bench/bench_determinism.py --runs 20
 """
@@ -34,6 +35,7 @@ import json
 import multiprocessing
 import os
 from pathlib import Path
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -132,6 +134,11 @@ def main():
                           f'{"identical" if same else "DIFFERENT"}, {wall:.1f} s'
                           + (f', {factor:.2f}x real time' if factor else '')
                           + ('' if code == expected_code else f': {tail}'), flush=True)
+                    if not same:  # keep what says why, past the temporary folder
+                        kept = args.json.parent / 'bench_determinism_failures' / out.name
+                        kept.mkdir(parents=True, exist_ok=True)
+                        for log in (*out.glob('*.log'), *out.glob('report.*')):
+                            shutil.copy(log, kept)
                     for bag in bags:
                         bag.unlink()
                 ok = sum(r['exit'] == expected_code and r['identical'] for r in runs)
