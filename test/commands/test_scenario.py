@@ -68,7 +68,7 @@ def junit_cases(path):
 def recorded(folder):
     """Return {topic: [CDR bytes]} of every valve tick topic and the inlet flow in a run's bag."""
     (bag,) = folder.glob('*.mcap')
-    topics = {f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow')}
+    topics = {f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow_stamped')}
     messages = {}
     for channel, _, message in BagReader(bag).messages(topics):
         messages.setdefault(channel.topic, []).append(bytes(message.data))
@@ -115,16 +115,29 @@ def test_ten_ticks_per_clock_and_one_record_the_same_messages_bit_for_bit(stuck_
     """
     The same scenario twice, k = 10 and k = 1 ticks per /clock: equal bytes, in order.
 
-    Header stamps and data of every state and inlet flow message; the event (0.2 s)
-    and the flow step (0.3 s) land on the same tick either way.
+    Header stamps and data of every state message, the applied inlet flow among them;
+    the event (0.2 s) and the flow step (0.3 s) land on the same tick either way. (The
+    stamped inputs sent differ by their covers, one per /clock step.)
     """
     assert stuck_valve_runs[1][0].returncode == 0, stuck_valve_runs[1][0].stdout
     first, second = (recorded(folder) for _, folder in stuck_valve_runs)
-    assert sorted(first) == sorted(f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow'))
+    assert sorted(first) == sorted(f'/{name}' for name in (*TICK_TOPICS, 'inlet_flow_stamped'))
     for topic in TICK_TOPICS:
         assert len(first[f'/{topic}']) == 801, topic
-    for topic, messages in first.items():
-        assert second[topic] == messages, f'{topic} differs between the two runs'
+        assert second[f'/{topic}'] == first[f'/{topic}'], f'{topic} differs between the runs'
+
+
+def test_both_runs_log_model_time_in_their_bags(stuck_valve_runs):
+    """On /clock a bag's log and publish times are the model's: each state's stamp (issue 42)."""
+    from valve_sim.ros.scenario_runner import lockstep_messages
+
+    first, second = (lockstep_messages(next(folder.glob('*.mcap')), TICK_TOPICS)
+                     for _, folder in stuck_valve_runs)
+    assert first == second  # data and times, message by message
+    stamps = [NS_PER_S + k * 1_000_000 for k in range(801)]
+    for topic in TICK_TOPICS:
+        assert [(log, publish) for log, publish, _ in first[f'/{topic}']] == list(
+            zip(stamps, stamps)), topic
 
 
 def test_a_failing_expectation_fails_the_run_and_its_junit_case(tmp_path, valve_node_kernels):

@@ -180,3 +180,22 @@ def test_vacuum_is_judged_with_the_ambient_pressure_in_use():
     assert received.offer_cdr(fluid_pressure(0.0)), 'absolute 0 is a (hard) vacuum, not below'
     received.ambient_pressure = 2e5  # a node at altitude set otherwise: the gauge moves
     assert received.gauge() == -2e5
+
+
+def test_lockstep_inputs_apply_the_value_stamped_for_the_tick_once_a_later_stamp_came():
+    """Issue 42: a value holds from its stamp; a tick waits for a later stamp; the later wins."""
+    flow = InletFlowInput(1e-4, 1e-3)
+    flow.lockstep()
+    assert not flow.covers(100)
+    flow.offer_at(100, 2e-4)  # the value for the tick from 100 on
+    assert not flow.covers(100)  # another value for 100 may still come
+    flow.offer_at(100, 3e-4)  # ... and does: sent later, it holds
+    flow.offer_at(130, 5e-3)  # above max_inlet_flow: refused, but it covers 100 to 129
+    assert flow.covers(100) and flow.covers(129) and not flow.covers(130)
+    assert (flow.accepted, flow.rejected) == (2, 1) and 'max_inlet_flow' in flow.last_rejection
+    flow.hold_at(110)
+    assert flow.flow == 3e-4 and flow.changed
+    flow.hold_at(130)
+    assert flow.flow == 3e-4  # the refused value never holds
+    flow.receive(b'\x00\x01\x00\x00' + bytes(8), {})  # a plain Float64 in lockstep: refused
+    assert flow.rejected == 2 and 'inlet_flow_stamped' in flow.last_rejection

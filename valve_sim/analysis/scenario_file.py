@@ -129,6 +129,10 @@ class BenchScenario:
             due.setdefault(tick_index(event.time_ns, self.period_ns), {}).update(event.changes)
         return due
 
+    def window_events(self):
+        """[(time [s], changes)] of every event: each ends a step's window (docs/measures.md)."""
+        return [(event.time_ns / NS_PER_S, event.changes) for event in self.events]
+
     def supply_pressure_limits(self):
         """supply_pressure_limit [Pa] in effect over the tick ending at each state's time."""
         limits = np.full(self.ticks + 1, self.supply_pressure_limit)

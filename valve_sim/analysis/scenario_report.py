@@ -18,9 +18,11 @@ A bench scenario's verdict: report.txt, report.json, junit.xml and scenario.png.
 Each expectation's limit is one check with what was measured (valve_sim.analysis.
 expectations.Check). The JUnit file has one test case per check (a failure with the
 measured value for one that does not hold, the measured value as its system-out for
-one that holds; one error case for a run that could not complete), so any CI shows
-the result. The figure draws p_s, the valve positions and the inlet flow over the
-run, the events and the limits of the checks that bound a signal.
+one that holds; for a run that could not complete, the checks of what it measured up
+to the failure and one error case), so any CI shows the result. The figure draws p_s,
+the valve positions and the inlet flow over the run, the events and the limits of the
+checks that bound a signal. A failed run's report.txt, report.json and figure say the
+error and show the states recorded up to it.
 """
 
 from datetime import datetime, timezone
@@ -44,16 +46,21 @@ def report_text(run):
     """Return the report as text: the verdict, how the run went, one line per check."""
     scenario = run.scenario
     word, failed = verdict(run.checks)
+    states = 0 if run.series is None else len(run.series)
     lines = [
-        f'scenario {scenario.name} ({scenario.path}): {word}, '
+        f'scenario {scenario.name} ({scenario.path}): {"ERROR" if run.error else word}, '
         f'{len(run.checks) - failed} of {len(run.checks)} checks hold',
-        f'  {scenario.duration:g} s of model time, {len(run.series)} states of valve_node in '
-        f'lockstep in {run.wall_s:.2f} s ({run.speed:.2f}x real time)',
+        f'  {scenario.duration:g} s of model time, {states} states of valve_node in '
+        f'lockstep in {run.wall_s:.2f} s'
+        + (f' ({run.speed:.2f}x real time)' if run.speed and not run.error else ''),
         f'  bag {run.bag}',
     ]
+    if run.error:
+        lines[2:2] = [f'  ERROR: the run did not complete: {run.error}',
+                      f'  the checks below judge the {states} states recorded up to the failure']
     if scenario.description:
         lines.insert(1, f'  {scenario.description}')
-    width = max(len(check.name) for check in run.checks)
+    width = max((len(check.name) for check in run.checks), default=0)
     for check in run.checks:
         lines.append(f'  {"PASS" if check.passed else "FAIL"}  {check.name:<{width}}  '
                      f'measured {check.shown}  ({check.detail})')
@@ -67,13 +74,15 @@ def report_document(run):
         'scenario': scenario.name,
         'file': str(scenario.path),
         'passed': run.passed,
+        'error': run.error,
         'checks': [check.as_dict() for check in run.checks],
         'run': {
             'duration_s': scenario.duration,
-            'states': len(run.series),
+            'states': 0 if run.series is None else len(run.series),
             'period_s': scenario.period_ns / 1e9,
             'first_stamp_ns': run.start_ns,
             'wall_s': run.wall_s,
+            'clock_steps': run.clock_steps,
             'real_time_factor': run.speed,
             'bag': str(run.bag),
         },
@@ -82,10 +91,10 @@ def report_document(run):
 
 
 def junit_document(scenario, checks, wall_s=0.0, error=None):
-    """Return the JUnit XML of a run as bytes: a test case per check, or the error's case."""
+    """Return the JUnit XML of a run as bytes: a test case per check, and the error's case."""
     word, failed = verdict(checks)
     tests = len(checks) + (error is not None)
-    counts = {'tests': str(tests), 'failures': str(failed if error is None else 0),
+    counts = {'tests': str(tests), 'failures': str(failed),
               'errors': str(int(error is not None)), 'skipped': '0', 'time': f'{wall_s:.3f}'}
     suites = ElementTree.Element('testsuites', name='valve-sim scenario', **counts)
     suite = ElementTree.SubElement(
@@ -93,7 +102,7 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
         timestamp=datetime.now(timezone.utc).isoformat(timespec='seconds'), **counts)
     properties = ElementTree.SubElement(suite, 'properties')
     ElementTree.SubElement(properties, 'property', name='file', value=str(scenario.path))
-    for check in checks if error is None else ():
+    for check in checks:
         case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
                                       name=check.name, time='0')
         if not check.passed:
@@ -117,11 +126,17 @@ def plot_run(path, run):
 
     series, scenario = run.series, run.scenario
     figure, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 8), constrained_layout=True)
+    if series is None:  # nothing recorded: the figure says so, and why
+        axes[0].set_title(f'scenario {scenario.name}: ERROR, no state recorded')
+        axes[1].text(0.5, 0.5, run.error, ha='center', va='center', wrap=True,
+                     transform=axes[1].transAxes, fontsize='small')
+        save_figure(figure, path, dpi=110)
+        return
     for expectation in scenario.expectations:
         if isinstance(expectation, Bound) and expectation.signal == 'supply_pressure':
             axes[0].axhline(expectation.value * 1e-6, color='tab:red', linestyle='--',
                             linewidth=0.8)
-    limits = scenario.supply_pressure_limits()
+    limits = scenario.supply_pressure_limits()[:len(series)]
     if np.any(limits > 0):
         axes[0].step(series.time, np.where(limits > 0, limits, np.nan) * 1e-6, where='pre',
                      color='0.4', linestyle=':', linewidth=0.8, label='supply_pressure_limit')
@@ -145,8 +160,9 @@ def plot_run(path, run):
     for axis in axes:
         axis.grid(True, alpha=0.3)
     word, failed = verdict(run.checks)
-    axes[0].set_title(f'scenario {scenario.name}: {word} '
-                      f'({len(run.checks) - failed} of {len(run.checks)} checks hold)')
+    axes[0].set_title(f'scenario {scenario.name}: {"ERROR" if run.error else word} '
+                      f'({len(run.checks) - failed} of {len(run.checks)} checks hold)'
+                      + (f', stopped at {series.time[-1]:.3f} s' if run.error else ''))
     save_figure(figure, path, dpi=110)
 
 
@@ -178,6 +194,6 @@ def write_reports(run, junit_path=None):
     write_text(paths['json'], json_text(report_document(run)) + '\n')
     plot_run(paths['figure'], run)
     paths['junit'] = write_junit(
-        junit_document(run.scenario, run.checks, run.wall_s), folder, junit_path
+        junit_document(run.scenario, run.checks, run.wall_s, run.error), folder, junit_path
     )
     return paths

@@ -59,6 +59,7 @@ TOPIC_TYPES = {
     'applied_tank_pressure': 'sensor_msgs/msg/FluidPressure',
     'relief_flow': 'sensor_msgs/msg/JointState',
     'inlet_flow': 'std_msgs/msg/Float64',
+    'inlet_flow_stamped': 'sensor_msgs/msg/JointState',  # lockstep (ros.lockstep_inputs)
     'tank_pressure': 'sensor_msgs/msg/FluidPressure',
 }
 PRESSURE_FRAMES = dict(  # where each pressure is measured

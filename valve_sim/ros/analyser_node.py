@@ -93,6 +93,7 @@ from valve_sim.ros.ros_parameters import declare
 NODE_NAME = 'valve_analyser'
 DEFAULT_TOPICS = [
     'inlet_flow',
+    'inlet_flow_stamped',  # the lockstep drivers' inlet flow (valve_sim.ros.lockstep_inputs)
     'applied_inlet_flow',
     'supply_pressure',
     'intermediate_pressure',
@@ -106,7 +107,7 @@ DEFAULT_TOPICS = [
     'relief_flow',
 ]
 # Recorded once published, never waited for: only a bench with a back pressure sends it.
-OPTIONAL_TOPICS = ('tank_pressure',)
+OPTIONAL_TOPICS = ('tank_pressure', 'inlet_flow_stamped')
 # The signals measured: the required ones, and the tank's pressure where it is recorded (the
 # measures then take the supply pressure above the tank, step_analysis).
 ANALYSED = REQUIRED + ('tank_pressure',)

@@ -34,12 +34,22 @@ m^3/s) and TankPressureInput (sensor_msgs/FluidPressure, absolute Pa) say only h
 message is read and which values are valid. Both subscriptions' QoS (INLET_FLOW_QOS, the
 inlet_flow_reliability parameter) and how much a tick takes (INPUTS_PER_TICK, INPUT_SHARE)
 live here too.
+
+Lockstep inputs (lockstep()): each message carries the model time it applies from as
+its header stamp (the flow on inlet_flow_stamped, the tank pressure on tank_pressure);
+a value checked and counted when taken is scheduled, and the tick starting at t_k holds
+the one stamped last at or before t_k (hold_at; of two at one stamp the later sent),
+once a message stamped later than t_k has come (covers): ros.lockstep_inputs waits for
+it, so /clock cannot race an input.
 """
 
+import bisect
+import itertools
 import struct
 
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from valve_sim.core.limits import inlet_flow_problem, tank_pressure_problem
+from valve_sim.recording.cdr import read_message, STAMP, STAMP_OFFSET
 from valve_sim.ros.raw_take import RawTaker
 
 
@@ -70,6 +80,8 @@ FLOAT64_CDR = struct.Struct('<d')  # std_msgs/Float64 data after the 4-byte CDR 
 CDR_HEADER = 4
 STRING_LENGTH = struct.Struct('<I')
 FRAME_ID_OFFSET = CDR_HEADER + 8  # std_msgs/Header: stamp (int32 sec, uint32 nanosec), frame_id
+NS_PER_S = 1_000_000_000
+STAMPED_FLOW_TOPIC = 'inlet_flow_stamped'  # lockstep: sensor_msgs/JointState, velocity[0]
 
 
 class CheckedInput(RawTaker):
@@ -93,6 +105,13 @@ class CheckedInput(RawTaker):
         self.received_ns = None  # clock time [ns] of the tick after the last good message
         self.last_rejection = ''
         self.reported_rejected = 0  # rejected at the last report()
+        self.scheduled = None  # lockstep: [(stamp [ns], arrival, value)] in stamp order
+        self.covered_ns = None  # lockstep: the latest stamp taken [ns]
+        self._arrivals = itertools.count()
+
+    def lockstep(self):
+        """Take stamped messages from now on: each value from its stamp on (hold_at)."""
+        self.scheduled = []
 
     def problem(self, value):
         """Return why value is not a valid input, or None."""
@@ -104,16 +123,50 @@ class CheckedInput(RawTaker):
 
     def offer(self, value):
         """Take a received value: keep it if it is valid, count it either way."""
+        if self._check(value):
+            self._hold(value)
+            return True
+        return False
+
+    def _check(self, value):
+        """Count value as accepted or rejected (with its reason); return whether it is valid."""
         problem = self.problem(value)
         if problem is None:
             self.accepted += 1
-            self.changed = self.changed or value != self.value
-            self.value = value
-            self.received = True
             return True
-        self.rejected += 1
-        self.last_rejection = problem
+        self._reject(problem)
         return False
+
+    def _reject(self, reason):
+        self.rejected += 1
+        self.last_rejection = reason
+
+    def _hold(self, value):
+        self.changed = self.changed or value != self.value
+        self.value = value
+        self.received = True
+
+    def offer_at(self, stamp_ns, value):
+        """
+        Lockstep: take value [SI] from model time stamp_ns [ns] on, checked and counted now.
+
+        A rejected value still covers its stamp: the tick does not wait for it, and holds
+        the value before it (which the driver sees in the tick's applied value).
+        """
+        self.covered_ns = stamp_ns if self.covered_ns is None else max(self.covered_ns, stamp_ns)
+        if self._check(value):
+            bisect.insort(self.scheduled, (stamp_ns, next(self._arrivals), value))
+
+    def covers(self, time_ns):
+        """Lockstep: whether a message stamped later than time_ns [ns] has been taken."""
+        return self.covered_ns is not None and self.covered_ns > time_ns
+
+    def hold_at(self, time_ns):
+        """Lockstep: hold the value stamped last at or before time_ns [ns] (the last sent)."""
+        index = bisect.bisect_right(self.scheduled, (time_ns, float('inf')))
+        if index:
+            self._hold(self.scheduled[index - 1][2])
+            del self.scheduled[:index]
 
     def offer_cdr(self, data):
         """Take a serialized message (little-endian CDR, as ROS 2 sends it)."""
@@ -126,7 +179,18 @@ class CheckedInput(RawTaker):
 
     def receive(self, data, info):
         """Take a message as RawTaker.take() hands it over: its CDR bytes are checked."""
-        self.offer_cdr(data)
+        if self.scheduled is None:
+            self.offer_cdr(data)
+            return
+        stamped = self.decode_stamped(data) if len(data) > CDR_HEADER and data[1] == 1 else None
+        if stamped is None:
+            self._reject(f'a lockstep input needs a stamped {self.STAMPED_TYPE}')
+        else:
+            self.offer_at(*stamped)
+
+    def decode_stamped(self, data):
+        """Lockstep: return (stamp [ns], value) of a stamped message, or None."""
+        return None
 
     def stamp(self, now_ns):
         """At a tick: a good message received since the last tick arrived by now_ns [ns]."""
@@ -154,6 +218,7 @@ class InletFlowInput(CheckedInput):
     """
 
     MESSAGE_TYPE = 'std_msgs/Float64'
+    STAMPED_TYPE = 'sensor_msgs/JointState on ' + STAMPED_FLOW_TOPIC
 
     def __init__(self, flow, max_inlet_flow):
         super().__init__(flow)
@@ -174,6 +239,18 @@ class InletFlowInput(CheckedInput):
             return None
         return FLOAT64_CDR.unpack_from(data, CDR_HEADER)[0]
 
+    def receive_stamped(self, data, info):
+        """Take a message of inlet_flow_stamped (a RawTaker's receive): velocity[0], stamped."""
+        try:
+            message = read_message('sensor_msgs/msg/JointState', data)
+        except (ValueError, struct.error):
+            message = None
+        if message is None or len(message.velocity) != 1:
+            self._reject(f'not a {self.STAMPED_TYPE} with one velocity ({len(data)} bytes)')
+            return
+        stamp = message.header.stamp
+        self.offer_at(stamp.sec * NS_PER_S + stamp.nanosec, message.velocity[0])
+
 
 class TankPressureInput(CheckedInput):
     """
@@ -186,6 +263,7 @@ class TankPressureInput(CheckedInput):
     """
 
     MESSAGE_TYPE = 'sensor_msgs/FluidPressure'
+    STAMPED_TYPE = MESSAGE_TYPE
 
     def __init__(self, ambient_pressure, burst_pressure):
         super().__init__(None)
@@ -213,3 +291,11 @@ class TankPressureInput(CheckedInput):
         if offset + 2 * FLOAT64_CDR.size > len(data):
             return None
         return FLOAT64_CDR.unpack_from(data, offset)[0]
+
+    def decode_stamped(self, data):
+        """Lockstep: (header stamp [ns], fluid_pressure [Pa absolute]), or None."""
+        value = self.decode(data)
+        if value is None:
+            return None
+        sec, nanosec = STAMP.unpack_from(data, STAMP_OFFSET)
+        return sec * NS_PER_S + nanosec, value

@@ -28,7 +28,7 @@ import tempfile
 
 DOMAIN_IDS = range(1, 102)   # 0-101 are the IDs Fast DDS maps to ports; 0 is the default
 LOCK_FOLDER = Path(tempfile.gettempdir()) / 'valve_sim_domains'
-_held_locks = []
+_held_locks = {}  # domain: the open lock file this process holds it by
 
 
 def claim_domain(keep_existing=True):
@@ -42,17 +42,40 @@ def claim_domain(keep_existing=True):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     if keep_existing and 'ROS_DOMAIN_ID' in os.environ:
         return int(os.environ['ROS_DOMAIN_ID'])
-    LOCK_FOLDER.mkdir(exist_ok=True)
     candidates = list(DOMAIN_IDS)
     random.SystemRandom().shuffle(candidates)
     for domain in candidates:
-        handle = open(LOCK_FOLDER / f'{domain}.lock', 'w')
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _held_locks.append(handle)   # held until this process ends
-        os.environ['ROS_DOMAIN_ID'] = str(domain)
-        return domain
+        if _lock(domain):
+            os.environ['ROS_DOMAIN_ID'] = str(domain)
+            return domain
     raise RuntimeError(f'every ROS domain 1-101 is held by another run (locks in {LOCK_FOLDER})')
+
+
+def _lock(domain):
+    """Hold domain's lock for this process; return whether it is this process's now."""
+    if domain in _held_locks:
+        return True
+    LOCK_FOLDER.mkdir(exist_ok=True)
+    handle = open(LOCK_FOLDER / f'{domain}.lock', 'w')
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return False
+    _held_locks[domain] = handle  # held until this process ends
+    return True
+
+
+def hold_domain():
+    """
+    Run in a domain no other process on this machine holds: the environment's, or a new one.
+
+    The environment's ROS_DOMAIN_ID is kept, and held, unless another process holds
+    it (a second pytest-xdist worker or test run that inherited the same environment):
+    then a free one is claimed (claim_domain). Returns the domain.
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    current = os.environ.get('ROS_DOMAIN_ID', '')
+    if current.isdigit() and _lock(int(current)):
+        return int(current)
+    return claim_domain(keep_existing=False)

@@ -15,25 +15,33 @@
 """
 valve_node on /clock in lockstep: publish a time, wait for the states stamped with it, go on.
 
-Lockstep drives a valve_node that runs with use_sim_time. tick() publishes /clock one
-tick period on and waits until the valve's state of that time has arrived here, and
-a message of that tick on each wait topic (the topics that other use_sim_time nodes,
-such as a controller under test, publish once per tick); only then does the next
-tick go. Inputs and parameter changes go between ticks, so they act from the tick
-after the state just received: the same run twice gives the same states, bit for bit.
-tick(count) steps /clock count periods at once: valve_node ticks such a jump period
-by period (ros.clock_jumps), publishing the same states as count single steps, and
-the driver saves count - 1 round trips; inputs and changes then go between steps.
+The one lockstep core: `valve-sim scenario run` (ros.scenario_runner) and the test kit
+(valve_sim.testing) drive valve_node with it, and so can any driver of model time.
+
+Protocol. valve_node runs with use_sim_time and lockstep_inputs (lockstep_parameters()),
+so it takes its inputs stamped with the model time they apply from (ros.lockstep_inputs).
+set_flow(flow, at_ns) and set_tank_pressure(absolute, at_ns) publish a value stamped at_ns
+(default: the start of the next tick); a batch may hold a value for each of its ticks.
+tick(count) first publishes, for each input, its held value stamped with the batch's
+end unless a stamp past the start of its last tick was already sent (the cover: it
+tells the node that nothing else comes for the batch), then /clock count periods on, and
+waits until the valve's state of that time has arrived here, and a message of that tick
+on each wait topic (the topics that other use_sim_time nodes, such as a controller under
+test, publish once per tick). valve_node does not start a tick before it has its inputs
+for it, whatever the load, so the tick meant for an input applies that input: no race
+between an input's topic and /clock. valve_node ticks a jump of count periods period by
+period (ros.clock_jumps), a state each, so a ramp or a sine goes TICKS_PER_CLOCK ticks
+per /clock like a step; the driver saves count - 1 round trips. Parameter changes go
+between tick() calls and act from the next tick: the same run twice gives the same
+states, bit for bit.
 
 A tick is complete when the last of the tick topics valve_node publishes
-(valve_topics.TICK_TOPICS) has come with its stamp, so every topic of the tick was
-published, and applied_inlet_flow (the handshake), which carries the flow the tick
-applied, has come too: a flow that was
-published before the tick but not applied (the message had not arrived) is an
-error, never a silent difference. With tank=True the driver also sends tank_pressure
-(set_tank_pressure) and a tick is complete only once applied_tank_pressure of it has
-come too, checked the same way. /clock is subscribed best effort by rclpy's time
-source, so a time whose state does not come within RESEND is published again.
+(valve_topics.TICK_TOPICS) has come with its stamp, and applied_inlet_flow (the
+handshake), which carries the flow the tick applied (with a tank input also
+applied_tank_pressure); one that applied another value than the one sent for it is an
+error (LateInputError: the node rejected it, or its model is halted), never a silent
+difference. /clock is subscribed best effort by rclpy's time source, so a time whose
+state does not come within RESEND is published again.
 
 The driver spins its own node on the calling thread (rclpy's EventsExecutor where
 there is one), so waiting costs no thread hand-over; as fast as the node can by
@@ -50,12 +58,13 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, JointState
-from std_msgs.msg import Float64
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
-from valve_sim.recording.cdr import ENCAPSULATION, STAMP, STAMP_OFFSET
+from valve_sim.recording.cdr import CdrMessage, ENCAPSULATION, STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
+from valve_sim.ros.inlet_input import STAMPED_FLOW_TOPIC
+from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 
@@ -75,7 +84,54 @@ RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class LateInputError(IncompleteRunError):
-    """A tick applied another inlet flow than the one published before it."""
+    """A tick applied another input value than the one sent for it."""
+
+
+def lockstep_parameters(tank=False):
+    """Return valve_node's parameters {name: command-line value} for a Lockstep driver."""
+    return {'use_sim_time': 'true',
+            LOCKSTEP_INPUTS: 'inlet_flow,tank_pressure' if tank else 'inlet_flow'}
+
+
+class SentInput:
+    """
+    One stamped input as the driver sends it: publish(value, stamp_ns), and what a tick applies.
+
+    Stamps never go back (a later stamp is the node's proof that it has them all); a
+    value sent again at the same stamp replaces the one before, at the node too.
+    """
+
+    def __init__(self, publish):
+        self.publish = publish
+        self.sent = []  # [(stamp [ns], value)] from the oldest a tick may still apply
+        self.count = 0  # messages sent
+
+    @property
+    def value(self):
+        """Return the value sent last (None before any)."""
+        return self.sent[-1][1] if self.sent else None
+
+    def send(self, value, stamp_ns):
+        if self.sent and stamp_ns < self.sent[-1][0]:
+            raise ValueError(f'an input stamped {stamp_ns / NS_PER_S:.6f} s after one stamped '
+                             f'{self.sent[-1][0] / NS_PER_S:.6f} s: stamps never go back')
+        self.publish(value, stamp_ns)
+        self.sent.append((stamp_ns, value))
+        self.count += 1
+
+    def cover(self, last_start_ns, end_ns):
+        """Send the held value stamped end_ns unless a stamp past last_start_ns went already."""
+        if self.sent and self.sent[-1][0] <= last_start_ns:
+            self.send(self.sent[-1][1], end_ns)
+
+    def at(self, time_ns):
+        """Return the value the tick starting at time_ns applies; forget the older ones."""
+        index = max((i for i, (stamp, _) in enumerate(self.sent) if stamp <= time_ns),
+                    default=None)
+        if index is None:
+            return None  # none sent: nothing to check
+        del self.sent[:index]
+        return self.sent[0][1]
 
 
 def stamp_ns(data):
@@ -142,16 +198,22 @@ class Lockstep:
         self.executor.add_node(self.node)
         self.processes, self.rate = processes, rate
         self.clock = self.node.create_publisher(Clock, '/clock', 10)
-        self.inlet = self.node.create_publisher(Float64, 'inlet_flow', RELIABLE)
+        self.inlet = self.node.create_publisher(JointState, STAMPED_FLOW_TOPIC, INPUT_QOS)
+        self._flow_message = CdrMessage(frame_id='')  # as applied_inlet_flow's layout
+        self._flow_message.strings(['inlet_flow'])
+        self._flow_message.float64s(0)  # position
+        self._flow_offset = self._flow_message.float64s(1)  # velocity: the flow [m^3/s]
+        self._flow_message.float64s(0)  # effort
+        self.flows = SentInput(self._publish_flow)
+        self.tanks = None  # the tank pressures [Pa absolute], with tank=True
         self.parameters = AsyncParameterClient(self.node, node_fqn(namespace, NODE_NAME))
         self.wait_topics = []
         self.time_ns = None  # stamp of the valve's latest state
         self.applied = None  # the flow applied over the tick ending at time_ns [m^3/s]
         self.clock_ns = None  # last /clock published
-        self.flow = None  # last flow published [m^3/s]: what the next tick applies
+        self.period_ns = None
         self._paced_from = None  # (wall time, clock) pacing starts from
         self._applied_ns = self._last_ns = None
-        self.tank = None  # last tank pressure published [Pa absolute]
         self.applied_tank = None  # the tank pressure applied over the tick ending at time_ns
         self._tank_ns = None
         self.tank_publisher = None
@@ -163,7 +225,8 @@ class Lockstep:
         handshakes = (HANDSHAKE, LAST_TOPIC)
         if tank:
             self.tank_publisher = self.node.create_publisher(FluidPressure, 'tank_pressure',
-                                                             RELIABLE)
+                                                             INPUT_QOS)
+            self.tanks = SentInput(self._publish_tank)
             self.subscriptions.append(self.node.create_subscription(
                 FluidPressure, TANK_HANDSHAKE, self._on_tank, RELIABLE, raw=True))
             handshakes += (TANK_HANDSHAKE,)
@@ -236,7 +299,8 @@ class Lockstep:
         """
         Publish /clock = start_ns until the valve's first state (its model time's anchor) comes.
 
-        Returns its stamp. Later ticks are period_ns apart.
+        Returns its stamp. Later ticks are period_ns apart. Send the inputs first
+        (set_flow, set_tank_pressure): valve_node on lockstep_inputs waits for them.
         """
         self.period_ns = period_ns
         self._publish_clock(start_ns)
@@ -244,27 +308,60 @@ class Lockstep:
         self._paced_from = (time.monotonic(), start_ns)
         return self.time_ns
 
-    def set_flow(self, flow):
-        """Publish the inlet flow [m^3/s]; the next tick applies it."""
-        self.inlet.publish(Float64(data=float(flow)))
-        self.flow = float(flow)
+    @property
+    def flow(self):
+        """Return the inlet flow sent last [m^3/s] (None before any)."""
+        return self.flows.value
 
-    def set_tank_pressure(self, absolute, stamp_ns):
-        """Publish the tank pressure [Pa absolute], stamped stamp_ns; the next tick applies it."""
-        message = FluidPressure(fluid_pressure=float(absolute))
+    @property
+    def tank(self):
+        """Return the tank pressure sent last [Pa absolute] (None before any or without)."""
+        return None if self.tanks is None else self.tanks.value
+
+    def _inputs(self):
+        return (self.flows,) if self.tanks is None else (self.flows, self.tanks)
+
+    def input_publishers(self):
+        """Return {topic (full name): (publisher, SentInput)} of the inputs this sends."""
+        pairs = [(self.inlet, self.flows)] + (
+            [] if self.tanks is None else [(self.tank_publisher, self.tanks)])
+        return {publisher.topic_name: (publisher, sent) for publisher, sent in pairs}
+
+    def _next_start(self, at_ns):
+        """Return an input's stamp: at_ns, by default the start of the next tick."""
+        return (self.clock_ns or START_NS) if at_ns is None else at_ns
+
+    def set_flow(self, flow, at_ns=None):
+        """Send the inlet flow [m^3/s] from model time at_ns [ns] on (default: the next tick)."""
+        self.flows.send(float(flow), self._next_start(at_ns))
+
+    def set_tank_pressure(self, absolute, at_ns=None):
+        """Send the tank pressure [Pa absolute] from model time at_ns [ns] on (tank=True)."""
+        self.tanks.send(float(absolute), self._next_start(at_ns))
+
+    def _publish_flow(self, flow, stamp_ns):
+        self._flow_message.set_stamp(*divmod(stamp_ns, NS_PER_S))
+        self._flow_message.set_float64s(self._flow_offset, flow)
+        self.inlet.publish(self._flow_message.bytes())
+
+    def _publish_tank(self, absolute, stamp_ns):
+        message = FluidPressure(fluid_pressure=absolute)
         message.header.stamp = Time(sec=stamp_ns // NS_PER_S, nanosec=stamp_ns % NS_PER_S)
         self.tank_publisher.publish(message)
-        self.tank = float(absolute)
 
     def tick(self, count=1):
         """
         Advance the valve by count tick periods in one /clock; returns the last state's stamp.
 
         valve_node ticks a jump of up to clock_jumps.MAX_TICKS_PER_CLOCK periods period
-        by period, a state each; this waits for the last. The inputs set before apply
-        to all of them; the wait topics must have a message of the last.
+        by period, a state each; this waits for the last. Each tick applies the input
+        values stamped last at or before its start; the wait topics must have a message
+        of the last.
         """
         time_ns = self.clock_ns + count * self.period_ns
+        last_start = time_ns - self.period_ns
+        for sent in self._inputs():
+            sent.cover(last_start, time_ns)
         if self.rate:
             wall, clock = self._paced_from
             delay = wall + (time_ns - clock) / NS_PER_S / self.rate - time.monotonic()
@@ -275,18 +372,19 @@ class Lockstep:
         self._publish_clock(time_ns)
         self._wait_for(time_ns, f'the state of valve_node at {time_ns / NS_PER_S:.6f} s',
                        self.wait_topics)
-        if self.flow is not None and self.applied != self.flow:
+        flow = self.flows.at(last_start)
+        if flow is not None and self.applied != flow:
             raise LateInputError(
                 f'valve_node applied {self.applied:g} m^3/s over the tick ending at '
-                f'{time_ns / NS_PER_S:.6f} s, not the {self.flow:g} m^3/s published before it '
-                '(the message came late, valve_node rejected it, or its model is halted: see '
-                'its log); the run would not repeat'
+                f'{time_ns / NS_PER_S:.6f} s, not the {flow:g} m^3/s sent for it '
+                '(valve_node rejected it, or its model is halted: see its log)'
             )
-        if self.tank is not None and abs(self.applied_tank - self.tank) > TANK_TOLERANCE:
+        tank = None if self.tanks is None else self.tanks.at(last_start)
+        if tank is not None and abs(self.applied_tank - tank) > TANK_TOLERANCE:
             raise LateInputError(
                 f'valve_node applied the tank pressure {self.applied_tank:g} Pa over the tick '
-                f'ending at {time_ns / NS_PER_S:.6f} s, not the {self.tank:g} Pa published '
-                'before it (see its log); the run would not repeat'
+                f'ending at {time_ns / NS_PER_S:.6f} s, not the {tank:g} Pa sent for it '
+                '(see its log)'
             )
         return time_ns
 
@@ -329,11 +427,19 @@ class Lockstep:
             raise ValueError(f'valve_node refused {changes}: {result.reason}')
 
     def get_parameters(self, names):
-        """Return valve_node's values of names, as a dict."""
-        future = self.parameters.get_parameters(list(names))
-        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
+        """Return valve_node's values of names, as a dict; ValueError naming any it lacks."""
+        names = list(names)
+        values = self._get(names)
+        if len(values) != len(names):  # one name it lacks fails the whole request
+            missing = [name for name in names if len(self._get([name])) != 1]
+            raise ValueError(f"valve_node has no parameter {', '.join(map(repr, missing))}")
         return {name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
-                for name, value in zip(names, future.result().values)}
+                for name, value in zip(names, values)}
+
+    def _get(self, names):
+        future = self.parameters.get_parameters(names)
+        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
+        return future.result().values
 
     def close(self):
         self.executor.shutdown()

@@ -25,13 +25,21 @@ the analysed topics' messages to the measures publisher (measures_publisher.Step
 which also says which type of a topic it reads and how (type_to_record, extractor).
 status() is the recording status analyser_node publishes on /diagnostics. The node's
 docstring (valve_sim.ros.analyser_node) says what is recorded and how nothing is lost.
+
+Log and publish times: the receive and send times, on the system clock; on /clock
+(use_sim_time, as in lockstep) the model's time instead, as rosbag2 records with
+use_sim_time: a message with a header its stamp (the model time it is of, exact
+whatever the drain's lag, so two runs of a scenario give the same times), another
+the node's clock at the drain.
 """
 
 import functools
+import struct
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class
 from valve_sim.ros.raw_take import RawTaker
 
@@ -53,6 +61,20 @@ class RecordedTopic(RawTaker):
         self.extractor, self.channel = extractor, channel
         self.count = 0
         self.qos = qos  # reliability and durability of the subscription
+        fields = list(subscription.msg_type.get_fields_and_field_types().items())
+        self.stamped = bool(fields) and fields[0] == ('header', 'std_msgs/Header')
+
+
+def model_time(recorded, data, clock_ns):
+    """Return a message's model time [ns]: its header stamp if it has one, else clock_ns."""
+    if recorded.stamped:
+        try:
+            sec, nanosec = STAMP.unpack_from(data, STAMP_OFFSET)
+        except struct.error:
+            return clock_ns
+        if sec >= 0:
+            return sec * 1_000_000_000 + nanosec
+    return clock_ns
 
 
 def subscription_qos(offers, depth):
@@ -126,6 +148,7 @@ class Recorder:
         self.unrecordable = {}  # topic -> why it cannot be recorded
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
         self.unreadable_since = {}  # topic -> when only unreadable types were first seen
+        self.clock_ns = None  # the node's /clock time at this drain, None off /clock
 
     @property
     def subscriptions(self):
@@ -199,6 +222,8 @@ class Recorder:
 
     def drain(self):
         """Take every queued message of every topic: write it, and analyse those of the signals."""
+        clock = self.node.get_clock()
+        self.clock_ns = clock.now().nanoseconds if clock.ros_time_is_active else None
         for topic, recorded in self.recorded.items():
             lost = recorded.lost
             recorded.take(recorded.subscription)
@@ -211,7 +236,11 @@ class Recorder:
     def _record(self, recorded, data, info):
         """Write one message taken from a recorded topic; analyse it if it carries a signal."""
         received = info['received_timestamp']
-        self.bag.write(recorded.channel, data, received, info['source_timestamp'])
+        if self.clock_ns is None:
+            self.bag.write(recorded.channel, data, received, info['source_timestamp'])
+        else:  # on /clock: the model's time, for both
+            model_ns = model_time(recorded, data, self.clock_ns)
+            self.bag.write(recorded.channel, data, model_ns, model_ns)
         recorded.count += 1
         if recorded.extractor:
             self.measures.add(recorded, data, received)

@@ -16,19 +16,22 @@
 Run a bench scenario over DDS: valve_node and analyser_node in lockstep, then the verdict.
 
 run_scenario() starts both nodes (valve_node on use_sim_time with the scenario's
-parameters, analyser_node recording into the output folder), waits until the analyser
-records every topic of the valve, and drives the valve in steps of up to TICKS_PER_CLOCK
-ticks per /clock (Lockstep; one tick per /clock with wait topics), split so that each
-input change and event starts a step (batch_starts): the same states as tick by tick.
-The inlet flow of each tick is published before it (and the tank pressure, when the
-scenario gives one: its gauge value + ambient_pressure, as the topic is absolute,
-stamped with the tick's start), each event's parameter changes applied after the
-state of the tick it falls on. Then it waits until the analyser reports
-(on /diagnostics) that it has recorded every state, since in lockstep the valve runs
-ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
-analyser closed, checks that it holds every state of the run, and judges
-the expectations on it (valve_sim.analysis.expectations). The outputs are written by
-valve_sim.analysis.scenario_report.
+parameters and stamped lockstep inputs, analyser_node recording into the output folder),
+waits until the analyser records every topic of the valve, and drives the valve in
+steps of up to TICKS_PER_CLOCK ticks per /clock (ros.lockstep; one tick per /clock with
+wait topics), split so that each event starts a step (batch_starts). Before each step
+the inlet flow of each of its ticks that changes is sent stamped with the tick's start
+(and the tank pressure, when the scenario gives one: its gauge value +
+ambient_pressure, as the topic is absolute), so a ramp or a sine runs as many ticks
+per /clock as a step, the same states as tick by tick; each event's parameter changes
+are applied after the state of the tick it falls on. Then it waits until the analyser
+reports (on /diagnostics) that it has recorded every state, since in lockstep the valve
+runs ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
+analyser closed, checks that it holds every state of the run and that each tick
+applied the flow sent for it, and judges the expectations on it
+(valve_sim.analysis.expectations). The outputs are written by
+valve_sim.analysis.scenario_report, for a run that failed too (run_and_report): with
+what was measured up to the failure, each expectation judged on its own.
 """
 
 from dataclasses import dataclass, field
@@ -37,21 +40,22 @@ import time
 import numpy as np
 
 from valve_sim.analysis.expectations import evaluate
-from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.errors import IncompleteRunError, USER_ERRORS
 from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-from valve_sim.ros.lockstep import Lockstep, NS_PER_S, START_NS
+from valve_sim.ros.inlet_input import STAMPED_FLOW_TOPIC
+from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import start_valve_and_analyser
 
 
-RECORDED = (*TICK_TOPICS, 'inlet_flow')  # what the analyser must record before the first tick
+# what the analyser must record before the first tick
+RECORDED = (*TICK_TOPICS, STAMPED_FLOW_TOPIC)
 READY_TIMEOUT = 180.0  # [s] start-up (a cold kernel compile on a loaded machine) and discovery
 # The analyser's queue per topic: in lockstep the valve may run ahead of the analyser's
 # drain for as long as this lasts (100 s of states), and nothing is lost meanwhile.
 ANALYSER_QUEUE_DEPTH = 100_000
-FLOW_REPUBLISH = 0.02  # [s] of model time: the inputs are published again so, as a bench does
 PROGRESS_INTERVAL = 2.0  # [s] of wall time between progress lines
 DRAIN_TIMEOUT = 120.0  # [s] for analyser_node to record the states still on their way
 
@@ -67,6 +71,7 @@ class RunRecord:
     checks: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     wall_s: float = 0.0  # [s] of the lockstep stepping
+    clock_steps: int = 0  # /clock messages of the stepping (each up to ticks_per_clock ticks)
     start_ns: int = START_NS
     error: str = None  # why the run did not complete
 
@@ -88,12 +93,13 @@ def ros_value(value):
 def start_nodes(scenario, folder):
     """Start valve_node (on /clock) and analyser_node for the scenario; returns NodeProcesses."""
     ambient = scenario.ambient_pressure
-    valve = {'use_sim_time': 'true',
+    valve = {**lockstep_parameters(tank='tank_pressure' in scenario.inputs),
              **{name: ros_value(value) for name, value in scenario.parameters.items()}}
     ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
     return start_valve_and_analyser(
         folder, valve_parameters=valve, valve_ros_args=ros_args,
-        analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient})
+        analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient,
+                             'use_sim_time': 'true'})  # the bag's log times: model time
 
 
 class AnalyserStatus:
@@ -123,9 +129,9 @@ def batch_starts(ticks, breaks, size):
     """
     Return the first tick of each /clock step of a run of ticks ticks, steps of at most size.
 
-    breaks: the ticks before which the driver acts (an event, a new or republished
-    input): a step starts at each, so none crosses one and every input and change lands
-    on the tick it does with one tick per step.
+    breaks: the ticks before which the driver acts between ticks (an event): a step
+    starts at each, so none crosses one and every change lands on the tick it does
+    with one tick per step.
     """
     bounds = [0, *sorted({tick for tick in breaks if 0 < tick < ticks}), ticks]
     return [tick for start, end in zip(bounds, bounds[1:]) for tick in range(start, end, size)]
@@ -140,19 +146,26 @@ def apply_event(driver, scenario, tick, changes):
                                  f's: {error}') from None
 
 
-def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK):
-    """Run the scenario's ticks on a connected Lockstep; returns the wall time [s] it took."""
+def input_values(scenario):
+    """Return the inlet flows [m^3/s] and tank pressures [Pa absolute] or None, a tick each."""
     flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
     tank = scenario.inputs.get('tank_pressure')
     tanks = None if tank is None else tank.sample(scenario.tick_times()) + (
         scenario.ambient_pressure)  # [Pa absolute], as the topic takes it
+    return flows, tanks
+
+
+def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=None):
+    """
+    Run the scenario's ticks on a connected Lockstep; returns the wall time [s] it took.
+
+    record: a RunRecord whose wall_s follows the run (for a run that fails midway).
+    """
+    flows, tanks = input_values(scenario)
     events = scenario.event_ticks()
-    republish = max(round(FLOW_REPUBLISH * NS_PER_S / scenario.period_ns), 1)
-    breaks = {*events, *range(0, scenario.ticks, republish), *change_ticks(flows)}
-    if tanks is not None:
-        breaks.update(change_ticks(tanks))
-    starts = batch_starts(scenario.ticks, breaks, ticks_per_clock)
-    driver.set_flow(flows[0])
+    starts = batch_starts(scenario.ticks, events, ticks_per_clock)
+    changes = {0, *change_ticks(flows), *(() if tanks is None else change_ticks(tanks))}
+    driver.set_flow(flows[0], START_NS)
     if tanks is not None:
         driver.set_tank_pressure(tanks[0], START_NS)
     driver.start(START_NS, scenario.period_ns)
@@ -160,11 +173,15 @@ def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK):
     for tick, end in zip(starts, [*starts[1:], scenario.ticks]):
         if tick in events:
             apply_event(driver, scenario, tick, events[tick])
-        if flows[tick] != driver.flow or tick % republish == 0:
-            driver.set_flow(flows[tick])
-        if tanks is not None and (tanks[tick] != driver.tank or tick % republish == 0):
-            driver.set_tank_pressure(tanks[tick], driver.clock_ns)
+        for change in sorted(changes.intersection(range(tick, end))):
+            stamp = START_NS + change * scenario.period_ns
+            driver.set_flow(flows[change], stamp)
+            if tanks is not None:
+                driver.set_tank_pressure(tanks[change], stamp)
         driver.tick(end - tick)
+        if record is not None:
+            record.wall_s = time.monotonic() - started
+            record.clock_steps += 1
         if time.monotonic() - last_report > PROGRESS_INTERVAL:
             last_report = time.monotonic()
             model = end * scenario.period_ns / NS_PER_S
@@ -181,7 +198,11 @@ def change_ticks(values):
 
 
 def check_complete(series, scenario, start_ns):
-    """Raise IncompleteRunError unless the bag holds a state of every tick, none else."""
+    """
+    Raise IncompleteRunError unless the bag holds a state of every tick, none else.
+
+    Also unless every tick applied the inlet flow sent for it (the same float).
+    """
     expected = [start_ns + k * scenario.period_ns for k in range(scenario.ticks + 1)]
     if series.stamps_ns.tolist() != expected:
         missing = sorted(set(expected) - set(series.stamps_ns.tolist()))
@@ -192,23 +213,33 @@ def check_complete(series, scenario, start_ns):
         gaps = int(series[name].size - (series[name] == series[name]).sum())
         if gaps:
             raise IncompleteRunError(f'the bag lacks {name} at {gaps} of the ticks of the run')
+    flows, _ = input_values(scenario)
+    flows = flows[:scenario.ticks]  # tick k applies the value sampled at its start
+    wrong = np.flatnonzero(series['inlet_flow'][1:] != flows)
+    if wrong.size:
+        tick = int(wrong[0])
+        raise IncompleteRunError(
+            f'the tick from {tick * scenario.period_ns / NS_PER_S:.6f} s applied '
+            f'{series["inlet_flow"][tick + 1]:g} m^3/s, not the {flows[tick]:g} m^3/s sent for '
+            f'it ({wrong.size} such ticks)')
 
 
 def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
-                 ticks_per_clock=None):
+                 ticks_per_clock=None, record=None):
     """
     Run a BenchScenario in folder (created); returns its RunRecord with the checks judged.
 
     rate: model time per wall time to keep to at most (None: as fast as it goes);
     wait_topics: topics other use_sim_time nodes publish once per tick;
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
-    with wait topics, whose nodes must see every tick's /clock). Raises the
-    errors of a run that cannot complete (a node died, a refused event, a timeout,
-    an incomplete bag), after stopping both nodes.
+    with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
+    to fill (default: a new one). Raises the errors of a run that cannot complete (a
+    node died, a refused event, a timeout, an incomplete bag), after stopping both
+    nodes; record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
-    record = RunRecord(scenario, folder)
+    record = record or RunRecord(scenario, folder)
     processes = start_nodes(scenario, folder)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -224,17 +255,23 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
                                                        recorded)),
                           'analyser_node recording every topic', READY_TIMEOUT)
+        inputs = driver.input_publishers()  # matched by both nodes: none sent is lost
+        driver.spin_until(lambda: all(publisher.get_subscription_count() >= 2
+                                      for publisher, _ in inputs.values()),
+                          'analyser_node subscribed to the inputs', READY_TIMEOUT)
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
-            1 if wait_topics else TICKS_PER_CLOCK))
+            1 if wait_topics else TICKS_PER_CLOCK), record)
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (once a second) says when it has all.
         progress('waiting for analyser_node to record every state')
         driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
-                                                      TICK_TOPICS), scenario.ticks + 1),
-                          f'analyser_node recording all {scenario.ticks + 1} states',
-                          DRAIN_TIMEOUT)
+                                                      TICK_TOPICS), scenario.ticks + 1)
+                          and all(status.recorded([topic], sent.count)
+                                  for topic, (_, sent) in inputs.items()),
+                          f'analyser_node recording all {scenario.ticks + 1} states and '
+                          'every input sent', DRAIN_TIMEOUT)
     finally:
         if driver is not None:
             driver.close()
@@ -245,11 +282,54 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     record.series = tick_series(record.bag, start_ns=START_NS,
                                 ambient_pressure=scenario.ambient_pressure)
     check_complete(record.series, scenario, START_NS)
-    record.steps = record.series.steps(events=[(event.time_ns / 1e9, event.changes)
-                                               for event in scenario.events])
-    record.checks = evaluate(scenario.expectations, record.series,
-                             scenario.supply_pressure_limits(), record.steps)
+    record.steps = record.series.steps(events=scenario.window_events())
+    record.checks = judge(scenario, record.series, record.steps)
     return record
+
+
+def judge(scenario, series, steps):
+    """
+    Judge each expectation on series (states from t = 0, all or the first ones).
+
+    Raises IncompleteRunError naming the first expectation that cannot be judged, with
+    the checks of the others in its checks attribute.
+    """
+    limits = scenario.supply_pressure_limits()[:len(series)]
+    checks, problems = [], []
+    for index, expectation in enumerate(scenario.expectations):
+        try:
+            checks += evaluate([expectation], series, limits, steps)
+        except (ValueError, LookupError) as error:
+            problems.append(f'expect[{index}] cannot be judged: {error}')
+    if problems:
+        error = IncompleteRunError('; '.join(problems))
+        error.checks = checks
+        raise error
+    return checks
+
+
+def measure_partial(record):
+    """
+    After a failed run: the bag, states, steps and checks of what was recorded, if any.
+
+    Each expectation is judged on the states up to the failure; one that cannot be
+    judged (or a bag that cannot be read) adds its reason to record.error.
+    """
+    bags = sorted(record.folder.glob('*.mcap'))
+    if not bags:
+        return
+    record.bag = bags[0]
+    try:
+        record.series = tick_series(record.bag, start_ns=START_NS,
+                                    ambient_pressure=record.scenario.ambient_pressure)
+        record.steps = record.series.steps(events=record.scenario.window_events())
+        record.checks = judge(record.scenario, record.series, record.steps)
+    except IncompleteRunError as error:
+        record.checks = getattr(error, 'checks', [])
+        if str(error) not in record.error:
+            record.error += f'; {error}'
+    except (*USER_ERRORS, ValueError) as error:
+        record.error += f'; no states to judge: {error}'
 
 
 def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
@@ -257,17 +337,36 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
     """
     Run a scenario and write its reports (scenario_report); returns (RunRecord, paths).
 
-    A run that cannot complete still gets its JUnit file, with the error as its one
-    case; the error is then raised again.
+    A run that cannot complete still gets every report, with what was measured up to
+    the failure and the error (JUnit: the checks and an error case); the error is then
+    raised again.
     """
-    from valve_sim.analysis.scenario_report import junit_document, write_junit, write_reports
-    from valve_sim.core.errors import USER_ERRORS
+    from valve_sim.analysis.scenario_report import write_reports
 
-    started = time.monotonic()
+    record = RunRecord(scenario, folder)
     try:
-        record = run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock)
-    except (*USER_ERRORS, TimeoutError, RuntimeError) as error:
-        write_junit(junit_document(scenario, [], time.monotonic() - started, str(error)),
-                    folder, junit)
+        run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record)
+    except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as error:
+        record.error = str(error) or type(error).__name__
+        measure_partial(record)
+        write_reports(record, junit)
         raise
     return record, write_reports(record, junit)
+
+
+def lockstep_messages(bag, topics=(*TICK_TOPICS, STAMPED_FLOW_TOPIC, 'tank_pressure')):
+    """
+    Return {topic: [(log_time, publish_time, CDR bytes)]} of the valve's topics in a bag.
+
+    What two runs of a scenario must record alike: each tick topic's and input's
+    messages in order, with their model-time log and publish times (the bag's other
+    topics, /diagnostics and fault_status, say how the run went in wall time).
+    """
+    from valve_sim.recording.bag import BagReader
+
+    wanted = {f'/{topic}' for topic in topics}
+    messages = {}
+    for channel, _, message in BagReader(bag).messages(wanted):
+        messages.setdefault(channel.topic, []).append(
+            (message.log_time, message.publish_time, bytes(message.data)))
+    return messages

@@ -66,6 +66,7 @@ from valve_sim.ros.inlet_input import (
     RELIABILITY_DESCRIPTION,
     TankPressureInput,
 )
+from valve_sim.ros.lockstep_inputs import declare_lockstep_inputs, LockstepInputs
 from valve_sim.ros.node_status import NodeStatus, Throttle
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, ReceiveThreads
 from valve_sim.ros.ros_parameters import log_parameter_files
@@ -89,6 +90,7 @@ class ReliefValveNode(Node):
     def __init__(self, argv=(), **kwargs):
         self.inlet_subscription = None  # taken by the tick, left out of subscriptions
         self.tank_subscription = None  # likewise
+        self.stamped_subscriptions = ()  # likewise: the lockstep inputs' (lockstep_inputs)
         super().__init__(NODE_NAME, **kwargs)
         self.set_up(argv)
 
@@ -135,9 +137,15 @@ class ReliefValveNode(Node):
         self.inlet_subscription = self.create_subscription(
             Float64, 'inlet_flow', self.input.offer_cdr, input_qos, raw=True
         )
-        self.tank_subscription = self.create_subscription(
-            FluidPressure, 'tank_pressure', self.tank_input.offer_cdr, input_qos, raw=True
+        self.lockstep_inputs = LockstepInputs(
+            self, declare_lockstep_inputs(self), self.input, self.tank_input
         )
+        self.tank_subscription = self.create_subscription(
+            FluidPressure, 'tank_pressure', self.tank_input.offer_cdr,
+            self.lockstep_inputs.tank_qos(input_qos), raw=True
+        )
+        self.lockstep_inputs.add_tank_subscription(self.tank_subscription)
+        self.stamped_subscriptions = self.lockstep_inputs.subscriptions
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
         self.housekeeping = Housekeeping(self)
@@ -188,7 +196,7 @@ class ReliefValveNode(Node):
         groups), so a flood of inlet_flow or tank_pressure never wakes the executor and
         never queues callbacks ahead of the tick (take_inputs).
         """
-        taken = (self.inlet_subscription, self.tank_subscription)
+        taken = (self.inlet_subscription, self.tank_subscription, *self.stamped_subscriptions)
         return (s for s in super().subscriptions if s not in taken)
 
     # --- parameters (ros.valve_parameters) -------------------------------------------------
@@ -239,6 +247,8 @@ class ReliefValveNode(Node):
         self.tank_input.stamp(now_ns)
         if not starting:
             self._count_lateness(now_ns, slot_ns)
+            self.lockstep_inputs.settle(  # stamped inputs: on /clock, wait for t_k's
+                self.model.time_ns, self.get_clock().ros_time_is_active)
             self._advance(now_ns)
         self._inject()
         self.outputs.publish_tick(

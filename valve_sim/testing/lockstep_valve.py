@@ -24,13 +24,20 @@ parameter changes act from the next tick, so a test repeats exactly.
 Values are SI, or text with a unit ('20 L/min', '21 MPa'); parameters by ROS name or
 paper symbol. Pressures read back are gauge [Pa], as the model's (tick_series).
 
-The nodes run in the environment's ROS_DOMAIN_ID, or in a domain of their own that
-this claims (valve_sim.ros.isolation): a node of the test that talks to the valve
-(a controller under test) must be created after the valve, in the same process.
+Isolation: one open kit per process (a second is refused: both would share /clock and
+the valve's topics); the kit runs in the environment's ROS_DOMAIN_ID unless another
+process holds it (another pytest-xdist worker, another test run), then in a free one it
+claims (valve_sim.ros.isolation.hold_domain, set in os.environ): a node of the test
+that talks to the valve (a controller under test) must be created after the valve,
+in the same process. Arguments are checked at the call (ValueError, TypeError, one
+line); any call after close() raises RuntimeError; a start valve_node refuses raises
+ChildProcessError with the node's reason, and keeps its log.
 """
 
 from contextlib import contextmanager
+import math
 from pathlib import Path
+import shutil
 import tempfile
 import time
 
@@ -38,6 +45,7 @@ from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
+from valve_sim.core.limits import inlet_flow_problem
 from valve_sim.core.output_files import make_folder
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.core.quantities import FLOW, parse_quantity
@@ -45,14 +53,19 @@ from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import node_command
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-from valve_sim.ros.isolation import claim_domain
-from valve_sim.ros.lockstep import Lockstep, NS_PER_S, START_NS
+from valve_sim.ros.isolation import hold_domain
+from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import ros_value
 
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
 STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
+# The states a kit keeps at most: about 0.8 kB each in memory (a dict of the 11 signals by
+# stamp, measured with tracemalloc), so 600 000 (10 min of model time at 1 kHz) is 0.5 GB.
+MAX_STATES = 600_000
+LOG_LINES = 5  # of valve_node's log in the error of a refused start
+_open_kit = []  # the kit open in this process, if any
 
 
 class LockstepValve:
@@ -69,6 +82,11 @@ class LockstepValve:
                  namespace='', folder=None):
         import rclpy
 
+        if _open_kit:
+            raise RuntimeError(
+                f'a lockstep valve is already open in this process (log in '
+                f'{_open_kit[0].folder}): close it first; two would share /clock and the '
+                "valve's topics")
         given = dict(parameters or {})
         try:
             start = dict(start_parameter(name, value, name) for name, value in given.items())
@@ -76,13 +94,13 @@ class LockstepValve:
         except (ProfileError, ValueError) as error:
             raise ValueError(f'lockstep valve: {error}') from None
         self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
-        self._temporary = None if folder else tempfile.TemporaryDirectory(prefix='valve_')
-        self.folder = make_folder(Path(folder or self._temporary.name))
-        claim_domain()
+        self._temporary = None if folder else tempfile.mkdtemp(prefix='valve_')
+        self.folder = make_folder(Path(folder or self._temporary))
+        self.domain = hold_domain()
         ros_args = ['--params-file', str(params_file)] if params_file else []
         if namespace:
             ros_args += ['-r', f'__ns:={namespace}']
-        values = {'use_sim_time': 'true', 'initial_inlet_flow': repr(flow),
+        values = {**lockstep_parameters(), 'initial_inlet_flow': repr(flow),
                   **{name: ros_value(value) for name, value in start.items()}}
         self.processes = NodeProcesses(self.folder, {
             'valve_node': node_command('valve_node', parameters=values, ros_args=ros_args)})
@@ -90,16 +108,42 @@ class LockstepValve:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self._driver = None
+        _open_kit.append(self)
         try:
             self._driver = Lockstep(self.context, namespace, self.processes,
                                     on_state=self._on_state, record_topics=TICK_TOPICS)
             self._driver.connect(timeout=START_TIMEOUT)
+            self.max_inlet_flow = self._driver.get_parameters(['max_inlet_flow'])[
+                'max_inlet_flow']
             self._driver.set_flow(flow)
             self._driver.start(START_NS)
             self._await_row(START_NS)
+        except ChildProcessError as error:
+            self._fail_start(error)
         except BaseException:
             self.close()
             raise
+
+    def _fail_start(self, error):
+        """valve_node ended while starting: raise its reason from its log, which is kept."""
+        log = self.processes.log('valve_node')
+        lines = [line.strip() for line in log.read_text(errors='replace').splitlines()
+                 if line.strip()]
+        reasons = [line for line in lines if 'ERROR' in line or 'rror' in line] or lines
+        self._temporary = None  # the log stays for the user to read
+        try:
+            self.close()
+        except ChildProcessError:
+            pass  # the node's own end: its reason follows
+        raise ChildProcessError(
+            f'valve_node refused to start: {" | ".join(reasons[-LOG_LINES:]) or error} '
+            f'(log kept: {log})') from None
+
+    def _live(self):
+        """Return the driver; RuntimeError once close() was called."""
+        if self._driver is None:
+            raise RuntimeError('this lockstep valve is closed: start another one')
+        return self._driver
 
     def _on_state(self, topic, data):
         from rclpy.serialization import deserialize_message
@@ -113,21 +157,34 @@ class LockstepValve:
     @property
     def time(self):
         """Return the model time [s] since the first state (t = 0)."""
-        return (self._driver.time_ns - START_NS) / NS_PER_S
+        return (self._live().time_ns - START_NS) / NS_PER_S
 
     @property
     def period(self):
         """Return the tick period [s] (valve_node's publish_rate)."""
-        return self._driver.period_ns / NS_PER_S
+        return self._live().period_ns / NS_PER_S
 
     def advance(self, seconds):
-        """Run the valve on by seconds of model time (whole ticks); returns the new time [s]."""
-        ticks = round(float(seconds) / self.period)
-        if ticks < 0:
-            raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
+        """
+        Run the valve on by seconds of model time (whole ticks); returns the new time [s].
+
+        seconds: a finite number >= 0 [s]; the states kept stay within MAX_STATES.
+        """
+        driver = self._live()
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)):
+            raise TypeError(f'advance: seconds must be a number [s], got {seconds!r}')
+        if not math.isfinite(seconds) or seconds < 0:
+            raise ValueError(f'advance: seconds must be finite and >= 0 (time only goes '
+                             f'forward), got {seconds!r}')
+        ticks = round(seconds / self.period)
+        room = MAX_STATES - len(self._rows)
+        if ticks > room:
+            raise ValueError(
+                f'advance({seconds!r}): {ticks} more states would pass the {MAX_STATES} a kit '
+                f'keeps (about 0.8 kB each); at most {room * self.period:g} s more')
         for done in range(0, ticks, TICKS_PER_CLOCK):  # a /clock step of several ticks
-            self._driver.tick(min(TICKS_PER_CLOCK, ticks - done))
-        self._await_row(self._driver.time_ns)
+            driver.tick(min(TICKS_PER_CLOCK, ticks - done))
+        self._await_row(driver.time_ns)
         return self.time
 
     def _await_row(self, time_ns):
@@ -142,8 +199,21 @@ class LockstepValve:
             self._driver.executor.spin_once(timeout_sec=0.01)
 
     def set_flow(self, flow):
-        """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
-        self._driver.set_flow(parse_quantity(flow, FLOW))
+        """
+        Set the inlet flow (m^3/s, or text with a unit) from the next tick on.
+
+        ValueError at the call for a value valve_node would refuse: negative, not finite
+        or above its max_inlet_flow.
+        """
+        driver = self._live()
+        try:
+            value = parse_quantity(flow, FLOW)
+        except ValueError as error:
+            raise ValueError(f'set_flow: {error}') from None
+        problem = inlet_flow_problem(value, self.max_inlet_flow)
+        if problem:
+            raise ValueError(f'set_flow({flow!r}): {problem}')
+        driver.set_flow(value)
 
     def set_parameters(self, changes=None, **named):
         """
@@ -153,34 +223,42 @@ class LockstepValve:
         fault.* and sensor.* settings too. ValueError if a value is wrong or the node
         refuses it.
         """
+        driver = self._live()
         try:
             resolved = dict(live_change(name, value)
                             for name, value in {**(changes or {}), **named}.items())
         except (ParameterError, ProfileError, InputFileError) as error:
             raise ValueError(str(error)) from None
-        before = self._driver.get_parameters(list(resolved))
-        self._driver.set_parameters(resolved)
+        before = driver.get_parameters(list(resolved))
+        driver.set_parameters(resolved)
         changed = {name: value for name, value in resolved.items() if before[name] != value}
         if changed:  # a change ends a step's window (docs/measures.md)
             self._events.append((self.time + self.period, changed))
+        if 'max_inlet_flow' in resolved:
+            self.max_inlet_flow = float(resolved['max_inlet_flow'])
 
     def inject(self, fault, value=True):
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
+        if not isinstance(fault, str):
+            raise TypeError(f"inject: fault must be a fault's name such as 'main_valve_stuck' "
+                            f'(docs/faults.md), got {fault!r}')
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
     def get_parameters(self, *names):
-        """Return valve_node's current values of names (ROS names), as a dict."""
-        return self._driver.get_parameters(names)
+        """Return valve_node's values of names (ROS names) as a dict; ValueError if one lacks."""
+        return self._live().get_parameters(names)
 
     @property
     def state(self):
         """Return the latest state: {signal: value} of tick_series.SIGNALS (SI, gauge [Pa])."""
+        self._live()
         return dict(self._latest)
 
     @property
     def series(self):
         """Return every state so far as a TickSeries (time [s] from the first state)."""
+        self._live()
         return TickSeries.from_rows(self._rows, START_NS)
 
     def measures(self, at=None):
@@ -200,6 +278,8 @@ class LockstepValve:
 
     def close(self):
         """Stop valve_node (SIGINT) and the driver; ChildProcessError if the node failed."""
+        if self in _open_kit:
+            _open_kit.remove(self)
         try:
             if self._driver is not None:
                 self._driver.close()
@@ -210,7 +290,7 @@ class LockstepValve:
                 self.processes.stop()
             finally:
                 if self._temporary is not None:
-                    self._temporary.cleanup()
+                    shutil.rmtree(self._temporary, ignore_errors=True)
                     self._temporary = None
 
 
