@@ -130,7 +130,13 @@ def test_a_run_that_aborts_writes_every_report_with_what_it_measured_to_then(
 
 def test_an_expectation_that_cannot_be_judged_keeps_the_others_and_every_report(
         profile_run, tmp_path):
-    """A steady window of -1 (a ValueError in the judging) after a whole run of PROFILES."""
+    """
+    An expectation whose judging raises (a LookupError) after a whole run of PROFILES.
+
+    `scenario check` refuses every such expectation in a file (a window of -1 among them,
+    test_hostile_scenarios), so the loaded one is given a signal the series does not have:
+    what a judging that fails at run time leaves.
+    """
     import shutil
 
     from valve_sim.analysis.scenario_file import load_scenario
@@ -142,8 +148,10 @@ def test_an_expectation_that_cannot_be_judged_keeps_the_others_and_every_report(
     path = tmp_path / 'profiles.yaml'
     path.write_text(PROFILES.replace('  - no_alarm: {}\n', (
         '  - steady: {signal: supply_pressure, flow: 5 L/min, min: 6.9 MPa, max: 7.1 MPa, '
-        'window: -1}\n  - never_above: {signal: supply_pressure, value: 7.5 MPa}\n')))
-    record = RunRecord(load_scenario(path), tmp_path, error='the judging failed')
+        'window: 0.02}\n  - never_above: {signal: supply_pressure, value: 7.5 MPa}\n')))
+    scenario = load_scenario(path)
+    scenario.expectations[0].signal = 'no_such_signal'
+    record = RunRecord(scenario, tmp_path, error='the judging failed')
     measure_partial(record)
     write_reports(record)
     report = check_reports(tmp_path, 'expect[0] cannot be judged', [PEAK])
