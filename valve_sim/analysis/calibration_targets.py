@@ -28,7 +28,11 @@ Both offer kind, residual_names, residuals(params), model_output(params) and
 covariance_scale(cost, count, fitted) (the s^2 of the fit's covariance).
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 import math
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -38,6 +42,10 @@ from valve_sim.core.errors import CalibrationError
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
 from valve_sim.core.simulation import simulate, simulate_recorded_flow
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from valve_sim.core.scenario import Scenario
 
 
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
@@ -52,8 +60,9 @@ class MeasuresTarget:
 
     kind = 'measures'
 
-    def __init__(self, values, tolerances, weights=None, scenario=REFERENCE_SCENARIO,
-                 step_size=1e-5):
+    def __init__(self, values: Mapping[str, float], tolerances: Mapping[str, float],
+                 weights: Optional[Mapping[str, float]] = None,
+                 scenario: Scenario = REFERENCE_SCENARIO, step_size: float = 1e-5) -> None:
         self.names = [name for name in MEASURE_NAMES if name in values]
         self.values = {name: float(values[name]) for name in self.names}
         self.tolerances = {name: float(tolerances[name]) for name in self.names}
@@ -155,8 +164,10 @@ class RecordingTarget:
 
     kind = 'recording'
 
-    def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6, step_times=(), brackets=()):
+    def __init__(self, time: ArrayLike, supply_pressure: ArrayLike, inlet_flow: ArrayLike,
+                 main_valve: Optional[ArrayLike] = None, step_size: float = 1e-5,
+                 step_threshold: float = 1e-6, step_times: Sequence[float] = (),
+                 brackets: Sequence[tuple[float, float]] = ()) -> None:
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)

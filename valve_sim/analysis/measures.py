@@ -45,11 +45,17 @@ half a period (a swing just inside or just outside the band); the decay rate mov
 continuously with the parameters (docs/measures.md).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, field
 import math
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
@@ -69,8 +75,8 @@ NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
 class StepMeasures:
     """The six measures of one step; a value of None comes with its reason."""
 
-    values: dict
-    reasons: dict = field(default_factory=dict)
+    values: dict[str, Optional[float]]
+    reasons: dict[str, str] = field(default_factory=dict)
     details: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -79,12 +85,14 @@ class StepMeasures:
             if value is not None and not math.isfinite(value):
                 self.values[name] = None
                 self.reasons[name] = NOT_FINITE
+            elif value is not None:
+                self.values[name] = float(value)  # a plain float, never an np.float64
         self.details = {
             key: None if isinstance(value, float) and not math.isfinite(value) else value
             for key, value in self.details.items()
         }
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: the six names (None where undefined), 'reasons' and 'details'."""
         return {
             **{name: self.values.get(name) for name in MEASURE_NAMES},
@@ -195,7 +203,10 @@ def _parabola_exit(t, deviation, band):
     return t[1] + min(root, tc[-1])
 
 
-def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW):
+def step_measures(
+    t: ArrayLike, supply_pressure: ArrayLike, main_valve_displacement: Optional[ArrayLike],
+    t_step: float, direction: int = 1, window: float = WINDOW,
+) -> StepMeasures:
     """
     Compute the six measures of the step at t_step [s] (docs/measures.md), as StepMeasures.
 

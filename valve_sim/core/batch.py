@@ -26,7 +26,11 @@ simulation.simulate(): there rounding errors grow before the step as they would 
 rig. Each run's outcome is a RunResult: its waveforms or why it failed.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
@@ -56,8 +60,8 @@ class RunResult:
     integration), None when it succeeded.
     """
 
-    waveforms: Waveforms = None
-    error: Exception = None
+    waveforms: Optional[Waveforms] = None
+    error: Optional[Exception] = None
 
     @property
     def success(self):
@@ -87,8 +91,9 @@ def is_stable(params, state, inlet_flow):
 
 
 def simulate_batch(
-    params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
-):
+    params_list: Sequence[Mapping[str, float]], scenario: Scenario = Scenario(),
+    step_size: float = 1e-5, record_interval: float = 1e-4, lanes: int = LANES,
+) -> list[RunResult]:
     """
     Run one scenario for many parameter sets; a list of RunResults, one per set, in order.
 

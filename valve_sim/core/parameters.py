@@ -23,11 +23,16 @@ node read the same numbers. All values are SI.
 No ROS imports here: the node turns these specs into ParameterDescriptors.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 import logging
 import math
+import os
 from pathlib import Path
 import sys
+from typing import Any, Optional, Union
 
 # STANDARD_ATMOSPHERE: the readers and writers of the wire import it from here.
 from valve_sim.core.catalogue import (  # noqa: F401
@@ -83,7 +88,7 @@ def retired_reason(name):
     return None
 
 
-def resolve_name(name):
+def resolve_name(name: str) -> str:
     """Return the parameter name for a ROS name or a paper symbol (e.g. 'm_m')."""
     if name in SPECS:
         return name
@@ -146,7 +151,7 @@ def checked_switch(name, value, kind='parameter'):
     return value
 
 
-def validate(params):
+def validate(params: Mapping[str, Any]) -> dict[str, float]:
     """
     Check a complete parameter set; return a new dict of floats or raise ParameterError.
 
@@ -266,12 +271,16 @@ class LoadedParameters:
     preset_pressure, checked; injection: fault.*, sensor.* and fault_schedule, unchecked.
     """
 
-    params: dict
-    settings: dict
-    injection: dict = field(default_factory=dict)
+    params: dict[str, float]
+    settings: dict[str, float]
+    injection: dict[str, Any] = field(default_factory=dict)
 
 
-def load_parameters(path=None, overrides=None, namespace='', with_injection=False):
+def load_parameters(
+    path: Union[str, os.PathLike[str], None] = None,
+    overrides: Optional[Mapping[str, Any]] = None, namespace: str = '',
+    with_injection: bool = False,
+) -> LoadedParameters:
     """
     Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 
