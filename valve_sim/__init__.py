@@ -49,52 +49,6 @@ from __future__ import annotations
 from importlib import import_module
 from typing import Any, TYPE_CHECKING
 
-__version__ = '0.1.0'
-
-# name -> the module it lives in (one implementation each; this file only points at it).
-_EXPORTS = {
-    'Parameters': 'valve_sim.core.valve',
-    'OperatingPoint': 'valve_sim.core.valve',
-    'operating_point': 'valve_sim.core.valve',
-    'Scenario': 'valve_sim.core.scenario',
-    'TankPressure': 'valve_sim.core.scenario',
-    'LITRE_PER_MINUTE': 'valve_sim.core.scenario',
-    'simulate': 'valve_sim.core.simulation',
-    'Waveforms': 'valve_sim.core.simulation',
-    'cracking_pressure': 'valve_sim.core.steady_state',
-    'simulate_batch': 'valve_sim.core.batch',
-    'RunResult': 'valve_sim.core.batch',
-    'step_measures': 'valve_sim.analysis.measures',
-    'StepMeasures': 'valve_sim.analysis.measures',
-    'calibrate': 'valve_sim.analysis.calibration',
-    'CalibrationProblem': 'valve_sim.analysis.calibration',
-    'CalibrationResult': 'valve_sim.analysis.calibration',
-    'FitSettings': 'valve_sim.analysis.calibration',
-    'fit_parameters': 'valve_sim.analysis.calibration_parameters',
-    'RecordingTarget': 'valve_sim.analysis.calibration_targets',
-    'MeasuresTarget': 'valve_sim.analysis.calibration_targets',
-    'read_recording': 'valve_sim.recording.signal_reader',
-    'Recording': 'valve_sim.recording.signal_reader',
-    'recorded_steps': 'valve_sim.analysis.recorded_steps',
-    'ValveSimError': 'valve_sim.core.errors',
-    'ParameterError': 'valve_sim.core.errors',
-    'InputFileError': 'valve_sim.core.errors',
-    'IntegrationError': 'valve_sim.core.errors',
-    'SteadyStateError': 'valve_sim.core.errors',
-    'CalibrationError': 'valve_sim.core.errors',
-}
-_RENAMED = {'recorded_steps': 'analyse'}  # front-door name -> its name in its module
-
-__all__ = [  # literal, so that type checkers see the exports (test_front_door checks it)
-    '__version__',
-    'Parameters', 'OperatingPoint', 'operating_point', 'Scenario', 'TankPressure',
-    'LITRE_PER_MINUTE', 'simulate', 'Waveforms', 'cracking_pressure', 'simulate_batch',
-    'RunResult', 'step_measures', 'StepMeasures', 'calibrate', 'CalibrationProblem',
-    'CalibrationResult', 'FitSettings', 'fit_parameters', 'RecordingTarget', 'MeasuresTarget',
-    'read_recording', 'Recording', 'recorded_steps', 'ValveSimError', 'ParameterError',
-    'InputFileError', 'IntegrationError', 'SteadyStateError', 'CalibrationError',
-]
-
 if TYPE_CHECKING:  # what a type checker sees; at run time __getattr__ imports on first use
     from valve_sim.analysis.calibration import (
         calibrate as calibrate,
@@ -149,6 +103,53 @@ if TYPE_CHECKING:  # what a type checker sees; at run time __getattr__ imports o
         read_recording as read_recording,
         Recording as Recording,
     )
+
+
+__version__ = '0.1.0'
+
+# name -> the module it lives in (one implementation each; this file only points at it).
+_EXPORTS = {
+    'Parameters': 'valve_sim.core.valve',
+    'OperatingPoint': 'valve_sim.core.valve',
+    'operating_point': 'valve_sim.core.valve',
+    'Scenario': 'valve_sim.core.scenario',
+    'TankPressure': 'valve_sim.core.scenario',
+    'LITRE_PER_MINUTE': 'valve_sim.core.scenario',
+    'simulate': 'valve_sim.core.simulation',
+    'Waveforms': 'valve_sim.core.simulation',
+    'cracking_pressure': 'valve_sim.core.steady_state',
+    'simulate_batch': 'valve_sim.core.batch',
+    'RunResult': 'valve_sim.core.batch',
+    'step_measures': 'valve_sim.analysis.measures',
+    'StepMeasures': 'valve_sim.analysis.measures',
+    'calibrate': 'valve_sim.analysis.calibration',
+    'CalibrationProblem': 'valve_sim.analysis.calibration',
+    'CalibrationResult': 'valve_sim.analysis.calibration',
+    'FitSettings': 'valve_sim.analysis.calibration',
+    'fit_parameters': 'valve_sim.analysis.calibration_parameters',
+    'RecordingTarget': 'valve_sim.analysis.calibration_targets',
+    'MeasuresTarget': 'valve_sim.analysis.calibration_targets',
+    'read_recording': 'valve_sim.recording.signal_reader',
+    'Recording': 'valve_sim.recording.signal_reader',
+    'recorded_steps': 'valve_sim.analysis.recorded_steps',
+    'ValveSimError': 'valve_sim.core.errors',
+    'ParameterError': 'valve_sim.core.errors',
+    'InputFileError': 'valve_sim.core.errors',
+    'IntegrationError': 'valve_sim.core.errors',
+    'SteadyStateError': 'valve_sim.core.errors',
+    'CalibrationError': 'valve_sim.core.errors',
+}
+_RENAMED = {'recorded_steps': 'analyse'}  # front-door name -> its name in its module
+
+__all__ = [  # literal, so that type checkers see the exports (test_front_door checks it)
+    '__version__',
+    'Parameters', 'OperatingPoint', 'operating_point', 'Scenario', 'TankPressure',
+    'LITRE_PER_MINUTE', 'simulate', 'Waveforms', 'cracking_pressure', 'simulate_batch',
+    'RunResult', 'step_measures', 'StepMeasures', 'calibrate', 'CalibrationProblem',
+    'CalibrationResult', 'FitSettings', 'fit_parameters', 'RecordingTarget', 'MeasuresTarget',
+    'read_recording', 'Recording', 'recorded_steps', 'ValveSimError', 'ParameterError',
+    'InputFileError', 'IntegrationError', 'SteadyStateError', 'CalibrationError',
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -40,6 +40,9 @@ def test_the_python_page_runs_as_written(capsys):
         os.chdir(here)
     printed = capsys.readouterr().out
     assert '0 the run reached its end' in printed and '0 fitted' in printed
+    result, measures = namespace['result'], namespace['measures']
+    assert all(type(v) is float for v in [*result.values, result.cost])  # no np.float64
+    assert all(type(v) is float for v in measures.values.values() if v is not None)
 
 
 def test_the_readme_links_the_page():

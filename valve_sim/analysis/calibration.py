@@ -95,8 +95,8 @@ class CalibrationResult:
 
     parameters: dict
     fitted: list
-    values: list
-    start_values: list
+    values: list[float]
+    start_values: list[float]
     residuals: np.ndarray
     residual_names: list
     cost: float
@@ -123,7 +123,7 @@ class CalibrationResult:
 
     @property
     def message(self) -> str:
-        """What status means, in one line."""
+        """Say what status means, in one line."""
         return 'interrupted: the best evaluation so far' if self.interrupted else 'fitted'
 
 
@@ -363,12 +363,12 @@ def _result(objective, u, cost, constraints, runs, interrupted):
     return CalibrationResult(
         parameters=objective.parameters(u),
         fitted=problem.fitted,
-        values=list(u * start),
-        start_values=list(start),
+        values=[float(v) for v in u * start],
+        start_values=[float(v) for v in start],
         residuals=None,
         residual_names=list(problem.target.residual_names)
         + [c.name for c in problem.constraints],
-        cost=cost,
+        cost=float(cost),
         constraints=constraints,
         starts=[{k: v for k, v in run.items() if k != 'u'} for run in runs],
         interrupted=interrupted,

@@ -90,7 +90,7 @@ class Waveforms:
 
     @property
     def message(self) -> str:
-        """What status means, in one line."""
+        """Say what status means, in one line."""
         return 'the run reached its end' if self.halted is None else (
             f'halted at {self.halted[0]:g} s: {self.halted[1]}'
         )
