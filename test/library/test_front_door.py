@@ -20,6 +20,7 @@ import sys
 
 import pytest
 import valve_sim as vs
+from valve_sim.commands import cli
 from valve_sim.core.errors import ParameterError, UnavailableError
 from valve_sim.core.realtime_model import RealTimeModel
 from valve_sim.core.scenario import Scenario
@@ -105,14 +106,18 @@ def test_an_overpressure_halt_is_a_status_not_a_normal_result():
     assert run.status == 1 and run.message.startswith('halted at 0.05'), run.message
 
 
-def test_every_ros_domain_held_is_a_one_line_valve_sim_error(monkeypatch, tmp_path):
+def test_every_ros_domain_held_is_one_line_from_the_cli(monkeypatch, tmp_path, capsys):
     """Before: a bare RuntimeError, a traceback from `valve-sim demo` and `scenario run`."""
     def held(handle, flags):
         raise BlockingIOError('held')
 
-    monkeypatch.setattr(isolation, 'LOCK_FOLDER', tmp_path)
+    monkeypatch.setattr(isolation, 'LOCK_FOLDER', tmp_path / 'locks')
     monkeypatch.setattr(isolation, 'DOMAIN_IDS', range(1, 4))
     monkeypatch.setattr(isolation.fcntl, 'flock', held)
     with pytest.raises(UnavailableError, match='every ROS domain') as refused:
         isolation.claim_domain(keep_existing=False)
-    assert isinstance(refused.value, RuntimeError) and '\n' not in str(refused.value)
+    assert isinstance(refused.value, RuntimeError)
+    monkeypatch.delenv('ROS_DOMAIN_ID')  # the user's shell sets none: demo claims one
+    assert cli.main(['demo', '--out', str(tmp_path / 'demo')]) == 1
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith('valve-sim demo: error: every ROS domain 1-101 is held')
