@@ -30,7 +30,7 @@ import sys
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-SURFACE = ['valve_sim/__init__.py', 'valve_sim/core/valve.py']
+SURFACE = ['valve_sim/__init__.py', 'valve_sim/core/valve.py', 'valve_sim/testing/__init__.py']
 
 
 def unannotated(function):
@@ -46,20 +46,27 @@ def unannotated(function):
     return missing
 
 
-@pytest.mark.parametrize('package', ['valve_sim'])
+def members(value):
+    """Yield (name, function) of an exported function, or a class's public methods."""
+    if inspect.isfunction(value):
+        yield value.__name__, value
+    elif inspect.isclass(value) and value.__module__.startswith('valve_sim'):
+        for name, member in vars(value).items():
+            if isinstance(member, property):
+                member = member.fget
+            if inspect.isfunction(member) and (name == '__init__' or not name.startswith('_')):
+                yield f'{value.__name__}.{name}', member
+
+
+@pytest.mark.parametrize('package', ['valve_sim', 'valve_sim.testing'])
 def test_every_exported_verb_is_annotated(package):
     module = importlib.import_module(package)
-    problems = {}
-    for name in module.__all__:
-        value = getattr(module, name)
-        if inspect.isfunction(value):
-            missing = unannotated(value)
-        elif inspect.isclass(value) and '__init__' in vars(value):
-            missing = unannotated(value.__init__)
-        else:
-            continue
-        if missing:
-            problems[name] = missing
+    problems = {
+        name: unannotated(function)
+        for exported in module.__all__
+        for name, function in members(getattr(module, exported))
+        if unannotated(function)
+    }
     assert problems == {}, f'exported without annotations: {problems}'
 
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 import math
-from typing import Optional, TYPE_CHECKING
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -41,7 +41,7 @@ from valve_sim.analysis.step_detection import detect_steps
 from valve_sim.core.errors import CalibrationError
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
-from valve_sim.core.simulation import simulate, simulate_recorded_flow
+from valve_sim.core.simulation import simulate, simulate_recorded_flow, Waveforms
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -109,7 +109,7 @@ class MeasuresTarget:
             raise CalibrationError('the measures target names none of ' + ', '.join(MEASURE_NAMES))
         return cls(values, tolerances, weights, step_size=step_size)
 
-    def model_output(self, params):
+    def model_output(self, params: Mapping[str, float]) -> tuple[dict[str, Any], Waveforms]:
         """Measures (StepMeasures.as_dict) and waveforms of the model's step test."""
         waveforms = simulate(params, self.scenario, self.step_size, 1e-4)
         measures = step_measures(
@@ -120,7 +120,7 @@ class MeasuresTarget:
         ).as_dict()
         return measures, waveforms
 
-    def residuals(self, params):
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
         measures, _ = self.model_output(params)
         return np.array(
             [
@@ -131,7 +131,7 @@ class MeasuresTarget:
             ]
         )
 
-    def covariance_scale(self, cost, count, fitted):
+    def covariance_scale(self, cost: float, count: int, fitted: int) -> float:
         """Residuals are in tolerance units: s^2 = 1."""
         return 1.0
 
@@ -206,7 +206,7 @@ class RecordingTarget:
                 recorded = np.isfinite(position)
                 self.residual_names += ['main_valve'] * int(recorded.sum())
 
-    def model_output(self, params):
+    def model_output(self, params: Mapping[str, float]) -> np.ndarray:
         """Model states (rows) at the recorded sample times."""
         flow = self.flow.copy()
         for t_step, (_, last) in zip(self.step_times, self.brackets):
@@ -214,7 +214,7 @@ class RecordingTarget:
             flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
         return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
 
-    def residuals(self, params):
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
         states = self.model_output(params)
         parts = [(states[:, 0] - self.pressure) / self.pressure_noise]
         if self.position is not None:
@@ -222,6 +222,6 @@ class RecordingTarget:
             parts.append((states[recorded, X] - self.position[recorded]) / self.position_noise)
         return np.concatenate(parts)
 
-    def covariance_scale(self, cost, count, fitted):
+    def covariance_scale(self, cost: float, count: int, fitted: int) -> float:
         """s^2: the residual variance, for noise levels that were only estimated."""
         return 2.0 * cost / max(count - fitted, 1)

@@ -64,14 +64,19 @@ class RunResult:
     error: Optional[Exception] = None
 
     @property
-    def success(self):
+    def success(self) -> bool:
         """Whether the run completed (it has waveforms)."""
         return self.error is None
 
     @property
-    def message(self):
+    def message(self) -> str:
         """Why the run failed, in one line ('' when it succeeded)."""
         return '' if self.error is None else str(self.error)
+
+    @property
+    def status(self) -> int:
+        """0: the run completed; 1: it failed (message says why), as scipy's results."""
+        return 0 if self.error is None else 1
 
 
 def steady_lead(flows, initial_flow, record_every):

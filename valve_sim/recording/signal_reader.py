@@ -68,7 +68,7 @@ class Recording:
     tank_pressure: Optional[np.ndarray] = None  # [Pa] gauge, NaN where the bag has none
     relief_flow: Optional[np.ndarray] = None  # [m^3/s], NaN where the bag has none
 
-    def valve_pressure(self):
+    def valve_pressure(self) -> np.ndarray:
         """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
         if self.tank_pressure is None:
             return self.supply_pressure

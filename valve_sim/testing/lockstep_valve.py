@@ -29,10 +29,15 @@ this claims (valve_sim.ros.isolation): a node of the test that talks to the valv
 (a controller under test) must be created after the valve, in the same process.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+import os
 from pathlib import Path
 import tempfile
 import time
+from typing import Any, Optional, Union
 
 from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
@@ -55,6 +60,8 @@ START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and d
 STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
 
 
+PathLike = Union[str, 'os.PathLike[str]']
+
 class LockstepValve:
     """
     valve_node on /clock, advanced by the test; every state kept.
@@ -65,8 +72,10 @@ class LockstepValve:
     (default: a temporary folder). Call close() (or use lockstep_valve()) to stop it.
     """
 
-    def __init__(self, parameters=None, initial_flow='5 L/min', params_file=None,
-                 namespace='', folder=None):
+    def __init__(self, parameters: Optional[Mapping[str, Any]] = None,
+                 initial_flow: Union[float, str] = '5 L/min',
+                 params_file: Optional[PathLike] = None, namespace: str = '',
+                 folder: Optional[PathLike] = None) -> None:
         import rclpy
 
         given = dict(parameters or {})
@@ -111,16 +120,16 @@ class LockstepValve:
         self._latest.update(values)
 
     @property
-    def time(self):
+    def time(self) -> float:
         """Return the model time [s] since the first state (t = 0)."""
         return (self._driver.time_ns - START_NS) / NS_PER_S
 
     @property
-    def period(self):
+    def period(self) -> float:
         """Return the tick period [s] (valve_node's publish_rate)."""
         return self._driver.period_ns / NS_PER_S
 
-    def advance(self, seconds):
+    def advance(self, seconds: float) -> float:
         """Run the valve on by seconds of model time (whole ticks); returns the new time [s]."""
         ticks = round(float(seconds) / self.period)
         if ticks < 0:
@@ -141,11 +150,11 @@ class LockstepValve:
         while len(self._rows.get(time_ns, ())) < len(SIGNALS) and time.monotonic() < deadline:
             self._driver.executor.spin_once(timeout_sec=0.01)
 
-    def set_flow(self, flow):
+    def set_flow(self, flow: Union[float, str]) -> None:
         """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
         self._driver.set_flow(parse_quantity(flow, FLOW))
 
-    def set_parameters(self, changes=None, **named):
+    def set_parameters(self, changes: Optional[Mapping[str, Any]] = None, **named: Any) -> None:
         """
         Change valve_node's live parameters at once, from the next tick on.
 
@@ -160,26 +169,26 @@ class LockstepValve:
             raise ValueError(str(error)) from None
         self._driver.set_parameters(resolved)
 
-    def inject(self, fault, value=True):
+    def inject(self, fault: str, value: Any = True) -> None:
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
-    def get_parameters(self, *names):
+    def get_parameters(self, *names: str) -> dict[str, Any]:
         """Return valve_node's current values of names (ROS names), as a dict."""
         return self._driver.get_parameters(names)
 
     @property
-    def state(self):
+    def state(self) -> dict[str, float]:
         """Return the latest state: {signal: value} of tick_series.SIGNALS (SI, gauge [Pa])."""
         return dict(self._latest)
 
     @property
-    def series(self):
+    def series(self) -> TickSeries:
         """Return every state so far as a TickSeries (time [s] from the first state)."""
         return TickSeries.from_rows(self._rows, START_NS)
 
-    def measures(self, at=None):
+    def measures(self, at: Optional[float] = None) -> Any:
         """
         Return the analyser's step records of the run so far (docs/measures.md).
 
@@ -194,7 +203,7 @@ class LockstepValve:
             raise LookupError(f'no step at {at:g} s (steps at: {found})')
         return near[0]
 
-    def close(self):
+    def close(self) -> None:
         """Stop valve_node (SIGINT) and the driver; ChildProcessError if the node failed."""
         try:
             if self._driver is not None:
@@ -211,8 +220,10 @@ class LockstepValve:
 
 
 @contextmanager
-def lockstep_valve(parameters=None, initial_flow='5 L/min', params_file=None, namespace='',
-                   folder=None):
+def lockstep_valve(parameters: Optional[Mapping[str, Any]] = None,
+                   initial_flow: Union[float, str] = '5 L/min',
+                   params_file: Optional[PathLike] = None, namespace: str = '',
+                   folder: Optional[PathLike] = None) -> Iterator[LockstepValve]:
     """Start a LockstepValve for a with block; stop it after (see LockstepValve)."""
     valve = LockstepValve(parameters, initial_flow, params_file, namespace, folder)
     try:
