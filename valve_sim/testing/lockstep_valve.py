@@ -58,9 +58,8 @@ from valve_sim.ros.scenario_runner import ros_value
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
 STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
-
-
 PathLike = Union[str, 'os.PathLike[str]']
+
 
 class LockstepValve:
     """
