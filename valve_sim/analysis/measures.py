@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
-from typing import Any, Optional, TYPE_CHECKING
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
@@ -75,7 +75,7 @@ NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
 class StepMeasures:
     """The six measures of one step; a value of None comes with its reason."""
 
-    values: dict[str, Optional[float]]
+    values: dict[str, float | None]
     reasons: dict[str, str] = field(default_factory=dict)
     details: dict = field(default_factory=dict)
 
@@ -203,10 +203,9 @@ def _parabola_exit(t, deviation, band):
     return t[1] + min(root, tc[-1])
 
 
-def step_measures(
-    t: ArrayLike, supply_pressure: ArrayLike, main_valve_displacement: Optional[ArrayLike],
-    t_step: float, direction: int = 1, window: float = WINDOW,
-) -> StepMeasures:
+def step_measures(t: ArrayLike, supply_pressure: ArrayLike,
+                  main_valve_displacement: ArrayLike | None, t_step: float, direction: int = 1,
+                  window: float = WINDOW) -> StepMeasures:
     """
     Compute the six measures of the step at t_step [s] (docs/measures.md), as StepMeasures.
 

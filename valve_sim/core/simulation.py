@@ -31,13 +31,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import OverpressureError, ParameterError
-from valve_sim.core.fault_schedule import tick_index
-from valve_sim.core.faults import FAULT_NAMES, HEALTHY
+from valve_sim.core.fault_schedule import FaultEvent, tick_index
+from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
 from valve_sim.core.integrator import advance, step_inputs
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import schedule_problem, tank_pressure_problem
@@ -56,10 +55,6 @@ from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
 )
 from valve_sim.core.steady_state import steady_state
 
-if TYPE_CHECKING:
-    from valve_sim.core.fault_schedule import FaultEvent
-    from valve_sim.core.faults import FaultSet
-
 
 @dataclass
 class Waveforms:
@@ -77,8 +72,8 @@ class Waveforms:
     inlet_flow: np.ndarray
     # [(time [s], {name: value})] applied
     events: list[tuple[float, dict[str, float]]] = field(default_factory=list)
-    halted: Optional[tuple[float, str]] = None
-    tank_pressure: Optional[np.ndarray] = None
+    halted: tuple[float, str] | None = None
+    tank_pressure: np.ndarray | None = None
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.states[:, STATE_NAMES.index(name)]
@@ -91,9 +86,8 @@ class Waveforms:
     @property
     def message(self) -> str:
         """Say what status means, in one line."""
-        return 'the run reached its end' if self.halted is None else (
-            f'halted at {self.halted[0]:g} s: {self.halted[1]}'
-        )
+        return f'halted at {self.halted[0]:g} s: {self.halted[1]}' if self.halted else (
+            'the run reached its end')
 
 
 def apply_faults(state, faults, changes):
