@@ -94,6 +94,7 @@ TEST_DEPENDENCIES = [
     'colcon-ros',
     'colcon-python-setup-py',
     'ros-jazzy-ament-package',
+    'mypy',  # test/lint/test_types.py: the library's public surface, strictly
 ]
 
 COMPILE_TIMEOUT = 1800  # [s] a cold compile takes 30 s on a quiet machine, minutes loaded
@@ -161,6 +162,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={PACKAGE: ['py.typed']},  # PEP 561: the package ships its types
+    python_requires='>=3.10',
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
@@ -188,6 +191,16 @@ setup(
         'Virtual direct-pressure-sensing water-hydraulic relief valve for ROS 2 test benches'
     ),
     license='Apache-2.0',
+    classifiers=[
+        'Programming Language :: Python :: 3',
+        'Programming Language :: Python :: 3 :: Only',
+        'Programming Language :: Python :: 3.10',
+        'Programming Language :: Python :: 3.11',
+        'Programming Language :: Python :: 3.12',
+        'Programming Language :: Python :: 3.13',
+        'Typing :: Typed',
+        'Operating System :: POSIX :: Linux',
+    ],
     entry_points={
         'console_scripts': [
             'valve-sim = valve_sim.commands.cli:main',

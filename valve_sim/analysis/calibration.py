@@ -29,9 +29,13 @@ A caller stops a fit by its should_stop callback (the command line's Ctrl-C): th
 result is then the best evaluation so far, marked interrupted.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 import math
 import time as clock
+from typing import Optional
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -57,12 +61,12 @@ class CalibrationProblem:
     ties: {tied: (fitted parameter it follows, factor)} (fit_ties).
     """
 
-    params: dict
+    params: Mapping[str, float]
     fitted: list
     target: object
     constraints: tuple = ()
     checks: tuple = ()
-    preset_pressure: float = None
+    preset_pressure: Optional[float] = None
     ties: dict = field(default_factory=dict)
 
 
@@ -81,7 +85,7 @@ class FitSettings:
     spread: float = 0.1
     seed: int = 0
     tolerance: float = 1e-10
-    diff_step: float = None
+    diff_step: Optional[float] = None
     max_evaluations: int = 2000
 
 
@@ -91,14 +95,14 @@ class CalibrationResult:
 
     parameters: dict
     fitted: list
-    values: list
-    start_values: list
+    values: list[float]
+    start_values: list[float]
     residuals: np.ndarray
     residual_names: list
     cost: float
-    intervals: list = None  # [(low, high)] or None when not computed
-    correlations: np.ndarray = None
-    uncertainty_note: str = None  # why there are no intervals or correlations
+    intervals: Optional[list] = None  # [(low, high)] or None when not computed
+    correlations: Optional[np.ndarray] = None
+    uncertainty_note: Optional[str] = None  # why there are no intervals or correlations
     flat: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     starts: list = field(default_factory=list)
@@ -106,12 +110,22 @@ class CalibrationResult:
     wall_time: float = 0.0
     interrupted: bool = False
     ties: dict = field(default_factory=dict)
-    rank: int = None  # combinations of the fitted parameters the target determines
-    jacobian: np.ndarray = None  # d(residuals)/du at the result (calibration_verdict)
+    rank: Optional[int] = None  # combinations of the fitted parameters the target determines
+    jacobian: Optional[np.ndarray] = None  # d(residuals)/du at the result (calibration_verdict)
 
     @property
-    def satisfied(self):
+    def satisfied(self) -> bool:
         return all(status['satisfied'] for status in self.constraints)
+
+    @property
+    def status(self) -> int:
+        """0: the fit ran to its end; 1: it was interrupted (as scipy's OptimizeResult)."""
+        return 1 if self.interrupted else 0
+
+    @property
+    def message(self) -> str:
+        """Say what status means, in one line."""
+        return 'interrupted: the best evaluation so far' if self.interrupted else 'fitted'
 
 
 class _Stopped(Exception):
@@ -201,7 +215,11 @@ def _starts(fitted, start, count, spread, seed):
     return points, (lower, upper)
 
 
-def calibrate(problem, settings=FitSettings(), progress=None, should_stop=None):
+def calibrate(
+    problem: CalibrationProblem, settings: FitSettings = FitSettings(),
+    progress: Optional[Callable[[str], object]] = None,
+    should_stop: Optional[Callable[[], bool]] = None,
+) -> CalibrationResult:
     """
     Fit problem.fitted to problem.target from settings.starts starts; a CalibrationResult.
 
@@ -368,12 +386,12 @@ def _result(objective, u, cost, constraints, runs, interrupted):
     return CalibrationResult(
         parameters=objective.parameters(u),
         fitted=problem.fitted,
-        values=list(u * start),
-        start_values=list(start),
+        values=[float(v) for v in u * start],
+        start_values=[float(v) for v in start],
         residuals=None,
         residual_names=list(problem.target.residual_names)
         + [c.name for c in problem.constraints],
-        cost=cost,
+        cost=float(cost),
         constraints=constraints,
         starts=[{k: v for k, v in run.items() if k != 'u'} for run in runs],
         interrupted=interrupted,

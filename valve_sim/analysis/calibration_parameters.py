@@ -24,8 +24,12 @@ bearing coefficients K_1..K_3 re-derived when a bearing input moves (core.bearin
 and the preload re-solved for a held preset pressure.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 import math
+from typing import Optional
 
 from valve_sim.core.bearing import with_bearing_fit
 from valve_sim.core.errors import CalibrationError
@@ -42,7 +46,7 @@ class FitParameter:
     upper: float
     unit: str
     symbol: str
-    start: float = None  # the start value of a variable that is no model parameter
+    start: Optional[float] = None  # the start value of a variable that is no model parameter
 
 
 STEP_TIME = 'step_time_'  # fitted step times: step_time_1, step_time_2, ...
@@ -64,7 +68,10 @@ def step_time_parameters(target):
     ]
 
 
-def fit_parameters(names, bounds, params):
+def fit_parameters(
+    names: Sequence[str], bounds: Mapping[str, tuple[float, float]],
+    params: Mapping[str, float],
+) -> list[FitParameter]:
     """
     Return the FitParameters for names (ROS names, paper symbols or preset_pressure).
 

@@ -29,7 +29,11 @@ Both offer kind, residual_names, residuals(params), model_output(params) and
 covariance_scale(cost, count, fitted) (the s^2 of the fit's covariance).
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 import math
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
@@ -39,7 +43,10 @@ from valve_sim.core.errors import CalibrationError
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
 from valve_sim.core.scenario import Scenario
-from valve_sim.core.simulation import simulate, simulate_recorded_flow
+from valve_sim.core.simulation import simulate, simulate_recorded_flow, Waveforms
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
@@ -58,8 +65,9 @@ class MeasuresTarget:
 
     kind = 'measures'
 
-    def __init__(self, values, tolerances, weights=None, scenario=REFERENCE_SCENARIO,
-                 step_size=1e-5):
+    def __init__(self, values: Mapping[str, float], tolerances: Mapping[str, float],
+                 weights: Optional[Mapping[str, float]] = None,
+                 scenario: Scenario = REFERENCE_SCENARIO, step_size: float = 1e-5) -> None:
         self.names = [name for name in MEASURE_NAMES if name in values]
         self.values = {name: float(values[name]) for name in self.names}
         self.tolerances = {name: float(tolerances[name]) for name in self.names}
@@ -129,7 +137,7 @@ class MeasuresTarget:
                             REFERENCE_SCENARIO.step_time, REFERENCE_SCENARIO.end_time)
         return cls(values, PAPER_TOLERANCES, scenario=scenario, step_size=step_size)
 
-    def model_output(self, params):
+    def model_output(self, params: Mapping[str, float]) -> tuple[dict[str, Any], Waveforms]:
         """Measures (StepMeasures.as_dict) and waveforms of the model's step test."""
         waveforms = simulate(params, self.scenario, self.step_size, 1e-4)
         measures = step_measures(
@@ -141,7 +149,7 @@ class MeasuresTarget:
         ).as_dict()
         return measures, waveforms
 
-    def residuals(self, params):
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
         measures, _ = self.model_output(params)
         return np.array(
             [
@@ -152,7 +160,7 @@ class MeasuresTarget:
             ]
         )
 
-    def covariance_scale(self, cost, count, fitted):
+    def covariance_scale(self, cost: float, count: int, fitted: int) -> float:
         """Residuals are in tolerance units: s^2 = 1."""
         return 1.0
 
@@ -185,8 +193,10 @@ class RecordingTarget:
 
     kind = 'recording'
 
-    def __init__(self, time, supply_pressure, inlet_flow, main_valve=None, step_size=1e-5,
-                 step_threshold=1e-6, step_times=(), brackets=()):
+    def __init__(self, time: ArrayLike, supply_pressure: ArrayLike, inlet_flow: ArrayLike,
+                 main_valve: Optional[ArrayLike] = None, step_size: float = 1e-5,
+                 step_threshold: float = 1e-6, step_times: Sequence[float] = (),
+                 brackets: Sequence[tuple[float, float]] = ()) -> None:
         time = np.asarray(time, dtype=float)
         pressure = np.asarray(supply_pressure, dtype=float)
         flow = np.asarray(inlet_flow, dtype=float)
@@ -225,7 +235,7 @@ class RecordingTarget:
                 recorded = np.isfinite(position)
                 self.residual_names += ['main_valve'] * int(recorded.sum())
 
-    def model_output(self, params):
+    def model_output(self, params: Mapping[str, float]) -> np.ndarray:
         """Model states (rows) at the recorded sample times."""
         flow = self.flow.copy()
         for t_step, (_, last) in zip(self.step_times, self.brackets):
@@ -233,7 +243,7 @@ class RecordingTarget:
             flow[(self.time > t_step) & (self.time < last)] = flow[after]  # the new flow
         return simulate_recorded_flow(params, self.time, flow, self.step_size, self.step_times)
 
-    def residuals(self, params):
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
         states = self.model_output(params)
         parts = [(states[:, 0] - self.pressure) / self.pressure_noise]
         if self.position is not None:
@@ -241,6 +251,6 @@ class RecordingTarget:
             parts.append((states[recorded, X] - self.position[recorded]) / self.position_noise)
         return np.concatenate(parts)
 
-    def covariance_scale(self, cost, count, fitted):
+    def covariance_scale(self, cost: float, count: int, fitted: int) -> float:
         """s^2: the residual variance, for noise levels that were only estimated."""
         return 2.0 * cost / max(count - fitted, 1)

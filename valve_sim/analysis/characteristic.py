@@ -46,7 +46,7 @@ gives the exact steady state's, marks_table() shows them side by side.
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from valve_sim.core.errors import SteadyStateError
+from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
@@ -123,16 +123,16 @@ def characteristic(supply_pressure, inlet_flow, rated_flow, main_flow=None):
 
     supply_pressure p_s [Pa], inlet_flow q_in [m^3/s], main_flow q_main [m^3/s]
     or None: arrays over the same samples of an up-and-down ramp. rated_flow
-    [m^3/s] > 0. Returns a Characteristic; raises ValueError for unusable input.
+    [m^3/s] > 0. Returns a Characteristic; raises ParameterError for unusable input.
     """
     p = np.asarray(supply_pressure, dtype=float)
     q = np.asarray(inlet_flow, dtype=float)
     if not (np.isfinite(rated_flow) and rated_flow > 0.0):
-        raise ValueError(f'rated flow must be finite and > 0 m^3/s, got {rated_flow}')
+        raise ParameterError(f'rated flow must be finite and > 0 m^3/s, got {rated_flow}')
     if p.shape != q.shape or p.ndim != 1 or len(p) < 3:
-        raise ValueError('supply pressure and inlet flow must be equal-length series of >= 3')
+        raise ParameterError('supply pressure and inlet flow must be equal-length series of >= 3')
     if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
-        raise ValueError('supply pressure and inlet flow must be finite')
+        raise ParameterError('supply pressure and inlet flow must be finite')
     rising, falling = split_ramps(q)
     result = Characteristic(rated_flow, MAIN_FLOW_BASIS if main_flow is not None else CURVE_BASIS)
     reasons = result.reasons

@@ -45,14 +45,20 @@ half a period (a swing just inside or just outside the band); the decay rate mov
 continuously with the parameters (docs/measures.md).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, field
 import math
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.measure_windows import (  # noqa: F401 (the measures' constants)
-    at_rest, early_end, FINAL_VALUE_MEASURES, SETTLED_SPAN, SETTLING_BAND,
+    at_rest, Cut, early_end, FINAL_VALUE_MEASURES, SETTLED_SPAN, SETTLING_BAND,
 )
 from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
@@ -67,8 +73,8 @@ NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
 class StepMeasures:
     """The six measures of one step; a value of None comes with its reason."""
 
-    values: dict
-    reasons: dict = field(default_factory=dict)
+    values: dict[str, float | None]
+    reasons: dict[str, str] = field(default_factory=dict)
     details: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -77,12 +83,14 @@ class StepMeasures:
             if value is not None and not math.isfinite(value):
                 self.values[name] = None
                 self.reasons[name] = NOT_FINITE
+            elif value is not None:
+                self.values[name] = float(value)  # a plain float, never an np.float64
         self.details = {
             key: None if isinstance(value, float) and not math.isfinite(value) else value
             for key, value in self.details.items()
         }
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: the six names (None where undefined), 'reasons' and 'details'."""
         return {
             **{name: self.values.get(name) for name in MEASURE_NAMES},
@@ -193,8 +201,10 @@ def _parabola_exit(t, deviation, band):
     return t[1] + min(root, tc[-1])
 
 
-def step_measures(t, supply_pressure, main_valve_displacement, t_step, direction=1, window=WINDOW,
-                  cut=None, since=None):
+def step_measures(t: ArrayLike, supply_pressure: ArrayLike,
+                  main_valve_displacement: ArrayLike | None, t_step: float, direction: int = 1,
+                  window: float = WINDOW, cut: Cut | None = None, since: Cut | None = None
+                  ) -> StepMeasures:
     """
     Compute the six measures of the step at t_step [s] (docs/measures.md), as StepMeasures.
 

@@ -25,7 +25,10 @@ samples of a live recording can carry a step's measures, measures_agree() whethe
 analyses of one step agree (the demo checks its live measures so).
 """
 
+from __future__ import annotations
+
 import math
+from typing import Any
 
 import numpy as np
 from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
@@ -50,8 +53,14 @@ PEAK_GAP_LIMIT = 0.003
 WINDOW_GAP_LIMIT = 0.01
 
 
-def analyse(recording, threshold=1e-6, merge_time=0.05):
-    """Step records of every step in a Recording (step_analysis.StepAnalysis over its rows)."""
+def analyse(
+    recording: Any, threshold: float = 1e-6, merge_time: float = 0.05
+) -> list[dict[str, Any]]:
+    """
+    Step records of every step in a Recording (step_analysis.StepAnalysis over its rows).
+
+    recording: a recording.signal_reader.Recording (Any: that wing is above this one).
+    """
     analysis, records = StepAnalysis(threshold, merge_time), []
     for event in getattr(recording, 'events', None) or ():  # fault_status changes
         analysis.add_event(*event)

@@ -25,7 +25,7 @@ that comes from interactions. SALib is imported only when used.
 """
 
 import numpy as np
-from valve_sim.core.errors import ParameterError
+from valve_sim.core.errors import ParameterError, UndefinedResultError
 
 
 CONFIDENCE = 0.95
@@ -55,15 +55,16 @@ def sobol_indices(distributions, outputs, seed):
     S1, S1_conf, ST, ST_conf (arrays, one per parameter) of outputs in design order.
 
     CONFIDENCE intervals by bootstrap (half-widths). outputs must be finite:
-    undefined values make the indices undefined and raise ValueError.
+    undefined values make the indices undefined and raise UndefinedResultError
+    (a ValueError).
     """
     from SALib.analyze import sobol
 
     outputs = np.asarray(outputs, dtype=float)
     if not np.all(np.isfinite(outputs)):
-        raise ValueError(f'{int(np.sum(~np.isfinite(outputs)))} runs have no value')
+        raise UndefinedResultError(f'{int(np.sum(~np.isfinite(outputs)))} runs have no value')
     if np.ptp(outputs) == 0.0:
-        raise ValueError('the output is the same in every run')
+        raise UndefinedResultError('the output is the same in every run')
     result = sobol.analyze(
         _problem(distributions),
         outputs,

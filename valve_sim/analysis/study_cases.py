@@ -29,6 +29,7 @@ from valve_sim.analysis.paper import (
     STUDY_VARIATIONS,
     TABLE2_CHANGES,
 )
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.parameters import scaled
 
 
@@ -69,14 +70,14 @@ def case_parameters(params, changes, protocol, preset_pressure):
     if protocol == 'held-preset':
         case = with_preset_pressure(case, preset_pressure)
     elif protocol != 'frozen-preload':
-        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
+        raise ParameterError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
     return case
 
 
 def protocol_preset(protocol, preset_pressure):
     """Return the preset a case of this protocol is set to: preset_pressure, or None (frozen)."""
     if protocol not in PROTOCOLS:
-        raise ValueError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
+        raise ParameterError(f'unknown study protocol {protocol!r}; known: {", ".join(PROTOCOLS)}')
     return preset_pressure if protocol == 'held-preset' else None
 
 

@@ -101,34 +101,36 @@ def read_results(path, study, check=None):
 def check_row(row):
     """Raise ValueError naming the key unless row is a results row as evaluate_batch makes it."""
     if not isinstance(row, dict):
-        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+        raise InputFileError(f'a row is a JSON object, got {shown(row)}')
     index = row.get('index')
     if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-        raise ValueError(f"key 'index' must be an integer >= 0, got {shown(index)}")
+        raise InputFileError(f"key 'index' must be an integer >= 0, got {shown(index)}")
     measures = row.get('measures')
     if not isinstance(measures, dict) or not set(MEASURE_NAMES) <= set(measures) <= set(
         MEASURE_NAMES + (ENVELOPE_DECAY,)
     ):
-        raise ValueError(
+        raise InputFileError(
             f"key 'measures' must map {', '.join(MEASURE_NAMES)} (and {ENVELOPE_DECAY}, if "
             'asked) to numbers or null'
         )
     for name, value in measures.items():
         if value is not None and not is_number(value):
-            raise ValueError(f"key 'measures.{name}' must be a number or null, got {shown(value)}")
+            raise InputFileError(
+                f"key 'measures.{name}' must be a number or null, got {shown(value)}"
+            )
     reasons = row.get('reasons')
     if not isinstance(reasons, dict) or not all(isinstance(r, str) for r in reasons.values()):
-        raise ValueError(f"key 'reasons' must map measure names to text, got {shown(reasons)}")
+        raise InputFileError(f"key 'reasons' must map measure names to text, got {shown(reasons)}")
     if row.get('error') is not None and not isinstance(row['error'], str):
-        raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+        raise InputFileError(f"key 'error' must be text or null, got {shown(row['error'])}")
     for key in NUMBER_KEYS:
         if key in row and not is_number(row[key]):
-            raise ValueError(f"key '{key}' must be a number, got {shown(row[key])}")
+            raise InputFileError(f"key '{key}' must be a number, got {shown(row[key])}")
     waveforms = row.get('waveforms', {'time': []})
     if not isinstance(waveforms, dict) or not all(
         isinstance(trace, list) and all(map(is_number, trace)) for trace in waveforms.values()
     ):
-        raise ValueError("key 'waveforms' must map names to lists of numbers")
+        raise InputFileError("key 'waveforms' must map names to lists of numbers")
 
 
 def is_number(value):

@@ -51,7 +51,7 @@ from valve_sim.analysis.measures import (
 )
 from valve_sim.analysis.study_results import drop_torn_tail, fingerprint, read_results
 from valve_sim.core.batch import simulate_batch
-from valve_sim.core.errors import MODEL_ERRORS, StudyError
+from valve_sim.core.errors import MODEL_ERRORS, ParameterError, StudyError
 from valve_sim.core.output_files import append_to, finite, make_folder, write_text
 from valve_sim.core.parameters import validate
 from valve_sim.core.steady_state import cracking_pressure, preset_preload
@@ -233,7 +233,7 @@ def run_cases(
     """
     indices = [case['index'] for case in cases]
     if len(set(indices)) != len(indices):
-        raise ValueError('case indices must be unique')
+        raise ParameterError('case indices must be unique')
     study = fingerprint(cases)
     results_path = Path(results_path)
     if results_path.is_symlink():

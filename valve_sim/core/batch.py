@@ -26,7 +26,11 @@ simulation.simulate(): there rounding errors grow before the step as they would 
 rig. Each run's outcome is a RunResult: its waveforms or why it failed.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
@@ -56,18 +60,23 @@ class RunResult:
     integration), None when it succeeded.
     """
 
-    waveforms: Waveforms = None
-    error: Exception = None
+    waveforms: Optional[Waveforms] = None
+    error: Optional[Exception] = None
 
     @property
-    def success(self):
+    def success(self) -> bool:
         """Whether the run completed (it has waveforms)."""
         return self.error is None
 
     @property
-    def message(self):
+    def message(self) -> str:
         """Why the run failed, in one line ('' when it succeeded)."""
         return '' if self.error is None else str(self.error)
+
+    @property
+    def status(self) -> int:
+        """0: the run completed; 1: it failed (message says why), as scipy's results."""
+        return 0 if self.error is None else 1
 
 
 def steady_lead(flows, initial_flow, record_every):
@@ -87,8 +96,9 @@ def is_stable(params, state, inlet_flow):
 
 
 def simulate_batch(
-    params_list, scenario=Scenario(), step_size=1e-5, record_interval=1e-4, lanes=LANES
-):
+    params_list: Sequence[Mapping[str, float]], scenario: Scenario = Scenario(),
+    step_size: float = 1e-5, record_interval: float = 1e-4, lanes: int = LANES,
+) -> list[RunResult]:
     """
     Run one scenario for many parameter sets; a list of RunResults, one per set, in order.
 

@@ -35,6 +35,10 @@ here, once, and imported from here; each keeps the builtin base callers catch it
       SteadyStateError (RuntimeError)   no steady state
       IncompleteRunError (RuntimeError) a run ended without all it was to produce
       StudyError (RuntimeError)         a study cannot run or complete
+      UndefinedResultError (ValueError) the data give the result no value (Sobol indices)
+      UnavailableError (RuntimeError)   what a run needs is held by another (a ROS domain)
+      WaitTimeoutError (TimeoutError)   what a run waited for did not come within its limit
+      NodeExitError (ChildProcessError) a node a run started ended, or did not end cleanly
 """
 
 
@@ -105,6 +109,22 @@ class IncompleteRunError(ValveSimError, RuntimeError):
 
 class StudyError(ValveSimError, RuntimeError):
     """A study cannot run or complete (its results file, its cluster)."""
+
+
+class UndefinedResultError(ValveSimError, ValueError):
+    """The data give a result no value (sensitivity indices of runs without one)."""
+
+
+class UnavailableError(ValveSimError, RuntimeError):
+    """What a run needs is held by another run on this machine (every ROS domain)."""
+
+
+class WaitTimeoutError(ValveSimError, TimeoutError):
+    """What a run waited for (a node, a topic, an acknowledgement) did not come in time."""
+
+
+class NodeExitError(ValveSimError, ChildProcessError):
+    """A node a run started ended while it was needed, or did not end cleanly; see its log."""
 
 
 # What one valve of a study or a calibration can fail with (recorded as that case's error).

@@ -24,6 +24,9 @@ mode_sensitivity() gives how each mode moves per +1 % of each parameter.
 Used to check stability margins and to explain them (docs/model.md).
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
 
@@ -67,22 +70,22 @@ class Mode:
     """
 
     eigenvalue: complex
-    states: tuple
+    states: tuple[str, ...]
 
     @property
-    def frequency_hz(self):
+    def frequency_hz(self) -> float:
         return abs(self.eigenvalue.imag) / (2.0 * math.pi)
 
     @property
-    def decay_rate(self):
+    def decay_rate(self) -> float:
         return -self.eigenvalue.real
 
     @property
-    def damping_ratio(self):
+    def damping_ratio(self) -> float:
         return -self.eigenvalue.real / abs(self.eigenvalue)
 
     @property
-    def name(self):
+    def name(self) -> str:
         return mode_name(self.states)
 
 
@@ -97,7 +100,9 @@ def mode_name(states):
     return 'chamber ' + ', '.join(states)
 
 
-def modes(params, inlet_flow, tank_pressure=0.0):
+def modes(
+    params: Mapping[str, float], inlet_flow: float, tank_pressure: float = 0.0
+) -> list[Mode]:
     """
     Return every linear mode [Mode] at the steady state of inlet_flow [m^3/s].
 

@@ -23,12 +23,18 @@ node read the same numbers. All values are SI.
 No ROS imports here: the node turns these specs into ParameterDescriptors.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 import logging
 import math
+import os
 from pathlib import Path
 import sys
+from typing import Any, Optional, Union
 
+import numpy as np
 # STANDARD_ATMOSPHERE: the readers and writers of the wire import it from here.
 from valve_sim.core.catalogue import (  # noqa: F401
     FAULT_SCHEDULE_SPEC,
@@ -49,6 +55,7 @@ NODE_NAME = 'relief_valve'
 
 
 SPECS = {spec.name: spec for spec in PARAMETERS}
+BEARING_GRID = np.linspace(0.0, 1.0, 101)  # z = 1 - p_p/p_s where Eq. (12) must rise
 SETTING_SPECS = {spec.name: spec for spec in SETTINGS}
 SYMBOLS = {spec.symbol: spec.name for spec in PARAMETERS}
 
@@ -83,7 +90,7 @@ def retired_reason(name):
     return None
 
 
-def resolve_name(name):
+def resolve_name(name: str) -> str:
     """Return the parameter name for a ROS name or a paper symbol (e.g. 'm_m')."""
     if name in SPECS:
         return name
@@ -122,6 +129,8 @@ def checked_number(spec, value, kind='parameter'):
 
     Raise ParameterError naming the parameter (kind, spec.name), its symbol and limits.
     """
+    if type(value) is float and spec.minimum <= value <= spec.maximum and math.isfinite(value):
+        return value  # the common case, before any message is built (simulate validates)
     label = f"{kind} '{spec.name}' ({spec.symbol})"
     unit = unit_suffix(spec)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -148,7 +157,7 @@ def checked_switch(name, value, kind='parameter'):
     return value
 
 
-def validate(params):
+def validate(params: Mapping[str, Any]) -> dict[str, float]:
     """
     Check a complete parameter set; return a new dict of floats or raise ParameterError.
 
@@ -171,14 +180,14 @@ def validate(params):
                 f"'{smaller}' ({small.symbol} = {checked[smaller]:g} m)"
             )
     k1, k2, k3 = (checked[f'bearing_coefficient_{i}'] for i in (1, 2, 3))
-    for i in range(101):
-        z = i / 100.0
-        if k1 + 2.0 * k2 * z + 3.0 * k3 * z * z <= 0.0:
-            raise ParameterError(
-                f'bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow '
-                f'that does not rise with the pressure drop at 1 - p_p/p_s = {z:.2f} '
-                '(Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])'
-            )
+    falling = np.flatnonzero(k1 + 2.0 * k2 * BEARING_GRID + 3.0 * k3 * BEARING_GRID**2 <= 0.0)
+    if len(falling):  # one expression over the grid: simulate() validates at every call
+        raise ParameterError(
+            f'bearing coefficients K_1..K_3 = {k1:g}, {k2:g}, {k3:g} give a bearing flow '
+            f'that does not rise with the pressure drop at 1 - p_p/p_s = '
+            f'{BEARING_GRID[falling[0]]:.2f} '
+            '(Eq. 12 needs K_1 + 2 K_2 z + 3 K_3 z^2 > 0 on [0, 1])'
+        )
     return checked
 
 
@@ -268,12 +277,16 @@ class LoadedParameters:
     preset_pressure, checked; injection: fault.*, sensor.* and fault_schedule, unchecked.
     """
 
-    params: dict
-    settings: dict
-    injection: dict = field(default_factory=dict)
+    params: dict[str, float]
+    settings: dict[str, float]
+    injection: dict[str, Any] = field(default_factory=dict)
 
 
-def load_parameters(path=None, overrides=None, namespace='', with_injection=False):
+def load_parameters(
+    path: Union[str, os.PathLike[str], None] = None,
+    overrides: Optional[Mapping[str, Any]] = None, namespace: str = '',
+    with_injection: bool = False,
+) -> LoadedParameters:
     """
     Load validated model parameters: config/reference.yaml, overlaid by a parameter file.
 

@@ -25,6 +25,7 @@ Pressures here are the model's gauge pressures [Pa] (docs/model.md).
 import math
 import re
 
+from valve_sim.core.errors import ParameterError
 from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
@@ -43,30 +44,30 @@ def parse_quantity(value, dimension):
     """
     Return value in SI units: a number (SI) or a text 'number unit' of dimension's table.
 
-    dimension: (name, SI unit, {unit: factor to SI}), e.g. FLOW. Raises ValueError with
-    what was expected; the value must be finite.
+    dimension: (name, SI unit, {unit: factor to SI}), e.g. FLOW. Raises ParameterError
+    (a ValueError) with what was expected; the value must be finite.
     """
     name, unit, units = dimension
     example = f'e.g. 5 {next(iter(units))}' if units else 'a number'
     if isinstance(value, bool):
-        raise ValueError(f'expected a {name}, got {value!r} ({example})')
+        raise ParameterError(f'expected a {name}, got {value!r} ({example})')
     if isinstance(value, (int, float)):
         number = float(value)
     elif isinstance(value, str) and _WRITTEN.match(value):
         text, written = _WRITTEN.match(value).groups()
         if written and written not in units:
-            raise ValueError(
+            raise ParameterError(
                 f'{value!r}: unknown {name} unit {written!r} '
                 f'(units: {", ".join(units) or "none, a plain number"})'
             )
         try:
             number = float(text) * units.get(written, 1.0)
         except ValueError:
-            raise ValueError(f'expected a {name}, got {value!r} ({example})') from None
+            raise ParameterError(f'expected a {name}, got {value!r} ({example})') from None
     else:
-        raise ValueError(f'expected a {name}, got {value!r} ({example})')
+        raise ParameterError(f'expected a {name}, got {value!r} ({example})')
     if not math.isfinite(number):
-        raise ValueError(f'{name} must be finite, got {value!r}')
+        raise ParameterError(f'{name} must be finite, got {value!r}')
     return number
 
 

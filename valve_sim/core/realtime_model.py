@@ -38,6 +38,7 @@ at burst_pressure, the limit it passed, as a transducer at full scale reads.
 
 from dataclasses import dataclass
 from enum import Enum
+from typing import Optional
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
@@ -45,6 +46,7 @@ from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import P_S, relief_flows
+from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 
@@ -92,7 +94,7 @@ class Outcome:
     status: Status
     steps: int = 0
     skipped_ns: int = 0
-    error: IntegrationError = None
+    error: Optional[IntegrationError] = None
     rolled_back: bool = False
 
     @property
@@ -105,13 +107,14 @@ class RealTimeModel:
     """
     The valve state, its parameters and its model time [ns].
 
-    params: validated parameter dict; step_size [s]; inlet_flow [m^3/s] and
+    params: parameter dict (validated here: ParameterError); step_size [s]; inlet_flow [m^3/s] and
     tank_pressure [Pa, gauge]: the inputs whose exact steady state is the initial
     state; faults: the FaultSet in effect. The model time is None until start()
     anchors it to the clock. tank_pressure: the tank pressure applied last.
     """
 
     def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
+        params = validate(params)  # ParameterError naming what is wrong or missing
         self.state = steady_state(params, inlet_flow, faults, tank_pressure)
         self.tank_pressure = tank_pressure
         self.time_ns = None
@@ -245,6 +248,7 @@ class RealTimeModel:
         them (the node's sensor or publish-rate changes) is no change: the change
         before it stays the one that roll_back() undoes. Returns whether it was a change.
         """
+        params = validate(params)
         if params == self.params and step_size == self.step_size and not faults:
             return False
         self._previous = (self.params, self.step_size, self.faults)

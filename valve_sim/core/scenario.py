@@ -20,9 +20,15 @@ stepped or ramped. Kept apart from the simulation so that the command line and t
 paper's reference data can name scenarios without loading the integrator (numba) or scipy.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
@@ -38,7 +44,7 @@ class Scenario:
     end_time: float = 1.25
     ramp_time: float = 0.0
 
-    def inlet_flow(self, t):
+    def inlet_flow(self, t: ArrayLike) -> np.ndarray:
         """q_in(t) [m^3/s] (vectorised)."""
         return stepped(t, self.initial_flow, self.final_flow, self.step_time, self.ramp_time)
 
@@ -53,11 +59,11 @@ class TankPressure:
     """
 
     initial: float = 0.0
-    final: float = None
+    final: Optional[float] = None
     step_time: float = 0.0
     ramp_time: float = 0.0
 
-    def at(self, t):
+    def at(self, t: ArrayLike) -> np.ndarray:
         """p_t(t) [Pa, gauge] (vectorised)."""
         final = self.initial if self.final is None else self.final
         return stepped(t, self.initial, final, self.step_time, self.ramp_time)

@@ -27,13 +27,16 @@ simulate() integrates the whole run; run_flows() any inlet-flow schedule. The ba
 runs of studies (many parameter sets through one scenario) are valve_sim.core.batch's.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import OverpressureError, ParameterError
-from valve_sim.core.fault_schedule import tick_index
-from valve_sim.core.faults import FAULT_NAMES, HEALTHY
+from valve_sim.core.fault_schedule import FaultEvent, tick_index
+from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
 from valve_sim.core.integrator import advance, step_inputs
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import schedule_problem, tank_pressure_problem
@@ -44,6 +47,7 @@ from valve_sim.core.model import (
     STATE_NAMES,
     X_DOT,
 )
+from valve_sim.core.parameters import validate
 from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
     LITRE_PER_MINUTE,
     Scenario,
@@ -66,12 +70,24 @@ class Waveforms:
     time: np.ndarray
     states: np.ndarray
     inlet_flow: np.ndarray
-    events: list = field(default_factory=list)  # [(time [s], {name: value})] applied
-    halted: tuple = None
-    tank_pressure: np.ndarray = None
+    # [(time [s], {name: value})] applied
+    events: list[tuple[float, dict[str, float]]] = field(default_factory=list)
+    halted: tuple[float, str] | None = None
+    tank_pressure: np.ndarray | None = None
 
-    def __getitem__(self, name):
+    def __getitem__(self, name: str) -> np.ndarray:
         return self.states[:, STATE_NAMES.index(name)]
+
+    @property
+    def status(self) -> int:
+        """0: the run reached its end; 1: it halted at an overpressure (as scipy's OdeResult)."""
+        return 0 if self.halted is None else 1
+
+    @property
+    def message(self) -> str:
+        """Say what status means, in one line."""
+        return f'halted at {self.halted[0]:g} s: {self.halted[1]}' if self.halted else (
+            'the run reached its end')
 
 
 def apply_faults(state, faults, changes):
@@ -256,6 +272,7 @@ def run_flows(
     last good state is held to the end, its supply pressure reported at burst_pressure
     (what valve_node publishes), and Waveforms.halted says when and why.
     """
+    params = validate(params)  # a dict or a valve.Parameters; ParameterError if invalid
     record_every = max(1, int(round(record_interval / step_size)))
     flows, tanks = step_inputs(flows, tank_pressures)
     if initial_tank_pressure is None:
@@ -313,16 +330,16 @@ def run_flows(
 
 
 def simulate(
-    params,
-    scenario=Scenario(),
-    step_size=1e-5,
-    record_interval=1e-4,
-    faults=HEALTHY,
-    schedule=(),
-    tick_interval=1e-3,
-    halt_on_overpressure=False,
-    tank=TankPressure(),
-):
+    params: Mapping[str, float],
+    scenario: Scenario = Scenario(),
+    step_size: float = 1e-5,
+    record_interval: float = 1e-4,
+    faults: FaultSet = HEALTHY,
+    schedule: Sequence[FaultEvent] = (),
+    tick_interval: float = 1e-3,
+    halt_on_overpressure: bool = False,
+    tank: TankPressure = TankPressure(),
+) -> Waveforms:
     """
     Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
@@ -367,7 +384,7 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5, step_times=
     ends = np.rint((time - time[0]) / step_size).astype(np.int64)
     counts = np.diff(ends)
     if len(time) < 2 or np.any(counts < 1):
-        raise ValueError('sample times must increase by at least one step size')
+        raise ParameterError('sample times must increase by at least one step size')
     flows = np.repeat(inlet_flow[1:], counts)
     for t_step in step_times:
         i = int(np.searchsorted(time, t_step))  # the interval (time[i-1], time[i]] holding it

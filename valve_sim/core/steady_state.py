@@ -41,12 +41,15 @@ the balances, their scaling and the design estimate; the static characteristic b
 on them lives in valve_sim.core.steady_curve.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, ParameterError, SteadyStateError
-from valve_sim.core.faults import HEALTHY
+from valve_sim.core.faults import FaultSet, HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import inlet_flow_problem, state_problem, tank_pressure_problem
@@ -268,7 +271,10 @@ def empty_valve(tank_pressure=0.0):
     return state
 
 
-def steady_state(params, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
+def steady_state(
+    params: Mapping[str, float], inlet_flow: float, faults: FaultSet = HEALTHY,
+    tank_pressure: float = 0.0,
+) -> np.ndarray:
     """
     Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
 
@@ -349,7 +355,9 @@ def _cracking_problem(state, error, poppet_stroke):
     return None
 
 
-def cracking_pressure(params, faults=HEALTHY, tank_pressure=0.0):
+def cracking_pressure(
+    params: Mapping[str, float], faults: FaultSet = HEALTHY, tank_pressure: float = 0.0
+) -> float:
     """
     Supply pressure [Pa, gauge] at which the main valve lifts off its seat (steady state).
 

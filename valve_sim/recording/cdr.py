@@ -29,6 +29,8 @@ sequences as uint32 count + elements.
 
 import struct
 
+from valve_sim.core.errors import InputFileError
+
 
 ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR little endian, no options
 STAMP = struct.Struct('<iI')  # builtin_interfaces/Time: sec, nanosec
@@ -119,7 +121,7 @@ class CdrFields:
         start = self.offset + COUNT.size
         self.offset = start + length
         if self.offset > len(self.data):
-            raise ValueError('a string runs past the end of the message')
+            raise InputFileError('a string runs past the end of the message')
         return bytes(self.data[start:self.offset - 1]).decode()
 
     def strings(self):

@@ -26,7 +26,12 @@ time axis; the result is a Recording of arrays, what the step analysis
 (analysis.recorded_steps) and calibration take.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 from dataclasses import dataclass
+import os
+from typing import Any, Optional, Union
 
 import numpy as np
 from valve_sim.analysis.measure_windows import SettingChanges
@@ -59,13 +64,13 @@ class Recording:
     main_valve: np.ndarray  # [m], NaN where the bag has none
     pilot_poppet: np.ndarray  # [m], NaN where the bag has none
     inlet_flow: np.ndarray  # [m^3/s], NaN where not required and absent
-    problem: str = None
-    inlet_flow_time: np.ndarray = None  # [s] time of each row's flow sample (None: the row's)
-    tank_pressure: np.ndarray = None  # [Pa] gauge, NaN where the bag has none
-    relief_flow: np.ndarray = None  # [m^3/s], NaN where the bag has none
-    events: list = None  # [(time [s], what)]: changes in valve_node's fault_status
+    problem: Optional[str] = None
+    inlet_flow_time: Optional[np.ndarray] = None  # [s] each row's flow sample (None: the row's)
+    tank_pressure: Optional[np.ndarray] = None  # [Pa] gauge, NaN where the bag has none
+    relief_flow: Optional[np.ndarray] = None  # [m^3/s], NaN where the bag has none
+    events: Optional[list] = None  # [(time [s], what)]: changes in valve_node's fault_status
 
-    def valve_pressure(self):
+    def valve_pressure(self) -> np.ndarray:
         """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
         if self.tank_pressure is None:
             return self.supply_pressure
@@ -76,7 +81,10 @@ class Recording:
         )
 
 
-def read_recording(path, signal_map=None, required=BAG_REQUIRED, decoder_factories=None):
+def read_recording(
+    path: Union[str, os.PathLike[str]], signal_map: Optional[SignalMap] = None,
+    required: Sequence[str] = BAG_REQUIRED, decoder_factories: Optional[Sequence[Any]] = None,
+) -> Recording:
     """
     Read a bag (an MCAP file or a rosbag2 bag folder) as a Recording.
 

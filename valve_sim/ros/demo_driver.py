@@ -33,7 +33,7 @@ import numpy as np
 from valve_sim.analysis.measures import WINDOW
 from valve_sim.analysis.paper import REFERENCE_SCENARIO
 from valve_sim.analysis.recorded_steps import sampling_problem
-from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.errors import IncompleteRunError, WaitTimeoutError
 
 
 INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow  # [m^3/s] 5 L/min
@@ -213,7 +213,7 @@ class Driver:
                 progress(f'valve_node advances in real time ({share:.2f} s of model time per s)')
                 return
             if time.monotonic() > deadline:
-                raise TimeoutError(
+                raise WaitTimeoutError(
                     f'valve_node advanced only {share:.2f} s of model time per second of wall '
                     f'time after {READY_TIMEOUT:g} s (needs {REAL_TIME_SHARE:g}; the machine is '
                     f'too busy for real time?) (log: {self.folder / "valve_node.log"})'

@@ -26,6 +26,8 @@ from pathlib import Path
 import random
 import tempfile
 
+from valve_sim.core.errors import UnavailableError
+
 DOMAIN_IDS = range(1, 102)   # 0-101 are the IDs Fast DDS maps to ports; 0 is the default
 LOCK_FOLDER = Path(tempfile.gettempdir()) / 'valve_sim_domains'
 _held_locks = {}  # domain: the open lock file this process holds it by
@@ -48,7 +50,9 @@ def claim_domain(keep_existing=True):
         if _lock(domain):
             os.environ['ROS_DOMAIN_ID'] = str(domain)
             return domain
-    raise RuntimeError(f'every ROS domain 1-101 is held by another run (locks in {LOCK_FOLDER})')
+    raise UnavailableError(
+        f'every ROS domain 1-101 is held by another run (locks in {LOCK_FOLDER})'
+    )
 
 
 def _lock(domain):

@@ -34,7 +34,7 @@ from valve_sim.analysis.measure_windows import SettingChanges
 from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
 from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.errors import InputFileError, output_error
 from valve_sim.recording.cdr import read_message
 from valve_sim.recording.valve_topics import TOPIC_TYPES
 from valve_sim.ros import diagnostics
@@ -186,7 +186,7 @@ class StepMeasures:
             try:
                 self.file.append(record)
             except OSError as error:  # name the file: a full disk's error does not
-                raise OSError(error.errno, error.strerror, str(self.file.path)) from error
+                raise output_error(error, self.file.path) from error
             message = measures_message(
                 record,
                 diagnostics.status_name(self.node, MEASURES_TASK),

@@ -26,6 +26,7 @@ import signal
 import subprocess
 import time
 
+from valve_sim.core.errors import NodeExitError, WaitTimeoutError
 from valve_sim.core.output_files import fresh_file
 from valve_sim.ros import node_command
 
@@ -49,16 +50,16 @@ class NodeProcesses:
         return self.folder / f'{name}.log'
 
     def check(self, what):
-        """Raise ChildProcessError if a node ended (while waiting for what)."""
+        """Raise NodeExitError (a ChildProcessError) if a node ended (while waiting for what)."""
         for name, process in self.processes.items():
             if process.poll() is not None:
-                raise ChildProcessError(
+                raise NodeExitError(
                     f'{name} ended with code {process.returncode} while waiting for '
                     f'{what} (log: {self.log(name)})'
                 )
 
     def stop(self):
-        """SIGINT each running node and wait; ChildProcessError if one does not end cleanly."""
+        """SIGINT each running node and wait; NodeExitError if one does not end cleanly."""
         for process in self.processes.values():
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
@@ -76,7 +77,7 @@ class NodeProcesses:
             if code != 0:
                 failures.append(f'{name} exited with code {code}')
         if failures:
-            raise ChildProcessError('; '.join(failures) + f' (logs in {self.folder})')
+            raise NodeExitError('; '.join(failures) + f' (logs in {self.folder})')
 
 
 def start_valve_and_analyser(folder, valve_options=(), valve_parameters=None,
@@ -98,7 +99,7 @@ def start_valve_and_analyser(folder, valve_options=(), valve_parameters=None,
 
 def spin_until(executor, condition, timeout, what, processes=None, period=0.02):
     """
-    Spin executor until condition() holds; raises TimeoutError, or ChildProcessError.
+    Spin executor until condition() holds; raises WaitTimeoutError or NodeExitError.
 
     processes: the NodeProcesses whose end (a node died) is an error meanwhile.
     """
@@ -109,4 +110,4 @@ def spin_until(executor, condition, timeout, what, processes=None, period=0.02):
             processes.check(what)
         if time.monotonic() > deadline:
             where = f' (logs in {processes.folder})' if processes is not None else ''
-            raise TimeoutError(f'no {what} within {timeout:g} s{where}')
+            raise WaitTimeoutError(f'no {what} within {timeout:g} s{where}')

@@ -29,6 +29,7 @@ wait_until_delivered() after it, that every message has reached every subscriber
 
 import time
 
+from valve_sim.core.errors import WaitTimeoutError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.valve_topics import (
     message_class,
@@ -58,7 +59,7 @@ class Replay:
         deadline = time.monotonic() + timeout
         while any(p.get_subscription_count() < count for p in self.publishers.values()):
             if time.monotonic() > deadline:
-                raise TimeoutError(
+                raise WaitTimeoutError(
                     f'not {count} subscriber(s) for every valve topic within {timeout:g} s'
                 )
             time.sleep(0.01)
@@ -71,7 +72,9 @@ class Replay:
         for topic, publisher in self.publishers.items():
             left = max(deadline - time.monotonic(), 0.0)
             if not publisher.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))):
-                raise TimeoutError(f'{topic}: not every message acknowledged within {timeout:g} s')
+                raise WaitTimeoutError(
+                    f'{topic}: not every message acknowledged within {timeout:g} s'
+                )
 
     def publish(self, waveforms, start_time_ns, period=1e-3, every=10, relief=None):
         """

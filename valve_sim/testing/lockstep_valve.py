@@ -34,12 +34,17 @@ line); any call after close() raises RuntimeError; a start valve_node refuses ra
 ChildProcessError with the node's reason, and keeps its log.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 import math
+import os
 from pathlib import Path
 import shutil
 import tempfile
 import time
+from typing import Any, Optional, Union
 
 from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
@@ -66,6 +71,7 @@ STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
 MAX_STATES = 600_000
 LOG_LINES = 5  # of valve_node's log in the error of a refused start
 _open_kit = []  # the kit open in this process, if any
+PathLike = Union[str, 'os.PathLike[str]']
 
 
 class LockstepValve:
@@ -78,8 +84,10 @@ class LockstepValve:
     (default: a temporary folder). Call close() (or use lockstep_valve()) to stop it.
     """
 
-    def __init__(self, parameters=None, initial_flow='5 L/min', params_file=None,
-                 namespace='', folder=None):
+    def __init__(self, parameters: Optional[Mapping[str, Any]] = None,
+                 initial_flow: Union[float, str] = '5 L/min',
+                 params_file: Optional[PathLike] = None, namespace: str = '',
+                 folder: Optional[PathLike] = None) -> None:
         import rclpy
 
         if _open_kit:
@@ -155,12 +163,12 @@ class LockstepValve:
         self._latest.update(values)
 
     @property
-    def time(self):
+    def time(self) -> float:
         """Return the model time [s] since the first state (t = 0)."""
         return (self._live().time_ns - START_NS) / NS_PER_S
 
     @property
-    def period(self):
+    def period(self) -> float:
         """Return the tick period [s] (valve_node's publish_rate)."""
         return self._live().period_ns / NS_PER_S
 
@@ -182,6 +190,11 @@ class LockstepValve:
             raise ValueError(
                 f'advance({seconds!r}): {ticks} more states would pass the {MAX_STATES} a kit '
                 f'keeps (about 0.8 kB each); at most {room * self.period:g} s more')
+    def advance(self, seconds: float) -> float:
+        """Run the valve on by seconds of model time (whole ticks); returns the new time [s]."""
+        ticks = round(float(seconds) / self.period)
+        if ticks < 0:
+            raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
         for done in range(0, ticks, TICKS_PER_CLOCK):  # a /clock step of several ticks
             driver.tick(min(TICKS_PER_CLOCK, ticks - done))
         self._await_row(driver.time_ns)
@@ -214,8 +227,11 @@ class LockstepValve:
         if problem:
             raise ValueError(f'set_flow({flow!r}): {problem}')
         driver.set_flow(value)
+    def set_flow(self, flow: Union[float, str]) -> None:
+        """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
+        self._driver.set_flow(parse_quantity(flow, FLOW))
 
-    def set_parameters(self, changes=None, **named):
+    def set_parameters(self, changes: Optional[Mapping[str, Any]] = None, **named: Any) -> None:
         """
         Change valve_node's live parameters at once, from the next tick on.
 
@@ -237,7 +253,7 @@ class LockstepValve:
         if 'max_inlet_flow' in resolved:
             self.max_inlet_flow = float(resolved['max_inlet_flow'])
 
-    def inject(self, fault, value=True):
+    def inject(self, fault: str, value: Any = True) -> None:
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         if not isinstance(fault, str):
             raise TypeError(f"inject: fault must be a fault's name such as 'main_valve_stuck' "
@@ -248,20 +264,23 @@ class LockstepValve:
     def get_parameters(self, *names):
         """Return valve_node's values of names (ROS names) as a dict; ValueError if one lacks."""
         return self._live().get_parameters(names)
+    def get_parameters(self, *names: str) -> dict[str, Any]:
+        """Return valve_node's current values of names (ROS names), as a dict."""
+        return self._driver.get_parameters(names)
 
     @property
-    def state(self):
+    def state(self) -> dict[str, float]:
         """Return the latest state: {signal: value} of tick_series.SIGNALS (SI, gauge [Pa])."""
         self._live()
         return dict(self._latest)
 
     @property
-    def series(self):
+    def series(self) -> TickSeries:
         """Return every state so far as a TickSeries (time [s] from the first state)."""
         self._live()
         return TickSeries.from_rows(self._rows, START_NS)
 
-    def measures(self, at=None):
+    def measures(self, at: Optional[float] = None) -> Any:
         """
         Return the analyser's step records of the run so far (docs/measures.md).
 
@@ -276,7 +295,7 @@ class LockstepValve:
             raise LookupError(f'no step at {at:g} s (steps at: {found})')
         return near[0]
 
-    def close(self):
+    def close(self) -> None:
         """Stop valve_node (SIGINT) and the driver; ChildProcessError if the node failed."""
         if self in _open_kit:
             _open_kit.remove(self)
@@ -295,8 +314,10 @@ class LockstepValve:
 
 
 @contextmanager
-def lockstep_valve(parameters=None, initial_flow='5 L/min', params_file=None, namespace='',
-                   folder=None):
+def lockstep_valve(parameters: Optional[Mapping[str, Any]] = None,
+                   initial_flow: Union[float, str] = '5 L/min',
+                   params_file: Optional[PathLike] = None, namespace: str = '',
+                   folder: Optional[PathLike] = None) -> Iterator[LockstepValve]:
     """Start a LockstepValve for a with block; stop it after (see LockstepValve)."""
     valve = LockstepValve(parameters, initial_flow, params_file, namespace, folder)
     try:
