@@ -119,6 +119,10 @@ class UnavailableError(ValveSimError, RuntimeError):
     """What a run needs is held by another run on this machine (every ROS domain)."""
 
 
+class ArgumentTypeError(ValveSimError, TypeError):
+    """A call was given a value of the wrong kind (a number where a name belongs, say)."""
+
+
 class WaitTimeoutError(ValveSimError, TimeoutError):
     """What a run waited for (a node, a topic, an acknowledgement) did not come in time."""
 

@@ -58,7 +58,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, JointState
-from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.errors import IncompleteRunError, ParameterError, WaitTimeoutError
 from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.recording.cdr import CdrMessage, ENCAPSULATION, STAMP, STAMP_OFFSET
@@ -284,7 +284,7 @@ class Lockstep:
         self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subscriptions),
                         'valve_node publishing its states to this driver', timeout)
         if not self.parameters.wait_for_services(timeout_sec=timeout):
-            raise TimeoutError(f'no parameter services of valve_node within {timeout:g} s')
+            raise WaitTimeoutError(f'no parameter services of valve_node within {timeout:g} s')
         for topic in wait_topics:
             name = self.node.resolve_topic_name(topic)
             self.spin_until(lambda: self.node.count_publishers(name) > 0,
@@ -409,7 +409,7 @@ class Lockstep:
                 self.processes.check(what)
             if time.monotonic() > deadline:
                 missing = [t.topic for t in wait_topics if not t.has(time_ns)]
-                raise TimeoutError(f'no {what} within {TIMEOUT:g} s' + (
+                raise WaitTimeoutError(f'no {what} within {TIMEOUT:g} s' + (
                     f' (waiting for {", ".join(missing)})' if missing else ''))
             self.clock.publish(clock_message(time_ns))
 
@@ -424,7 +424,7 @@ class Lockstep:
         self.spin_until(future.done, 'the answer of valve_node to a parameter change')
         result = future.result().result
         if not result.successful:
-            raise ValueError(f'valve_node refused {changes}: {result.reason}')
+            raise ParameterError(f'valve_node refused {changes}: {result.reason}')
 
     def get_parameters(self, names):
         """Return valve_node's values of names, as a dict; ValueError naming any it lacks."""
@@ -432,7 +432,7 @@ class Lockstep:
         values = self._get(names)
         if len(values) != len(names):  # one name it lacks fails the whole request
             missing = [name for name in names if len(self._get([name])) != 1]
-            raise ValueError(f"valve_node has no parameter {', '.join(map(repr, missing))}")
+            raise ParameterError(f"valve_node has no parameter {', '.join(map(repr, missing))}")
         return {name: Parameter.from_parameter_msg(ParameterMessage(name=name, value=value)).value
                 for name, value in zip(names, values)}
 

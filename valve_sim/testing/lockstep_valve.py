@@ -48,7 +48,14 @@ from typing import Any, Optional, Union
 
 from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
-from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
+from valve_sim.core.errors import (
+    ArgumentTypeError,
+    InputFileError,
+    NodeExitError,
+    ParameterError,
+    ProfileError,
+    UnavailableError,
+)
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
 from valve_sim.core.limits import inlet_flow_problem
 from valve_sim.core.output_files import make_folder
@@ -66,12 +73,12 @@ from valve_sim.ros.scenario_runner import ros_value
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
 STRAGGLER_WAIT = 0.5  # [s] for a tick's other topics after its handshake
+PathLike = Union[str, 'os.PathLike[str]']
 # The states a kit keeps at most: about 0.8 kB each in memory (a dict of the 11 signals by
 # stamp, measured with tracemalloc), so 600 000 (10 min of model time at 1 kHz) is 0.5 GB.
 MAX_STATES = 600_000
 LOG_LINES = 5  # of valve_node's log in the error of a refused start
 _open_kit = []  # the kit open in this process, if any
-PathLike = Union[str, 'os.PathLike[str]']
 
 
 class LockstepValve:
@@ -91,7 +98,7 @@ class LockstepValve:
         import rclpy
 
         if _open_kit:
-            raise RuntimeError(
+            raise UnavailableError(
                 f'a lockstep valve is already open in this process (log in '
                 f'{_open_kit[0].folder}): close it first; two would share /clock and the '
                 "valve's topics")
@@ -100,7 +107,7 @@ class LockstepValve:
             start = dict(start_parameter(name, value, name) for name, value in given.items())
             flow = parse_quantity(initial_flow, FLOW)
         except (ProfileError, ValueError) as error:
-            raise ValueError(f'lockstep valve: {error}') from None
+            raise ParameterError(f'lockstep valve: {error}') from None
         self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
         self._temporary = None if folder else tempfile.mkdtemp(prefix='valve_')
         self.folder = make_folder(Path(folder or self._temporary))
@@ -143,14 +150,14 @@ class LockstepValve:
             self.close()
         except ChildProcessError:
             pass  # the node's own end: its reason follows
-        raise ChildProcessError(
+        raise NodeExitError(
             f'valve_node refused to start: {" | ".join(reasons[-LOG_LINES:]) or error} '
             f'(log kept: {log})') from None
 
     def _live(self):
         """Return the driver; RuntimeError once close() was called."""
         if self._driver is None:
-            raise RuntimeError('this lockstep valve is closed: start another one')
+            raise UnavailableError('this lockstep valve is closed: start another one')
         return self._driver
 
     def _on_state(self, topic, data):
@@ -172,7 +179,7 @@ class LockstepValve:
         """Return the tick period [s] (valve_node's publish_rate)."""
         return self._live().period_ns / NS_PER_S
 
-    def advance(self, seconds):
+    def advance(self, seconds: float) -> float:
         """
         Run the valve on by seconds of model time (whole ticks); returns the new time [s].
 
@@ -180,21 +187,16 @@ class LockstepValve:
         """
         driver = self._live()
         if isinstance(seconds, bool) or not isinstance(seconds, (int, float)):
-            raise TypeError(f'advance: seconds must be a number [s], got {seconds!r}')
+            raise ArgumentTypeError(f'advance: seconds must be a number [s], got {seconds!r}')
         if not math.isfinite(seconds) or seconds < 0:
-            raise ValueError(f'advance: seconds must be finite and >= 0 (time only goes '
+            raise ParameterError(f'advance: seconds must be finite and >= 0 (time only goes '
                              f'forward), got {seconds!r}')
         ticks = round(seconds / self.period)
         room = MAX_STATES - len(self._rows)
         if ticks > room:
-            raise ValueError(
+            raise ParameterError(
                 f'advance({seconds!r}): {ticks} more states would pass the {MAX_STATES} a kit '
                 f'keeps (about 0.8 kB each); at most {room * self.period:g} s more')
-    def advance(self, seconds: float) -> float:
-        """Run the valve on by seconds of model time (whole ticks); returns the new time [s]."""
-        ticks = round(float(seconds) / self.period)
-        if ticks < 0:
-            raise ValueError(f'cannot advance by {seconds} s: time only goes forward')
         for done in range(0, ticks, TICKS_PER_CLOCK):  # a /clock step of several ticks
             driver.tick(min(TICKS_PER_CLOCK, ticks - done))
         self._await_row(driver.time_ns)
@@ -211,7 +213,7 @@ class LockstepValve:
         while len(self._rows.get(time_ns, ())) < len(SIGNALS) and time.monotonic() < deadline:
             self._driver.executor.spin_once(timeout_sec=0.01)
 
-    def set_flow(self, flow):
+    def set_flow(self, flow: Union[float, str]) -> None:
         """
         Set the inlet flow (m^3/s, or text with a unit) from the next tick on.
 
@@ -222,14 +224,11 @@ class LockstepValve:
         try:
             value = parse_quantity(flow, FLOW)
         except ValueError as error:
-            raise ValueError(f'set_flow: {error}') from None
+            raise ParameterError(f'set_flow: {error}') from None
         problem = inlet_flow_problem(value, self.max_inlet_flow)
         if problem:
-            raise ValueError(f'set_flow({flow!r}): {problem}')
+            raise ParameterError(f'set_flow({flow!r}): {problem}')
         driver.set_flow(value)
-    def set_flow(self, flow: Union[float, str]) -> None:
-        """Set the inlet flow (m^3/s, or text with a unit) from the next tick on."""
-        self._driver.set_flow(parse_quantity(flow, FLOW))
 
     def set_parameters(self, changes: Optional[Mapping[str, Any]] = None, **named: Any) -> None:
         """
@@ -244,7 +243,7 @@ class LockstepValve:
             resolved = dict(live_change(name, value)
                             for name, value in {**(changes or {}), **named}.items())
         except (ParameterError, ProfileError, InputFileError) as error:
-            raise ValueError(str(error)) from None
+            raise ParameterError(str(error)) from None
         before = driver.get_parameters(list(resolved))
         driver.set_parameters(resolved)
         changed = {name: value for name, value in resolved.items() if before[name] != value}
@@ -256,17 +255,14 @@ class LockstepValve:
     def inject(self, fault: str, value: Any = True) -> None:
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         if not isinstance(fault, str):
-            raise TypeError(f"inject: fault must be a fault's name such as 'main_valve_stuck' "
+            raise ArgumentTypeError(f"inject: fault must be a fault's name such as 'main_valve_stuck' "
                             f'(docs/faults.md), got {fault!r}')
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
-    def get_parameters(self, *names):
+    def get_parameters(self, *names: str) -> dict[str, Any]:
         """Return valve_node's values of names (ROS names) as a dict; ValueError if one lacks."""
         return self._live().get_parameters(names)
-    def get_parameters(self, *names: str) -> dict[str, Any]:
-        """Return valve_node's current values of names (ROS names), as a dict."""
-        return self._driver.get_parameters(names)
 
     @property
     def state(self) -> dict[str, float]:
