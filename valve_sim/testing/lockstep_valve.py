@@ -190,7 +190,7 @@ class LockstepValve:
             raise ArgumentTypeError(f'advance: seconds must be a number [s], got {seconds!r}')
         if not math.isfinite(seconds) or seconds < 0:
             raise ParameterError(f'advance: seconds must be finite and >= 0 (time only goes '
-                             f'forward), got {seconds!r}')
+                                 f'forward), got {seconds!r}')
         ticks = round(seconds / self.period)
         room = MAX_STATES - len(self._rows)
         if ticks > room:
@@ -255,8 +255,8 @@ class LockstepValve:
     def inject(self, fault: str, value: Any = True) -> None:
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         if not isinstance(fault, str):
-            raise ArgumentTypeError(f"inject: fault must be a fault's name such as 'main_valve_stuck' "
-                            f'(docs/faults.md), got {fault!r}')
+            raise ArgumentTypeError(f"inject: fault must be a fault's name such as "
+                                    f"'main_valve_stuck' (docs/faults.md), got {fault!r}")
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
