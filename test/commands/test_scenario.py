@@ -36,7 +36,7 @@ from valve_sim.analysis.scenario_file import load_scenario
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import TICK_TOPICS
-from valve_sim.ros.scenario_runner import batch_starts
+from valve_sim.ros.scenario_stepper import batch_starts
 
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -55,6 +55,7 @@ OUTSIDE = {
     'topics', 'output_dir', 'bag_folder', 'queue_depth', 'supply_pressure_topic',
     'main_valve_topic', 'main_valve_joint', 'inlet_flow_topic', 'inlet_flow_joint',
     'tank_pressure_topic', 'hardware_id', 'frame_prefix', 'inlet_flow_reliability',
+    'lockstep_inputs',
 }
 GREEK = {'ρ': 'rho', 'μ': 'mu', 'β': 'beta', 'δ': 'delta', 'θ': 'theta', 'Δ': 'd'}
 

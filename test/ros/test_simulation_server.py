@@ -99,6 +99,11 @@ class SimulationClient(SpinningNode):
             self.states[stamp_ns(data)] = bytes(data)
             self.condition.notify_all()
 
+    def on_feedback(self, message):
+        with self.condition:
+            self.feedback.append(message.feedback)
+            self.condition.notify_all()
+
     def _on_matched(self, status):
         with self.condition:
             self.matches = status.total_count
@@ -246,10 +251,13 @@ def stepped(simulator):
         steps=400 - joined)).result.result == Result.RESULT_OK
     goal = wait(client.steps.send_goal_async(
         SimulateSteps.Goal(steps=TICKS - 400),
-        feedback_callback=lambda message: client.feedback.append(message.feedback)))
+        feedback_callback=client.on_feedback))
     assert goal.accepted
     outcome = wait(goal.get_result_async()).result
     assert outcome.result.result == Result.RESULT_OK
+    with client.condition:  # feedback is a topic: it may come after the result
+        client.condition.wait_for(
+            lambda: client.feedback and client.feedback[-1].remaining_steps == 0, TIMEOUT)
     return contiguous(client.wait_for_states(START_NS + TICKS * PERIOD_NS),
                       START_NS + TICKS * PERIOD_NS)
 

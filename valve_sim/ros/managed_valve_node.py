@@ -69,6 +69,7 @@ class ManagedReliefValveNode(LifecycleNodeMixin, ReliefValveNode):
 
     def __init__(self, argv=(), **kwargs):
         self.inlet_subscription = self.tank_subscription = None
+        self.stamped_subscriptions = ()  # valve_node's lockstep inputs' (set_up makes them)
         self._argv = argv
         self._configured = False  # set_up ran: its publishers are lifecycle publishers
         self._halt_reason = None  # why the node deactivated itself, until activated again
@@ -199,12 +200,17 @@ class ManagedReliefValveNode(LifecycleNodeMixin, ReliefValveNode):
             del self._parameters[name]
             del self._descriptors[name]
         self.inlet_subscription = self.tank_subscription = None
+        self.stamped_subscriptions = ()
         self.parameters = None
         self._configured = False
 
     # --- the halt path --------------------------------------------------------------------
 
     def _tick(self):
+        # A timer call the executor collected before a transition that stopped the ticks
+        # (its timer cancelled, or destroyed by shutdown) still comes: nothing to tick.
+        if not self.active:
+            return
         super()._tick()
         reason = self._halting_reason()
         if reason is not None and self.active:

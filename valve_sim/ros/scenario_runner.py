@@ -19,12 +19,12 @@ run_scenario() starts both nodes (valve_node on use_sim_time with the scenario's
 parameters and stamped lockstep inputs, analyser_node recording into the output folder),
 waits until the analyser records every topic of the valve, and drives the valve in
 steps of up to TICKS_PER_CLOCK ticks per /clock (ros.lockstep; one tick per /clock with
-wait topics), split so that each event starts a step (batch_starts). Before each step
-the inlet flow of each of its ticks that changes is sent stamped with the tick's start
-(and the tank pressure, when the scenario gives one: its gauge value +
-ambient_pressure, as the topic is absolute), so a ramp or a sine runs as many ticks
-per /clock as a step, the same states as tick by tick; each event's parameter changes
-are applied after the state of the tick it falls on. Then it waits until the analyser
+wait topics), split so that each event starts a step, through ros.scenario_stepper
+(valve_simulator's too): before each step the inlet flow of each of its ticks that
+changes is sent stamped with the tick's start (and the tank pressure, when the scenario
+gives one), so a ramp or a sine runs as many ticks per /clock as a step, the same
+states as tick by tick; each event's parameter changes are applied after the state of
+the tick it falls on. Then it waits until the analyser
 reports (on /diagnostics) that it has recorded every state, since in lockstep the valve
 runs ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
 analyser closed, checks that it holds every state of the run and that each tick
@@ -48,6 +48,7 @@ from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.inlet_input import STAMPED_FLOW_TOPIC
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import start_valve_and_analyser
+from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
 
 
 # what the analyser must record before the first tick
@@ -90,12 +91,23 @@ def ros_value(value):
     return str(value).lower() if isinstance(value, bool) else repr(value)
 
 
+def valve_arguments(scenario):
+    """
+    Return valve_node's (parameters, ROS arguments) for a scenario driven by a Lockstep.
+
+    On /clock with stamped inputs (lockstep_parameters()), the scenario's parameters
+    and its parameter file.
+    """
+    parameters = {**lockstep_parameters(tank='tank_pressure' in scenario.inputs),
+                  **{name: ros_value(value) for name, value in scenario.parameters.items()}}
+    ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
+    return parameters, ros_args
+
+
 def start_nodes(scenario, folder):
     """Start valve_node (on /clock) and analyser_node for the scenario; returns NodeProcesses."""
     ambient = scenario.ambient_pressure
-    valve = {**lockstep_parameters(tank='tank_pressure' in scenario.inputs),
-             **{name: ros_value(value) for name, value in scenario.parameters.items()}}
-    ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
+    valve, ros_args = valve_arguments(scenario)
     return start_valve_and_analyser(
         folder, valve_parameters=valve, valve_ros_args=ros_args,
         analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient,
@@ -125,76 +137,26 @@ class AnalyserStatus:
         return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
 
-def batch_starts(ticks, breaks, size):
-    """
-    Return the first tick of each /clock step of a run of ticks ticks, steps of at most size.
-
-    breaks: the ticks before which the driver acts between ticks (an event): a step
-    starts at each, so none crosses one and every change lands on the tick it does
-    with one tick per step.
-    """
-    bounds = [0, *sorted({tick for tick in breaks if 0 < tick < ticks}), ticks]
-    return [tick for start, end in zip(bounds, bounds[1:]) for tick in range(start, end, size)]
-
-
-def apply_event(driver, scenario, tick, changes):
-    """Set an event's parameter changes after the state of tick; refused: IncompleteRunError."""
-    try:
-        driver.set_parameters(changes)
-    except ValueError as error:
-        raise IncompleteRunError(f'the event at {tick * scenario.period_ns / NS_PER_S:g} '
-                                 f's: {error}') from None
-
-
-def input_values(scenario):
-    """Return the inlet flows [m^3/s] and tank pressures [Pa absolute] or None, a tick each."""
-    flows = scenario.inputs['inlet_flow'].sample(scenario.tick_times())
-    tank = scenario.inputs.get('tank_pressure')
-    tanks = None if tank is None else tank.sample(scenario.tick_times()) + (
-        scenario.ambient_pressure)  # [Pa absolute], as the topic takes it
-    return flows, tanks
-
-
 def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=None):
     """
-    Run the scenario's ticks on a connected Lockstep; returns the wall time [s] it took.
+    Run the scenario's ticks on a connected Lockstep (ScenarioStepper); returns the wall time [s].
 
     record: a RunRecord whose wall_s follows the run (for a run that fails midway).
     """
-    flows, tanks = input_values(scenario)
-    events = scenario.event_ticks()
-    starts = batch_starts(scenario.ticks, events, ticks_per_clock)
-    changes = {0, *change_ticks(flows), *(() if tanks is None else change_ticks(tanks))}
-    driver.set_flow(flows[0], START_NS)
-    if tanks is not None:
-        driver.set_tank_pressure(tanks[0], START_NS)
-    driver.start(START_NS, scenario.period_ns)
+    stepper = ScenarioStepper(scenario, driver, ticks_per_clock)
+    stepper.start()
     started = last_report = time.monotonic()
-    for tick, end in zip(starts, [*starts[1:], scenario.ticks]):
-        if tick in events:
-            apply_event(driver, scenario, tick, events[tick])
-        for change in sorted(changes.intersection(range(tick, end))):
-            stamp = START_NS + change * scenario.period_ns
-            driver.set_flow(flows[change], stamp)
-            if tanks is not None:
-                driver.set_tank_pressure(tanks[change], stamp)
-        driver.tick(end - tick)
+    while stepper.tick < scenario.ticks:
+        stepper.batch(scenario.ticks)
         if record is not None:
             record.wall_s = time.monotonic() - started
             record.clock_steps += 1
         if time.monotonic() - last_report > PROGRESS_INTERVAL:
             last_report = time.monotonic()
-            model = end * scenario.period_ns / NS_PER_S
+            model = stepper.tick * scenario.period_ns / NS_PER_S
             progress(f't = {model:.3f} s of {scenario.duration:g} s '
                      f'({model / (last_report - started):.2f}x real time)')
-    if scenario.ticks in events:
-        apply_event(driver, scenario, scenario.ticks, events[scenario.ticks])
     return time.monotonic() - started
-
-
-def change_ticks(values):
-    """Return the ticks whose input value differs from the tick before's."""
-    return (np.flatnonzero(values[1:] != values[:-1]) + 1).tolist()
 
 
 def check_complete(series, scenario, start_ns):

@@ -17,11 +17,12 @@ valve_simulator: valve_sim as the bench's simulator, stepped through simulation_
 
     valve_simulator SCENARIO.yaml [--output-dir DIR]
 
-It owns /clock: it starts valve_node on use_sim_time with the scenario's parameters and
-drives it in lockstep (ros.lockstep), the scenario's inputs and events applied at
-their ticks (ros.scenario_stepper), so the states are the scenario runner's, byte for
-byte. A client in any language steps it through the standard services of
-simulation_interfaces (docs/scenarios.md), all under the node valve_simulator:
+It owns /clock: it starts valve_node as the scenario runner does (on use_sim_time with
+stamped lockstep inputs and the scenario's parameters: scenario_runner.valve_arguments)
+and drives it in lockstep (ros.lockstep) through the runner's ScenarioStepper
+(ros.scenario_stepper), so the states are the scenario runner's, byte for byte. A
+client in any language steps it through the standard services of simulation_interfaces
+(docs/scenarios.md), all under the node valve_simulator:
   ~/get_simulator_features  GetSimulatorFeatures  the features below
   ~/get_simulation_state    GetSimulationState    STOPPED, PLAYING, PAUSED
   ~/set_simulation_state    SetSimulationState    play (real time), pause, stop (= reset), quit
@@ -60,7 +61,7 @@ from valve_sim.core.errors import IncompleteRunError
 from valve_sim.ros import node_command, spinning
 from valve_sim.ros.lockstep import LateInputError, Lockstep, NS_PER_S
 from valve_sim.ros.node_processes import NodeProcesses
-from valve_sim.ros.scenario_runner import READY_TIMEOUT, ros_value
+from valve_sim.ros.scenario_runner import READY_TIMEOUT, valve_arguments
 from valve_sim.ros.scenario_stepper import ScenarioStepper
 
 
@@ -106,11 +107,8 @@ class SimulationServer:
     def start(self):
         """Start valve_node for the scenario and its first state at the start time."""
         scenario = self.scenario
-        parameters = {'use_sim_time': 'true',
-                      **{name: ros_value(value) for name, value in scenario.parameters.items()}}
-        ros_args = ['--params-file', str(scenario.params_file)] if scenario.params_file else []
         self.processes = NodeProcesses(self.folder, {
-            'valve_node': node_command('valve_node', (), parameters, ros_args)})
+            'valve_node': node_command('valve_node', (), *valve_arguments(scenario))})
         try:
             self.driver = Lockstep(self.context, processes=self.processes,
                                    tank='tank_pressure' in scenario.inputs)
