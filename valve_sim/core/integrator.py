@@ -30,11 +30,13 @@ splits_needed(): at least what keeps RK4 stable on the stiffest chamber
 (model.fastest_chamber_rate), and as many more as make one sub-step agree with two
 half sub-steps (step doubling, an estimate of the local error) within
 ERROR_TOLERANCE. The choice is made every CHECK_EVERY steps and whenever an input
-moved by more than INPUT_CHANGE; it may halve at each choice. At the paper's operating
-points n is 1. Before, n was capped at 8 and judged by the stiffness bound alone: a
-state that needed more (a broken or weakened pilot spring, a blocked damping orifice,
-a tank pressure step) was integrated unstably, and the run settled in a numerical
-limit cycle whose own stiffness the bound found acceptable (docs/model.md,
+moved by more than INPUT_CHANGE, and may halve at each choice; in between, the
+stability bound alone is asked every step and may only raise it (a fault that
+opens the poppet in a few steps makes its chamber stiff between two choices). At the
+paper's operating points n is 1. Before, n was capped at 8 and judged by the
+stiffness bound alone: a state that needed more (a broken or weakened pilot spring,
+a blocked damping orifice) was integrated unstably, and the run settled in a
+numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
 "Step splitting"). A step that needs more than MAX_SPLITS is a divergence.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
@@ -169,6 +171,13 @@ def step_error(whole, halves, c):
 
 
 @jit
+def stable_splits(state, c, step, tank_pressure=0.0):
+    """Return the sub-steps that keep RK4 stable on the stiffest chamber (<= MAX_SPLITS + 1)."""
+    rate = fastest_chamber_rate(state, c, tank_pressure)
+    return min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS + 1)
+
+
+@jit
 def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1):
     """
     Return the number of equal RK4 sub-steps for a step of size step [s] from state.
@@ -178,8 +187,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
     than MAX_SPLITS: MAX_SPLITS + 1, which the caller takes as a divergence.
     """
-    rate = fastest_chamber_rate(state, c, tank_pressure)
-    splits = max(min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS + 1), previous // 2, 1)
+    splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
     while splits <= MAX_SPLITS:
         h = step / splits
         whole = rk4_step(state, inlet_flow, tank_pressure, c, h)
@@ -217,8 +225,8 @@ def rk4_steps(
     inlet_flows[k] [m^3/s] and tank_pressures[k] [Pa, gauge] are held during step k
     (tank_pressures as long as inlet_flows); a step is split where
     splits_needed() asks for it (asked every check_every steps: CHECK_EVERY, a
-    constant of the compiled kernel unless given; bench/bench_step_split.py varies it) and
-    when an input moved (choice_due). Every
+    constant of the compiled kernel unless given; 0: never, plain RK4, for
+    bench/bench_step_split.py) and when an input moved (choice_due). Every
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
@@ -230,12 +238,16 @@ def rk4_steps(
     splits, chosen_q, chosen_p_t = 1, 0.0, 0.0
     for k in range(inlet_flows.shape[0]):
         q, p_t = inlet_flows[k], tank_pressures[k]
-        if choice_due(k, check_every, q, p_t, chosen_q, chosen_p_t):
+        if check_every <= 0:
+            pass  # plain RK4: bench/bench_step_split.py's baseline, never a run's
+        elif choice_due(k, check_every, q, p_t, chosen_q, chosen_p_t):
             splits = splits_needed(current, c, step, p_t, q, splits)
             chosen_q, chosen_p_t = q, p_t
-            if splits > MAX_SPLITS:
-                state[:] = current
-                return k, STATE_DIVERGED
+        else:
+            splits = max(splits, stable_splits(current, c, step, p_t))
+        if splits > MAX_SPLITS:
+            state[:] = current
+            return k, STATE_DIVERGED
         h = step / splits
         for _ in range(splits):
             current = rk4_step(current, q, p_t, c, h)

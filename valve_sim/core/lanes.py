@@ -32,6 +32,7 @@ from valve_sim.core.integrator import (
     MAX_SPLITS,
     rk4_step,
     splits_needed,
+    stable_splits,
     step_inputs,
 )
 from valve_sim.core.jit import jit
@@ -127,8 +128,15 @@ def rk4_lanes(
                     state, c = lane_state(states, j), lane_coefficients(table, j)
                     splits[j] = splits_needed(state, c, step, p_t, q, splits[j])
                     alone[j] = faulty[j] or splits[j] > 1
-                    if splits[j] > MAX_SPLITS:
-                        completed[j], verdicts[j] = k, STATE_DIVERGED
+        else:
+            for j in range(LANES):
+                if completed[j] == steps:
+                    state, c = lane_state(states, j), lane_coefficients(table, j)
+                    splits[j] = max(splits[j], stable_splits(state, c, step, p_t))
+                    alone[j] = faulty[j] or splits[j] > 1
+        for j in range(LANES):
+            if completed[j] == steps and splits[j] > MAX_SPLITS:
+                completed[j], verdicts[j] = k, STATE_DIVERGED
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):
             c = healthy_lane_coefficients(table, j)
