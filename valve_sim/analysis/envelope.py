@@ -201,3 +201,43 @@ def judged_run(params, faults, initial_flow, final_flow, initial_tank, final_tan
             case, 'wrong', f'steady end p_s {p_s:.6g} Pa, solver {solved[P_S]:.6g} Pa'
         )
     return JudgedRun(case, 'correct', 'agrees with a quarter step and the steady-state solver')
+
+
+def property_findings(params, faults, initial_flow, final_flow, initial_tank, final_tank,
+                      ramp_time=0.0, end_time=0.3, step_size=1e-5):
+    """
+    Return what a run breaks of the model's properties (test/core/test_properties.py).
+
+    Refused inputs break none. Else: a divergence; non-finite states; the same run
+    twice giving other bytes; the end disagreeing with a quarter of the step
+    (AGREEMENT); an invariant alarm (valve_sim.core.invariants). [] if all hold.
+    """
+    from valve_sim.core.errors import OverpressureError, ParameterError
+    from valve_sim.core.simulation import simulate_alarms, TankPressure
+
+    scenario = Scenario(initial_flow, final_flow, STEP_TIME / 2, end_time, ramp_time)
+    tank = TankPressure(initial_tank, final_tank, STEP_TIME / 2, ramp_time)
+    runs = []
+    for step in (step_size, step_size, step_size / 4):
+        try:
+            runs.append(simulate(params, scenario, step, 1e-4, faults, tank=tank))
+        except (ParameterError, SteadyStateError, OverpressureError):
+            return []
+        except IntegrationError as error:
+            return [f'diverged at step {step:g} s: {error}']
+    run, again, fine = runs
+    findings = []
+    if not np.all(np.isfinite(run.states)):
+        findings.append('a state is not finite')
+    if run.states.tobytes() != again.states.tobytes():
+        findings.append('the same run twice gave other bytes')
+    (p_s, _, relief), (fine_p_s, _, fine_relief) = (
+        _end(w, params, faults, final_tank, 0.02) for w in (run, fine)
+    )
+    if abs(p_s - fine_p_s) > AGREEMENT * params['burst_pressure'] or abs(
+        relief - fine_relief
+    ) > AGREEMENT * max(final_flow, fine_relief, 1e-5):
+        findings.append(f'a quarter step ends elsewhere: p_s {p_s:.6g} / {fine_p_s:.6g} Pa, '
+                        f'relief {relief:.4g} / {fine_relief:.4g} m^3/s')
+    findings += [str(alarm) for alarm in simulate_alarms(params, run, faults)]
+    return findings
