@@ -65,7 +65,7 @@ def report(title, best, steps, baseline):
         tick = seconds / steps * 100
         print(
             f'  {name:<34} {seconds * 1e3:8.1f} ms, {tick * 1e6:7.1f} us per 1 ms tick '
-            f'({tick * 1e2:.2f} % of it)'
+            f'({tick / 1e-3:.1%} of it)'
             + (f', x{seconds / best[baseline]:.3f} of plain RK4' if baseline else '')
         )
 
