@@ -16,6 +16,7 @@
 
 import numpy as np
 import pytest
+from valve_sim.analysis.envelope import property_findings
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.invariants import Monitor, run_alarms, WINDOW_SAMPLES
@@ -76,3 +77,10 @@ def test_the_live_monitor_counts_what_it_finds(params):
     for t, s in zip(time + 1.0, states):
         monitor.observe(t, s, 6 * L, 0.0, c)
     assert monitor.alarms['flow balance'] == 2 and monitor.last.invariant == 'flow balance'
+
+
+def test_a_poppet_chamber_swinging_between_samples_is_not_judged(params):
+    # bench/bench_properties.py's finding: a healthy valve at 0.5 L/min through a 20 ms tank
+    # ramp to 10 MPa; p_c swings between samples, so its continuity is beyond their
+    # quadrature (a false 9.6 % alarm before the chamber's own span was required steady).
+    assert property_findings(params, HEALTHY, 0.5 * L, 0.5 * L, 0.0, 10e6, 0.02) == []

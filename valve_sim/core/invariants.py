@@ -122,14 +122,18 @@ def sample_flows(state, inlet_flow, c, tank_pressure):
     ])
 
 
-def window_alarms(time, supply_pressures, inlet_flows, rows, c):
+def window_alarms(time, pressures, inlet_flows, rows, c):
     """
-    Alarms of one window of samples: time [s], p_s [Pa], inlet flows, sample_flows rows.
+    Return the Alarms of one window of samples.
 
+    time [s]; pressures [Pa], rows of (p_s, p_m, p_p, p_c); inlet flows; sample_flows rows.
     inlet_flows[i] is the flow held over the interval ending at sample i (the first
     unused); the coefficients c and the tank pressure are held throughout. Returns []
-    for a window that is not quasi-steady (nothing is judged there).
+    for a window that is not quasi-steady (nothing is judged there); a chamber's
+    continuity is judged only where its own pressure is quasi-steady too (a small
+    chamber swinging fast between samples is beyond their quadrature).
     """
+    supply_pressures = pressures[:, 0]
     if (
         len(time) < 3
         or np.ptp(supply_pressures) > STEADY_SPAN * c.burst_pressure
@@ -147,6 +151,7 @@ def window_alarms(time, supply_pressures, inlet_flows, rows, c):
     stored = stored[-1] - stored[0]
     alarms = []
     gaps = np.abs(net_in - stored) / np.maximum(volume, FLOW_FLOOR * duration)
+    gaps[np.ptp(pressures, axis=0) > STEADY_SPAN * c.burst_pressure] = 0.0
     worst = int(np.argmax(gaps))
     if gaps[worst] > TOLERANCE:
         alarms.append(Alarm('continuity', float(gaps[worst]), float(time[-1]),
@@ -191,7 +196,8 @@ def run_alarms(time, states, inlet_flows, tank_pressures, segments, window=WINDO
         rows = np.array([
             sample_flows(s, q, c, tank) for s, q in zip(states[part], inlet_flows[part])
         ])
-        for alarm in window_alarms(time[part], states[part, P_S], inlet_flows[part], rows, c):
+        pressures = states[part, P_S:P_C + 1]
+        for alarm in window_alarms(time[part], pressures, inlet_flows[part], rows, c):
             if alarm.invariant not in seen:
                 alarms.append(alarm)
                 seen.add(alarm.invariant)
@@ -230,7 +236,7 @@ class Monitor:
         if self.samples and (self.samples[-1][4] != tank_pressure or self.samples[-1][5] is not c):
             self.samples = []
         row = sample_flows(state, inlet_flow, c, tank_pressure)
-        self.samples.append((time, state[P_S], inlet_flow, row, tank_pressure, c))
+        self.samples.append((time, state[P_S:P_C + 1], inlet_flow, row, tank_pressure, c))
         if len(self.samples) > self.window:
             found += window_alarms(
                 np.array([s[0] for s in self.samples]),
