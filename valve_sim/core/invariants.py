@@ -181,18 +181,30 @@ def run_alarms(time, states, inlet_flows, tank_pressures, segments, window=WINDO
     tank_pressures = np.zeros(len(time)) if tank_pressures is None else tank_pressures
     starts = [t for t, _ in segments]
     alarms, seen = [], set()
-    for i, state in enumerate(states):
-        c = segments[max(np.searchsorted(starts, time[i], side='right') - 1, 0)][1]
-        alarm = bounds_alarm(float(time[i]), state, c)
-        if alarm and 'bounds' not in seen:
-            alarms.append(alarm)
+    segment = np.maximum(np.searchsorted(starts, time, side='right') - 1, 0)
+    for start, c in segments:  # the sample-by-sample bounds, at array speed
+        inside = segment == starts.index(start)
+        pressures = states[:, P_S:P_C + 1]
+        beyond = inside & ~(
+            np.all(np.isfinite(states), axis=1)
+            & np.all((pressures >= PRESSURE_FLOOR) & (pressures <= c.burst_pressure), axis=1)
+            & (states[:, X] >= 0.0) & (states[:, X] <= c.main_valve_stroke)
+            & (states[:, Y] >= 0.0) & (states[:, Y] <= c.poppet_stroke)
+        )
+        if np.any(beyond) and 'bounds' not in seen:
+            i = int(np.argmax(beyond))
+            alarms.append(bounds_alarm(float(time[i]), states[i], c))
             seen.add('bounds')
+    steady_span = STEADY_SPAN * min(c.burst_pressure for _, c in segments)
     for first in range(0, len(time) - window, window):
         part = slice(first, first + window + 1)
-        index = np.searchsorted(starts, time[part], side='right') - 1
-        if np.ptp(index) or np.ptp(tank_pressures[part][1:]):
-            continue
-        c, tank = segments[max(int(index[0]), 0)][1], float(tank_pressures[part][-1])
+        index = segment[part]
+        if (
+            np.ptp(index) or np.ptp(tank_pressures[part][1:])
+            or np.ptp(states[part, P_S]) > steady_span or np.ptp(inlet_flows[part][1:])
+        ):
+            continue  # not quasi-steady: nothing to judge, no flows to evaluate
+        c, tank = segments[int(index[0])][1], float(tank_pressures[part][-1])
         rows = np.array([
             sample_flows(s, q, c, tank) for s, q in zip(states[part], inlet_flows[part])
         ])
