@@ -127,8 +127,10 @@ def window_alarms(time, pressures, inlet_flows, rows, c):
     Return the Alarms of one window of samples.
 
     time [s]; pressures [Pa], rows of (p_s, p_m, p_p, p_c); inlet flows; sample_flows rows.
-    inlet_flows[i] is the flow held over the interval ending at sample i (the first
-    unused); the coefficients c and the tank pressure are held throughout. Returns []
+    inlet_flows[i] is the flow held over the interval ending at sample i, the same
+    for all (a window starting at an input step would judge the step's first fast
+    transient by its samples' quadrature); the coefficients c and the tank pressure
+    are held throughout. Returns []
     for a window that is not quasi-steady (nothing is judged there); a chamber's
     continuity is judged only where its own pressure is quasi-steady too (a small
     chamber swinging fast between samples is beyond their quadrature).
@@ -137,7 +139,7 @@ def window_alarms(time, pressures, inlet_flows, rows, c):
     if (
         len(time) < 3
         or np.ptp(supply_pressures) > STEADY_SPAN * c.burst_pressure
-        or np.ptp(inlet_flows[1:]) > 0.0
+        or np.ptp(inlet_flows) > 0.0
         or at_supply_limit(float(np.max(supply_pressures)), c.supply_pressure_limit)
     ):
         return []
@@ -160,7 +162,8 @@ def window_alarms(time, pressures, inlet_flows, rows, c):
     relieved = float(np.sum(0.5 * (relief[1:] + relief[:-1]) * dt))
     balance = abs(inlet - relieved - float(np.sum(stored)))
     scale = max(inlet, abs(relieved), FLOW_FLOOR * duration)
-    if balance / scale > TOLERANCE:
+    steady = np.all(np.ptp(pressures, axis=0) <= STEADY_SPAN * c.burst_pressure)
+    if steady and balance / scale > TOLERANCE:  # the relief moves with p_m and p_c
         alarms.append(Alarm(
             'flow balance', balance / scale, float(time[-1]),
             f'relief {relieved / duration * 6e4:.4g} L/min, inlet {inlet / duration * 6e4:.4g} '
@@ -200,8 +203,8 @@ def run_alarms(time, states, inlet_flows, tank_pressures, segments, window=WINDO
         part = slice(first, first + window + 1)
         index = segment[part]
         if (
-            np.ptp(index) or np.ptp(tank_pressures[part][1:])
-            or np.ptp(states[part, P_S]) > steady_span or np.ptp(inlet_flows[part][1:])
+            np.ptp(index) or np.ptp(tank_pressures[part])
+            or np.ptp(states[part, P_S]) > steady_span or np.ptp(inlet_flows[part])
         ):
             continue  # not quasi-steady: nothing to judge, no flows to evaluate
         c, tank = segments[int(index[0])][1], float(tank_pressures[part][-1])
@@ -245,7 +248,10 @@ class Monitor:
         alarm = bounds_alarm(time, state, c)
         if alarm:
             found.append(alarm)
-        if self.samples and (self.samples[-1][4] != tank_pressure or self.samples[-1][5] is not c):
+        previous = self.samples[-1] if self.samples else None
+        if previous and (
+            previous[2] != inlet_flow or previous[4] != tank_pressure or previous[5] is not c
+        ):
             self.samples = []
         row = sample_flows(state, inlet_flow, c, tank_pressure)
         self.samples.append((time, state[P_S:P_C + 1], inlet_flow, row, tank_pressure, c))
