@@ -53,7 +53,7 @@ TOLERANCE = 0.02
 # Below this flow [m^3/s] (0.006 L/min) a window's throughput is taken as this.
 FLOW_FLOOR = 1e-7
 INVARIANTS = ('bounds', 'continuity', 'flow balance')
-CHAMBERS = ('supply', 'intermediate', 'pilot', 'poppet chamber')
+CHAMBERS = ('supply', 'intermediate', 'pilot', 'poppet')
 
 
 @dataclass(frozen=True)
