@@ -76,6 +76,7 @@ FMU_DEPENDENCIES = ['pythonfmu>=0.7,<0.8', 'fmpy']
 TEST_DEPENDENCIES = [
     'pytest',
     'pytest-timeout',
+    'hypothesis',  # property-based tests of the model (test/core/test_properties.py)
     'psutil',
     'rosbags',
     'websockets',

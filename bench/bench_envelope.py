@@ -12,11 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Envelope sweep: presets 3-10 MPa, inlet flows 0-25 L/min, steps and ramps, from closed too."""
+"""Envelope sweep: presets, flows, steps and ramps; then every fault and tank pressure, judged."""
 
 # The summary above is also this script's --help description.
 #
-#     .venv/bin/python bench/bench_envelope.py [--json FILE]
+#     .venv/bin/python bench/bench_envelope.py [--json FILE] [--faults-only]
 #
 # Every ordered pair of distinct flows of FLOWS (0 = the empty, closed valve as
 # start, or the flow stopped as end) at every preset of PRESETS, as a step and as a
@@ -24,6 +24,14 @@
 # relieves, closed, stalled, diverged). The test suite runs a coarse subset
 # (test/analysis/test_envelope.py); this is the full grid. Exit code 1 if any run stalled
 # or diverged.
+#
+# Then the faulty envelope (issue 40): every fault at several severities (FAULTS), flows
+# held, stepped and ramped (FLOW_CHANGES), tank pressures held, stepped and ramped up to
+# burst_pressure (TANK_CHANGES). valve_sim.analysis.envelope.judged_run judges each run
+# independently of the run's own checks (the same run at a quarter of the step, the
+# steady-state solver and the flow balance for a steady end) as correct, refused before
+# the run, or wrong; the counts are printed, every wrong run with its reason. Exit code 1
+# if any run is wrong. test/analysis/test_envelope.py runs a sample.
 
 import argparse
 from collections import Counter
@@ -31,7 +39,8 @@ import json
 import sys
 import time
 
-from valve_sim.analysis.envelope import envelope_run
+from valve_sim.analysis.envelope import envelope_run, judged_run
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 
@@ -39,13 +48,63 @@ from valve_sim.core.simulation import LITRE_PER_MINUTE
 PRESETS = (3e6, 4e6, 5e6, 7e6, 8.5e6, 10e6)  # [Pa]
 FLOWS = (0.0, 1.0, 5.0, 10.0, 15.0, 20.0, 25.0)  # [L/min]
 RAMP_TIME = 0.1  # [s]
+L = LITRE_PER_MINUTE
+FAULTS = [{}] + [
+    {f'fault.{name}': value for name in names}
+    for names, values in (
+        (('bearing_coulomb_friction', 'bearing_static_friction'), (50.0, 200.0, 1000.0)),
+        (('damping_orifice_blockage',), (0.5, 0.85, 1.0)),
+        (('bearing_orifice_blockage',), (0.5, 0.9, 1.0)),
+        (('pilot_spring_weakening',), (0.5, 0.95, 1.0)),
+        (('seat_leakage_diameter',), (0.5e-3, 2e-3, 5e-3)),
+    )
+    for value in values
+] + [{'fault.pilot_spring_broken': True}, {'fault.main_valve_stuck': True}]
+# (initial, final) inlet flow [m^3/s], ramp time [s]
+FLOW_CHANGES = ((5 * L, 5 * L, 0.0), (5 * L, 20 * L, 0.0), (20 * L, 3 * L, 0.05))
+# (initial, final) tank pressure [Pa, gauge], ramp time [s]; burst_pressure is 35 MPa
+TANK_CHANGES = ((0.0, 0.0, 0.0), (0.0, 10e6, 0.0), (0.0, 10e6, 0.05), (0.0, 34e6, 0.0),
+                (10e6, 0.0, 0.0))
+
+
+def faulty_cases():
+    """Yield judged_run's keyword arguments for every case of the faulty envelope."""
+    for changes in FAULTS:
+        for initial, final, flow_ramp in FLOW_CHANGES:
+            for tank_initial, tank_final, tank_ramp in TANK_CHANGES:
+                yield {
+                    'faults': HEALTHY.changed(changes), 'initial_flow': initial,
+                    'final_flow': final, 'initial_tank': tank_initial,
+                    'final_tank': tank_final, 'ramp_time': max(flow_ramp, tank_ramp),
+                }
+
+
+def faulty_envelope(params):
+    """Judge every faulty case; print the wrong ones and the counts; return the runs."""
+    began, runs = time.perf_counter(), []
+    for case in faulty_cases():
+        run = judged_run(params, **case)
+        runs.append(run)
+        if run.verdict == 'wrong':
+            print(f'wrong: {run.case}: {run.reason}', flush=True)
+    counts = Counter(run.verdict for run in runs)
+    print(
+        f'faulty envelope: {len(runs)} runs in {time.perf_counter() - began:.0f} s: '
+        + ', '.join(f'{verdict} {counts[verdict]}' for verdict in ('correct', 'refused', 'wrong'))
+    )
+    return runs
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--json', metavar='FILE', help='write every run as JSON')
+    parser.add_argument('--faults-only', action='store_true', help='the faulty envelope only')
     args = parser.parse_args()
     params = load_parameters().params
+    judged = faulty_envelope(params)
+    wrong = any(run.verdict == 'wrong' for run in judged)
+    if args.faults_only:
+        return 1 if wrong else 0
     began, runs = time.perf_counter(), []
     for preset in PRESETS:
         for initial in FLOWS:
@@ -88,7 +147,7 @@ def main():
                 stream,
                 indent=1,
             )
-    return 0 if all(run.good for run in runs) else 1
+    return 0 if all(run.good for run in runs) and not wrong else 1
 
 
 if __name__ == '__main__':

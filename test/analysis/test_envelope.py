@@ -15,8 +15,9 @@
 """The model across its envelope: presets 3-10 MPa, flows 0-25 L/min (coarse; bench/ has all)."""
 
 import pytest
-from valve_sim.analysis.envelope import envelope_run
+from valve_sim.analysis.envelope import envelope_run, judged_run
 from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.core.faults import HEALTHY
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 
 
@@ -45,3 +46,22 @@ def test_a_flow_the_pilot_passes_alone_says_the_main_stage_stayed_shut(reference
     run = envelope_run(reference, 7e6, 0.2 * LPM, 0.5 * LPM)
     assert run.outcome == 'pilot relieves'
     assert 'stayed on its seat' in run.measures['reasons']['T_s_ms']
+
+
+# A sample of bench/bench_envelope.py's faulty envelope: the issue-40 kinds of case.
+FAULTY_SAMPLE = [  # (fault changes, initial/final flow, initial/final tank pressure, ramp)
+    ({'fault.pilot_spring_weakening': 1.0}, 5 * LPM, 20 * LPM, 0.0, 10e6, 0.0),
+    ({'fault.seat_leakage_diameter': 2e-3}, 20 * LPM, 3 * LPM, 0.0, 10e6, 0.05),
+    ({'fault.bearing_orifice_blockage': 1.0}, 5 * LPM, 5 * LPM, 0.0, 0.0, 0.0),
+    ({}, 5 * LPM, 5 * LPM, 10e6, 0.0, 0.0),
+]
+
+
+@pytest.mark.parametrize('case', FAULTY_SAMPLE)
+def test_faulty_runs_are_correct_or_refused_judged_independently(reference, case):
+    changes, initial, final, tank_initial, tank_final, ramp = case
+    run = judged_run(
+        reference, HEALTHY.changed(changes), initial, final, tank_initial, tank_final, ramp,
+        end_time=0.6,
+    )
+    assert run.verdict in ('correct', 'refused'), (run.case, run.reason)

@@ -90,8 +90,8 @@ def test_divergence_leaves_state_and_model_time_unchanged(model):
 def test_trial_refuses_a_diverging_change_without_touching_the_model(model, reference):
     state = model.state.copy()
     model.trial(reference, 1e-5, FLOW)
-    with pytest.raises(IntegrationError):  # a 1 mm^3 poppet chamber: too stiff for any step
-        model.trial({**reference, 'poppet_chamber_volume': 1e-9}, 1e-5, FLOW)
+    with pytest.raises(IntegrationError):  # a 0.1 g main valve at 100 us: beyond MAX_SPLITS
+        model.trial({**reference, 'main_valve_mass': 1e-4}, 1e-4, FLOW)
     assert np.array_equal(model.state, state) and model.step_size == 1e-5
 
 
@@ -226,8 +226,8 @@ def test_update_halts_after_a_roll_back_whose_parameters_refuse_the_input(model,
 
 
 def test_update_tells_a_divergence_from_an_overpressure(reference):
-    """A step size the stiff poppet chamber cannot take: a divergence, not an overpressure."""
-    model = RealTimeModel({**reference, 'poppet_chamber_volume': 1e-9}, 1e-5, FLOW)
+    """A step size a 0.1 g main valve cannot take even split: a divergence, no overpressure."""
+    model = RealTimeModel({**reference, 'main_valve_mass': 1e-4}, 1e-4, FLOW)
     model.start(START_NS)
     outcome = model.update(START_NS + 100_000_000, 2 * FLOW, max_lag_ns=10**9)
     assert outcome.status is Status.FAILURE and not outcome.overpressure

@@ -235,7 +235,7 @@ def is_papers_run(params, scenario):
 def run(args):
     from valve_sim.analysis.step_analysis import tank_details
     from valve_sim.core.sensors import read_waveforms
-    from valve_sim.core.simulation import relief_flows, simulate
+    from valve_sim.core.simulation import relief_flows, simulate, simulate_alarms
 
     check_bag_arguments(args)
     if args.flow_interval is not None and not (args.mcap and args.rig_topics):
@@ -295,6 +295,11 @@ def run(args):
             '(details.overpressure; stderr)',
         )
         measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
+    # The run's invariants (valve_sim.core.invariants): details.invariant_alarms, stderr.
+    alarms = [] if waveforms.halted else simulate_alarms(params, waveforms, faults)
+    measures.details['invariant_alarms'] = [alarm.as_dict() for alarm in alarms]
+    for alarm in alarms:
+        print(f'valve-sim simulate: warning: {alarm}', file=sys.stderr)
     written = args.csv or args.plot or args.mcap
     relief = relief_flows(params, waveforms, faults) if written else None
     if args.csv:

@@ -25,9 +25,19 @@ beyond burst_pressure counts as an overpressure only if the step that crossed it
 was accurate (one step and two half steps agree): a numerical instability
 that happens to cross the limit first is a divergence.
 
-A step whose stiffest chamber would put RK4 beyond its stability
-(model.fastest_chamber_rate) is taken as up to MAX_SPLITS equal sub-steps; at
-the paper's operating points that never happens.
+Each step of the schedule is taken as n equal RK4 sub-steps, n chosen by
+splits_needed(): at least what keeps RK4 stable on the stiffest chamber
+(model.fastest_chamber_rate), and as many more as make one sub-step agree with two
+half sub-steps (step doubling, an estimate of the local error) within
+ERROR_TOLERANCE. The choice is made every CHECK_EVERY steps and whenever an input
+moved by more than INPUT_CHANGE, and may halve at each choice; in between, the
+stability bound alone is asked every step and may only raise it (a fault that
+opens the poppet in a few steps makes its chamber stiff between two choices). At the
+paper's operating points n is 1. Before, n was capped at 8 and judged by the
+stiffness bound alone: a state that needed more (a broken or weakened pilot spring,
+a blocked damping orifice) was integrated unstably, and the run settled in a
+numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
+"Step splitting"). A step that needs more than MAX_SPLITS is a divergence.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -43,6 +53,7 @@ from valve_sim.core.limits import (
     describe_state,
     NUMERICAL_CEILING,
     state_check,
+    STATE_DIVERGED,
     STATE_OK,
     STATE_OVERPRESSURE,
     state_problem,
@@ -64,15 +75,20 @@ from valve_sim.core.model import (
 # Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
 # eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
 STEP_RATE_LIMIT = 2.0
-# At most this many sub-steps per step: enough for a chamber made stiff by the operating
-# point at the paper's 10 us, not a licence for steps far beyond what the model allows.
-MAX_SPLITS = 8
+# At most this many sub-steps per step (10 ns at the paper's 10 us): beyond it the parameters
+# make a chamber faster than any step the real-time node can afford (a divergence).
+MAX_SPLITS = 1024
+# A sub-step is accurate when it agrees with two half sub-steps within this share of
+# burst_pressure (pressures) and of the stroke (positions): 1e-6 is 35 Pa at 35 MPa.
+ERROR_TOLERANCE = 1e-6
 # An accurate step: its supply pressure agrees with two half steps' within this share of p_burst.
 CROSSING_TOLERANCE = 1e-3
-# The question is asked every this many steps (0.1 ms at 10 us) and its answer kept in
-# between: a chamber's rate changes with the flows and openings, over milliseconds, and
-# STEP_RATE_LIMIT keeps 28 % below RK4's limit; asking every step cost a third of the run.
+# The split is chosen every this many steps (0.1 ms at 10 us) and kept in between, and
+# whenever an input moved since the last choice by more than INPUT_CHANGE (flow [m^3/s],
+# tank pressure [Pa]): a chamber's rate changes with the flows and openings over
+# milliseconds, an input step changes it at once.
 CHECK_EVERY = 10
+INPUT_CHANGE = (1e-7, 1e4)
 
 
 @jit
@@ -97,13 +113,6 @@ def on_stops(state, c):
     y, y_dot = rest_on_stops(state[Y], state[Y_DOT], c.poppet_stroke)
     p_s = c.supply_pressure_limit if state[P_S] > c.supply_pressure_limit else state[P_S]
     return p_s, state[P_M], state[P_P], state[P_C], x, x_dot, y, y_dot
-
-
-@jit
-def splits_needed(state, c, step, tank_pressure=0.0):
-    """Return the number of equal sub-steps that keep RK4 stable on the stiffest chamber."""
-    rate = fastest_chamber_rate(state, c, tank_pressure)
-    return min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS)
 
 
 @jit
@@ -151,6 +160,56 @@ def rk4_step(state, q, p_t, c, h):
 
 
 @jit
+def step_error(whole, halves, c):
+    """Return the gap between a sub-step and two half sub-steps in ERROR_TOLERANCE units."""
+    pressure_scale = 1.0 / (ERROR_TOLERANCE * c.burst_pressure)
+    gap = 0.0
+    for i in range(P_S, P_C + 1):
+        gap = max(gap, abs(whole[i] - halves[i]) * pressure_scale)
+    gap = max(gap, abs(whole[X] - halves[X]) / (ERROR_TOLERANCE * c.main_valve_stroke))
+    return max(gap, abs(whole[Y] - halves[Y]) / (ERROR_TOLERANCE * c.poppet_stroke))
+
+
+@jit
+def stable_splits(state, c, step, tank_pressure=0.0):
+    """Return the sub-steps that keep RK4 stable on the stiffest chamber (<= MAX_SPLITS + 1)."""
+    rate = fastest_chamber_rate(state, c, tank_pressure)
+    return min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS + 1)
+
+
+@jit
+def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1):
+    """
+    Return the number of equal RK4 sub-steps for a step of size step [s] from state.
+
+    At least what keeps RK4 stable on the stiffest chamber, at least half of previous
+    (the last choice), and doubled until a sub-step agrees with two half sub-steps
+    within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
+    than MAX_SPLITS: MAX_SPLITS + 1, which the caller takes as a divergence.
+    """
+    splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
+    while splits <= MAX_SPLITS:
+        h = step / splits
+        whole = rk4_step(state, inlet_flow, tank_pressure, c, h)
+        half = rk4_step(state, inlet_flow, tank_pressure, c, 0.5 * h)
+        halves = rk4_step(half, inlet_flow, tank_pressure, c, 0.5 * h)
+        if step_error(whole, halves, c) <= 1.0:
+            return splits
+        splits *= 2
+    return MAX_SPLITS + 1
+
+
+@jit
+def choice_due(k, check_every, q, p_t, chosen_q, chosen_p_t):
+    """Return whether step k chooses its split: every check_every steps, or an input moved."""
+    return (
+        k % check_every == 0
+        or abs(q - chosen_q) > INPUT_CHANGE[0]
+        or abs(p_t - chosen_p_t) > INPUT_CHANGE[1]
+    )
+
+
+@jit
 def as_tuple(state):
     """Return the 8-array state as an 8-tuple."""
     return state[0], state[1], state[2], state[3], state[4], state[5], state[6], state[7]
@@ -166,20 +225,29 @@ def rk4_steps(
     inlet_flows[k] [m^3/s] and tank_pressures[k] [Pa, gauge] are held during step k
     (tank_pressures as long as inlet_flows); a step is split where
     splits_needed() asks for it (asked every check_every steps: CHECK_EVERY, a
-    constant of the compiled kernel unless given; bench/bench_step_split.py varies it). Every
+    constant of the compiled kernel unless given; 0: never, plain RK4, for
+    bench/bench_step_split.py) and when an input moved (choice_due). Every
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
-    holds those values).
+    holds those values) or needed more than MAX_SPLITS sub-steps (STATE_DIVERGED).
     """
     current = as_tuple(state)
     row = 0
     until_record = record_every
-    splits = 1
+    splits, chosen_q, chosen_p_t = 1, 0.0, 0.0
     for k in range(inlet_flows.shape[0]):
         q, p_t = inlet_flows[k], tank_pressures[k]
-        if k % check_every == 0:
-            splits = splits_needed(current, c, step, p_t)
+        if check_every <= 0:
+            pass  # plain RK4: bench/bench_step_split.py's baseline, never a run's
+        elif choice_due(k, check_every, q, p_t, chosen_q, chosen_p_t):
+            splits = splits_needed(current, c, step, p_t, q, splits)
+            chosen_q, chosen_p_t = q, p_t
+        else:
+            splits = max(splits, stable_splits(current, c, step, p_t))
+        if splits > MAX_SPLITS:
+            state[:] = current
+            return k, STATE_DIVERGED
         h = step / splits
         for _ in range(splits):
             current = rk4_step(current, q, p_t, c, h)

@@ -27,13 +27,16 @@ result as integrator.advance would.
 import numpy as np
 from valve_sim.core.integrator import (
     CHECK_EVERY,
+    choice_due,
     limits_error,
+    MAX_SPLITS,
     rk4_step,
     splits_needed,
+    stable_splits,
     step_inputs,
 )
 from valve_sim.core.jit import jit
-from valve_sim.core.limits import state_check, STATE_OK
+from valve_sim.core.limits import state_check, STATE_DIVERGED, STATE_OK
 from valve_sim.core.model import Coefficients, HEALTHY_TERMS
 from valve_sim.core.model import P_C, P_M, P_P, P_S, X, X_DOT, Y, Y_DOT  # the state's indices
 
@@ -115,14 +118,25 @@ def rk4_lanes(
         verdicts[j] = STATE_OK
     row = 0
     until_record = record_every
+    chosen_q, chosen_p_t = 0.0, 0.0
     for k in range(steps):
         q, p_t = inlet_flows[k], tank_pressures[k]
-        if k % CHECK_EVERY == 0:
+        if choice_due(k, CHECK_EVERY, q, p_t, chosen_q, chosen_p_t):
+            chosen_q, chosen_p_t = q, p_t
             for j in range(LANES):
                 if completed[j] == steps:
                     state, c = lane_state(states, j), lane_coefficients(table, j)
-                    splits[j] = splits_needed(state, c, step, p_t)
+                    splits[j] = splits_needed(state, c, step, p_t, q, splits[j])
                     alone[j] = faulty[j] or splits[j] > 1
+        else:
+            for j in range(LANES):
+                if completed[j] == steps:
+                    state, c = lane_state(states, j), lane_coefficients(table, j)
+                    splits[j] = max(splits[j], stable_splits(state, c, step, p_t))
+                    alone[j] = faulty[j] or splits[j] > 1
+        for j in range(LANES):
+            if completed[j] == steps and splits[j] > MAX_SPLITS:
+                completed[j], verdicts[j] = k, STATE_DIVERGED
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):
             c = healthy_lane_coefficients(table, j)

@@ -38,7 +38,8 @@ Departures from the printed equations, each explained in docs/model.md:
   finite slope) below |dp| = dp_tr, and is exact above it, so that zero-flow and
   closed-valve states stay stable under fixed-step RK4.
 - Eq. (12) is normalised by the upstream pressure max(p_s, p_p), which equals the
-  printed p_s in forward flow and stays bounded in reverse flow or at zero pressure.
+  printed p_s in forward flow and stays bounded in reverse flow or at zero pressure,
+  and never by less than the drop |p_s - p_p| (z within the fit's 0..1).
 - Seats and end stops: a valve at a stop that is pushed into it does not move.
 - The supply may be pressure-limited: at supply_pressure_limit (if set) its own relief
   (the bench pump's) takes the inflow the valve does not pass, so p_s stops rising there.
@@ -178,6 +179,19 @@ def orifice_root_slope(dp, transition):
 
 
 @jit
+def bearing_upstream(p_s, p_p, tank_pressure, transition):
+    """
+    Return the pressure [Pa] that normalises Eq. (12): the upstream one above the tank.
+
+    max(p_s, p_p) - p_t, and never below the drop |p_s - p_p| itself, so that the
+    fit's z = |p_s - p_p| / upstream stays within its range 0..1: the downstream
+    chamber below the tank (p_t stepped above it) would make z, and the cubic, unbounded
+    (a bearing flow of 0.9 m^3/s, a 1e9 1/s pressure mode after a 10 MPa tank step).
+    """
+    return max(p_s - tank_pressure, p_p - tank_pressure, abs(p_s - p_p), transition)
+
+
+@jit
 def fastest_chamber_rate(state, c, tank_pressure=0.0):
     """
     Return a bound [1/s] on the fastest decay rate of the four chamber pressures.
@@ -205,7 +219,7 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
     throttle_2 = c.second_throttle_gain * x * orifice_root_slope(p_m - tank_pressure, tr)
     orifice = c.damping_orifice_gain * orifice_root_slope(p_p - p_c, tr)
     poppet = c.poppet_gain * y * orifice_root_slope(p_c - tank_pressure, tr)
-    upstream = max(p_s - tank_pressure, p_p - tank_pressure, tr)
+    upstream = bearing_upstream(p_s, p_p, tank_pressure, tr)
     z = abs(p_s - p_p) / upstream
     bearing = c.bearing_gain * (
         c.bearing_k1 + z * (2.0 * c.bearing_k2 + 3.0 * z * c.bearing_k3)
@@ -245,7 +259,7 @@ def flows(state, c, tank_pressure=0.0):
         c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root(p_s - p_m, tr)
     )  # (10)
     q_m2 = c.second_throttle_gain * x * orifice_root(p_m - tank_pressure, tr)  # (11)
-    upstream = max(p_s - tank_pressure, p_p - tank_pressure, tr)
+    upstream = bearing_upstream(p_s, p_p, tank_pressure, tr)
     z = abs(p_s - p_p) / upstream
     bearing = z * (c.bearing_k1 + z * (c.bearing_k2 + z * c.bearing_k3))
     q_n = math.copysign(1.0, p_s - p_p) * c.bearing_gain * math.sqrt(upstream) * bearing  # (12)

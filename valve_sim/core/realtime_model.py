@@ -34,6 +34,9 @@ roll_back() undoes it; any other cause leaves the parameters alone and halt() st
 model: it holds its state, its time following the clock, until resume() (a reset, a new
 inlet flow or a parameter change). After an overpressure halt, output_state() reads p_s
 at burst_pressure, the limit it passed, as a transducer at full scale reads.
+
+After each advance_to() that integrated, monitor (valve_sim.core.invariants.Monitor) judges
+the state: its alarms name a violated invariant, its size and the model time.
 """
 
 from dataclasses import dataclass
@@ -45,6 +48,7 @@ from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
+from valve_sim.core.invariants import Monitor
 from valve_sim.core.model import P_S, relief_flows
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import apply_faults
@@ -123,6 +127,7 @@ class RealTimeModel:
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
         self.saturated = None  # [Pa gauge] p_s is read at this limit while an overpressure halts
+        self.monitor = Monitor()  # the invariants, judged after each advance_to()
         self.relief_flows()  # its kernel loads (or compiles) here, not in the first tick
 
     def _use(self, params, step_size, faults):
@@ -174,6 +179,12 @@ class RealTimeModel:
             raise
         self.tank_pressure = tank_pressure
         self.time_ns += skipped_ns + steps * self._step_ns
+        if skipped_ns:
+            self.monitor.restart()  # the state was held over the skipped stretch
+        if steps:
+            self.monitor.observe(
+                self.time_ns / NS_PER_S, self.state, inlet_flow, tank_pressure, self._coefficients
+            )
         return Progress(steps, skipped_ns)
 
     def update(self, now_ns, inlet_flow, max_lag_ns, tank_pressure=0.0):
@@ -208,6 +219,7 @@ class RealTimeModel:
     def resume(self):
         """Advance again from the held state; return whether the model was halted."""
         halted, self.halted, self.saturated = self.halted, None, None
+        self.monitor.restart()
         return halted is not None
 
     def output_state(self):
@@ -285,6 +297,7 @@ class RealTimeModel:
         tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
         self.state = steady_state(self.params, inlet_flow, self.faults, tank_pressure)
         self.tank_pressure = tank_pressure
+        self.monitor.restart()
         self.resume()
 
     def relief_flows(self):

@@ -38,6 +38,7 @@ from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import FaultEvent, tick_index
 from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
 from valve_sim.core.integrator import advance, step_inputs
+from valve_sim.core.invariants import run_alarms
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import schedule_problem, tank_pressure_problem
 from valve_sim.core.model import (
@@ -398,3 +399,18 @@ def simulate_recorded_flow(params, time, inlet_flow, step_size=1e-5, step_times=
         flows[k] = share * before + (1.0 - share) * after
     waveforms = run_flows(params, flows, step_size, step_size, float(inlet_flow[0]))
     return waveforms.states[ends]
+
+
+def simulate_alarms(params, waveforms, faults=HEALTHY):
+    """
+    Return the invariant Alarms of a run (valve_sim.core.invariants), [] for a sound one.
+
+    faults: the FaultSet the run started with; the run's events change it as they did.
+    """
+    segments = [(float(waveforms.time[0]), coefficients(params, faults))]
+    for time, changes in waveforms.events:
+        faults = faults.changed({n: v for n, v in changes.items() if n in FAULT_NAMES})
+        segments.append((time, coefficients(params, faults)))
+    return run_alarms(
+        waveforms.time, waveforms.states, waveforms.inlet_flow, waveforms.tank_pressure, segments
+    )

@@ -137,6 +137,7 @@ class ReliefValve(Fmi2Slave):
         self._start_ns = 0
         self._clock_ns = None
         self._applied = None  # (inlet flow, tank pressure) of the last step
+        self._alarm_logged = None  # the last invariant alarm logged (core.invariants)
         self._saturated = False  # halted by an overpressure: p_s shown at burst_pressure
         self._failed = None  # why the start failed
         self._sensors = SensorStage()  # ideal, for plan_change: the FMU has no sensor stage
@@ -325,6 +326,9 @@ class ReliefValve(Fmi2Slave):
             self._update_outputs()
             raise
         self._clock_ns = now_ns
+        if model.monitor.last is not None and model.monitor.last is not self._alarm_logged:
+            self._alarm_logged = model.monitor.last  # an invariant violated (core.invariants)
+            self.log(str(model.monitor.last), Fmi2Status.warning)
         self._update_outputs()
 
     # --- the adapter -------------------------------------------------------------------------

@@ -45,6 +45,7 @@ class ValveDiagnostics:
         self.input_stale = False
         self.tank_stale = False
         self.tank_from_topic = False  # said once in the log
+        self.alarms_reported = 0  # invariant alarms counted up to the last report
 
     def publish(self):
         """Publish the report of the window since the last one (and to a watched live view)."""
@@ -72,6 +73,11 @@ class ValveDiagnostics:
         conditions = injection.conditions(
             model.faults, model.state[P_S], model.params['supply_pressure_limit']
         )
+        monitor = model.monitor  # the invariants (valve_sim.core.invariants)
+        settings['invariant_alarms'] = ', '.join(f'{n}: {k}' for n, k in monitor.alarms.items())
+        if sum(monitor.alarms.values()) > self.alarms_reported:  # new ones since the last report
+            self.alarms_reported = sum(monitor.alarms.values())
+            conditions.append((DiagnosticStatus.WARN, str(monitor.last)))
         if tank['tank_pressure_stale']:
             conditions.append((DiagnosticStatus.WARN, (
                 f'tank_pressure stale: none for {tank["seconds_since_tank_pressure"]:.1f} s, '
