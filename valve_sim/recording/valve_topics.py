@@ -239,8 +239,9 @@ def write_simulation_bag(
         tanks = waveforms.tank_pressure
         tanks = np.zeros(len(waveforms.time)) if tanks is None else tanks
         commanded, commanded_tank, tank_commands = None, None, bool(np.any(tanks != 0.0))
-        # As a recording of valve_node: a topic nobody published is not in the bag.
-        unwritten = {'tank_pressure'} if not tank_commands else set()
+        # As a recording of valve_node: a topic nobody published is not in the bag (the
+        # flow comes on inlet_flow, as from a free-running bench, not on lockstep's topic).
+        unwritten = {'inlet_flow_stamped'} | ({'tank_pressure'} if not tank_commands else set())
         unwritten |= {'relief_flow'} if relief is None else set()
         for topic, type_name in TOPIC_TYPES.items():
             if topic not in unwritten:
