@@ -27,6 +27,7 @@ import re
 import subprocess
 import sys
 import threading
+import time
 
 from mcap.reader import make_reader
 import pytest
@@ -180,8 +181,11 @@ def simulator(context, scenario_file, runner, tmp_path_factory):
             cwd=REPO)
     client = SimulationClient(context)
     try:
+        deadline = time.monotonic() + 180.0  # a valve starts first
         for name, service in client.clients.items():
-            assert service.wait_for_service(timeout_sec=180.0), name  # a valve starts first
+            while not service.wait_for_service(timeout_sec=1.0):
+                assert process.poll() is None, (folder / 'simulator.log').read_text()[-3000:]
+                assert time.monotonic() < deadline, name
         assert client.steps.wait_for_server(timeout_sec=TIMEOUT)
         yield client, scenario, folder, process
     finally:
