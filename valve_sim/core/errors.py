@@ -119,7 +119,7 @@ class UnavailableError(ValveSimError, RuntimeError):
     """What a run needs is held by another run on this machine (every ROS domain)."""
 
 
-class ArgumentTypeError(ValveSimError, TypeError):
+class WrongTypeError(ValveSimError, TypeError):
     """A call was given a value of the wrong kind (a number where a name belongs, say)."""
 
 

@@ -49,12 +49,12 @@ from typing import Any, Optional, Union
 from valve_sim.analysis.scenario_file import live_change, start_parameter
 from valve_sim.analysis.tick_series import SIGNALS, TickSeries
 from valve_sim.core.errors import (
-    ArgumentTypeError,
     InputFileError,
     NodeExitError,
     ParameterError,
     ProfileError,
     UnavailableError,
+    WrongTypeError,
 )
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
 from valve_sim.core.limits import inlet_flow_problem
@@ -187,7 +187,7 @@ class LockstepValve:
         """
         driver = self._live()
         if isinstance(seconds, bool) or not isinstance(seconds, (int, float)):
-            raise ArgumentTypeError(f'advance: seconds must be a number [s], got {seconds!r}')
+            raise WrongTypeError(f'advance: seconds must be a number [s], got {seconds!r}')
         if not math.isfinite(seconds) or seconds < 0:
             raise ParameterError(f'advance: seconds must be finite and >= 0 (time only goes '
                                  f'forward), got {seconds!r}')
@@ -255,8 +255,8 @@ class LockstepValve:
     def inject(self, fault: str, value: Any = True) -> None:
         """Switch a fault on (docs/faults.md): a name such as 'main_valve_stuck', and its value."""
         if not isinstance(fault, str):
-            raise ArgumentTypeError(f"inject: fault must be a fault's name such as "
-                                    f"'main_valve_stuck' (docs/faults.md), got {fault!r}")
+            raise WrongTypeError(f"inject: fault must be a fault's name such as "
+                                 f"'main_valve_stuck' (docs/faults.md), got {fault!r}")
         name = fault if fault.startswith(FAULT_PREFIX) else FAULT_PREFIX + fault
         self.set_parameters({name: value})
 
