@@ -190,9 +190,17 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
     while splits <= MAX_SPLITS:
         h = step / splits
-        whole = rk4_step(state, inlet_flow, tank_pressure, c, h)
-        half = rk4_step(state, inlet_flow, tank_pressure, c, 0.5 * h)
-        halves = rk4_step(half, inlet_flow, tank_pressure, c, 0.5 * h)
+        # The sub-step, then two half sub-steps, through ONE call of rk4_step: every
+        # call site of an inline='always' kernel compiles the model's equations again.
+        origin = as_tuple(state)  # a tuple whether state came as one or as an array
+        whole = halves = origin
+        for stage in range(3):
+            start, size = (origin, h) if stage == 0 else (halves, 0.5 * h)
+            reached = rk4_step(start, inlet_flow, tank_pressure, c, size)
+            if stage == 0:
+                whole = reached
+            else:
+                halves = reached
         if step_error(whole, halves, c) <= 1.0:
             return splits
         splits *= 2
