@@ -196,7 +196,7 @@ def run_timer_floor(path, flooded=None):
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Float64
         from valve_sim.ros.receive_threads import ReceiveThreads
-        from valve_sim.ros.inlet_input import INLET_FLOW_QOS
+        from valve_sim.ros.valve_inputs import INLET_FLOW_QOS
 
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node('flooded_timer_floor')

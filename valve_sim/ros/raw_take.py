@@ -17,7 +17,7 @@
 Taking serialized messages from a raw subscription no executor runs, counting the lost ones.
 
 Both nodes take some messages themselves instead of letting the executor call back
-for each one: valve_node its inputs at the start of a tick (inlet_input), analyser_node
+for each one: valve_node its inputs at the start of a tick (valve_inputs), analyser_node
 every recorded topic in its drain. take() locks the subscription's handle once and
 takes messages until the queue is empty, a limit or a deadline; each message goes to
 the taker's receive(data, info) as CDR bytes and rmw's message info. What the

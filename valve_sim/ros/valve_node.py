@@ -58,7 +58,7 @@ from valve_sim.ros.fault_injection import (
     ScheduleLoader,
 )
 from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
-from valve_sim.ros.inlet_input import (
+from valve_sim.ros.valve_inputs import (
     INLET_FLOW_QOS,
     InletFlowInput,
     INPUT_SHARE,

@@ -21,7 +21,7 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
-from valve_sim.ros.inlet_input import InletFlowInput, TankPressureInput
+from valve_sim.ros.valve_inputs import InletFlowInput, TankPressureInput
 from valve_sim.ros.node_status import Throttle
 
 
