@@ -21,8 +21,8 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
-from valve_sim.ros.valve_inputs import InletFlowInput, TankPressureInput
 from valve_sim.ros.node_status import Throttle
+from valve_sim.ros.valve_inputs import InletFlowInput, TankPressureInput
 
 
 MAX_FLOW = 1.6666666666666667e-3  # [m^3/s] max_inlet_flow of config/reference.yaml

@@ -16,14 +16,15 @@
 valve_node's housekeeping, once a second on the steady clock, between ticks.
 
 Housekeeping copies the inputs' counts to the diagnostics counters, warns of rejected
-input messages (at most once a second per input), gives new middleware receive
-threads their policy, publishes /diagnostics (valve_diagnostics) and collects the
-young generations' garbage: main() turns automatic collection off, as a collection
+input messages (at most once a second per input), runs the node's chores (new
+middleware receive threads given their policy, /diagnostics: valve_diagnostics) and
+collects the young generations' garbage: main() turns automatic collection off, as a collection
 that starts inside a tick stalls it for up to a millisecond.
 """
 
 import gc
 import time
+from typing import Callable, NamedTuple
 
 from rclpy.clock import Clock, ClockType
 from valve_sim.ros.node_status import Throttle
@@ -36,6 +37,15 @@ YOUNG_GENERATIONS = (
 )
 
 
+class WatchedInput(NamedTuple):
+    """One input the housekeeping counts and warns of."""
+
+    topic: str  # the topic, as the warning names it
+    received: object  # its CheckedInput (ros.valve_inputs)
+    subscription: object  # its raw subscription: get_publisher_count()
+    holding: Callable[[], str]  # what the node holds meanwhile, e.g. '0.0001 m^3/s'
+
+
 class Housekeeping:
     """
     The 1 Hz housekeeping of a ReliefValveNode: it runs right after the next tick.
@@ -46,18 +56,28 @@ class Housekeeping:
     run pending housekeeping: none yet, or a paused /clock), and then takes the
     inputs no tick took. Calls that a busy executor queued back to back count once
     (the steady clock decides).
+
+    Given what it needs, no node: counters (node_status.Counters: ticks read, the
+    inlet input's counts and refused /clock messages written), inputs (WatchedInput,
+    the inlet flow's first: its counts are the counters'), clock_guard (its refused
+    count), take_inputs() (takes the inputs no tick took), chores (callables run at
+    each run after the counts and warnings, in order: e.g. the receive threads, the
+    /diagnostics report), logger, and create_timer (rclpy's Node.create_timer).
     """
 
-    def __init__(self, node):
-        self._node = node
+    def __init__(self, counters, inputs, clock_guard, take_inputs, chores, logger, create_timer):
+        self._counters = counters
+        self._inputs = inputs
+        self._clock_guard = clock_guard
+        self._take_inputs = take_inputs
+        self._chores = chores
+        self._logger = logger
         self._calls = Throttle(INTERVAL_NS)
-        self._rejection_warnings = {
-            'inlet_flow': Throttle(WARNING_INTERVAL_NS),
-            'tank_pressure': Throttle(WARNING_INTERVAL_NS),
-        }
+        self._rejection_warnings = {watched.topic: Throttle(WARNING_INTERVAL_NS)
+                                    for watched in inputs}
         self._due = False
         self._ticks_at_last = 0
-        node.create_timer(1.0, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        create_timer(1.0, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def after_tick(self):
         """Run the housekeeping if the timer asked for it since the last tick."""
@@ -67,49 +87,40 @@ class Housekeeping:
     def _on_timer(self):
         if not self._calls.due(time.monotonic_ns()):
             return
-        if self._due or self._node.status.counters.ticks == self._ticks_at_last:
-            self._node.take_inputs()
+        if self._due or self._counters.ticks == self._ticks_at_last:
+            self._take_inputs()
             self.run()
         else:
             self._due = True
 
     def run(self):
-        """Count, warn, publish the diagnostics report, and collect young garbage."""
-        node = self._node
+        """Count, warn, do the chores (the diagnostics report), and collect young garbage."""
         self._due = False
-        self._ticks_at_last = node.status.counters.ticks
+        self._ticks_at_last = self._counters.ticks
         self._count_inputs()
         self._warn_rejected_inputs()
-        if node.receive_threads.update():  # receive threads started since the last run
-            node.get_logger().info(
-                f'middleware receive threads: {node.receive_threads.describe()}'
-            )
-        node.diagnostics.publish()
+        for chore in self._chores:
+            chore()
         gc.collect(YOUNG_GENERATIONS)
 
     def _count_inputs(self):
-        """Copy the input's counts to the diagnostics; note if one publisher sends an input."""
-        node = self._node
-        counters = node.status.counters
-        counters.accepted_inputs = node.input.accepted
-        counters.rejected_inputs = node.input.rejected
-        counters.lost_inputs = node.input.lost
-        counters.refused_clock_messages = node.clock_guard.refused
-        node.input.single_publisher = node.inlet_subscription.get_publisher_count() == 1
-        node.tank_input.single_publisher = node.tank_subscription.get_publisher_count() == 1
+        """Copy the inlet input's counts to the counters; note if one publisher sends an input."""
+        counters, inlet = self._counters, self._inputs[0].received
+        counters.accepted_inputs = inlet.accepted
+        counters.rejected_inputs = inlet.rejected
+        counters.lost_inputs = inlet.lost
+        counters.refused_clock_messages = self._clock_guard.refused
+        for watched in self._inputs:
+            watched.received.single_publisher = watched.subscription.get_publisher_count() == 1
 
     def _warn_rejected_inputs(self):
         """At most once a second per input (steady clock): how many messages were rejected."""
-        node = self._node
-        for topic, received, holding in (
-            ('inlet_flow', node.input, f'{node.inlet_flow:g} m^3/s'),
-            ('tank_pressure', node.tank_input, f'{node.tank_pressure:g} Pa (gauge)'),
-        ):
+        for topic, received, _, holding in self._inputs:
             if received.rejected == received.reported_rejected:
                 continue
             if self._rejection_warnings[topic].due(time.monotonic_ns()):
                 new, reason = received.report()
-                node.get_logger().warn(
+                self._logger.warn(
                     f'{new} {topic} message(s) rejected since the last report '
-                    f'({received.rejected} since start), the last: {reason}; holding {holding}'
+                    f'({received.rejected} since start), the last: {reason}; holding {holding()}'
                 )

@@ -63,10 +63,10 @@ from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.recording.cdr import CdrMessage, ENCAPSULATION, STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
-from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
+from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
 
 HANDSHAKE = 'applied_inlet_flow'  # the flow the tick applied

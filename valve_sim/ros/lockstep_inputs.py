@@ -41,8 +41,8 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from valve_sim.core.errors import ParameterError
-from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 from valve_sim.ros.raw_take import RawTaker
+from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
 
 PARAMETER = 'lockstep_inputs'

@@ -45,10 +45,10 @@ from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import start_valve_and_analyser
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
+from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
 
 # what the analyser must record before the first tick

@@ -57,7 +57,12 @@ from valve_sim.ros.fault_injection import (
     FaultInjection,
     ScheduleLoader,
 )
-from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS
+from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS, WatchedInput
+from valve_sim.ros.lockstep_inputs import declare_lockstep_inputs, LockstepInputs
+from valve_sim.ros.node_status import NodeStatus, Throttle
+from valve_sim.ros.receive_threads import DEFAULT_POLICY, ReceiveThreads
+from valve_sim.ros.ros_parameters import log_parameter_files
+from valve_sim.ros.valve_diagnostics import ValveDiagnostics
 from valve_sim.ros.valve_inputs import (
     INLET_FLOW_QOS,
     InletFlowInput,
@@ -66,11 +71,6 @@ from valve_sim.ros.valve_inputs import (
     RELIABILITY_DESCRIPTION,
     TankPressureInput,
 )
-from valve_sim.ros.lockstep_inputs import declare_lockstep_inputs, LockstepInputs
-from valve_sim.ros.node_status import NodeStatus, Throttle
-from valve_sim.ros.receive_threads import DEFAULT_POLICY, ReceiveThreads
-from valve_sim.ros.ros_parameters import log_parameter_files
-from valve_sim.ros.valve_diagnostics import ValveDiagnostics
 from valve_sim.ros.valve_outputs import ValveOutputs
 from valve_sim.ros.valve_parameters import (
     declare_choice,
@@ -148,7 +148,16 @@ class ReliefValveNode(Node):
         self.stamped_subscriptions = self.lockstep_inputs.subscriptions
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.receive_threads = ReceiveThreads(DEFAULT_POLICY)  # main() sets its --receive-threads
-        self.housekeeping = Housekeeping(self)
+        self.housekeeping = Housekeeping(
+            self.status.counters,
+            (WatchedInput('inlet_flow', self.input, self.inlet_subscription,
+                          lambda: f'{self.inlet_flow:g} m^3/s'),
+             WatchedInput('tank_pressure', self.tank_input, self.tank_subscription,
+                          lambda: f'{self.tank_pressure:g} Pa (gauge)')),
+            self.clock_guard, self.take_inputs, (self._update_receive_threads,
+                                                 self.diagnostics.publish),
+            self.get_logger(), self.create_timer,
+        )
         self._tick_timer = self._create_tick_timer()
         self.parameters = ValveParameters(self)
         self.get_logger().info(
@@ -435,5 +444,9 @@ class ReliefValveNode(Node):
     def use_receive_thread_policy(self, policy):
         """Put the middleware's receive threads under policy (a POLICIES key), now and later."""
         self.receive_threads = ReceiveThreads(policy)
-        self.receive_threads.update()
-        self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
+        self._update_receive_threads(say=True)
+
+    def _update_receive_threads(self, say=False):
+        """Put receive threads started since the last look under the policy; log any (or say)."""
+        if self.receive_threads.update() or say:
+            self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
