@@ -14,18 +14,12 @@
 
 """valve_node's live parameter change planned once (core.retuning.plan_change) and applied once."""
 
-from types import SimpleNamespace
-
 import pytest
-import rclpy
-from rclpy.parameter import Parameter
 from valve_sim.core import retuning, steady_state
-from valve_sim.core.parameters import load_parameters, PRESET_PRESSURE, SPECS
+from valve_sim.core.parameters import load_parameters
 from valve_sim.core.realtime_model import RealTimeModel
 from valve_sim.core.retuning import plan_change
 from valve_sim.core.sensors import SensorStage
-from valve_sim.ros.ros_parameters import declare_double
-from valve_sim.ros.valve_parameters import ValveParameters
 
 
 @pytest.fixture
@@ -116,36 +110,3 @@ def test_a_tank_pressure_solves_the_cracking_point_at_it_too(model, loaded, solv
     planned = plan(model, loaded, {'damping_orifice_diameter': d_c}, ambient + 1e5)
     assert planned.problem is None and planned.tank_pressure == pytest.approx(1e5)
     assert len(solves) == 2  # the preset at ambient, the limit at the back pressure
-
-
-def test_a_live_d_c_change_through_the_three_callbacks_solves_the_cracking_point_once(
-    context, solves
-):
-    # The real pre-set, on-set and post-set callbacks on an rclpy node that carries what
-    # they use of valve_node: the model, settings, inputs and sensors.
-    loaded = load_parameters()
-    node = rclpy.create_node('planning', context=context)
-    d_c = SPECS['damping_orifice_diameter']
-    declare_double(node, d_c, loaded.params[d_c.name])
-    declare_double(node, PRESET_PRESSURE, solves.solve(loaded.params))
-    node.model = RealTimeModel(loaded.params, 1e-5, loaded.settings['initial_inlet_flow'])
-    node.settings = loaded.settings
-    node.inlet_flow = loaded.settings['initial_inlet_flow']
-    node.tank_input = SimpleNamespace(value=None)
-    node.input = SimpleNamespace()
-    node.injection = SimpleNamespace(sensors=SensorStage())
-    for name in ('publish_fault_status', 'use_settings', 'resume'):
-        setattr(node, name, lambda *args: None)
-    parameters = ValveParameters(node)
-    solve = solves.solve
-    wider = loaded.params[d_c.name] * 1.2
-    solves.clear()
-    result = parameters.set_atomically(
-        [Parameter(d_c.name, value=wider)], node.set_parameters_atomically
-    )
-    assert result.successful, result.reason
-    assert len(solves) == 1
-    assert node.model.params[d_c.name] == node.get_parameter(d_c.name).value == wider
-    preset = node.get_parameter('preset_pressure').value
-    assert preset == solve(node.model.params) != solve(loaded.params)
-    node.destroy_node()

@@ -186,7 +186,9 @@ class ManagedReliefValveNode(LifecycleNodeMixin, ReliefValveNode):
         if getattr(self, 'schedule_loader', None) is not None:
             self.schedule_loader.close()
         if getattr(self, 'parameters', None) is not None:
+            self.remove_pre_set_parameters_callback(self.parameters.complete)
             self.remove_on_set_parameters_callback(self.parameters.check)
+            self.remove_post_set_parameters_callback(self.parameters.apply)
         clock_subscription = getattr(self._time_source, '_clock_sub', None)  # kept
         for kind, entities in self._entities().items():
             destroy = getattr(self, f'destroy_{kind}')

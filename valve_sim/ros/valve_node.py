@@ -76,6 +76,8 @@ from valve_sim.ros.valve_parameters import (
     declare_choice,
     declare_frame_prefix,
     declare_valve_parameters,
+    DeclaredParameters,
+    NodeHooks,
     ValveParameters,
 )
 
@@ -159,7 +161,15 @@ class ReliefValveNode(Node):
             self.get_logger(), self.create_timer,
         )
         self._tick_timer = self._create_tick_timer()
-        self.parameters = ValveParameters(self)
+        self.parameters = ValveParameters(
+            DeclaredParameters(self), self.model, self.injection, (self.input, self.tank_input),
+            self.schedule_loader, self.status, NodeHooks(
+                lambda: self.settings, self.use_settings, self.resume, self.publish_fault_status),
+            self.get_logger(),
+        )
+        self.add_pre_set_parameters_callback(self.parameters.complete)
+        self.add_on_set_parameters_callback(self.parameters.check)
+        self.add_post_set_parameters_callback(self.parameters.apply)
         self.get_logger().info(
             f'valve at the steady state of {self.inlet_flow:g} m^3/s'
             + (f' into a tank at {self.tank_pressure:g} Pa (gauge)' if self.tank_pressure else '')
@@ -356,7 +366,7 @@ class ReliefValveNode(Node):
         Logged at most once a second (a flapping input can fail every tick), with how
         many were not; every failure is counted in the diagnostics. After a roll-back
         the node's other values of the undone change (settings, sensor settings, the
-        declared parameters) return too, and the inputs' limits follow.
+        declared parameters) return too, and the inputs' limits follow (restore).
         """
         error = outcome.error
         log = self._failure_logs.due(time.monotonic_ns())
@@ -374,8 +384,6 @@ class ReliefValveNode(Node):
             )
         if outcome.rolled_back:
             self.parameters.restore()
-            self.input.max_inlet_flow = self.model.params['max_inlet_flow']
-            self.tank_input.burst_pressure = self.model.params['burst_pressure']
         if outcome.status is not Status.FAILURE or not log:
             return
         saturated = self.model.saturated
@@ -448,5 +456,6 @@ class ReliefValveNode(Node):
 
     def _update_receive_threads(self, say=False):
         """Put receive threads started since the last look under the policy; log any (or say)."""
-        if self.receive_threads.update() or say:
-            self.get_logger().info(f'middleware receive threads: {self.receive_threads.describe()}')
+        threads = self.receive_threads
+        if threads.update() or say:
+            self.get_logger().info(f'middleware receive threads: {threads.describe()}')

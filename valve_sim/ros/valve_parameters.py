@@ -25,6 +25,8 @@ refused schedule file) go through set_declared, which the on-set and post-set
 callbacks let pass.
 """
 
+from typing import Callable, NamedTuple
+
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.node import Node
@@ -67,7 +69,7 @@ def declare_valve_parameters(node):
     defaults = {**reference.params, **reference.settings}
     # rclpy drops an undeclared override silently: say so for a retired parameter that
     # a parameter file (an older calibrated.yaml) still sets.
-    for name in filter(retired_reason, node._parameter_overrides):
+    for name in filter(retired_reason, overridden_names(node)):
         node.get_logger().warning(f'ignoring {name} (a parameter file or -p sets it): '
                                   f'{retired_reason(name)}')
     values = {
@@ -83,6 +85,16 @@ def declare_valve_parameters(node):
     preload = preload_for_cracking_pressure(params, preset)
     node.set_parameters([Parameter('pilot_spring_preload', value=preload)])
     return {**params, 'pilot_spring_preload': preload}, settings
+
+
+def overridden_names(node):
+    """
+    Return the names of the parameters that node's parameter files and -p set, declared or not.
+
+    rclpy has no public API for a node's overrides: only Node._parameter_overrides holds
+    the undeclared ones (the only reader of that private attribute in valve_sim).
+    """
+    return list(node._parameter_overrides)
 
 
 def declare_choice(node, name, choices, description):
@@ -107,19 +119,65 @@ def declare_frame_prefix(node):
     return node.declare_parameter('frame_prefix', node.get_name() + '/', descriptor).value
 
 
-class ValveParameters:
-    """The live parameter changes of a ReliefValveNode: checked, planned, applied."""
+class DeclaredParameters:
+    """
+    A node's declared parameters as ValveParameters reads and sets them: a small mapping.
+
+    declared[name]: the value declared; name in declared: whether it is declared;
+    declared.set_values(parameters): set them through rclpy's own Node.set_parameters_atomically,
+    past the checks a ReliefValveNode adds (its parameter callbacks still run).
+    """
 
     def __init__(self, node):
-        self.node = node
+        self._node = node
+
+    def __contains__(self, name):
+        return self._node.has_parameter(name)
+
+    def __getitem__(self, name):
+        return self._node.get_parameter(name).value
+
+    def set_values(self, parameters):
+        """Set rclpy Parameters as the node's declared values, past the node's own checks."""
+        Node.set_parameters_atomically(self._node, parameters)
+
+
+class NodeHooks(NamedTuple):
+    """What ValveParameters asks of the node it serves."""
+
+    settings: Callable[[], dict]  # the run-time settings in use (SETTING_SPECS)
+    use_settings: Callable[[dict], None]  # use new settings (a new publish_rate: a new timer)
+    resume: Callable[[str], None]  # let a halted model advance again, for the cause given
+    publish_fault_status: Callable[[], None]  # the faults and sensor settings in effect
+
+
+class ValveParameters:
+    """
+    The live parameter changes of a ReliefValveNode: checked, planned, applied.
+
+    Given what it needs, no node: declared (DeclaredParameters, or a mapping with set_values()),
+    the parts a change acts on (model: RealTimeModel; injection: FaultInjection; inputs:
+    (InletFlowInput, TankPressureInput), whose limits follow the parameters;
+    schedule_loader: ScheduleLoader; status: NodeStatus, where refusals are counted),
+    hooks (NodeHooks) and logger. The node adds complete, check and apply as its pre-set,
+    on-set and post-set parameter callbacks.
+    """
+
+    def __init__(self, declared, model, injection, inputs, schedule_loader, status, hooks,
+                 logger):
+        self.declared = declared
+        self.model = model
+        self.injection = injection
+        self.inlet, self.tank = inputs
+        self.schedule_loader = schedule_loader
+        self.status = status
+        self.hooks = hooks
+        self.logger = logger
         self.restoring = False  # set_declared at work: the callbacks let the values pass
         self.plan = None  # ChangePlan of the change being set
         self.before = {}  # declared values of the change being set, before it
         self.undo = {}  # declared values before the last change that retuned the model
         self.opened_schedule = None  # the file a change being set sets as fault_schedule
-        node.add_pre_set_parameters_callback(self.complete)
-        node.add_on_set_parameters_callback(self.check)
-        node.add_post_set_parameters_callback(self.apply)
 
     def set_atomically(self, parameter_list, set_declared_values):
         """
@@ -129,12 +187,11 @@ class ValveParameters:
         and unit, and each name (an undeclared one is named, with the declared name
         meant), and counts and logs every refusal.
         """
-        node = self.node
         problems = (
             value_problem(VALVE_SPECS[p.name], p)
             if p.name in VALVE_SPECS
             else None
-            if node.has_parameter(p.name)
+            if p.name in self.declared
             else retired_reason(p.name) or undeclared_reason(p.name, VALVE_SPECS)
             for p in parameter_list
         )
@@ -154,8 +211,8 @@ class ValveParameters:
 
     def count_refusal(self, reason):
         """Count and log a refused parameter change."""
-        self.node.status.counters.rejected_parameter_changes += 1
-        self.node.get_logger().warn(f'parameter change refused: {reason}')
+        self.status.counters.rejected_parameter_changes += 1
+        self.logger.warn(f'parameter change refused: {reason}')
 
     def complete(self, parameters):
         """Pre-set callback: integers as doubles; plan the change, add what it implies."""
@@ -163,14 +220,13 @@ class ValveParameters:
         changes = {p.name: p.value for p in parameters if p.name in LIVE_NAMES}
         if self.restoring:  # values in use again: the dependent one only keeps them agreeing
             try:
-                dependent = dependent_change(self.node.model.params, changes)
+                dependent = dependent_change(self.model.params, changes)
             except (ParameterError, SteadyStateError):
                 dependent = {}
         else:
-            node = self.node
             self.plan = changes and plan_change(
-                node.model, node.settings, changes, node.inlet_flow, node.tank_input.value,
-                node.injection.sensors,
+                self.model, self.hooks.settings(), changes, self.inlet.flow, self.tank.value,
+                self.injection.sensors,
             )
             dependent = self.plan.dependent if self.plan else {}
         return parameters + [
@@ -189,9 +245,7 @@ class ValveParameters:
         except (ParameterError, InputFileError) as error:
             return SetParametersResult(successful=False, reason=str(error))
         self.before = {
-            name: self.node.get_parameter(name).value
-            for name in self.plan.changes
-            if name != FAULT_SCHEDULE
+            name: self.declared[name] for name in self.plan.changes if name != FAULT_SCHEDULE
         }
         return SetParametersResult(successful=True)
 
@@ -201,7 +255,7 @@ class ValveParameters:
 
         The file is read and checked on the loader's thread (take_schedule applies it).
         """
-        loader = self.node.schedule_loader
+        loader = self.schedule_loader
         if loader.loading:
             raise ParameterError(
                 f'fault schedule {loader.loading} is still being read and '
@@ -214,35 +268,39 @@ class ValveParameters:
         plan, self.plan = self.plan, None
         if not plan or self.restoring:
             return
-        node, parts = self.node, plan.parts
+        parts = plan.parts
         before, self.before = self.before, {}
-        if node.model.retune(plan.params, plan.settings['step_size'], parts.fault or None):
+        if self.model.retune(plan.params, plan.settings['step_size'], parts.fault or None):
             self.undo = before  # what a roll-back of this change restores
-        node.injection.sensors.change(parts.sensor)
+        self.injection.sensors.change(parts.sensor)
         if FAULT_SCHEDULE in plan.changes:
             self._load_schedule(plan.changes[FAULT_SCHEDULE])
         if parts.fault or parts.sensor:
-            node.publish_fault_status()
-        node.input.max_inlet_flow = plan.params['max_inlet_flow']
-        node.tank_input.ambient_pressure = plan.settings['ambient_pressure']
-        node.tank_input.burst_pressure = plan.params['burst_pressure']
-        if 'tank_pressure' in plan.changes and node.tank_input.value is not None:
-            node.get_logger().warn(
+            self.hooks.publish_fault_status()
+        self._limit_inputs(plan.params, plan.settings)
+        if 'tank_pressure' in plan.changes and self.tank.value is not None:
+            self.logger.warn(
                 'tank_pressure set, but the tank_pressure topic sets the tank pressure '
-                f'({node.tank_input.gauge():g} Pa gauge): the topic takes precedence'
+                f'({self.tank.gauge():g} Pa gauge): the topic takes precedence'
             )
-        node.use_settings(plan.settings)
-        node.resume('a parameter change')
-        node.get_logger().info(f'parameters set: {plan.changes}')
+        self.hooks.use_settings(plan.settings)
+        self.hooks.resume('a parameter change')
+        self.logger.info(f'parameters set: {plan.changes}')
+
+    def _limit_inputs(self, params, settings):
+        """Make the inputs' limits follow the parameters and settings in use (rule kept here)."""
+        self.inlet.max_inlet_flow = params['max_inlet_flow']
+        self.tank.ambient_pressure = settings['ambient_pressure']
+        self.tank.burst_pressure = params['burst_pressure']
 
     def _load_schedule(self, path):
         """Read the schedule file opened by the check on the loader's thread ('': none, now)."""
         stream, self.opened_schedule = self.opened_schedule, None
         if not path:
-            self.node.injection.use_events((), '')
+            self.injection.use_events((), '')
             return
-        self.node.schedule_loader.start(path, stream)
-        self.node.get_logger().info(f'reading fault schedule {path}: in use once it is checked')
+        self.schedule_loader.start(path, stream)
+        self.logger.info(f'reading fault schedule {path}: in use once it is checked')
 
     def take_schedule(self):
         """
@@ -252,21 +310,20 @@ class ValveParameters:
         in the diagnostics (fault_schedule_refused), and fault_schedule is set back to
         the file in use.
         """
-        node = self.node
-        loaded = node.schedule_loader.take()
+        loaded = self.schedule_loader.take()
         if loaded is None:
             return
         path, events = loaded
         if not isinstance(events, str):
-            node.injection.use_events(events, path)
-            node.get_logger().info(
+            self.injection.use_events(events, path)
+            self.logger.info(
                 f'fault schedule {path} in use: {len(events)} events, t from this tick'
             )
             return
-        node.status.schedule_refused = f'{path}: {events}'
-        node.status.counters.refused_fault_schedules += 1
+        self.status.schedule_refused = f'{path}: {events}'
+        self.status.counters.refused_fault_schedules += 1
         self.count_refusal(f'fault_schedule {path}: {events}')
-        self.set_declared({FAULT_SCHEDULE: node.injection.schedule_path})
+        self.set_declared({FAULT_SCHEDULE: self.injection.schedule_path})
 
     def apply_scheduled(self, changes):
         """
@@ -279,35 +336,35 @@ class ValveParameters:
         /parameter_events show the event; a failure it causes within the trial window
         rolls it back as it does a parameter change (restore).
         """
-        node, parts = self.node, split(changes)
-        message = f'fault schedule at t = {node.model.time_ns / NS_PER_S:.6f} s: {changes}'
+        model, parts = self.model, split(changes)
+        message = f'fault schedule at t = {model.time_ns / NS_PER_S:.6f} s: {changes}'
         try:
-            node.injection.sensors.checked(parts.sensor)
+            self.injection.sensors.checked(parts.sensor)
         except ParameterError as error:
             self.count_refusal(str(error))
-            node.get_logger().error(f'{message} refused: {error}')
+            self.logger.error(f'{message} refused: {error}')
             return
-        before = {name: node.get_parameter(name).value for name in changes}
+        before = {name: self.declared[name] for name in changes}
         self.set_declared(changes)
-        if node.model.retune(node.model.params, node.model.step_size, parts.fault or None):
+        if model.retune(model.params, model.step_size, parts.fault or None):
             self.undo = before  # what a roll-back of this event restores
-        node.injection.sensors.change(parts.sensor)
-        node.publish_fault_status()
-        node.resume('a scheduled fault')
-        node.get_logger().info(message)
+        self.injection.sensors.change(parts.sensor)
+        self.hooks.publish_fault_status()
+        self.hooks.resume('a scheduled fault')
+        self.logger.info(message)
 
     def set_declared(self, values):
         """Set declared parameter values {name: value} that differ, without the callbacks."""
         changed = [
             Parameter(name, value=value)
             for name, value in values.items()
-            if self.node.get_parameter(name).value != value
+            if self.declared[name] != value
         ]
         if not changed:
             return
         self.restoring = True
         try:
-            Node.set_parameters_atomically(self.node, changed)
+            self.declared.set_values(changed)
         finally:
             self.restoring = False
 
@@ -318,18 +375,21 @@ class ValveParameters:
         Settings and sensor settings of the change return to their values before it,
         and the node's declared parameters to what is in use (the model's parameters,
         step size and faults, and every other value of the change): all agree again,
-        and a later change cannot bring back a part of the one undone.
+        and a later change cannot bring back a part of the one undone. The inputs'
+        limits follow.
         """
-        node = self.node
+        model = self.model
         undo, self.undo = self.undo, {}
-        node.injection.sensors.change(split(undo).sensor)
-        node.use_settings({**node.settings, **split(undo).setting})
+        self.injection.sensors.change(split(undo).sensor)
+        settings = {**self.hooks.settings(), **split(undo).setting}
+        self.hooks.use_settings(settings)
         self.set_declared(
             {
                 **undo,
-                **node.model.params,
-                'step_size': node.model.step_size,
-                **node.model.faults.as_parameters(),
+                **model.params,
+                'step_size': model.step_size,
+                **model.faults.as_parameters(),
             }
         )
-        node.publish_fault_status()
+        self._limit_inputs(model.params, settings)
+        self.hooks.publish_fault_status()
