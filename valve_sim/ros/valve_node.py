@@ -30,13 +30,14 @@ Names are relative, so namespaces and remapping work. Pressures are ABSOLUTE [Pa
 
 All messages of one tick carry the model time of the state as header.stamp. The model
 (valve_sim.core.realtime_model, no ROS) decides what a tick comes to; this module adapts
-it: inputs, the tick timer, the outcome's logs and counters, the reset service.
-Parameters (ros.valve_parameters: declarations, a change planned once and applied once),
-housekeeping (ros.housekeeping) and the /diagnostics report (ros.valve_diagnostics) live
-apart. Faults and sensors (docs/faults.md): parameters fault.* and sensor.*, and a
-schedule file whose events are applied at the tick, directly. The process (command line,
-main) is ros.valve_node_main; with its --foxglove [PORT] the tick topics and /diagnostics
-are also served over Foxglove's WebSocket protocol.
+it: inputs, the tick timer, the outcome's counters, the reset service. Parameters
+(ros.valve_parameters: declarations, a change planned once and applied once),
+housekeeping (ros.housekeeping), the outcome's logs (ros.tick_logs) and the /diagnostics
+report (ros.valve_diagnostics) live apart, each given what it needs. Faults and sensors
+(docs/faults.md): parameters fault.* and sensor.*, and a schedule file whose events are
+applied at the tick, directly. The process (command line, main) is ros.valve_node_main;
+with its --foxglove [PORT] the tick topics and /diagnostics are also served over
+Foxglove's WebSocket protocol.
 """
 
 import time
@@ -57,11 +58,12 @@ from valve_sim.ros.fault_injection import (
     FaultInjection,
     ScheduleLoader,
 )
-from valve_sim.ros.housekeeping import Housekeeping, WARNING_INTERVAL_NS, WatchedInput
+from valve_sim.ros.housekeeping import Housekeeping, WatchedInput
 from valve_sim.ros.lockstep_inputs import declare_lockstep_inputs, LockstepInputs
-from valve_sim.ros.node_status import NodeStatus, Throttle
+from valve_sim.ros.node_status import NodeStatus
 from valve_sim.ros.receive_threads import DEFAULT_POLICY, ReceiveThreads
 from valve_sim.ros.ros_parameters import log_parameter_files
+from valve_sim.ros.tick_logs import TickLogs
 from valve_sim.ros.valve_diagnostics import ValveDiagnostics
 from valve_sim.ros.valve_inputs import (
     INLET_FLOW_QOS,
@@ -122,13 +124,8 @@ class ReliefValveNode(Node):
         self.kernels_seconds = time.perf_counter() - started  # also in /diagnostics
         self.input = InletFlowInput(self.settings['initial_inlet_flow'], params['max_inlet_flow'])
         self.applied_flow = self.inlet_flow  # [m^3/s], over the last tick
-        self._lag_warnings = Throttle(WARNING_INTERVAL_NS)
-        # Failures and resumptions: logged at most once a second each, the rest counted.
-        self._failure_logs = Throttle(WARNING_INTERVAL_NS)
-        self._resume_logs = Throttle(WARNING_INTERVAL_NS)
-        self._failures_unlogged = 0
-        self._lag_warned_total_s = 0.0  # skipped_time_s at the last lag warning
         self.status = NodeStatus(time.monotonic_ns())
+        self.logs = TickLogs(self.get_logger(), self.status.counters, CATCH_UP_LIMIT_PERIODS)
         self.schedule_loader = ScheduleLoader()
         self.outputs = ValveOutputs(self, self.frame_prefix)
         self.diagnostics = ValveDiagnostics(self)
@@ -324,22 +321,11 @@ class ReliefValveNode(Node):
         if outcome.status is Status.PROGRESS:
             self.applied_flow = self.inlet_flow
             if outcome.skipped_ns:
-                self._warn_lag(outcome.skipped_ns)
-        elif outcome.error is not None:
-            self._report_failure(outcome)
-
-    def _warn_lag(self, skipped_ns):
-        """Warn of skipped lag at most once a second, with what was skipped since and in total."""
-        if not self._lag_warnings.due(time.monotonic_ns()):
-            return
-        total_s = self.status.counters.skipped_time_s
-        since_s, self._lag_warned_total_s = total_s - self._lag_warned_total_s, total_s
-        self.get_logger().warn(
-            f'{skipped_ns / NS_PER_S:g} s of lag skipped (catch-up limit '
-            f'{CATCH_UP_LIMIT_PERIODS} tick periods); {since_s:g} s skipped '
-            f'since the last warning, {total_s:g} s in '
-            f'{self.status.counters.skipped_ticks} tick periods since start'
-        )
+                self.logs.lag_skipped(outcome.skipped_ns)
+        elif outcome.error is not None:  # the last good state held; a roll-back followed through
+            self.logs.failure(outcome, self.model.saturated)
+            if outcome.rolled_back:  # the rest of the undone change too (settings, limits)
+                self.parameters.restore()
 
     def _inject(self):
         """Apply the schedule's events due at this tick; watch for overpressure."""
@@ -349,59 +335,13 @@ class ReliefValveNode(Node):
             self.parameters.apply_scheduled(changes)
         limit = self.model.params['supply_pressure_limit']
         overpressure = self.injection.at_supply_limit(self.model.state, limit)
-        if overpressure and not self.injection.overpressure:
-            self.status.counters.overpressure_alarms += 1
-            self.get_logger().error(
-                f'OVERPRESSURE: p_s reached supply_pressure_limit = {limit:g} Pa; faults: '
-                f'{self.model.faults.describe() or "none"}'
-            )
-        elif self.injection.overpressure and not overpressure:
-            self.get_logger().info('p_s back below supply_pressure_limit')
+        self.logs.supply_limit(overpressure, self.injection.overpressure, limit, self.model.faults)
         self.injection.overpressure = overpressure
-
-    def _report_failure(self, outcome):
-        """
-        Log a failure the model held its last good state after; follow a roll-back through.
-
-        Logged at most once a second (a flapping input can fail every tick), with how
-        many were not; every failure is counted in the diagnostics. After a roll-back
-        the node's other values of the undone change (settings, sensor settings, the
-        declared parameters) return too, and the inputs' limits follow (restore).
-        """
-        error = outcome.error
-        log = self._failure_logs.due(time.monotonic_ns())
-        if not log:
-            self._failures_unlogged += 1
-        else:
-            unlogged, self._failures_unlogged = self._failures_unlogged, 0
-            self.get_logger().error(f'{error} The last good state is held.' + (
-                f' ({unlogged} more failure(s) since the last report, at most one a second; '
-                'all counted in /diagnostics)' if unlogged else ''))
-        if outcome.rolled_back and log:
-            self.get_logger().error(
-                'parameters rolled back to the ones in use before the last change, '
-                'applied within the trial window before the failure'
-            )
-        if outcome.rolled_back:
-            self.parameters.restore()
-        if outcome.status is not Status.FAILURE or not log:
-            return
-        saturated = self.model.saturated
-        self.get_logger().error(
-            'the model stops advancing and holds its last good state until a reset, '
-            'a new inlet flow or a parameter change'
-            + (
-                f'; supply_pressure is published at burst_pressure = {saturated:g} Pa (gauge), '
-                'the limit it passed, the other topics at their last values'
-                if saturated is not None
-                else ''
-            )
-        )
 
     def resume(self, cause):
         """Let a halted model advance again."""
-        if self.model.resume() and self._resume_logs.due(time.monotonic_ns()):
-            self.get_logger().info(f'the model advances again after {cause}')
+        if self.model.resume():
+            self.logs.resumed(cause)
 
     # --- inputs and outputs -----------------------------------------------------------------
 
