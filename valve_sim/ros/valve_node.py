@@ -153,16 +153,15 @@ class ReliefValveNode(Node):
                           lambda: f'{self.inlet_flow:g} m^3/s'),
              WatchedInput('tank_pressure', self.tank_input, self.tank_subscription,
                           lambda: f'{self.tank_pressure:g} Pa (gauge)')),
-            self.clock_guard, self.take_inputs, (self._update_receive_threads,
-                                                 self.diagnostics.publish),
-            self.get_logger(), self.create_timer,
+            self.clock_guard, self.take_inputs,
+            chores=(self._update_receive_threads, self.diagnostics.publish),
+            logger=self.get_logger(), create_timer=self.create_timer,
         )
         self._tick_timer = self._create_tick_timer()
         self.parameters = ValveParameters(
             DeclaredParameters(self), self.model, self.injection, (self.input, self.tank_input),
-            self.schedule_loader, self.status, NodeHooks(
+            self.schedule_loader, self.status, logger=self.get_logger(), hooks=NodeHooks(
                 lambda: self.settings, self.use_settings, self.resume, self.publish_fault_status),
-            self.get_logger(),
         )
         self.add_pre_set_parameters_callback(self.parameters.complete)
         self.add_on_set_parameters_callback(self.parameters.check)
