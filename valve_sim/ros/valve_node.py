@@ -32,8 +32,8 @@ All messages of one tick carry the model time of the state as header.stamp. The 
 (valve_sim.core.realtime_model, no ROS) decides what a tick comes to; this module adapts
 it: inputs, the tick timer, the outcome's counters, the reset service. Parameters
 (ros.valve_parameters: declarations, a change planned once and applied once),
-housekeeping (ros.housekeeping), the outcome's logs (ros.tick_logs) and the /diagnostics
-report (ros.valve_diagnostics) live apart, each given what it needs. Faults and sensors
+housekeeping (ros.housekeeping), the outcome's logs (ros.tick_logs), all three given what
+they need, and the /diagnostics report (ros.valve_diagnostics) live apart. Faults and sensors
 (docs/faults.md): parameters fault.* and sensor.*, and a schedule file whose events are
 applied at the tick, directly. The process (command line, main) is ros.valve_node_main;
 with its --foxglove [PORT] the tick topics and /diagnostics are also served over
