@@ -121,8 +121,8 @@ def mcap_summary(path):
     topics = {}
     with open(path, 'rb') as stream:
         for schema, channel, message in make_reader(stream).iter_messages():
-            entry = topics.setdefault(channel.topic, [schema.name if schema else '', 0,
-                                                       hashlib.sha256()])
+            kind = schema.name if schema else ''
+            entry = topics.setdefault(channel.topic, [kind, 0, hashlib.sha256()])
             entry[1] += 1
             entry[2].update(message.data)
             entry[2].update(str((message.log_time, message.publish_time)).encode())

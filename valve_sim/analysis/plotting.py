@@ -26,7 +26,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
-from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
+from valve_sim.analysis.steps.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
 from valve_sim.core.output_files import replacing  # noqa: E402
 
 
@@ -231,7 +231,7 @@ def plot_measures_fit(path, target, measures, waveforms):
     figure, (response, bars) = plt.subplots(
         2, 1, figsize=(8, 8), constrained_layout=True, gridspec_kw={'height_ratios': [3, 2]}
     )
-    t_step = target.scenario.step_time
+    t_step = target.flow_step.step_time
     pressure = waveforms['supply_pressure']
     before = max(int(np.searchsorted(waveforms.time, t_step, side='right')) - 1, 0)
     response.plot(waveforms.time, pressure / pressure[before], color='tab:blue', linewidth=0.9)

@@ -37,7 +37,7 @@ import sys
 
 import numpy as np
 from valve_sim.analysis.recorded_steps import analyse
-from valve_sim.analysis.signals import ROLE
+from valve_sim.analysis.steps.signals import ROLE
 from valve_sim.commands.options import (
     add_options,
     add_signal_arguments,
@@ -46,10 +46,10 @@ from valve_sim.commands.options import (
     number,
     signal_map_from,
 )
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 from valve_sim.core.input_documents import read_json
 from valve_sim.core.input_files import TARGET_MEASURES
 from valve_sim.core.output_files import json_text, make_folder, write_text
-from valve_sim.core.scenario import LITRE_PER_MINUTE
 from valve_sim.recording.signal_reader import read_recording, Recording
 
 # The model's and the fit's modules (numba, scipy) are imported in the functions that
@@ -226,7 +226,7 @@ def add_arguments(parser):
 
 
 def _target(args, step_size, signal_map):
-    from valve_sim.analysis.calibration_targets import MeasuresTarget, RecordingTarget
+    from valve_sim.analysis.calibration.targets import MeasuresTarget, RecordingTarget
     from valve_sim.core.errors import CalibrationError
 
     if args.target_measures:
@@ -317,19 +317,19 @@ def from_every_signal(recording, signal_map):
 
 
 def run(args):
-    from valve_sim.analysis.calibration import calibrate, CalibrationProblem, FitSettings
-    from valve_sim.analysis.calibration_parameters import (
+    from valve_sim.analysis.calibration.fit import calibrate, CalibrationProblem, FitSettings
+    from valve_sim.analysis.calibration.parameters import (
         fit_parameters,
         fit_ties,
         step_time_parameters,
     )
-    from valve_sim.analysis.calibration_report import (
+    from valve_sim.analysis.calibration.report import (
         parameter_file_text,
         plot_fit,
         report_document,
         report_text,
     )
-    from valve_sim.analysis.calibration_requirements import (
+    from valve_sim.analysis.calibration.requirements import (
         CaseRelieves,
         LandsInsideBore,
         MainSpringRange,
@@ -337,7 +337,7 @@ def run(args):
         PilotFlowLimit,
         StudyRelieves,
     )
-    from valve_sim.analysis.calibration_verdict import judged, verdict_lines
+    from valve_sim.analysis.calibration.verdict import judged, verdict_lines
     from valve_sim.commands.options import ctrl_c_stops
     from valve_sim.core.errors import CalibrationError
 

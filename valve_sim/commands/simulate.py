@@ -31,9 +31,9 @@ import math
 import sys
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import is_reference_step, REFERENCE_SCENARIO
+from valve_sim.analysis.paper import is_reference_step, REFERENCE_FLOW_STEP
 from valve_sim.analysis.recorded_steps import measures_table
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
 from valve_sim.commands.options import (
     add_options,
     check_bag_arguments,
@@ -48,10 +48,10 @@ from valve_sim.commands.options import (
 from valve_sim.core.catalogue import split
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.faults import HEALTHY
+from valve_sim.core.flow_step import FlowStep, TankPressure
 from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.output_files import json_text, replacing
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters
-from valve_sim.core.scenario import Scenario, TankPressure
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim simulate --help` stays quick.
@@ -65,7 +65,7 @@ INTERVAL = number('an interval', 's', 1e-7, 1.0)
 
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
-    s = REFERENCE_SCENARIO
+    s = REFERENCE_FLOW_STEP
     parser.add_argument('--initial-flow', type=flow_value, default=s.initial_flow, metavar='Q',
                         help='inlet flow before the step; 0 starts from the closed, empty '
                         'valve (default 5L/min)')
@@ -164,7 +164,7 @@ def rig_topics(text):
 def _scenario(args):
     if not args.step_time < args.end_time:
         raise ParameterError('need --step-time < --end-time')
-    return Scenario(
+    return FlowStep(
         args.initial_flow, args.final_flow, args.step_time, args.end_time, args.ramp_time
     )
 
@@ -233,7 +233,7 @@ def is_papers_run(params, scenario):
 
 
 def run(args):
-    from valve_sim.analysis.step_analysis import tank_details
+    from valve_sim.analysis.steps.step_analysis import tank_details
     from valve_sim.core.sensors import read_waveforms
     from valve_sim.core.simulation import relief_flows, simulate, simulate_alarms
 

@@ -20,7 +20,7 @@ order (rosbag2_metadata.bag_files), with BagReader; each channel that carries a
 mapped role gets a decoder from the first of decoder_factories that has one for its
 encoding and schema (the mcap library's DecoderFactory protocol: decoder_for(
 message_encoding, schema) -> a function of the message bytes, or None; default
-mcap_ros2's CDR decoder), and an analysis.signals.Extractor that takes the roles'
+mcap_ros2's CDR decoder), and an analysis.steps.signals.Extractor that takes the roles'
 values from the decoded messages. The Joiner puts them on the supply pressure's
 time axis; the result is a Recording of arrays, what the step analysis
 (analysis.recorded_steps) and calibration take.
@@ -34,8 +34,8 @@ import os
 from typing import Any, Optional, Union
 
 import numpy as np
-from valve_sim.analysis.measure_windows import SettingChanges
-from valve_sim.analysis.signals import (
+from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.signals import (
     Extractor,
     FLUID_PRESSURE,
     Joiner,
@@ -51,7 +51,7 @@ from valve_sim.recording.rosbag2_metadata import bag_files
 
 
 # What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
-# (then T_s comes from the pressure, valve_sim.analysis.measures).
+# (then T_s comes from the pressure, valve_sim.analysis.steps.measures).
 BAG_REQUIRED = ('supply_pressure', 'inlet_flow')
 
 

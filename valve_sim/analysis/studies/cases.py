@@ -16,20 +16,25 @@
 The cases of the paper's parameter study and the protocol that sets each case's preset.
 
 One definition for `valve-sim study`, calibration checks, tolerance studies and
-optimisation: the protocol's preset, and the runner cases of sampled valves.
-run_all() runs the paper's study on a runner backend (study_backend), run_case() one
-of its cases here; each result is {'measures', 'poppet', 'case'} (study_result()).
+optimisation: the protocol's preset, and the runner's cases (StudyCase) of the study and
+of sampled valves. run_all() runs the paper's study on a runner backend (backend),
+run_case() one of its cases here, run_samples() sampled valves; each result of the study
+is {'measures', 'poppet', 'case'} (study_result()).
 """
 
+from dataclasses import dataclass
 import sys
+from typing import Optional
 
 from valve_sim.analysis.paper import (
-    REFERENCE_SCENARIO,
+    REFERENCE_FLOW_STEP,
     STUDY_PARAMETERS,
     STUDY_VARIATIONS,
     TABLE2_CHANGES,
 )
+from valve_sim.analysis.studies.backend import CORES, open_backend, SerialBackend
 from valve_sim.core.errors import ParameterError
+from valve_sim.core.flow_step import FlowStep
 from valve_sim.core.parameters import scaled
 
 
@@ -99,17 +104,55 @@ def preset_protocol(protocol, params):
     return protocol_preset(protocol, preset), statement
 
 
+@dataclass(frozen=True)
+class StudyCase:
+    """
+    One step test of a study, as the runner (studies.runner) takes it; picklable (Dask).
+
+    index: unique within its study (the bookkeeping key); params: the complete model
+    parameters (SI), as sampled (validated by the runner: a sample outside a parameter's
+    limits is that case's error); preset_pressure [Pa]: the valve is set to crack at it
+    before its test (the pilot spring preload y_0 re-solved, as a technician turns the
+    screw), None keeps params' preload (frozen preload); flow_step: the inlet-flow step
+    test; step_size [s]: the RK4 step; record: the state names whose waveforms the row
+    keeps; envelope: the row gets the envelope's decay rate too (measures.ENVELOPE_DECAY).
+    """
+
+    index: int
+    params: dict
+    preset_pressure: Optional[float]
+    flow_step: FlowStep
+    step_size: float
+    record: tuple = ()
+    envelope: bool = False
+
+    def fingerprint_fields(self):
+        """
+        Return the case as results.fingerprint() hashes it.
+
+        The dict a case was before it was a StudyCase (its step test under 'scenario',
+        'envelope' only when set), so that a results folder written before resumes.
+        """
+        fields = {
+            'index': self.index,
+            'params': self.params,
+            'preset_pressure': self.preset_pressure,
+            'scenario': self.flow_step,
+            'step_size': self.step_size,
+            'record': list(self.record),
+        }
+        if self.envelope:
+            fields['envelope'] = True
+        return fields
+
+
 def sample_cases(params, names, values, preset, step_size):
     """Runner cases for sampled values (rows of values, columns of names)."""
     return [
-        {
-            'index': index,
-            'params': {**params, **dict(zip(names, map(float, row)))},
-            'preset_pressure': preset,
-            'scenario': REFERENCE_SCENARIO,
-            'step_size': step_size,
-            'record': [],
-        }
+        StudyCase(
+            index, {**params, **dict(zip(names, map(float, row)))}, preset,
+            REFERENCE_FLOW_STEP, step_size,
+        )
         for index, row in enumerate(values)
     ]
 
@@ -121,15 +164,15 @@ def runner_case(index, params, changes, step_size, protocol, preset_pressure):
     protocol 'held-preset' has the runner re-solve the pilot spring preload so that
     the main valve cracks at preset_pressure [Pa]; 'frozen-preload' keeps it.
     """
-    return {
-        'index': index,
-        'params': scaled(params, changes),
-        'preset_pressure': protocol_preset(protocol, preset_pressure),
-        'scenario': REFERENCE_SCENARIO,
-        'step_size': step_size,
-        'record': ['poppet_displacement'] if set(changes) <= {FIGURE8_PARAMETER} else [],
-        'envelope': True,
-    }
+    return StudyCase(
+        index,
+        scaled(params, changes),
+        protocol_preset(protocol, preset_pressure),
+        REFERENCE_FLOW_STEP,
+        step_size,
+        record=('poppet_displacement',) if set(changes) <= {FIGURE8_PARAMETER} else (),
+        envelope=True,
+    )
 
 
 def study_result(row, protocol, preset_pressure):
@@ -141,7 +184,7 @@ def study_result(row, protocol, preset_pressure):
     run gets every measure None with the reason.
     """
     import numpy as np  # here: commands import this module for their --help
-    from valve_sim.analysis.measures import MEASURE_NAMES
+    from valve_sim.analysis.steps.measures import MEASURE_NAMES
 
     case = {
         'protocol': protocol,
@@ -178,7 +221,7 @@ def run_case(params, changes, step_size, protocol=DEFAULT_PROTOCOL, preset_press
 
     preset_pressure [Pa] defaults to the cracking pressure of params.
     """
-    from valve_sim.analysis.study_runner import evaluate_case
+    from valve_sim.analysis.studies.runner import evaluate_case
     from valve_sim.core.steady_state import cracking_pressure
 
     if preset_pressure is None:
@@ -203,8 +246,7 @@ def run_all(
     Rows stream to results_path (resume: see run_cases); preset_pressure [Pa]
     defaults to the cracking pressure of params.
     """
-    from valve_sim.analysis.study_backend import SerialBackend
-    from valve_sim.analysis.study_runner import run_cases
+    from valve_sim.analysis.studies.runner import run_cases
     from valve_sim.core.steady_state import cracking_pressure
 
     if preset_pressure is None:
@@ -225,3 +267,31 @@ def run_all(
         label: study_result(rows[index], protocol, preset_pressure)
         for index, (label, _) in enumerate(labelled)
     }
+
+
+def run_samples(
+    label, params, names, values, preset, step_size, results_path, scheduler=None,
+    workers=CORES, dashboard=None, resume=False, batch_size=None,
+):
+    """
+    Run the sampled valves on the study runner; return their rows in sample order.
+
+    values: one row per valve, one column per parameter of names; preset [Pa] or None
+    (sample_cases). Rows stream to results_path (resume continues it); the backend is
+    open_backend()'s for command label.
+    """
+    from valve_sim.analysis.studies.runner import run_cases
+
+    backend = open_backend(label, scheduler, workers, dashboard)
+    try:
+        results, _ = run_cases(
+            sample_cases(params, names, values, preset, step_size),
+            results_path,
+            backend,
+            resume,
+            batch_size,
+            label=label,
+        )
+    finally:
+        backend.close()
+    return [results[index] for index in range(len(values))]

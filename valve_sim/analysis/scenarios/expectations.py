@@ -23,7 +23,7 @@ What a bench scenario expects of the valve, and each expectation judged on its r
       - no_alarm: {to: 0.5}
       - steady: {signal: supply_pressure, flow: 20 L/min, min: 7.0 MPa, max: 7.1 MPa}
 
-Times [s] count from the first tick; signals are valve_sim.analysis.tick_series.SIGNALS
+Times [s] count from the first tick; signals are valve_sim.analysis.scenarios.tick_series.SIGNALS
 (pressures gauge [Pa]); the six measures are docs/measures.md's, of the steps the
 analyser's own step analysis finds. Each expectation gives one Check per limit: what
 was measured, the limit, and whether it holds. The alarm is valve_node's overpressure
@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.tick_series import SIGNALS
+from valve_sim.analysis.scenarios.tick_series import SIGNALS
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.errors import ProfileError
 from valve_sim.core.faults import at_supply_limit
 from valve_sim.core.quantities import FLOW, NUMBER, parse_quantity, TIME, with_unit

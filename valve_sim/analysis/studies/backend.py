@@ -15,12 +15,13 @@
 """
 Where a study runs: the runner's backends, chosen and sized for this machine.
 
-A backend runs batches of cases for study_runner.run_cases(): SerialBackend (in this
+A backend runs batches of cases for runner.run_cases(): SerialBackend (in this
 process), PoolBackend (a local process pool) or DaskBackend (a Dask cluster; Dask is
 imported only by DaskBackend). open_backend() gives a DaskBackend on an existing
 cluster (scheduler tcp://HOST:PORT) or on a local cluster of workers processes, or
-without dask a PoolBackend where the command allows it. run_samples() runs sampled
-valves on one.
+without dask a PoolBackend where the command allows it. A backend receives cases and
+the function that evaluates them; it builds none (cases.run_samples runs sampled valves
+on one).
 
 Sizes are bounded before anything is allocated or started: a study of more than
 MAX_RUNS runs, or one whose runs would not fit in the memory available here
@@ -31,7 +32,7 @@ WORKERS_PER_CORE workers per core or more than the memory holds (BYTES_PER_WORKE
 import os
 import sys
 
-from valve_sim.analysis.study_cases import sample_cases
+from valve_sim.analysis.studies.results import case_index
 from valve_sim.core.errors import StudyError
 from valve_sim.core.extras import EXTRAS, require
 from valve_sim.core.input_files import size_text
@@ -215,7 +216,7 @@ class DaskBackend:
 def future_cases(batches, futures, future):
     """First and last case index of the batch a future ran."""
     batch = batches[futures.index(future)]
-    return batch[0]['index'], batch[-1]['index']
+    return case_index(batch[0]), case_index(batch[-1])
 
 
 def open_backend(command, scheduler=None, workers=CORES, dashboard=None, pool_fallback=False):
@@ -253,31 +254,3 @@ def check_workers(workers):
     """Raise StudyError unless a local cluster of workers processes fits this machine."""
     limit = WORKERS_PER_CORE * CORES  # WORKERS_PER_CORE a core
     check_fits(f'--workers {workers}', workers, 'worker processes', limit, BYTES_PER_WORKER)
-
-
-def run_samples(
-    label, params, names, values, preset, step_size, results_path, scheduler=None,
-    workers=CORES, dashboard=None, resume=False, batch_size=None,
-):
-    """
-    Run the sampled valves on the study runner; return their rows in sample order.
-
-    values: one row per valve, one column per parameter of names; preset [Pa] or None
-    (study_cases.sample_cases). Rows stream to results_path (resume continues it); the
-    backend is open_backend()'s for command label.
-    """
-    from valve_sim.analysis.study_runner import run_cases
-
-    backend = open_backend(label, scheduler, workers, dashboard)
-    try:
-        results, _ = run_cases(
-            sample_cases(params, names, values, preset, step_size),
-            results_path,
-            backend,
-            resume,
-            batch_size,
-            label=label,
-        )
-    finally:
-        backend.close()
-    return [results[index] for index in range(len(values))]

@@ -15,7 +15,7 @@
 """
 The results file of a study: its fingerprint, rows read back for a resume, their check.
 
-run_cases() (study_runner) appends every finished row to a JSON-lines file, its
+run_cases() (studies.runner) appends every finished row to a JSON-lines file, its
 first line the study's fingerprint(); read_results() reads the rows of that very
 study back (a resume), each checked by check_row() (the rows of evaluate_batch) or
 a caller's own check; drop_torn_tail() cuts a row the process died writing.
@@ -27,7 +27,7 @@ import json
 import os
 from pathlib import Path
 
-from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES
+from valve_sim.analysis.steps.measures import ENVELOPE_DECAY, MEASURE_NAMES
 from valve_sim.core.errors import InputFileError, StudyError
 from valve_sim.core.input_documents import parse_json
 from valve_sim.core.input_files import json_lines, shown, STUDY_RESULTS, STUDY_ROW
@@ -43,15 +43,27 @@ NUMBER_KEYS = (
 
 
 def fingerprint(cases):
-    """Hash of everything that determines a study's results (cases in order)."""
+    """
+    Hash of everything that determines a study's results (cases in order).
+
+    A case is a studies.cases.StudyCase (hashed as its fingerprint_fields(), the dict
+    the study's cases were before they were a dataclass, so older results folders
+    still resume) or a dict (the optimisation's candidates).
+    """
     digest = hashlib.sha256()
     for case in cases:
+        fields = case.fingerprint_fields() if hasattr(case, 'fingerprint_fields') else case
         plain = {
             key: asdict(value) if hasattr(value, '__dataclass_fields__') else value
-            for key, value in case.items()
+            for key, value in fields.items()
         }
         digest.update(json.dumps(plain, sort_keys=True, default=list).encode())
     return digest.hexdigest()[:16]
+
+
+def case_index(case):
+    """Return a case's index: a StudyCase's attribute, or a candidate dict's key."""
+    return case['index'] if isinstance(case, dict) else case.index
 
 
 def read_results(path, study, check=None):

@@ -15,19 +15,19 @@
 """
 The six measures of every inlet-flow step in a stream of samples, and their JSON file.
 
-StepAnalysis is fed joined rows (valve_sim.analysis.signals) in time order: time t [s],
+StepAnalysis is fed joined rows (valve_sim.analysis.steps.signals) in time order: time t [s],
 supply pressure p_s [Pa, gauge], main-valve displacement x [m], applied inlet
 flow q [m^3/s], the time [s] of the flow sample q came from and, where known, the
 tank pressure p_t [Pa, gauge]. The measures are taken on the pressure across the
 valve, p_s - p_t: the supply pressure above the tank, which is p_s itself with the
 tank at ambient (a back pressure then moves no measure of the valve's own response).
-valve_sim.analysis.step_detection.StepDetector finds the steps (up and down, any
+valve_sim.analysis.steps.step_detection.StepDetector finds the steps (up and down, any
 number); a step between two flow samples further apart than 1.5 pressure sample
 intervals (a coarse flowmeter) is located inside them from the pressure
 (step_detection.locate_step). A step's window ends measures.WINDOW after it, or at
 the next change of any input first (measure_windows: the next flow step, a change
 of p_t, an event given to add_event); once it has ended,
-valve_sim.analysis.measures.step_measures gives its six measures. Only the
+valve_sim.analysis.steps.measures.step_measures gives its six measures. Only the
 rows from step_detection.PRE_STEP_SPAN before the oldest open step on are kept, so
 memory stays bounded however long the stream.
 The live analyser and `valve-sim analyse` both use this class, so a bag analysed
@@ -50,11 +50,11 @@ import os
 from pathlib import Path
 
 import numpy as np
-from valve_sim.analysis.measure_windows import Cut, InputChanges
-from valve_sim.analysis.measures import step_measures, WINDOW
-from valve_sim.analysis.sample_window import last_at_or_before, TIME_TOLERANCE
-from valve_sim.analysis.signals import seconds
-from valve_sim.analysis.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
+from valve_sim.analysis.steps.measure_windows import Cut, InputChanges
+from valve_sim.analysis.steps.measures import step_measures, WINDOW
+from valve_sim.analysis.steps.sample_window import last_at_or_before, TIME_TOLERANCE
+from valve_sim.analysis.steps.signals import seconds
+from valve_sim.analysis.steps.step_detection import locate_step, PRE_STEP_SPAN, StepDetector
 from valve_sim.core.output_files import json_text, replacing, write_text
 
 

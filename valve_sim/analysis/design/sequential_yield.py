@@ -40,7 +40,7 @@ decides a yield:
                count it as meeting the yield).
 """
 
-from valve_sim.analysis.tolerances import yield_interval
+from valve_sim.analysis.studies.tolerances import yield_interval
 
 FIRST_ROUND = 16  # valves in a candidate's first round
 STOP_ALPHA = 0.05  # the chance of a wrong early stop, split over the looks

@@ -33,7 +33,7 @@ Six roles, each carried by a topic (valve_node's by default, any other by mappin
 Pressures on the wire are absolute [Pa]; ambient_pressure [Pa] is subtracted to get
 the model's gauge pressure (0 for a gauge sensor). Displacements [m], flows [m^3/s].
 Where the tank's pressure is known, the step measures take the supply pressure above
-it, p_s - p_t (valve_sim.analysis.step_analysis).
+it, p_s - p_t (valve_sim.analysis.steps.step_analysis).
 
 Time: clock "header" takes header.stamp (valve_node stamps every message of a tick
 with the model time); clock "receive" takes each message's receive time (the bag's

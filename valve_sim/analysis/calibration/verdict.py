@@ -36,7 +36,7 @@ import math
 import time
 
 import numpy as np
-from valve_sim.analysis.calibration_parameters import apply_values, FitParameter
+from valve_sim.analysis.calibration.parameters import apply_values, FitParameter
 from valve_sim.core.errors import USER_ERRORS
 from valve_sim.core.parameters import SPECS
 
@@ -128,12 +128,12 @@ def measures_residual(target):
     ones left out), each in units of the paper's tolerance (calibration_targets.
     PAPER_TOLERANCES).
     """
-    from valve_sim.analysis.calibration_targets import (
+    from valve_sim.analysis.calibration.targets import (
         PAPER_TOLERANCES,
         UNDEFINED_MEASURE_RESIDUAL,
     )
-    from valve_sim.analysis.measure_windows import Cut
-    from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
+    from valve_sim.analysis.steps.measure_windows import Cut
+    from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
     from valve_sim.core.model import X
 
     if target.kind == 'measures':

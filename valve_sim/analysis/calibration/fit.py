@@ -39,8 +39,8 @@ from typing import Optional
 
 import numpy as np
 from scipy.optimize import least_squares
-from valve_sim.analysis.calibration_parameters import apply_values, start_value, STEP_TIME
-from valve_sim.analysis.calibration_uncertainty import add_uncertainty, central_jacobian
+from valve_sim.analysis.calibration.parameters import apply_values, start_value, STEP_TIME
+from valve_sim.analysis.calibration.uncertainty import add_uncertainty, central_jacobian
 from valve_sim.core.errors import CalibrationError, MODEL_ERRORS
 
 
@@ -324,7 +324,7 @@ def _fit_from_starts(objective, settings):
 
 def start_fit_text(target, cost):
     """Say how far a start's residual RMS lies from the noise (tolerance) it is counted in."""
-    from valve_sim.analysis.calibration_verdict import FAR_ABOVE
+    from valve_sim.analysis.calibration.verdict import FAR_ABOVE
 
     count = len(target.residual_names)
     rms = math.sqrt(2.0 * cost / max(count, 1))

@@ -35,7 +35,7 @@ that names none of a later one keeps working): inlet_flow [m^3/s], and tank_pres
 [Pa, gauge], optional (without it the tank stays at valve_node's tank_pressure
 parameter). Events: valve_sim.core.fault_schedule's format; `set` takes fault.* and
 sensor.* settings and valve_node's live parameters (ROS name or paper symbol, a
-number in SI units or with a unit). Expectations: valve_sim.analysis.expectations.
+number in SI units or with a unit). Expectations: valve_sim.analysis.scenarios.expectations.
 Every change, event, time and window must lie within the run (0 .. duration). Every
 problem is one line naming the file, the key and what is wrong (ProfileError, an
 InputFileError).
@@ -45,7 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from valve_sim.analysis.expectations import check_times, parse_expectations
+from valve_sim.analysis.scenarios.expectations import check_times, parse_expectations
 from valve_sim.core.catalogue import section_of
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.fault_schedule import (

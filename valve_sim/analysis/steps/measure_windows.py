@@ -42,7 +42,7 @@ changes (InputChanges) and hands each step its Cut.
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.analysis.sample_window import between, last_span, TIME_TOLERANCE
+from valve_sim.analysis.steps.sample_window import between, last_span, TIME_TOLERANCE
 
 
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
@@ -136,7 +136,7 @@ def at_rest(measures, t, supply_pressure, since):
     pressure step |p_inf - p_0| for P_o, the first overshoot |p_1 - p_inf| for the
     others (the remains of the last response would shift its peaks, band and settling).
     """
-    from valve_sim.analysis.measures import MEASURE_NAMES, WINDOW
+    from valve_sim.analysis.steps.measures import MEASURE_NAMES, WINDOW
 
     details, values, reasons = measures.details, measures.values, measures.reasons
     if since is None or 'p_inf' not in details or since.time <= details['t_step'] - WINDOW:
@@ -193,7 +193,7 @@ class InputChanges:
     """
 
     def __init__(self, merge_time=0.05):
-        from valve_sim.analysis.step_detection import StepDetector
+        from valve_sim.analysis.steps.step_detection import StepDetector
 
         self.tank = StepDetector(TANK_STEP_THRESHOLD, merge_time)
         self.events = []  # (time [s], what), sorted

@@ -15,17 +15,17 @@
 """
 Figures of a robust optimisation: the Pareto front, and a design's measures against Table 2's.
 
-Rows are analysis.robust_yield's candidate rows; the outcome is
-analysis.optimisation.outcome_of's.
+Rows are analysis.design.robust_yield's candidate rows; the outcome is
+analysis.design.optimisation.outcome_of's.
 """
 
 from itertools import combinations
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.plotting import MEASURE_LABELS, plt, save_figure
-from valve_sim.analysis.study_plots import _limit_lines
-from valve_sim.analysis.tolerances import parse_limits
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.plots import _limit_lines
+from valve_sim.analysis.studies.tolerances import parse_limits
 
 
 def _objective_values(problem, rows, index):

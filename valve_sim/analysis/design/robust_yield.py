@@ -15,19 +15,19 @@
 """
 The yield of one design under its machining tolerances: a whole Monte Carlo as one work unit.
 
-A candidate case is a study-runner case (analysis.study_runner) whose work is the
+A candidate case is a study-runner case (analysis.studies.runner) whose work is the
 Monte Carlo of one design:
   index, label     bookkeeping (unique index within its results file)
   params           the complete parameter set the design is applied to (SI)
   design           {parameter name: value} of the candidate
-  protocol         'held-preset' or 'frozen-preload' (analysis.study_cases.PROTOCOLS)
+  protocol         'held-preset' or 'frozen-preload' (analysis.studies.cases.PROTOCOLS)
   preset_pressure  [Pa] the preset the design is set to (held preset), else None
-  tolerances       variation texts (analysis.tolerances), stated about the design's values
-  samples, sampler, seed   the Monte Carlo's points (analysis.tolerances.draw)
+  tolerances       variation texts (analysis.studies.tolerances), stated about the design's values
+  samples, sampler, seed   the Monte Carlo's points (analysis.studies.tolerances.draw)
   limits           limit texts ('P_1_percent<=3.2'); min_decay_rate [1/s] or None
   scenario, step_size
   keep_samples     whether the row keeps every sampled valve's row (for figures)
-  stop_alpha       the sequential rule's alpha (analysis.sequential_yield), or None:
+  stop_alpha       the sequential rule's alpha (analysis.design.sequential_yield), or None:
                    every valve runs, as in the confirmation
   first_round, required_yield, objectives ([measure, sense] pairs), front (the
                    objective points, to minimise, of the designs found feasible so far)
@@ -39,7 +39,7 @@ pilot spring preload), draws the sampled valves about it as `valve-sim tolerance
 does (same distributions, sampler and seed, each valve set to the nominal valve's
 cracking pressure), runs the nominal valve, and then the samples in rounds through
 study_runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
-analysis.sequential_yield decides (a row does not depend on its batch, so a valve
+analysis.design.sequential_yield decides (a row does not depend on its batch, so a valve
 is judged the same in any round).
 
 check_candidate_row(row) checks a row read back from a results file (--resume) before
@@ -52,10 +52,12 @@ test (core.linear.slowest_decay_rate; the default 3 1/s is 95 % within the measu
 with its Clopper-Pearson interval (tolerances.yield_interval).
 """
 
-from valve_sim.analysis.measures import WINDOW
-from valve_sim.analysis.sequential_yield import DECISIONS, dominated, look, rounds
-from valve_sim.analysis.study_cases import preset_protocol, sample_cases
-from valve_sim.analysis.tolerances import (
+from dataclasses import replace
+
+from valve_sim.analysis.design.sequential_yield import DECISIONS, dominated, look, rounds
+from valve_sim.analysis.steps.measures import WINDOW
+from valve_sim.analysis.studies.cases import preset_protocol, sample_cases
+from valve_sim.analysis.studies.tolerances import (
     draw,
     parse_limits,
     parse_variations,
@@ -121,7 +123,7 @@ def evaluate_candidate(case):
     row: index, label, design, error (the nominal valve could not be set: then no
     sample runs), preset_pressure (the sampled valves'), nominal (the runner's row of
     the nominal valve with decay_rate and pass), samples (the valves run),
-    planned_samples, runs (nominal included), decision (analysis.sequential_yield),
+    planned_samples, runs (nominal included), decision (analysis.design.sequential_yield),
     passed, yield, ci95, pass (one '1' or '0' per valve run, in sample order),
     failures (per limit, failed runs, slow decay), percentiles of the measures over
     the valves run, and sample_rows (every sampled valve's row, with its sampled
@@ -142,7 +144,7 @@ def evaluate_candidate(case):
     names = [d.name for d in distributions]
     values = draw(distributions, planned, case['seed'], case['sampler'])
     cases = sample_cases(nominal, names, values, preset, case['step_size'])
-    (nominal_row,) = _runs(case, limits, [{**cases[0], 'index': planned, 'params': nominal}])
+    (nominal_row,) = _runs(case, limits, [replace(cases[0], index=planned, params=nominal)])
     alpha = case.get('stop_alpha')
     point = _objective_point(case, nominal_row)
     sample_rows, decision = [], 'nominal'
@@ -187,13 +189,13 @@ def evaluate_candidate(case):
 
 def _runs(case, limits, valves):
     """Run valves (runner cases) as one batch; return their rows with decay_rate and pass."""
-    from valve_sim.analysis.study_runner import evaluate_batch  # numba: on the worker
+    from valve_sim.analysis.studies.runner import evaluate_batch  # numba: on the worker
 
     runs = evaluate_batch(valves)
     rate = case['min_decay_rate']
     for run, valve in zip(runs, valves):
         run['decay_rate'] = (
-            decay_rate(valve['params'], run, case['scenario']) if rate is not None else None
+            decay_rate(valve.params, run, case['scenario']) if rate is not None else None
         )
         run['pass'] = valve_passes(run, limits, rate)
     return runs
@@ -215,7 +217,7 @@ def check_candidate_row(row):
     The resume check of study_results.read_results for the optimisation's results files:
     the nominal valve's row and every kept sample row are checked as the runner's rows.
     """
-    from valve_sim.analysis.study_results import check_row, is_number
+    from valve_sim.analysis.studies.results import check_row, is_number
 
     if not isinstance(row, dict):
         raise ValueError(f'a row is a JSON object, got {shown(row)}')

@@ -18,7 +18,7 @@ Robust design optimisation: the best nominal response whose valves survive their
 The problem (RobustProblem): designed parameters with bounds, objectives on the
 nominal valve's six measures (minimise or maximise), limits every valve must meet,
 the machining tolerances about each design's values, and a required yield. Each
-candidate design is one work unit of the study runner (analysis.robust_yield): its
+candidate design is one work unit of the study runner (analysis.design.robust_yield): its
 nominal run and a quasi-random Monte Carlo of its tolerances, one batch of the lanes
 kernel. A design is feasible when its nominal valve meets the limits (and decays),
 its objectives exist, and its yield is at least the required yield.
@@ -27,7 +27,7 @@ search() runs NSGA-II (pymoo: constraint domination, so feasible designs rank fi
 infeasible ones by their violation) generation by generation, with the designs in the
 unit cube of the bounds and a Latin-hypercube first generation. Each generation's
 candidates go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
-as far as its verdict needs (analysis.sequential_yield: rounds, the nominal screen, a
+as far as its verdict needs (analysis.design.sequential_yield: rounds, the nominal screen, a
 stop once a feasible design before it dominates it). The optimiser is
 seeded, and the candidates of a generation follow only from the rows of the ones
 before, so --resume replays it: every generation on file is read (the runner checks
@@ -43,22 +43,22 @@ from pathlib import Path
 import sys
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
-from valve_sim.analysis.robust_yield import (
+from valve_sim.analysis.design.robust_yield import (
     check_candidate_row,
     evaluate_candidates,
     MIN_DECAY_RATE,
 )
-from valve_sim.analysis.sequential_yield import (
+from valve_sim.analysis.design.sequential_yield import (
     dominated,
     FIRST_ROUND,
     RunTally,
     STOP_ALPHA,
 )
-from valve_sim.analysis.study_results import fingerprint
-from valve_sim.analysis.study_runner import Progress, run_cases
-from valve_sim.analysis.tolerances import (
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP, TABLE2_CHANGES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.results import fingerprint
+from valve_sim.analysis.studies.runner import Progress, run_cases
+from valve_sim.analysis.studies.tolerances import (
     follows_nominal,
     parse_variation,
     SAMPLERS,
@@ -145,7 +145,7 @@ def parse_objectives(minimise, maximise):
 
 def parse_tolerances(texts, params, design):
     """
-    Tolerance items (analysis.tolerances forms) checked against params; returns the texts.
+    Tolerance items (analysis.studies.tolerances forms) checked against params; returns the texts.
 
     A designed parameter's tolerance must follow its value (±X%, ±Xum, ~N(S%) or ~N(S)):
     a fixed range would not move with the design.
@@ -241,7 +241,7 @@ class RobustProblem:
             'seed': self.seed + 1 if confirming else self.seed,
             'limits': list(self.limits),
             'min_decay_rate': self.min_decay_rate,
-            'scenario': REFERENCE_SCENARIO,
+            'scenario': REFERENCE_FLOW_STEP,
             'step_size': self.step_size,
             'keep_samples': confirming,
             'stop_alpha': None if confirming else self.stop_alpha,

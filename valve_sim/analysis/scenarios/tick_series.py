@@ -15,7 +15,7 @@
 """
 valve_node's states tick by tick as arrays: one row per header stamp, every signal a column.
 
-A bench scenario is judged on these (valve_sim.analysis.expectations), and the test
+A bench scenario is judged on these (valve_sim.analysis.scenarios.expectations), and the test
 kit hands them to a test. Rows are the ticks' stamps; a signal a tick did not publish
 (a sensor in dropout) is NaN there. Pressures are the model's gauge pressures [Pa]
 (the wire's absolute pressure minus ambient_pressure); time [s] counts from the
@@ -25,8 +25,8 @@ first tick (start_ns, the stamp of t = 0).
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.analysis.measure_windows import event_name
-from valve_sim.analysis.step_analysis import StepAnalysis
+from valve_sim.analysis.steps.measure_windows import event_name
+from valve_sim.analysis.steps.step_analysis import StepAnalysis
 from valve_sim.core.quantities import FLOW, LENGTH, PRESSURE, VELOCITY
 
 

@@ -17,7 +17,7 @@ The paper's test as data: an inlet-flow step (or ramp) from one steady flow to a
 
 TankPressure is the second input's profile the same way: the tank's (back) pressure held,
 stepped or ramped. Kept apart from the simulation so that the command line and the
-paper's reference data can name scenarios without loading the integrator (numba) or scipy.
+paper's reference data can name flow steps without loading the integrator (numba) or scipy.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ LITRE_PER_MINUTE = 1e-3 / 60.0  # [m^3/s]
 
 
 @dataclass(frozen=True)
-class Scenario:
+class FlowStep:
     """Inlet-flow step test. Flows in m^3/s, times in s."""
 
     initial_flow: float = 5.0 * LITRE_PER_MINUTE

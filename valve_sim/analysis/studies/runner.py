@@ -15,24 +15,16 @@
 """
 The study runner: many step tests in batches, on Dask or a local process pool.
 
-A case is a dict:
-  index            int, unique within its study (the bookkeeping key)
-  params           complete model parameter dict (SI), as sampled (validated here:
-                   a sample outside a parameter's limits is that case's error)
-  preset_pressure  [Pa] the valve is set to crack at this pressure before its test
-                   (the pilot spring preload y_0 re-solved, as a technician turns the
-                   screw); None keeps params' preload (frozen preload)
-  scenario         core.simulation.Scenario
-  step_size        [s] RK4 step
-  record           state names whose waveforms the row keeps (usually empty)
+A case is a studies.cases.StudyCase: its index (the bookkeeping key), the valve's
+parameters, the preset it is set to, the flow step, the RK4 step and what to record.
 evaluate_batch(cases) -> rows is the one work unit: a row holds index, the preload
 used, the cracking pressure, the initial p_s and x, the six measures, their reasons,
 and error (a message when the valve could not be set or the run failed; then the
 measures are None).
 
-run_cases() submits batches to a backend (study_backend: DaskBackend, PoolBackend,
+run_cases() submits batches to a backend (backend: DaskBackend, PoolBackend,
 SerialBackend) and appends every finished row to a JSON-lines results file as it
-arrives (study_results: first line the study's fingerprint), so an interrupted study
+arrives (results: first line the study's fingerprint), so an interrupted study
 resumes with only the missing indices. A row whose index is already on file is
 dropped, so a batch that Dask recomputes after a worker died is never recorded twice.
 """
@@ -43,13 +35,18 @@ from pathlib import Path
 import sys
 import time
 
-from valve_sim.analysis.measures import (
+from valve_sim.analysis.steps.measures import (
     ENVELOPE_DECAY,
     envelope_decay_rate,
     MEASURE_NAMES,
     step_measures,
 )
-from valve_sim.analysis.study_results import drop_torn_tail, fingerprint, read_results
+from valve_sim.analysis.studies.results import (
+    case_index,
+    drop_torn_tail,
+    fingerprint,
+    read_results,
+)
 from valve_sim.core.batch import simulate_batch
 from valve_sim.core.errors import MODEL_ERRORS, ParameterError, StudyError
 from valve_sim.core.output_files import append_to, finite, make_folder, write_text
@@ -71,7 +68,7 @@ def evaluate_batch(cases):
     """
     Rows of a batch of cases (the work unit a backend runs), in the order of cases.
 
-    Each valve is set to its preset first. Cases that share a scenario and step
+    Each valve is set to its preset first. Cases that share a flow_step and step
     size then run together through core.batch.simulate_batch: several valves
     per kernel call, each bit-identical to a run of its own, the stable steady
     state before the step held instead of integrated (docs/speed.md). A row does
@@ -79,32 +76,32 @@ def evaluate_batch(cases):
     """
     rows, groups = {}, {}
     for case in cases:
-        row = {'index': case['index']}
+        row = {'index': case.index}
         try:
-            params = validate(case['params'])
-            if case.get('preset_pressure') is None:
+            params = validate(case.params)
+            if case.preset_pressure is None:
                 cracking = cracking_pressure(params)
             else:
-                preload, cracking = preset_preload(params, case['preset_pressure'])
+                preload, cracking = preset_preload(params, case.preset_pressure)
                 params = {**params, 'pilot_spring_preload': preload}
             row['pilot_spring_preload'] = params['pilot_spring_preload']
             row['cracking_pressure'] = cracking
         except MODEL_ERRORS as error:
-            rows[case['index']] = _failed(row, error)
+            rows[case.index] = _failed(row, error)
             continue
-        key = (case['scenario'], case['step_size'])
+        key = (case.flow_step, case.step_size)
         groups.setdefault(key, []).append((case, row, params))
-    for (scenario, step_size), members in groups.items():
+    for (flow_step, step_size), members in groups.items():
         outcomes = simulate_batch(
-            [params for _, _, params in members], scenario, step_size, RECORD_INTERVAL
+            [params for _, _, params in members], flow_step, step_size, RECORD_INTERVAL
         )
         for (case, row, _), outcome in zip(members, outcomes):
-            rows[case['index']] = (
+            rows[case.index] = (
                 _measured(case, row, outcome.waveforms)
                 if outcome.success
                 else _failed(row, outcome.message)
             )
-    return [rows[case['index']] for case in cases]
+    return [rows[case.index] for case in cases]
 
 
 def _failed(row, reason):
@@ -115,17 +112,17 @@ def _measured(case, row, waveforms):
     """
     Complete the row of a run: initial state, the six measures and reasons, waveforms.
 
-    A case with 'envelope' set gets the envelope's decay rate too (ENVELOPE_DECAY).
+    A case with envelope set gets the envelope's decay rate too (ENVELOPE_DECAY).
     """
-    scenario = case['scenario']
+    flow_step = case.flow_step
     row['initial_supply_pressure'] = float(waveforms['supply_pressure'][0])
     row['initial_main_valve_displacement'] = float(waveforms['main_valve_displacement'][0])
     measures = step_measures(
         waveforms.time,
         waveforms['supply_pressure'],
         waveforms['main_valve_displacement'],
-        scenario.step_time,
-        1 if scenario.final_flow >= scenario.initial_flow else -1,
+        flow_step.step_time,
+        1 if flow_step.final_flow >= flow_step.initial_flow else -1,
     ).as_dict()
     row.update(
         measures={
@@ -135,20 +132,20 @@ def _measured(case, row, waveforms):
         reasons=measures['reasons'],
         error=None,
     )
-    if case.get('envelope'):  # T_s's continuous companion, for the study (docs/measures.md)
+    if case.envelope:  # T_s's continuous companion, for the study (docs/measures.md)
         decay, reason = envelope_decay_rate(
             waveforms.time,
             waveforms['supply_pressure'],
             waveforms['main_valve_displacement'],
-            scenario.step_time,
+            flow_step.step_time,
         )
         row['measures'][ENVELOPE_DECAY] = decay
         if reason:
             row['reasons'][ENVELOPE_DECAY] = reason
-    if case.get('record'):
+    if case.record:
         row['waveforms'] = {
             'time': waveforms.time.tolist(),
-            **{name: waveforms[name].tolist() for name in case['record']},
+            **{name: waveforms[name].tolist() for name in case.record},
         }
     return row
 
@@ -231,7 +228,7 @@ def run_cases(
     spans more than this call (the rows on file are skipped in it). check: the row
     check of evaluate's rows for a resume (read_results; default check_row).
     """
-    indices = [case['index'] for case in cases]
+    indices = [case_index(case) for case in cases]
     if len(set(indices)) != len(indices):
         raise ParameterError('case indices must be unique')
     study = fingerprint(cases)
@@ -243,7 +240,7 @@ def run_cases(
         )
     rows = read_results(results_path, study, check) if resume else {}
     rows = {index: row for index, row in rows.items() if index in set(indices)}
-    missing = [case for case in cases if case['index'] not in rows]
+    missing = [case for case in cases if case_index(case) not in rows]
     if resume and rows:
         _say(
             progress_stream,

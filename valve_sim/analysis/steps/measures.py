@@ -52,10 +52,12 @@ import math
 from typing import Any, TYPE_CHECKING
 
 import numpy as np
-from valve_sim.analysis.measure_windows import (  # noqa: F401 (the measures' constants)
+from valve_sim.analysis.steps.measure_windows import (  # noqa: F401 (the measures' constants)
     at_rest, Cut, early_end, FINAL_VALUE_MEASURES, SETTLED_SPAN, SETTLING_BAND,
 )
-from valve_sim.analysis.sample_window import between, last_at_or_before, last_span, window_end
+from valve_sim.analysis.steps.sample_window import (
+    between, last_at_or_before, last_span, window_end,
+)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

@@ -36,7 +36,7 @@ import math
 import re
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.output_files import replacing
 from valve_sim.core.parameters import resolve_name, SPECS

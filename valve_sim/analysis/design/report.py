@@ -15,8 +15,8 @@
 """
 What a robust optimisation writes: the Pareto set (CSV, JSON) and a parameter file per design.
 
-The outcome is analysis.optimisation.outcome_of's: the Pareto designs with their
-search and confirmation rows (analysis.robust_yield), the baselines (the reference
+The outcome is analysis.design.optimisation.outcome_of's: the Pareto designs with their
+search and confirmation rows (analysis.design.robust_yield), the baselines (the reference
 valve and Table 2) and the chosen design. A parameter file holds every model
 parameter of its design under '/**/relief_valve', so it applies to a valve_node in
 any namespace and to `valve-sim ... --params FILE`; under the held preset it also
@@ -26,8 +26,8 @@ holds preset_pressure, which sets the pilot spring preload when the file is load
 from collections import Counter
 import csv
 
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.sequential_yield import planned_runs_of, runs_of
+from valve_sim.analysis.design.sequential_yield import planned_runs_of, runs_of
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
 from valve_sim.core.parameters import NODE_NAME, PARAMETERS
 

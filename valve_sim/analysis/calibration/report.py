@@ -20,15 +20,15 @@ parameter and setting, the fitted, tied and derived ones marked; report_document
 the report as a JSON-ready dict (fitted values, 95 % intervals, correlations,
 residuals, constraints, starts, wall time); report_text(): that report for people;
 plot_fit(): the recording or the target measures against the calibrated model.
-Each takes a CalibrationResult of analysis.calibration and its target
-(analysis.calibration_targets).
+Each takes a CalibrationResult of analysis.calibration.fit and its target
+(analysis.calibration.targets).
 """
 
 import math
 
 import numpy as np
-from valve_sim.analysis.calibration_parameters import BEARING_INPUTS
-from valve_sim.analysis.calibration_verdict import verdict_line, verdict_lines
+from valve_sim.analysis.calibration.parameters import BEARING_INPUTS
+from valve_sim.analysis.calibration.verdict import verdict_line, verdict_lines
 from valve_sim.analysis.plotting import plot_measures_fit, plot_recording_fit
 from valve_sim.core.bearing import COEFFICIENTS
 from valve_sim.core.parameters import NODE_NAME

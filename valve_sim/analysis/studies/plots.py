@@ -19,9 +19,9 @@ Rows are the study runner's (measures, error); limits are tolerances.Limit.
 """
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.plotting import MEASURE_LABELS, plt, save_figure
-from valve_sim.analysis.tolerances import passes
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.tolerances import passes
 
 
 # Parameter units shown in a unit a person reads: (SI unit, largest |value| below) ->

@@ -32,10 +32,10 @@ valve-sim's own measures say, with a reason, where a run has no step response.
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.analysis.measures import step_measures
+from valve_sim.analysis.steps.measures import step_measures
 from valve_sim.core.errors import IntegrationError, SteadyStateError
 from valve_sim.core.model import P_S, X
-from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.core.simulation import FlowStep, simulate
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 
@@ -76,9 +76,9 @@ def envelope_run(params, preset_pressure, initial_flow, final_flow, ramp_time=0.
     case = with_preset_pressure(params, preset_pressure)
     fill = filling_time(case, preset_pressure, final_flow) if final_flow > 0.0 else 0.0
     end_time = STEP_TIME + ramp_time + SETTLE_TIME + (fill if initial_flow == 0.0 else 0.0)
-    scenario = Scenario(initial_flow, final_flow, STEP_TIME, end_time, ramp_time)
+    flow_step = FlowStep(initial_flow, final_flow, STEP_TIME, end_time, ramp_time)
     try:
-        waveforms = simulate(case, scenario, step_size, 1e-4)
+        waveforms = simulate(case, flow_step, step_size, 1e-4)
     except IntegrationError as error:
         run.outcome, run.message = 'diverged', str(error)
         return run
@@ -173,12 +173,12 @@ def judged_run(params, faults, initial_flow, final_flow, initial_tank, final_tan
         'final_flow': final_flow, 'initial_tank': initial_tank, 'final_tank': final_tank,
         'ramp_time': ramp_time,
     }
-    scenario = Scenario(initial_flow, final_flow, STEP_TIME, end_time, ramp_time)
+    flow_step = FlowStep(initial_flow, final_flow, STEP_TIME, end_time, ramp_time)
     tank = TankPressure(initial_tank, final_tank, STEP_TIME, ramp_time)
     ends = []
     for step in (step_size, step_size / 4):
         try:
-            run = simulate(params, scenario, step, 1e-4, faults, tank=tank)
+            run = simulate(params, flow_step, step, 1e-4, faults, tank=tank)
         except (ParameterError, SteadyStateError) as error:
             return JudgedRun(case, 'refused', str(error))
         except OverpressureError as error:
@@ -228,12 +228,12 @@ def property_findings(params, faults, initial_flow, final_flow, initial_tank, fi
     from valve_sim.core.errors import OverpressureError, ParameterError
     from valve_sim.core.simulation import simulate_alarms, TankPressure
 
-    scenario = Scenario(initial_flow, final_flow, STEP_TIME / 2, end_time, ramp_time)
+    flow_step = FlowStep(initial_flow, final_flow, STEP_TIME / 2, end_time, ramp_time)
     tank = TankPressure(initial_tank, final_tank, STEP_TIME / 2, ramp_time)
     runs = []
     for step in (step_size, step_size, step_size / 4):
         try:
-            runs.append(simulate(params, scenario, step, 1e-4, faults, tank=tank))
+            runs.append(simulate(params, flow_step, step, 1e-4, faults, tank=tank))
         except (ParameterError, SteadyStateError, OverpressureError):
             return []
         except IntegrationError as error:

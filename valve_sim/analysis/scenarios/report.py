@@ -30,7 +30,7 @@ import socket
 import xml.etree.ElementTree as ElementTree
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.output_files import json_text, replacing, write_text, xml_bytes
 
 
@@ -121,7 +121,7 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
 
 def plot_run(path, run):
     """Draw p_s (and p_t if driven), x and y, q_in and q_r over the run, with events and limits."""
-    from valve_sim.analysis.expectations import Bound
+    from valve_sim.analysis.scenarios.expectations import Bound
     from valve_sim.analysis.plotting import plt, save_figure
 
     series, scenario = run.series, run.scenario

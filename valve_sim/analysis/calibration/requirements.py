@@ -29,9 +29,9 @@ import math
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from valve_sim.analysis.measures import WINDOW
-from valve_sim.analysis.paper import REFERENCE_SCENARIO, TABLE2_CHANGES
-from valve_sim.analysis.study_cases import case_parameters, study_cases
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP, TABLE2_CHANGES
+from valve_sim.analysis.steps.measures import WINDOW
+from valve_sim.analysis.studies.cases import case_parameters, study_cases
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import MODEL_ERRORS
 from valve_sim.core.linear import modes
@@ -84,7 +84,7 @@ class PilotFlowLimit:
     """Pilot flow (through bearings, damping orifice and rod clearance) at most maximum."""
 
     maximum: float  # [m^3/s]
-    at_flow: float = REFERENCE_SCENARIO.initial_flow  # [m^3/s]
+    at_flow: float = REFERENCE_FLOW_STEP.initial_flow  # [m^3/s]
 
     @property
     def name(self):
@@ -216,7 +216,7 @@ class ModesDecay:
         case = case_parameters(params, self.changes, 'held-preset', cracking_pressure(params))
         rates = [
             mode.decay_rate
-            for flow in (REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow)
+            for flow in (REFERENCE_FLOW_STEP.initial_flow, REFERENCE_FLOW_STEP.final_flow)
             for mode in modes(case, flow)
         ]
         return min(rates)
@@ -238,7 +238,7 @@ class ModesDecay:
 RELIEF_TOLERANCE = 0.01  # p_s at the window's end within 1 % of the relieving steady state
 
 
-def relief_error(params, scenario=REFERENCE_SCENARIO, step_size=1e-5):
+def relief_error(params, flow_step=REFERENCE_FLOW_STEP, step_size=1e-5):
     """
     Return how far a step test ends from relieving through the main stage [-].
 
@@ -247,11 +247,11 @@ def relief_error(params, scenario=REFERENCE_SCENARIO, step_size=1e-5):
     ends with the main valve shut, or on another branch (the pilot poppet on its
     stop and p_s far above the preset), gets 1 or more.
     """
-    final = steady_state(params, scenario.final_flow)
+    final = steady_state(params, flow_step.final_flow)
     if final[X] <= 0.0:
         return 1.0
-    waveforms = simulate(params, scenario, step_size, 1e-3)
-    settled = waveforms.time >= scenario.end_time - 0.05
+    waveforms = simulate(params, flow_step, step_size, 1e-3)
+    settled = waveforms.time >= flow_step.end_time - 0.05
     if np.any(waveforms['main_valve_displacement'][settled] <= 0.0):
         return 1.0 + abs(float(np.mean(waveforms['supply_pressure'][settled])) / final[0] - 1.0)
     return abs(float(np.mean(waveforms['supply_pressure'][settled])) / final[0] - 1.0)
@@ -311,7 +311,7 @@ class StudyRelieves:
         for label, changes in study_cases():
             try:
                 case = case_parameters(params, changes, 'held-preset', preset)
-                initial = steady_state(case, REFERENCE_SCENARIO.initial_flow)
+                initial = steady_state(case, REFERENCE_FLOW_STEP.initial_flow)
                 error = relief_error(case)
             except MODEL_ERRORS as problem:
                 failed.append(f'{label}: {problem}')

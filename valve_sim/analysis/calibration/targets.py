@@ -36,13 +36,13 @@ import math
 from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
-from valve_sim.analysis.step_detection import detect_steps
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.steps.step_detection import detect_steps
 from valve_sim.core.errors import CalibrationError
+from valve_sim.core.flow_step import FlowStep
 from valve_sim.core.input_files import shown
 from valve_sim.core.model import X
-from valve_sim.core.scenario import Scenario
 from valve_sim.core.simulation import simulate, simulate_recorded_flow, Waveforms
 
 if TYPE_CHECKING:
@@ -67,12 +67,12 @@ class MeasuresTarget:
 
     def __init__(self, values: Mapping[str, float], tolerances: Mapping[str, float],
                  weights: Optional[Mapping[str, float]] = None,
-                 scenario: Scenario = REFERENCE_SCENARIO, step_size: float = 1e-5) -> None:
+                 flow_step: FlowStep = REFERENCE_FLOW_STEP, step_size: float = 1e-5) -> None:
         self.names = [name for name in MEASURE_NAMES if name in values]
         self.values = {name: float(values[name]) for name in self.names}
         self.tolerances = {name: float(tolerances[name]) for name in self.names}
         self.weights = {name: float((weights or {}).get(name, 1.0)) for name in self.names}
-        self.scenario, self.step_size = scenario, step_size
+        self.flow_step, self.step_size = flow_step, step_size
         self.residual_names = list(self.names)
 
     @classmethod
@@ -133,19 +133,19 @@ class MeasuresTarget:
         if not values:
             raise CalibrationError('the step has none of the six measures: '
                                    + '; '.join(f'{k}: {v}' for k, v in record['reasons'].items()))
-        scenario = Scenario(float(record['flow_before']), float(record['flow_after']),
-                            REFERENCE_SCENARIO.step_time, REFERENCE_SCENARIO.end_time)
-        return cls(values, PAPER_TOLERANCES, scenario=scenario, step_size=step_size)
+        flow_step = FlowStep(float(record['flow_before']), float(record['flow_after']),
+                             REFERENCE_FLOW_STEP.step_time, REFERENCE_FLOW_STEP.end_time)
+        return cls(values, PAPER_TOLERANCES, flow_step=flow_step, step_size=step_size)
 
     def model_output(self, params: Mapping[str, float]) -> tuple[dict[str, Any], Waveforms]:
         """Measures (StepMeasures.as_dict) and waveforms of the model's step test."""
-        waveforms = simulate(params, self.scenario, self.step_size, 1e-4)
+        waveforms = simulate(params, self.flow_step, self.step_size, 1e-4)
         measures = step_measures(
             waveforms.time,
             waveforms['supply_pressure'],
             waveforms['main_valve_displacement'],
-            self.scenario.step_time,
-            1 if self.scenario.final_flow >= self.scenario.initial_flow else -1,
+            self.flow_step.step_time,
+            1 if self.flow_step.final_flow >= self.flow_step.initial_flow else -1,
         ).as_dict()
         return measures, waveforms
 
