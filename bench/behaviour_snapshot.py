@@ -51,6 +51,8 @@ COMMANDS = [
 HELPS = [[]] + [[c] for c in COMMANDS] + [['scenario', 'run'], ['scenario', 'check']]
 BAG = 'bags/reference_step.mcap'
 RIG = 'bags/rig_step.mcap'
+RIG_TOPICS = ['--topic-supply-pressure', '/rig/inlet_pressure', '--topic-inlet-flow',
+              '/rig/flowmeter']
 # name -> argv after `valve-sim` ({out}: the case's fresh output folder)
 CASES = {
     'simulate-json': ['simulate', '--end-time', '0.4', '--json'],
@@ -61,8 +63,11 @@ CASES = {
     'simulate-rig': ['simulate', '--end-time', '0.35', '--mcap', '{out}/rig.mcap',
                      '--rig-topics', 'p,q', '--pressure-noise', '1000', '--json',
                      '--start-time', '2026-11-29T12:00:00Z'],
-    'simulate-overpressure': ['simulate', '--end-time', '0.3', '--final-flow', '200L/min',
-                              '--set', 'burst_pressure=8e6', '--json'],
+    'simulate-overpressure': ['simulate', '--end-time', '0.4', '--set', 'burst_pressure=7.1e6',
+                              '--json', '--mcap', '{out}/halted.mcap',
+                              '--start-time', '2026-11-29T12:00:00Z'],
+    'simulate-faults': ['simulate', '--end-time', '0.4', '--faults',
+                        'config/fault_schedule_example.yaml', '--json'],
     'simulate-tank': ['simulate', '--end-time', '0.4', '--tank-pressure', '0.5MPa',
                       '--final-tank-pressure', '1MPa', '--json'],
     'simulate-bad': ['simulate', '--end-time', '0.1', '--step-time', '0.2'],
@@ -70,19 +75,19 @@ CASES = {
     'operating-point-table': ['operating-point', '--flow', '10L/min'],
     'analyse-json': ['analyse', BAG, '--json'],
     'analyse-table': ['analyse', BAG],
-    'analyse-rig': ['analyse', RIG, '--json'],
+    'analyse-rig': ['analyse', RIG, *RIG_TOPICS, '--json'],
     'analyse-plot': ['analyse', BAG, '--plot', '{out}'],
     'characteristic': ['characteristic', '--ramp-time', '0.3', '--hold-time', '0.05',
                        '--max-flow', '10L/min', '--json'],
-    'calibrate-bag': ['calibrate', '--bag', RIG, '--fit', 'damping_orifice_diameter',
+    'calibrate-bag': ['calibrate', '--bag', RIG, *RIG_TOPICS, '--fit', 'damping_orifice_diameter',
                       '--starts', '1', '--quiet', '--out', '{out}'],
-    'calibrate-measures': ['calibrate', '--target-measures', 'bags/reference_step.measures.json',
+    'calibrate-measures': ['calibrate', '--target-measures', 'config/calibration/figure5.json',
                            '--fit', 'damping_orifice_diameter', '--starts', '1', '--quiet',
                            '--out', '{out}'],
     'tolerance': ['tolerance', '--out', '{out}', '--samples', '4', '--workers', '1',
-                  '--vary', 'damping_orifice_diameter=2%', '--step-size', '1e-5'],
+                  '--vary', 'd_c=±2%', '--limits', 'P_1_percent<=3.5'],
     'sensitivity': ['sensitivity', '--out', '{out}', '--samples', '2', '--workers', '1',
-                    '--vary', 'damping_orifice_diameter=2%,main_spring_stiffness=2%'],
+                    '--vary', 'd_c=±2%,k_p=±2%'],
     'scenario-check-paper': ['scenario', 'check', 'scenarios/paper_step.yaml'],
     'scenario-check-stuck': ['scenario', 'check', 'scenarios/stuck_main_valve.yaml'],
     'repair': ['repair', BAG, '-o', '{out}/repaired.mcap'],

@@ -45,6 +45,8 @@ import numpy as np
 from valve_sim.analysis.steps.sample_window import between, last_span, TIME_TOLERANCE
 
 
+MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
+WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 SETTLED_SPAN = 0.05  # [s] p_inf and x_inf are means over the window's last 50 ms
 SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
@@ -136,8 +138,6 @@ def at_rest(measures, t, supply_pressure, since):
     pressure step |p_inf - p_0| for P_o, the first overshoot |p_1 - p_inf| for the
     others (the remains of the last response would shift its peaks, band and settling).
     """
-    from valve_sim.analysis.steps.measures import MEASURE_NAMES, WINDOW
-
     details, values, reasons = measures.details, measures.values, measures.reasons
     if since is None or 'p_inf' not in details or since.time <= details['t_step'] - WINDOW:
         return measures

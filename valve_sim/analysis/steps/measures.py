@@ -53,7 +53,8 @@ from typing import Any, TYPE_CHECKING
 
 import numpy as np
 from valve_sim.analysis.steps.measure_windows import (  # noqa: F401 (the measures' constants)
-    at_rest, Cut, early_end, FINAL_VALUE_MEASURES, SETTLED_SPAN, SETTLING_BAND,
+    at_rest, Cut, early_end, FINAL_VALUE_MEASURES, MEASURE_NAMES, SETTLED_SPAN, SETTLING_BAND,
+    WINDOW,
 )
 from valve_sim.analysis.steps.sample_window import (
     between, last_at_or_before, last_span, window_end,
@@ -63,9 +64,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
-MEASURE_NAMES = ('P_o_percent', 'P_1_percent', 'T_1_ms', 'r_d', 'T_d_ms', 'T_s_ms')
 ENVELOPE_DECAY = 'envelope_decay_per_s'  # T_s's continuous companion (docs/measures.md)
-WINDOW = 1.0  # [s] analysis window after the step (docs/measures.md)
 PEAK_BAND = 0.1  # lobe hysteresis, fraction of the largest deviation
 PEAK_FIT_DEPTH = 0.2  # parabola fit over samples within 20 % of the lobe's extreme
 NOT_FINITE = 'not finite: the samples in the window include inf or NaN values'
