@@ -193,6 +193,29 @@ class RecordingTarget:
 
     kind = 'recording'
 
+    @classmethod
+    def from_recording(cls, recording: Any, step_size: float = 1e-5) -> RecordingTarget:
+        """
+        Return the target of a recording (recording.signal_reader.Recording).
+
+        Times count from its first row; the main valve counts where the recording holds
+        it at all; steps the pressure locates between two flow samples (located_steps)
+        are fitted too. The recording's rows must each hold every signal: cut it with
+        signal_reader.from_every_signal first, as `valve-sim calibrate` does.
+        """
+        start = recording.time[0]
+        main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
+        located = located_steps(recording)
+        return cls(
+            recording.time - start,
+            recording.supply_pressure,
+            recording.inlet_flow,
+            main_valve,
+            step_size,
+            step_times=[t - start for t, _ in located],
+            brackets=[tuple(t - start for t in bracket) for _, bracket in located],
+        )
+
     def __init__(self, time: ArrayLike, supply_pressure: ArrayLike, inlet_flow: ArrayLike,
                  main_valve: Optional[ArrayLike] = None, step_size: float = 1e-5,
                  step_threshold: float = 1e-6, step_times: Sequence[float] = (),
@@ -254,3 +277,19 @@ class RecordingTarget:
     def covariance_scale(self, cost: float, count: int, fitted: int) -> float:
         """s^2: the residual variance, for noise levels that were only estimated."""
         return 2.0 * cost / max(count - fitted, 1)
+
+
+def located_steps(recording: Any) -> list:
+    """
+    Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
+
+    A flowmeter slower than the pressure shows a step only at its next sample (last);
+    analyse locates it from the pressure (step_detection.locate_step), and calibrate fits it.
+    """
+    from valve_sim.analysis.recorded_steps import analyse
+
+    return [
+        (record['t_step'], tuple(record['details']['t_step_bracket']))
+        for record in analyse(recording)
+        if record['details'].get('t_step_from') == 'supply_pressure'
+    ]
