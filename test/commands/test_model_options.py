@@ -38,8 +38,9 @@ def options_of(parser):
 
 def test_the_readme_names_exactly_the_commands_that_take_the_model_options():
     text = ' '.join(README.read_text().split())
-    sentence = re.search(r'The commands that run the model \(([^)]*)\) take `--params FILE\.yaml`, '
-                         r'`--set NAME=VALUE` \([^)]*\) and `--preset-pressure 7MPa`', text)
+    sentence = re.search(r'The commands that run the model \(([^)]*)\) take '
+                         r'`--params FILE\.yaml`, `--set NAME=VALUE` \([^)]*\) and '
+                         r'`--preset-pressure 7MPa`', text)
     assert sentence, 'the README no longer says which commands take --params, --set, ...'
     named = {name.strip() for name in sentence.group(1).split(',')}
     taking, lacking = set(), set()

@@ -168,7 +168,7 @@ def module_name(path):
 
 
 def import_graph():
-    """{module: {the valve_sim modules it imports}} for every module (functions' too)."""
+    """Return {module: {the valve_sim modules it imports}} for every module (functions' too)."""
     return {
         module_name(path): {
             module for module, _ in imported_modules(path)

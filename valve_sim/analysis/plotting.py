@@ -225,7 +225,7 @@ def plot_measures_fit(path, target, measures, waveforms):
     """
     Calibration to measures: the model's step response, and each measure against its target.
 
-    target: calibration_targets.MeasuresTarget; measures: StepMeasures.as_dict() of the
+    target: calibration.targets.MeasuresTarget; measures: StepMeasures.as_dict() of the
     calibrated model; waveforms: its simulation.Waveforms.
     """
     figure, (response, bars) = plt.subplots(
@@ -265,7 +265,7 @@ def plot_recording_fit(path, target, states):
     """
     Calibration to a recording: recorded and model supply pressure (and x), and the residual.
 
-    target: calibration_targets.RecordingTarget; states: model states at its sample times.
+    target: calibration.targets.RecordingTarget; states: model states at its sample times.
     The recorded samples are drawn as dots above the model's line, so that both show
     where they agree; the first panel is zoomed on the first step (its first 0.2 s),
     where the dynamics are.

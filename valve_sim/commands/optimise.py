@@ -58,7 +58,7 @@ from valve_sim.core.output_files import make_folder
 
 # [bytes] a sampled valve's run on the worker that evaluates its candidate: every valve of
 # a candidate runs in one batch, waveforms and all; 1.1-1.5 MiB measured (tracemalloc
-# peak of study_runner.evaluate_batch over 32-128 valves of the step test), rounded up
+# peak of studies.runner.evaluate_batch over 32-128 valves of the step test), rounded up
 BYTES_PER_VALVE = 2 * 1024 * 1024
 MAX_CANDIDATES = 100_000  # population x generations: the rows kept for the Pareto set
 # [bytes] a candidate's row kept in the client (2.4 KiB as JSON), with Python's overhead

@@ -25,6 +25,9 @@ fault schedule (valve_sim.core.fault_schedule) changes them at the ticks valve_n
 
 simulate() integrates the whole run; run_flows() any inlet-flow schedule. The batch
 runs of studies (many parameter sets through one flow step) are valve_sim.core.batch's.
+
+Over 400 lines on purpose: every offline run (simulate, simulate_recorded_flow, the
+characteristic's ramp) goes through run_flows and the helpers here that it shares.
 """
 
 from __future__ import annotations

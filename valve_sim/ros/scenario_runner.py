@@ -297,7 +297,7 @@ def measure_partial(record):
 def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
                    ticks_per_clock=None):
     """
-    Run a scenario and write its reports (scenario_report); returns (RunRecord, paths).
+    Run a scenario and write its reports (scenarios.report); returns (RunRecord, paths).
 
     A run that cannot complete still gets every report, with what was measured up to
     the failure and the error (JUnit: the checks and an error case); the error is then

@@ -17,16 +17,19 @@
 Parameter identification: fit chosen model parameters to step measures or to a recording.
 
 One implementation for the paper's Figure 5 and for a rig's own valve, in three parts:
-- what is fitted: FitParameters, ties, the values applied (calibration_parameters);
-- what it is fitted to: a MeasuresTarget or RecordingTarget (calibration_targets);
+- what is fitted: FitParameters, ties, the values applied (calibration.parameters);
+- what it is fitted to: a MeasuresTarget or RecordingTarget (calibration.targets);
 - what the fitted valve must meet: Constraints, which add residuals that are zero while
-  they hold, and Checks, which judge each start's result (calibration_requirements);
+  they hold, and Checks, which judge each start's result (calibration.requirements);
 and the fit itself, here: calibrate(problem, settings). scipy.optimize.least_squares
 (trust region reflective, bounds) runs from several starts; the best start that meets
 every constraint and check wins. Approximate 95 % intervals and correlations come
-from the Jacobian at the result (calibration_uncertainty).
+from the Jacobian at the result (calibration.uncertainty).
 A caller stops a fit by its should_stop callback (the command line's Ctrl-C): the
 result is then the best evaluation so far, marked interrupted.
+
+About 400 lines on purpose: the fit's objective, starts, search and result in one
+module; what is fitted, to what, and its judgement live beside it in this room.
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ class CalibrationProblem:
     What to fit, to what, under what: the question a calibration answers.
 
     params: validated parameters (the fitted ones start at their values there);
-    fitted: FitParameters (calibration_parameters.fit_parameters, step_time_parameters);
+    fitted: FitParameters (calibration.parameters.fit_parameters, step_time_parameters);
     target: a MeasuresTarget or RecordingTarget; constraints: Constraints (their
     penalties join the residuals); checks: Checks judged per start after its fit;
     preset_pressure [Pa]: held during the fit (the preload re-solved) unless fitted;
@@ -111,7 +114,7 @@ class CalibrationResult:
     interrupted: bool = False
     ties: dict = field(default_factory=dict)
     rank: Optional[int] = None  # combinations of the fitted parameters the target determines
-    jacobian: Optional[np.ndarray] = None  # d(residuals)/du at the result (calibration_verdict)
+    jacobian: Optional[np.ndarray] = None  # d(residuals)/du at the result (calibration.verdict)
 
     @property
     def satisfied(self) -> bool:

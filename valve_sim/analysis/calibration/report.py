@@ -74,7 +74,7 @@ def report_document(result, target, target_name, command, verdict=None, freeing=
     """
     Return the report as a JSON-ready dict; target_name: the measures file or the bag.
 
-    verdict: calibration_verdict.fit_verdict's; freeing: its freeing_suggestions (or None).
+    verdict: calibration.verdict.fit_verdict's; freeing: its freeing_suggestions (or None).
     """
     fitted = []
     for k, p in enumerate(result.fitted):

@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 
 UNDEFINED_MEASURE_RESIDUAL = 30.0  # a measure the model's response does not have
 # The paper's tolerances (config/calibration/figure5.json), in each measure's unit: those of a
-# measure taken from a recording (MeasuresTarget.from_step, calibration_verdict).
+# measure taken from a recording (MeasuresTarget.from_step, calibration.verdict).
 PAPER_TOLERANCES = {'P_o_percent': 0.0432, 'P_1_percent': 0.477, 'T_1_ms': 0.67, 'r_d': 0.03,
                     'T_d_ms': 2.51, 'T_s_ms': 108.0}
 

@@ -125,7 +125,7 @@ def measures_residual(target):
 
     A measures target's own residuals; for a recording, the measures of its first step
     in the recording and in the model driven by its flow (the recording's undefined
-    ones left out), each in units of the paper's tolerance (calibration_targets.
+    ones left out), each in units of the paper's tolerance (calibration.targets.
     PAPER_TOLERANCES).
     """
     from valve_sim.analysis.calibration.targets import (

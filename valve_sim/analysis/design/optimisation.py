@@ -36,6 +36,9 @@ candidates are computed. confirm() re-runs the Pareto designs and the two baseli
 (the reference valve and the paper's Table 2) with more samples and an independent
 seed, keeping every valve's row: the yield of a design picked for passing a Monte
 Carlo is biased upward by that choice, a fresh sample is not.
+
+Over 400 lines on purpose: the options of a robust design (design, objectives,
+tolerances) are parsed beside the RobustProblem they define and its search and confirmation.
 """
 
 from dataclasses import dataclass

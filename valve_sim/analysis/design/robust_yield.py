@@ -34,11 +34,11 @@ Monte Carlo of one design:
 
 evaluate_candidates(cases) -> rows is the work unit. For each candidate it loads the
 nominal valve as `valve-sim ... --params FILE` loads the design's parameter file
-(optimisation_report.write_parameter_file: the values, then preset_pressure sets the
+(design.report.write_parameter_file: the values, then preset_pressure sets the
 pilot spring preload), draws the sampled valves about it as `valve-sim tolerance`
 does (same distributions, sampler and seed, each valve set to the nominal valve's
 cracking pressure), runs the nominal valve, and then the samples in rounds through
-study_runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
+studies.runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
 analysis.design.sequential_yield decides (a row does not depend on its batch, so a valve
 is judged the same in any round).
 
@@ -214,7 +214,7 @@ def check_candidate_row(row):
     """
     Raise ValueError naming the key unless row is a candidate row as evaluate_candidate makes it.
 
-    The resume check of study_results.read_results for the optimisation's results files:
+    The resume check of studies.results.read_results for the optimisation's results files:
     the nominal valve's row and every kept sample row are checked as the runner's rows.
     """
     from valve_sim.analysis.studies.results import check_row, is_number

@@ -31,6 +31,9 @@ alarm (valve_sim.core.faults.at_supply_limit), judged on the recorded supply_pre
 check_times() refuses any time or window outside the run (0 .. its duration), inverted,
 or negative, before the run; a check whose window holds no sample fails with that
 reason, in every kind, never passes.
+
+Over 400 lines on purpose: each kind of expectation is read and judged here, side by
+side, so that a kind's keys, limits and check are in one place.
 """
 
 from dataclasses import dataclass
