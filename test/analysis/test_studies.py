@@ -514,3 +514,18 @@ def test_the_dashboard_is_served_on_loopback_only_when_asked():
     assert {a.port for a in here} == ours and there
     assert {ip for ip, _ in here | there} == {'127.0.0.1'}
     assert DaskBackend(workers=1).dashboard_link is None  # none unless asked
+
+
+def test_a_study_case_has_the_fingerprint_its_dict_had(reference):
+    """Results folders written while cases were dicts still resume (their fingerprint holds)."""
+    from valve_sim.analysis.studies.cases import runner_case, sample_cases
+    from valve_sim.analysis.studies.results import fingerprint
+
+    old_sample = {'index': 0, 'params': reference, 'preset_pressure': 7e6,
+                  'scenario': REFERENCE_FLOW_STEP, 'step_size': 1e-5, 'record': []}
+    assert fingerprint(sample_cases(reference, [], [[]], 7e6, 1e-5)) == fingerprint([old_sample])
+    old_study = {**old_sample, 'params': scaled(reference, {'m_p': 10}),
+                 'record': ['poppet_displacement'], 'envelope': True}
+    new_study = runner_case(0, reference, {'m_p': 10}, 1e-5, 'held-preset', 7e6)
+    assert fingerprint([new_study]) == fingerprint([old_study])
+    assert fingerprint([replace(new_study, step_size=2e-5)]) != fingerprint([old_study])
