@@ -25,6 +25,9 @@ SHA-256; MCAP files as their messages' topics, counts and payload hash, so that 
 writer's chunk layout does not matter). Normalised, and only these: the run's temporary
 folder (-> <TMP>), the repository's path (-> <REPO>), wall-clock fields (elapsed,
 seconds, wall time, dates of the run) and progress lines on stderr (timing and rates).
+The repository's path is replaced after argparse wrapped the help, so a --help that
+names a file of the repository can wrap differently when the two trees' paths differ
+in length (take both snapshots in trees whose paths are as long, or read such a diff).
 
 Small settings throughout (short runs, few samples) so that `take` runs in minutes on
 two cores. Left out (each takes over a minute or needs ROS nodes): `demo` and
@@ -94,12 +97,13 @@ CASES = {
 }
 WALL_KEYS = re.compile(r'(elapsed|wall|seconds_taken|duration_s|started|finished|date|host)',
                        re.I)
+WALL_TEXT = re.compile(r'wall time [0-9.]+ ?(s|min|ms)\b')
 PROGRESS = re.compile(r'(\d+(\.\d+)? ?(s|min|runs/s|it/s)\b|ETA|\d+ ?%)')
 
 
 def normalised(text, out):
     text = text.replace(str(out), '<TMP>').replace(str(REPO), '<REPO>')
-    return re.sub(r'/tmp/[\w./-]*', '<TMPFILE>', text)
+    return WALL_TEXT.sub('wall time <WALL>', re.sub(r'/tmp/[\w./-]*', '<TMPFILE>', text))
 
 
 def normalised_json(value):
@@ -209,8 +213,10 @@ def compare(a, b):
     differences = 0
     for name in names:
         left, right = a / name, b / name
-        left_lines = left.read_text().splitlines() if left.exists() else ['<missing>']
-        right_lines = right.read_text().splitlines() if right.exists() else ['<missing>']
+        left_lines, right_lines = (
+            WALL_TEXT.sub('wall time <WALL>', side.read_text()).splitlines()
+            if side.exists() else ['<missing>'] for side in (left, right)
+        )
         if left_lines != right_lines:
             differences += 1
             sys.stdout.writelines(line + '\n' for line in difflib.unified_diff(
