@@ -43,7 +43,7 @@ import time
 
 import numpy as np
 import psutil
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate, Waveforms
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate, Waveforms
 from valve_sim.ros.isolation import claim_domain
 
 
@@ -60,10 +60,10 @@ def step_cycle(params):
     Up 5 -> 20 L/min at 0, down at 1.25 s (each step's last sample).
     """
     up = simulate(
-        params, Scenario(LOW, HIGH, step_time=0.0, end_time=1.25), record_interval=PERIOD
+        params, FlowStep(LOW, HIGH, step_time=0.0, end_time=1.25), record_interval=PERIOD
     )
     down = simulate(
-        params, Scenario(HIGH, LOW, step_time=0.0, end_time=1.25), record_interval=PERIOD
+        params, FlowStep(HIGH, LOW, step_time=0.0, end_time=1.25), record_interval=PERIOD
     )
     return Waveforms(
         np.concatenate([up.time[1:], 1.25 + down.time[1:]]),

@@ -20,14 +20,14 @@
 #
 # Every ordered pair of distinct flows of FLOWS (0 = the empty, closed valve as
 # start, or the flow stopped as end) at every preset of PRESETS, as a step and as a
-# RAMP_TIME ramp: valve_sim.analysis.envelope judges each run (relieves, pilot
+# RAMP_TIME ramp: valve_sim.analysis.steps.envelope judges each run (relieves, pilot
 # relieves, closed, stalled, diverged). The test suite runs a coarse subset
 # (test/analysis/test_envelope.py); this is the full grid. Exit code 1 if any run stalled
 # or diverged.
 #
 # Then the faulty envelope (issue 40): every fault at several severities (FAULTS), flows
 # held, stepped and ramped (FLOW_CHANGES), tank pressures held, stepped and ramped up to
-# burst_pressure (TANK_CHANGES). valve_sim.analysis.envelope.judged_run judges each run
+# burst_pressure (TANK_CHANGES). valve_sim.analysis.steps.envelope.judged_run judges each run
 # independently of the run's own checks (the same run at a quarter of the step, the
 # steady-state solver and the flow balance for a steady end) as correct, refused before
 # the run, or wrong; the counts are printed, every wrong run with its reason. Exit code 1
@@ -39,7 +39,7 @@ import json
 import sys
 import time
 
-from valve_sim.analysis.envelope import envelope_run, judged_run
+from valve_sim.analysis.steps.envelope import envelope_run, judged_run
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE

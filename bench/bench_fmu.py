@@ -45,7 +45,7 @@ import tracemalloc
 import fmpy
 from fmpy.fmi2 import FMU2Slave
 import numpy as np
-from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP as SCENARIO
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import simulate
 from valve_sim.fmu.builder import build

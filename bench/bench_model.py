@@ -44,9 +44,9 @@ import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
-from valve_sim.analysis.study_backend import DaskBackend, PoolBackend
-from valve_sim.analysis.study_cases import run_all
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP as SCENARIO
+from valve_sim.analysis.studies.backend import DaskBackend, PoolBackend
+from valve_sim.analysis.studies.cases import run_all
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.model import P_S, state_derivative
 from valve_sim.core.parameters import load_parameters

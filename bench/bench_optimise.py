@@ -43,15 +43,15 @@ import tempfile
 import time
 
 import numpy as np
-from valve_sim.analysis.optimisation import (
+from valve_sim.analysis.design.optimisation import (
     outcome_of,
     parse_design,
     parse_objectives,
     RobustProblem,
     search,
 )
-from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.sequential_yield import (
+from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.design.sequential_yield import (
     FIRST_ROUND,
     look,
     planned_runs_of,
@@ -59,9 +59,9 @@ from valve_sim.analysis.sequential_yield import (
     runs_of,
     STOP_ALPHA,
 )
-from valve_sim.analysis.study_backend import DaskBackend
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.study_runner import run_cases
+from valve_sim.analysis.studies.backend import DaskBackend
+from valve_sim.analysis.studies.cases import preset_protocol
+from valve_sim.analysis.studies.runner import run_cases
 from valve_sim.core.parameters import load_parameters
 
 LIMITS = 'r_d<=0.85,P_o_percent<=0.2'

@@ -24,7 +24,7 @@
 #    run on one core, 32 valves of the candidate's tolerance batch: the single-run
 #    rate; x cores is the reference.
 # 2. candidate: one candidate's --samples-valve yield (Latin hypercube: any count),
-#    as the optimiser's work unit (analysis.robust_yield.evaluate_candidate: preset,
+#    as the optimiser's work unit (analysis.design.robust_yield.evaluate_candidate: preset,
 #    one batch of the lanes kernel, measures, decay rates) in this process, one core.
 # 3. generation: `cores` such candidates on a local Dask cluster of `cores` workers
 #    (started beforehand), as one generation of the optimiser runs them.
@@ -43,14 +43,14 @@ import sys
 import tempfile
 import time
 
-from valve_sim.analysis.measures import step_measures
-from valve_sim.analysis.optimisation import parse_design, parse_objectives, RobustProblem
-from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO
-from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.study_backend import DaskBackend
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.study_runner import run_cases
-from valve_sim.analysis.tolerances import draw, parse_variations
+from valve_sim.analysis.design.optimisation import parse_design, parse_objectives, RobustProblem
+from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP as SCENARIO
+from valve_sim.analysis.steps.measures import step_measures
+from valve_sim.analysis.studies.backend import DaskBackend
+from valve_sim.analysis.studies.cases import preset_protocol
+from valve_sim.analysis.studies.runner import run_cases
+from valve_sim.analysis.studies.tolerances import draw, parse_variations
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import simulate
 from valve_sim.core.steady_state import with_preset_pressure

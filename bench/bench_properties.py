@@ -31,7 +31,7 @@ import sys
 import time
 
 from hypothesis import given, HealthCheck, seed, settings
-from valve_sim.analysis.envelope import property_findings
+from valve_sim.analysis.steps.envelope import property_findings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'test' / 'core'))
 from test_properties import valve_cases  # noqa: E402,I100 (the suite's strategy, one copy)

@@ -201,7 +201,7 @@ def scenario_run(scenario, folder, **options):
 
 def measure(kind, folder):
     """Measure one kind in this process; print {wall_s, cpu_s} as one JSON line."""
-    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
 
     scenario = load_scenario(SCENARIO)
     folder.mkdir(parents=True, exist_ok=True)

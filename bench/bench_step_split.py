@@ -33,7 +33,7 @@ import sys
 import time
 
 import numpy as np
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import CHECK_EVERY, rk4_steps
@@ -75,8 +75,8 @@ def main():
     parser.add_argument('--repeats', type=int, default=7)
     args = parser.parse_args()
     params = load_parameters().params
-    c, flows = coefficients(params), step_flows(REFERENCE_SCENARIO, 1e-5)
-    start = steady_state(params, REFERENCE_SCENARIO.initial_flow)
+    c, flows = coefficients(params), step_flows(REFERENCE_FLOW_STEP, 1e-5)
+    start = steady_state(params, REFERENCE_FLOW_STEP.initial_flow)
     tanks = np.zeros(len(flows))  # the tank at ambient
     plain = 'not chosen (plain RK4)'
     variants = {

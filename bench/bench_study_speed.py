@@ -40,10 +40,11 @@ import tempfile
 import time
 
 import numpy as np
-from valve_sim.analysis.measures import step_measures
-from valve_sim.analysis.paper import REFERENCE_SCENARIO as SCENARIO, STUDY_PARAMETERS
-from valve_sim.analysis.study_backend import DaskBackend
-from valve_sim.analysis.study_runner import evaluate_batch, run_cases
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP as SCENARIO, STUDY_PARAMETERS
+from valve_sim.analysis.steps.measures import step_measures
+from valve_sim.analysis.studies.backend import DaskBackend
+from valve_sim.analysis.studies.cases import StudyCase
+from valve_sim.analysis.studies.runner import evaluate_batch, run_cases
 from valve_sim.core.batch import simulate_batch
 from valve_sim.core.parameters import load_parameters, scaled
 from valve_sim.core.simulation import simulate
@@ -113,13 +114,7 @@ def _process_cpu_seconds():
 def study(params_list, preset, workers, out):
     """Run the cases on a local Dask cluster; returns (rows, CPU seconds of the workers)."""
     cases = [
-        {
-            'index': index,
-            'params': params,
-            'preset_pressure': preset,
-            'scenario': SCENARIO,
-            'step_size': 1e-5,
-        }
+        StudyCase(index, params, preset, SCENARIO, 1e-5)
         for index, params in enumerate(params_list)
     ]
     backend = DaskBackend(workers=workers)

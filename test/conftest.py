@@ -126,10 +126,10 @@ def node(context):
 def tick_waveforms():
     """Simulate the paper's step at 0.1 s, 1.15 s long, at 1 kHz: 1151 ticks of 6 messages."""
     from valve_sim.core.parameters import load_parameters
-    from valve_sim.core.simulation import Scenario, simulate
+    from valve_sim.core.simulation import FlowStep, simulate
 
     return simulate(
-        load_parameters().params, Scenario(step_time=0.1, end_time=1.15), record_interval=1e-3
+        load_parameters().params, FlowStep(step_time=0.1, end_time=1.15), record_interval=1e-3
     )
 
 

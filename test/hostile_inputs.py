@@ -129,10 +129,10 @@ def bag_with_inf_pressure(path):
     """Write a simulated step's bag whose supply pressure reads inf from 0.3 s (0.1 s after it)."""
     import numpy as np
     from valve_sim.core.parameters import load_parameters
-    from valve_sim.core.simulation import Scenario, simulate
+    from valve_sim.core.simulation import FlowStep, simulate
     from valve_sim.recording.valve_topics import write_simulation_bag
 
-    waveforms = simulate(load_parameters().params, Scenario(step_time=0.1, end_time=1.2),
+    waveforms = simulate(load_parameters().params, FlowStep(step_time=0.1, end_time=1.2),
                          record_interval=1e-3)
     readings = waveforms.states[:, :4] + 101325.0
     readings[300:, 0] = np.inf

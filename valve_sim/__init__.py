@@ -32,15 +32,15 @@ gives its verbs, each imported from its wing at first use, so that `import valve
 stays light (no numba, scipy or ROS until a verb needs them):
 
     vs.Parameters           a valve's parameters: validated when built, immutable, replace()
-    vs.Scenario, vs.TankPressure    the inputs: an inlet-flow step, the tank's pressure
-    vs.simulate             a scenario run -> Waveforms (time [s], states by name, status)
+    vs.FlowStep, vs.TankPressure    the inputs: an inlet-flow step, the tank's pressure
+    vs.simulate             a flow-step run -> Waveforms (time [s], states by name, status)
     vs.operating_point      the exact steady state at one flow, with its linear modes
     vs.cracking_pressure    the pressure at which the pilot opens [Pa]
     vs.step_measures        the paper's six step-response measures -> StepMeasures
     vs.read_recording       a bag (MCAP or rosbag2 folder) -> Recording
     vs.recorded_steps       the steps found in a Recording and their measures
     vs.calibrate            fit parameters to a recording or to measures -> CalibrationResult
-    vs.simulate_batch       a study: many parameter sets through one scenario -> [RunResult]
+    vs.simulate_batch       a study: many parameter sets through one flow step -> [RunResult]
     vs.ValveSimError        the root of every error the library raises on purpose
 """
 
@@ -50,25 +50,25 @@ from importlib import import_module
 from typing import Any, TYPE_CHECKING
 
 if TYPE_CHECKING:  # what a type checker sees; at run time __getattr__ imports on first use
-    from valve_sim.analysis.calibration import (
+    from valve_sim.analysis.calibration.fit import (
         calibrate as calibrate,
         CalibrationProblem as CalibrationProblem,
         CalibrationResult as CalibrationResult,
         FitSettings as FitSettings,
     )
-    from valve_sim.analysis.calibration_parameters import (
+    from valve_sim.analysis.calibration.parameters import (
         fit_parameters as fit_parameters,
     )
-    from valve_sim.analysis.calibration_targets import (
+    from valve_sim.analysis.calibration.targets import (
         MeasuresTarget as MeasuresTarget,
         RecordingTarget as RecordingTarget,
     )
-    from valve_sim.analysis.measures import (
-        step_measures as step_measures,
-        StepMeasures as StepMeasures,
-    )
     from valve_sim.analysis.recorded_steps import (
         analyse as recorded_steps,
+    )
+    from valve_sim.analysis.steps.measures import (
+        step_measures as step_measures,
+        StepMeasures as StepMeasures,
     )
     from valve_sim.core.batch import (
         RunResult as RunResult,
@@ -82,9 +82,9 @@ if TYPE_CHECKING:  # what a type checker sees; at run time __getattr__ imports o
         SteadyStateError as SteadyStateError,
         ValveSimError as ValveSimError,
     )
-    from valve_sim.core.scenario import (
+    from valve_sim.core.flow_step import (
+        FlowStep as FlowStep,
         LITRE_PER_MINUTE as LITRE_PER_MINUTE,
-        Scenario as Scenario,
         TankPressure as TankPressure,
     )
     from valve_sim.core.simulation import (
@@ -112,23 +112,23 @@ _EXPORTS = {
     'Parameters': 'valve_sim.core.valve',
     'OperatingPoint': 'valve_sim.core.valve',
     'operating_point': 'valve_sim.core.valve',
-    'Scenario': 'valve_sim.core.scenario',
-    'TankPressure': 'valve_sim.core.scenario',
-    'LITRE_PER_MINUTE': 'valve_sim.core.scenario',
+    'FlowStep': 'valve_sim.core.flow_step',
+    'TankPressure': 'valve_sim.core.flow_step',
+    'LITRE_PER_MINUTE': 'valve_sim.core.flow_step',
     'simulate': 'valve_sim.core.simulation',
     'Waveforms': 'valve_sim.core.simulation',
     'cracking_pressure': 'valve_sim.core.steady_state',
     'simulate_batch': 'valve_sim.core.batch',
     'RunResult': 'valve_sim.core.batch',
-    'step_measures': 'valve_sim.analysis.measures',
-    'StepMeasures': 'valve_sim.analysis.measures',
-    'calibrate': 'valve_sim.analysis.calibration',
-    'CalibrationProblem': 'valve_sim.analysis.calibration',
-    'CalibrationResult': 'valve_sim.analysis.calibration',
-    'FitSettings': 'valve_sim.analysis.calibration',
-    'fit_parameters': 'valve_sim.analysis.calibration_parameters',
-    'RecordingTarget': 'valve_sim.analysis.calibration_targets',
-    'MeasuresTarget': 'valve_sim.analysis.calibration_targets',
+    'step_measures': 'valve_sim.analysis.steps.measures',
+    'StepMeasures': 'valve_sim.analysis.steps.measures',
+    'calibrate': 'valve_sim.analysis.calibration.fit',
+    'CalibrationProblem': 'valve_sim.analysis.calibration.fit',
+    'CalibrationResult': 'valve_sim.analysis.calibration.fit',
+    'FitSettings': 'valve_sim.analysis.calibration.fit',
+    'fit_parameters': 'valve_sim.analysis.calibration.parameters',
+    'RecordingTarget': 'valve_sim.analysis.calibration.targets',
+    'MeasuresTarget': 'valve_sim.analysis.calibration.targets',
     'read_recording': 'valve_sim.recording.signal_reader',
     'Recording': 'valve_sim.recording.signal_reader',
     'recorded_steps': 'valve_sim.analysis.recorded_steps',
@@ -143,7 +143,7 @@ _RENAMED = {'recorded_steps': 'analyse'}  # front-door name -> its name in its m
 
 __all__ = [  # literal, so that type checkers see the exports (test_front_door checks it)
     '__version__',
-    'Parameters', 'OperatingPoint', 'operating_point', 'Scenario', 'TankPressure',
+    'Parameters', 'OperatingPoint', 'operating_point', 'FlowStep', 'TankPressure',
     'LITRE_PER_MINUTE', 'simulate', 'Waveforms', 'cracking_pressure', 'simulate_batch',
     'RunResult', 'step_measures', 'StepMeasures', 'calibrate', 'CalibrationProblem',
     'CalibrationResult', 'FitSettings', 'fit_parameters', 'RecordingTarget', 'MeasuresTarget',

@@ -15,8 +15,8 @@
 """The model across its envelope: presets 3-10 MPa, flows 0-25 L/min (coarse; bench/ has all)."""
 
 import pytest
-from valve_sim.analysis.envelope import envelope_run, judged_run
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.envelope import envelope_run, judged_run
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.simulation import LITRE_PER_MINUTE
 

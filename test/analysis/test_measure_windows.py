@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.step_analysis import StepAnalysis
-from valve_sim.analysis.tick_series import SIGNALS, TickSeries
+from valve_sim.analysis.scenarios.tick_series import SIGNALS, TickSeries
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.step_analysis import StepAnalysis
 
 
 LITRE_PER_MINUTE = 1.0 / 6e4
@@ -113,7 +113,7 @@ def test_each_step_of_a_staircase_measures_as_the_same_step_alone_or_not_at_all(
 
 def test_a_scenario_check_on_a_cut_window_fails_with_the_change_named(reference):
     """The issue's check: step 3 of the 0.7 s staircase "settled" in 762 ms and passed."""
-    from valve_sim.analysis.expectations import evaluate, parse_expectations
+    from valve_sim.analysis.scenarios.expectations import evaluate, parse_expectations
 
     waves = run(reference, staircase(0.7), STAIRCASE[0] * LITRE_PER_MINUTE)
     columns = {name: np.full(len(waves.time), np.nan) for name in SIGNALS}

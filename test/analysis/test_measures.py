@@ -18,8 +18,10 @@ import math
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import _lobes, envelope_decay_rate, MEASURE_NAMES, step_measures
-from valve_sim.analysis.step_detection import detect_steps, StepDetector
+from valve_sim.analysis.steps.measures import (
+    _lobes, envelope_decay_rate, MEASURE_NAMES, step_measures,
+)
+from valve_sim.analysis.steps.step_detection import detect_steps, StepDetector
 
 
 P0, DELTA = 7.0e6, 1.0e4  # pressure before the step, settled increment [Pa]
@@ -236,9 +238,9 @@ def test_a_step_down_has_a_negative_overshoot_and_the_definitions_say_so(referen
     """P_1 keeps the sign of p_1 - p_inf: below p_inf for a step down (docs/measures.md)."""
     from pathlib import Path
 
-    from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+    from valve_sim.core.simulation import LITRE_PER_MINUTE, FlowStep, simulate
 
-    run = simulate(reference, Scenario(20 * LITRE_PER_MINUTE, 5 * LITRE_PER_MINUTE, 0.1, 1.2),
+    run = simulate(reference, FlowStep(20 * LITRE_PER_MINUTE, 5 * LITRE_PER_MINUTE, 0.1, 1.2),
                    record_interval=1e-4)
     down = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'], 0.1,
                          direction=-1)
@@ -257,9 +259,9 @@ def test_the_window_holds_its_edge_samples_however_their_times_were_rounded(refe
     window's end: it was in one series and not in the other, P_o 2e-3 apart, and the
     window was noted truncated (test_journeys failed so when the flow took two ticks).
     """
-    from valve_sim.core.simulation import Scenario, simulate
+    from valve_sim.core.simulation import FlowStep, simulate
 
-    run = simulate(reference, Scenario(step_time=0.051, end_time=1.1), record_interval=1e-3)
+    run = simulate(reference, FlowStep(step_time=0.051, end_time=1.1), record_interval=1e-3)
     ticks = np.arange(len(run.time), dtype=np.int64) * 1_000_000  # [ns]
     epoch_ns = 1_795_953_600_000_000_000
     series = {

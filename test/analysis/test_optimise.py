@@ -27,7 +27,7 @@ import sys
 
 import numpy as np
 import pytest
-from valve_sim.analysis.optimisation import (
+from valve_sim.analysis.design.optimisation import (
     outcome_of,
     pareto_front,
     parse_design,
@@ -35,12 +35,12 @@ from valve_sim.analysis.optimisation import (
     RobustProblem,
     search,
 )
-from valve_sim.analysis.optimisation_report import parameter_file_text
-from valve_sim.analysis.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.sequential_yield import look, rounds, runs_of, STOP_ALPHA
-from valve_sim.analysis.study_backend import DaskBackend, SerialBackend
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.tolerances import parse_variations, unit_samples
+from valve_sim.analysis.design.report import parameter_file_text
+from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
+from valve_sim.analysis.design.sequential_yield import look, rounds, runs_of, STOP_ALPHA
+from valve_sim.analysis.studies.backend import DaskBackend, SerialBackend
+from valve_sim.analysis.studies.cases import preset_protocol
+from valve_sim.analysis.studies.tolerances import parse_variations, unit_samples
 from valve_sim.commands.cli import main
 from valve_sim.core.parameters import load_parameters
 

@@ -27,10 +27,10 @@ import re
 from matplotlib.figure import Figure
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.plotting import plot_step_response
 from valve_sim.analysis.recorded_steps import PLOT_LEAD, plot_steps
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.recording.signal_reader import read_recording
 
 
@@ -60,7 +60,7 @@ def test_a_step_from_the_closed_valve_is_drawn_in_mpa_and_mm(reference, saved, t
     """p_s and x are zero at the step: no ratio to them, the panels show MPa and mm."""
     run = simulate(
         reference,
-        Scenario(0.0, 20.0 * LITRE_PER_MINUTE, step_time=0.05, end_time=0.3),
+        FlowStep(0.0, 20.0 * LITRE_PER_MINUTE, step_time=0.05, end_time=0.3),
         record_interval=1e-4,
     )
     plot_step_response(
@@ -127,10 +127,10 @@ def test_the_figure_of_a_recorded_step_counts_time_from_the_first_sample(saved, 
 
 def test_the_fit_figure_shows_the_recording_above_the_model(reference, saved, tmp_path):
     """fit.png: recorded samples as dots drawn over the model's line, the step zoomed."""
-    from valve_sim.analysis.calibration_targets import RecordingTarget
+    from valve_sim.analysis.calibration.targets import RecordingTarget
     from valve_sim.analysis.plotting import plot_recording_fit
 
-    run = simulate(reference, Scenario(step_time=0.1, end_time=0.5), record_interval=1e-3)
+    run = simulate(reference, FlowStep(step_time=0.1, end_time=0.5), record_interval=1e-3)
     target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
                              run['main_valve_displacement'])
     plot_recording_fit(tmp_path / 'fit.png', target, run.states)
@@ -145,8 +145,8 @@ def test_the_fit_figure_shows_the_recording_above_the_model(reference, saved, tm
 
 
 def test_tolerance_figures_show_readable_units_and_limits_beside_their_lines(saved, tmp_path):
-    from valve_sim.analysis.study_plots import plot_measures_against
-    from valve_sim.analysis.tolerances import parse_limits
+    from valve_sim.analysis.studies.plots import plot_measures_against
+    from valve_sim.analysis.studies.tolerances import parse_limits
 
     values = np.array([0.98e-3, 1.0e-3, 1.02e-3])  # d_c [m]
     rows = [{'measures': {name: 1.0 + k for name in MEASURE_NAMES}, 'error': None,
@@ -166,6 +166,6 @@ def test_tolerance_figures_show_readable_units_and_limits_beside_their_lines(sav
     ('kg', [0.065], (1e3, 'g')), ('1', [0.5], (1.0, '1')),
 ])
 def test_parameters_are_shown_in_the_unit_a_person_reads(unit, values, expected):
-    from valve_sim.analysis.study_plots import display_unit
+    from valve_sim.analysis.studies.plots import display_unit
 
     assert display_unit(unit, np.array(values)) == expected

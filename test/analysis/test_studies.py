@@ -20,6 +20,7 @@ scheduler` / `dask worker` subprocesses, as a user starts them on other machines
 """
 
 import csv
+from dataclasses import replace
 import io
 import json
 import math
@@ -31,13 +32,15 @@ import sys
 import time
 
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
-from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.study_backend import DaskBackend, open_backend, PoolBackend, SerialBackend
-from valve_sim.analysis.study_cases import run_all
-from valve_sim.analysis.study_runner import evaluate_batch, Progress, run_cases
-from valve_sim.analysis.tolerances import (
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.backend import (
+    DaskBackend, open_backend, PoolBackend, SerialBackend,
+)
+from valve_sim.analysis.studies.cases import run_all, StudyCase
+from valve_sim.analysis.studies.runner import evaluate_batch, Progress, run_cases
+from valve_sim.analysis.studies.sensitivity import sobol_design, sobol_indices
+from valve_sim.analysis.studies.tolerances import (
     Distribution,
     parse_limits,
     parse_variations,
@@ -117,14 +120,8 @@ def cluster(tmp_path_factory):
 def valve_cases(reference, count):
     """Count variations of the paper's test: d_c from -4 % in steps of 0.5 %."""
     return [
-        {
-            'index': index,
-            'params': scaled(reference, {'d_c': -4.0 + 0.5 * index}),
-            'preset_pressure': None,
-            'scenario': REFERENCE_SCENARIO,
-            'step_size': 1e-5,
-            'record': [],
-        }
+        StudyCase(index, scaled(reference, {'d_c': -4.0 + 0.5 * index}), None,
+                  REFERENCE_FLOW_STEP, 1e-5)
         for index in range(count)
     ]
 
@@ -228,7 +225,7 @@ def test_resume_after_an_interruption_computes_only_the_missing_runs(reference, 
     evaluated = []
 
     def counting(batch):
-        evaluated.extend(case['index'] for case in batch)
+        evaluated.extend(case.index for case in batch)
         return evaluate_batch(batch)
 
     with pytest.raises(KeyboardInterrupt):
@@ -342,8 +339,8 @@ def test_tolerance_yield_and_percentiles_on_a_known_answer(cluster, reference, t
     # interpolation between the two most extreme samples) between P_1 at 0.9 and 1
     # and at 0 and 0.1.
     def p1_at(quantile):
-        case = valve_cases(reference, 1)[0]
-        case['params'] = scaled(reference, {'d_c': -5.0 + 10.0 * quantile})
+        case = replace(valve_cases(reference, 1)[0],
+                       params=scaled(reference, {'d_c': -5.0 + 10.0 * quantile}))
         return evaluate_batch([case])[0]['measures']['P_1_percent']
 
     limit = p1_at(0.25)
@@ -517,3 +514,18 @@ def test_the_dashboard_is_served_on_loopback_only_when_asked():
     assert {a.port for a in here} == ours and there
     assert {ip for ip, _ in here | there} == {'127.0.0.1'}
     assert DaskBackend(workers=1).dashboard_link is None  # none unless asked
+
+
+def test_a_study_case_has_the_fingerprint_its_dict_had(reference):
+    """Results folders written while cases were dicts still resume (their fingerprint holds)."""
+    from valve_sim.analysis.studies.cases import runner_case, sample_cases
+    from valve_sim.analysis.studies.results import fingerprint
+
+    old_sample = {'index': 0, 'params': reference, 'preset_pressure': 7e6,
+                  'scenario': REFERENCE_FLOW_STEP, 'step_size': 1e-5, 'record': []}
+    assert fingerprint(sample_cases(reference, [], [[]], 7e6, 1e-5)) == fingerprint([old_sample])
+    old_study = {**old_sample, 'params': scaled(reference, {'m_p': 10}),
+                 'record': ['poppet_displacement'], 'envelope': True}
+    new_study = runner_case(0, reference, {'m_p': 10}, 1e-5, 'held-preset', 7e6)
+    assert fingerprint([new_study]) == fingerprint([old_study])
+    assert fingerprint([replace(new_study, step_size=2e-5)]) != fingerprint([old_study])

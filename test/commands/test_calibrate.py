@@ -25,14 +25,14 @@ import time
 
 from figure5 import outside_tolerance, TOLERANCES
 import pytest
-from valve_sim.analysis.calibration import calibrate, CalibrationProblem, FitSettings
-from valve_sim.analysis.calibration_parameters import fit_parameters
-from valve_sim.analysis.calibration_targets import RecordingTarget
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.calibration.fit import calibrate, CalibrationProblem, FitSettings
+from valve_sim.analysis.calibration.parameters import fit_parameters
+from valve_sim.analysis.calibration.targets import RecordingTarget
 from valve_sim.analysis.paper import FIGURE5_MEASURES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.errors import CalibrationError
 from valve_sim.core.parameters import config_path, load_parameters, read_parameter_file, scaled
-from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.core.simulation import FlowStep, simulate
 from valve_sim.recording.bag import BagReader, BagWriter
 
 
@@ -196,7 +196,7 @@ def test_calibrate_fits_a_recording_whose_signals_begin_one_by_one(reference, tm
 
 
 def test_a_data_problem_is_not_reported_as_a_model_problem(reference):
-    run = simulate(reference, Scenario(step_time=0.1, end_time=0.3), record_interval=1e-3)
+    run = simulate(reference, FlowStep(step_time=0.1, end_time=0.3), record_interval=1e-3)
     target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
                              run['main_valve_displacement'])
     target.position_noise = math.nan  # a noise level the data could not give
@@ -208,7 +208,7 @@ def test_a_data_problem_is_not_reported_as_a_model_problem(reference):
 
 def short_recording_problem(reference):
     """Return the problem of fitting d_c to a short clean recording of a valve with d_c +5 %."""
-    run = simulate(scaled(reference, {'d_c': 5.0}), Scenario(step_time=0.1, end_time=0.3),
+    run = simulate(scaled(reference, {'d_c': 5.0}), FlowStep(step_time=0.1, end_time=0.3),
                    record_interval=1e-3)
     target = RecordingTarget(run.time, run['supply_pressure'], run.inlet_flow,
                              run['main_valve_displacement'])
@@ -249,7 +249,7 @@ def test_a_fit_stops_when_its_caller_says_so(reference):
 
 
 def test_every_requirement_follows_the_written_protocol():
-    from valve_sim.analysis.calibration_requirements import (
+    from valve_sim.analysis.calibration.requirements import (
         CaseRelieves, Check, Constraint, LandsInsideBore, MainSpringRange, ModesDecay,
         PilotFlowLimit, StudyRelieves,
     )
@@ -280,8 +280,8 @@ def test_a_perfect_fit_says_why_it_has_no_intervals(tmp_path):
 
 
 def test_the_design_rules_and_ties_as_the_fit_uses_them():
-    from valve_sim.analysis.calibration_parameters import apply_values, fit_ties
-    from valve_sim.analysis.calibration_requirements import LandsInsideBore, MainSpringRange
+    from valve_sim.analysis.calibration.parameters import apply_values, fit_ties
+    from valve_sim.analysis.calibration.requirements import LandsInsideBore, MainSpringRange
     from valve_sim.core.bearing import reference_bearing_fit
     from valve_sim.core.errors import CalibrationError
 

@@ -26,7 +26,7 @@ import subprocess
 import sys
 
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -104,10 +104,10 @@ def test_freeing_the_named_parameters_brings_the_recorded_measures_within_tolera
 
 
 def test_a_recorded_target_step_must_exist(other):
-    from valve_sim.analysis.calibration_targets import MeasuresTarget
+    from valve_sim.analysis.calibration.targets import MeasuresTarget
     from valve_sim.core.errors import CalibrationError
 
     steps = json.loads((other / 'other.json').read_text())['steps']
-    assert MeasuresTarget.from_step(steps, 1).scenario.final_flow == steps[0]['flow_after']
+    assert MeasuresTarget.from_step(steps, 1).flow_step.final_flow == steps[0]['flow_after']
     with pytest.raises(CalibrationError, match=r'no step 2: the recording has 1 step\(s\)'):
         MeasuresTarget.from_step(steps, 2)

@@ -22,7 +22,7 @@ import sys
 
 from figure5 import outside_tolerance
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.commands.cli import negative_values_joined, SUBCOMMANDS
 
 
@@ -147,7 +147,7 @@ def test_study_holds_the_preset_and_writes_the_papers_tables_and_figures(tmp_pat
 
 
 def test_frozen_preload_protocol_lets_the_preset_move_with_the_spring(reference):
-    from valve_sim.analysis.study_cases import run_case
+    from valve_sim.analysis.studies.cases import run_case
 
     held = run_case(reference, {'k_p': 20}, 1e-5, 'held-preset', 7e6)['case']
     frozen = run_case(reference, {'k_p': 20}, 1e-5, 'frozen-preload')['case']

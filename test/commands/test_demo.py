@@ -30,9 +30,9 @@ import sys
 from figure5 import outside_tolerance, TOLERANCES
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.paper import FIGURE5_MEASURES
 from valve_sim.analysis.recorded_steps import sampling_problem, steps_text
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
 from valve_sim.commands.demo import report
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.recording.bag import BagReader

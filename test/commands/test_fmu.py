@@ -37,11 +37,11 @@ import tracemalloc
 import numpy as np
 import pytest
 from test_cli import valve_sim
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import PARAMETERS, SPECS
-from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.core.simulation import FlowStep, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
 from valve_sim.fmu.environment import master_environment
 from valve_sim.fmu.fmi_calls import MAX_COMMUNICATION_STEP
@@ -63,8 +63,8 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 
 # The paper's step, simulate's default: 5 -> 20 L/min at 0.25 s, to 1.25 s; 1 ms steps.
-Q0, Q1 = REFERENCE_SCENARIO.initial_flow, REFERENCE_SCENARIO.final_flow
-STEP_TIME, END_TIME = REFERENCE_SCENARIO.step_time, REFERENCE_SCENARIO.end_time
+Q0, Q1 = REFERENCE_FLOW_STEP.initial_flow, REFERENCE_FLOW_STEP.final_flow
+STEP_TIME, END_TIME = REFERENCE_FLOW_STEP.step_time, REFERENCE_FLOW_STEP.end_time
 INTERVAL = 1e-3
 OUTPUTS = ('supply_pressure', 'main_valve_displacement', 'relief_flow', 'halted')
 
@@ -239,7 +239,7 @@ def test_two_instances_with_different_parameters_do_not_interfere(unzipped, refe
     for valve in (first, second):
         valve.close()
     for valve, params in ((first, lower), (second, reference)):  # each as if alone
-        offline = simulate(params, Scenario(Q0, Q1, 0.0, 0.2), record_interval=INTERVAL)
+        offline = simulate(params, FlowStep(Q0, Q1, 0.0, 0.2), record_interval=INTERVAL)
         np.testing.assert_allclose(traces[valve], offline['supply_pressure'][1:], rtol=1e-12)
     assert abs(traces[first][-1] - traces[second][-1]) > 5e5  # 1 MPa lower preset
 

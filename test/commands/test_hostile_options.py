@@ -192,8 +192,8 @@ def test_repair_never_follows_a_planted_link_at_its_default_output(tmp_path, cap
 
 
 def test_a_results_file_that_is_a_link_is_refused(tmp_path):
-    from valve_sim.analysis.study_backend import SerialBackend
-    from valve_sim.analysis.study_runner import run_cases
+    from valve_sim.analysis.studies.backend import SerialBackend
+    from valve_sim.analysis.studies.runner import run_cases
     from valve_sim.core.errors import StudyError
 
     victim = tmp_path / 'victim.jsonl'
@@ -208,7 +208,7 @@ def test_a_results_file_that_is_a_link_is_refused(tmp_path):
 
 FULL_DISK = """
 import json, resource, signal, sys
-from valve_sim.analysis.step_analysis import MeasuresFile
+from valve_sim.analysis.steps.step_analysis import MeasuresFile
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails, as on a full disk
 measures = MeasuresFile(sys.argv[1], 'bag.mcap')
 record = {'t_step': 1.0, 'direction': 1, 'flow_before': 1e-4, 'note': 'x' * 4000}

@@ -36,7 +36,7 @@ from types import SimpleNamespace
 import xml.etree.ElementTree as ElementTree
 
 import pytest
-from valve_sim.analysis.scenario_report import junit_document, write_junit
+from valve_sim.analysis.scenarios.report import junit_document, write_junit
 from valve_sim.commands.cli import main
 from valve_sim.core import output_files
 from valve_sim.core.errors import OutputFileError

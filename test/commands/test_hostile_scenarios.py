@@ -26,9 +26,9 @@ import re
 
 import numpy as np
 import pytest
-from valve_sim.analysis.expectations import evaluate, parse_expectations
-from valve_sim.analysis.scenario_file import load_scenario
-from valve_sim.analysis.tick_series import TickSeries
+from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+from valve_sim.analysis.scenarios.expectations import evaluate, parse_expectations
+from valve_sim.analysis.scenarios.tick_series import TickSeries
 from valve_sim.core.errors import InputFileError
 
 

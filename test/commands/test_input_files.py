@@ -29,9 +29,9 @@ from pathlib import Path
 
 from hostile_inputs import FILES, JSON_TEXTS, make_file, mutations, YAML_TEXTS
 import pytest
-from valve_sim.analysis.robust_yield import check_candidate_row
-from valve_sim.analysis.scenario_file import load_scenario
-from valve_sim.analysis.study_results import read_results
+from valve_sim.analysis.design.robust_yield import check_candidate_row
+from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+from valve_sim.analysis.studies.results import read_results
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import CalibrationError, InputFileError, ParameterError, StudyError
 from valve_sim.core.fault_schedule import load_schedule

@@ -43,11 +43,11 @@ import pytest
 from std_srvs.srv import Trigger
 from test_calibrate import valve_sim
 from valve_harness import Recorder, running_valve, TIMEOUT
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.step_detection import detect_steps
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.steps.step_detection import detect_steps
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters, scaled, STANDARD_ATMOSPHERE
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import steady_state
 
 
@@ -177,7 +177,7 @@ def test_record_analyse_calibrate_and_run_the_calibrated_valve_in_a_namespace(
     assert 'applied section(s) /**/relief_valve to /rig1/relief_valve' in node_log
     assert p_s[0] == pytest.approx(steady_state(calibrated, INITIAL_FLOW)[P_S], rel=1e-6)
     live = step_measures(t, p_s, x, t_step)
-    run = simulate(calibrated, Scenario(INITIAL_FLOW, FINAL_FLOW, t_step, t[-1]),
+    run = simulate(calibrated, FlowStep(INITIAL_FLOW, FINAL_FLOW, t_step, t[-1]),
                    record_interval=PERIOD_NS / 1e9)
     offline = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'],
                             t_step)
@@ -195,7 +195,7 @@ def test_a_rig_bag_with_a_slow_flowmeter_is_analysed_and_calibrated(reference, t
     The step lies between two flow samples and between two pressure samples (0.2537 s).
     """
     rig = scaled(reference, {'d_c': 6.0, 'k_p': -7.0})
-    run = simulate(rig, Scenario(INITIAL_FLOW, FINAL_FLOW, 0.2537, 1.3), record_interval=1e-4)
+    run = simulate(rig, FlowStep(INITIAL_FLOW, FINAL_FLOW, 0.2537, 1.3), record_interval=1e-4)
     truth = step_measures(run.time, run['supply_pressure'], run['main_valve_displacement'],
                           0.2537).values
     topics = ('--topic-supply-pressure', '/rig/p', '--topic-inlet-flow', '/rig/q',

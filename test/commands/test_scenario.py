@@ -32,7 +32,7 @@ import time
 import xml.etree.ElementTree as ElementTree
 
 import pytest
-from valve_sim.analysis.scenario_file import load_scenario
+from valve_sim.analysis.scenarios.bench_scenario import load_scenario
 from valve_sim.core.errors import InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.valve_topics import TICK_TOPICS
@@ -318,8 +318,8 @@ def test_input_profiles_sample_steps_ramps_sines_and_a_csv_column(tmp_path):
 def test_expectations_judge_a_series_with_what_they_measured():
     """never_below, steady with its window, a step by number that is not there, no_alarm."""
     import numpy as np
-    from valve_sim.analysis.expectations import evaluate, parse_expectations
-    from valve_sim.analysis.tick_series import TickSeries
+    from valve_sim.analysis.scenarios.expectations import evaluate, parse_expectations
+    from valve_sim.analysis.scenarios.tick_series import TickSeries
 
     rows = {1_000_000 * k: {'supply_pressure': 7e6 + (1e5 if k >= 100 else 0.0),
                             'main_valve': 1e-5, 'inlet_flow': 1e-4 if k < 100 else 2e-4}

@@ -69,7 +69,7 @@ def profile_run(tmp_path_factory, valve_node_kernels):
 
 def test_inputs_changing_every_tick_run_ten_ticks_per_clock_each_tick_applying_its_own(
         profile_run):
-    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.ros.scenario_runner import input_values
 
     out, completed = profile_run
@@ -139,8 +139,8 @@ def test_an_expectation_that_cannot_be_judged_keeps_the_others_and_every_report(
     """
     import shutil
 
-    from valve_sim.analysis.scenario_file import load_scenario
-    from valve_sim.analysis.scenario_report import write_reports
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+    from valve_sim.analysis.scenarios.report import write_reports
     from valve_sim.ros.scenario_runner import measure_partial, RunRecord
 
     out, _ = profile_run

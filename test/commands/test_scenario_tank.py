@@ -31,10 +31,10 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure
-from valve_sim.analysis.scenario_file import load_scenario
+from valve_sim.analysis.scenarios.bench_scenario import load_scenario
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import (
-    LITRE_PER_MINUTE, RELIEF_COLUMNS, relief_flows, Scenario, simulate, TankPressure
+    FlowStep, LITRE_PER_MINUTE, RELIEF_COLUMNS, relief_flows, simulate, TankPressure
 )
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.tick_bags import tick_series
@@ -89,7 +89,7 @@ def test_a_tank_pressure_step_in_a_scenario_is_the_offline_one(tmp_path, valve_n
     assert series.stamps_ns.tolist() == [START_NS + k * PERIOD_NS for k in range(301)]
 
     flow = 5 * LITRE_PER_MINUTE
-    offline = simulate(params, Scenario(flow, flow, end_time=0.3005),
+    offline = simulate(params, FlowStep(flow, flow, end_time=0.3005),
                        step_size=settings['step_size'], record_interval=PERIOD_NS / 1e9,
                        tank=TankPressure(0.0, 5 * BAR, step_time=0.1))
     node_p_s, offline_p_s = series['supply_pressure'], offline['supply_pressure'][:301]

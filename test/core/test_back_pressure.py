@@ -26,16 +26,16 @@ import sys
 
 import numpy as np
 import pytest
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.faults import FaultSet
 from valve_sim.core.model import P_C, P_S, relief_flows as model_relief_flows, X, Y
 from valve_sim.core.simulation import (
+    FlowStep,
     LITRE_PER_MINUTE,
     relief_flows,
     run_flows,
-    Scenario,
     simulate,
     step_flows,
     TankPressure,
@@ -46,7 +46,7 @@ from valve_sim.core.steady_state import cracking_pressure, steady_state
 STEP = 1e-5  # [s] the reference step size
 WORN_SEAT = FaultSet(seat_leakage_diameter=0.2e-3)  # a leak to the tank beside q_m2 and q_p
 BAR = 1e5
-FLOW_STEP = Scenario(5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE, step_time=0.005, end_time=0.06)
+FLOW_STEP = FlowStep(5 * LITRE_PER_MINUTE, 20 * LITRE_PER_MINUTE, step_time=0.005, end_time=0.06)
 
 
 def stored_volume(params, states):
@@ -92,11 +92,11 @@ def volume_balance(params, run, faults):
         (FLOW_STEP, TankPressure()),
         (FLOW_STEP, TankPressure(4 * BAR)),
         (
-            Scenario(10 * LITRE_PER_MINUTE, 10 * LITRE_PER_MINUTE, end_time=0.06),
+            FlowStep(10 * LITRE_PER_MINUTE, 10 * LITRE_PER_MINUTE, end_time=0.06),
             TankPressure(1 * BAR, 6 * BAR, step_time=0.005, ramp_time=0.002),
         ),
         (
-            Scenario(10 * LITRE_PER_MINUTE, 10 * LITRE_PER_MINUTE, end_time=0.06),
+            FlowStep(10 * LITRE_PER_MINUTE, 10 * LITRE_PER_MINUTE, end_time=0.06),
             TankPressure(6 * BAR, 1 * BAR, step_time=0.005),
         ),
     ],
@@ -131,7 +131,7 @@ def test_a_constant_back_pressure_relieves_what_flows_in_at_steady_state(referen
     """At a steady state with the tank at 5 bar the relief flow is the inlet flow."""
     flow = 15 * LITRE_PER_MINUTE
     run = simulate(
-        reference, Scenario(flow, flow, end_time=1e-3), STEP, 1e-3, WORN_SEAT,
+        reference, FlowStep(flow, flow, end_time=1e-3), STEP, 1e-3, WORN_SEAT,
         tank=TankPressure(5 * BAR),
     )
     assert relief_flows(reference, run, WORN_SEAT)[0, 0] == pytest.approx(flow, rel=1e-7)
@@ -196,7 +196,7 @@ def test_the_solver_refuses_a_tank_pressure_that_is_not_an_input(
 def test_a_tank_profile_beyond_the_limits_is_refused_before_the_run(reference):
     with pytest.raises(ParameterError, match='tank pressure schedule'):
         simulate(
-            reference, Scenario(end_time=0.01), STEP, STEP,
+            reference, FlowStep(end_time=0.01), STEP, STEP,
             tank=TankPressure(0.0, 40e6, step_time=0.005),
         )
 
@@ -209,11 +209,11 @@ def test_the_tank_at_ambient_leaves_the_figure_5_run_bit_identical(reference):
     byte-identical; the comparison with the code before issue 30 (the behaviour
     snapshot of both trees) is in notes/issue-30.md.
     """
-    default = simulate(reference, REFERENCE_SCENARIO)
-    held = simulate(reference, REFERENCE_SCENARIO, tank=TankPressure(0.0))
-    flows = step_flows(REFERENCE_SCENARIO, STEP)
+    default = simulate(reference, REFERENCE_FLOW_STEP)
+    held = simulate(reference, REFERENCE_FLOW_STEP, tank=TankPressure(0.0))
+    flows = step_flows(REFERENCE_FLOW_STEP, STEP)
     profile = run_flows(
-        reference, flows, STEP, initial_flow=REFERENCE_SCENARIO.initial_flow,
+        reference, flows, STEP, initial_flow=REFERENCE_FLOW_STEP.initial_flow,
         tank_pressures=np.zeros(len(flows)),
     )
     for run in (held, profile):

@@ -16,8 +16,8 @@
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
 from valve_sim.core.batch import simulate_batch
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import IntegrationError, SteadyStateError
@@ -26,7 +26,7 @@ from valve_sim.core.integrator import advance, STEP_RATE_LIMIT
 from valve_sim.core.lanes import advance_lanes
 from valve_sim.core.model import fastest_chamber_rate, P_C, P_S
 from valve_sim.core.parameters import scaled
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 
@@ -88,7 +88,7 @@ def test_batch_skips_the_steady_lead_without_changing_the_measures(reference):
     rounding, measures equal to 1e-9. An unstable start (d_c +60 %: its pilot mode
     grows at 5 L/min) is integrated as simulate() does it: bit-identical.
     """
-    scenario = Scenario(end_time=0.45)  # the paper's step, shorter (the window is truncated)
+    scenario = FlowStep(end_time=0.45)  # the paper's step, shorter (the window is truncated)
     variants = [reference, scaled(reference, {'m_m': 20}), scaled(reference, {'d_c': 60})]
     batch = [result.waveforms for result in simulate_batch(variants, scenario, lanes=2)]
     for params, fast in zip(variants, batch):
@@ -112,7 +112,7 @@ def test_batch_reports_each_failure_in_its_place(reference):
     A run that diverges has its IntegrationError (time on the run's axis) as the reason,
     a start without a steady state its SteadyStateError; the rest run on.
     """
-    scenario = Scenario(end_time=0.3)
+    scenario = FlowStep(end_time=0.3)
     # burst_pressure below the step's first peak (7.23 MPa): an overpressure after the step.
     # (V_p / 1000, the stiff valve used here before issue 40, now integrates in split steps.)
     stiff = dict(reference, burst_pressure=7.1e6)
@@ -126,15 +126,15 @@ def test_batch_reports_each_failure_in_its_place(reference):
     for result in (results[0], results[2]):
         assert result.success
         assert np.array_equal(result.waveforms.states, alone.waveforms.states)
-    (nan_start,) = simulate_batch([reference], Scenario(initial_flow=float('nan')))
+    (nan_start,) = simulate_batch([reference], FlowStep(initial_flow=float('nan')))
     assert not nan_start.success and nan_start.waveforms is None
     assert isinstance(nan_start.error, SteadyStateError) and nan_start.message
 
 
 def test_paper_scenario_measures_through_the_batch(reference):
     """The reference valve's measures through simulate_batch equal simulate()'s (1e-9)."""
-    fast = simulate_batch([reference], REFERENCE_SCENARIO)[0].waveforms
-    full = simulate(reference, REFERENCE_SCENARIO)
-    a, b = _measures(full, REFERENCE_SCENARIO), _measures(fast, REFERENCE_SCENARIO)
+    fast = simulate_batch([reference], REFERENCE_FLOW_STEP)[0].waveforms
+    full = simulate(reference, REFERENCE_FLOW_STEP)
+    a, b = _measures(full, REFERENCE_FLOW_STEP), _measures(fast, REFERENCE_FLOW_STEP)
     for name in MEASURE_NAMES:
         assert b[name] == pytest.approx(a[name], rel=1e-9), name

@@ -20,7 +20,7 @@ import json
 
 import numpy as np
 import pytest
-from valve_sim.analysis.measures import step_measures
+from valve_sim.analysis.steps.measures import step_measures
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import FaultEvent, parse_schedule
@@ -35,13 +35,13 @@ from valve_sim.core.model import (
     X_DOT,
 )
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state
 from valve_sim.recording.bag import BagReader
 
 
 L = LITRE_PER_MINUTE
-PAPER_STEP = Scenario()
+PAPER_STEP = FlowStep()
 
 
 @pytest.fixture(scope='module')
@@ -109,7 +109,7 @@ def test_a_blocked_damping_orifice_raises_p1_and_t1_as_a_smaller_orifice_does(pa
 
 
 @dataclass(frozen=True)
-class Triangle(Scenario):
+class Triangle(FlowStep):
     """Flow ramp from initial_flow up to final_flow and back down, over end_time."""
 
     def inlet_flow(self, t):
@@ -176,7 +176,7 @@ def test_a_weakened_pilot_spring_lowers_the_cracking_pressure_in_proportion(para
 def test_seat_leakage_lowers_p_s_and_moves_cracking_to_a_higher_inlet_flow(params):
     leak = FaultSet(seat_leakage_diameter=0.3e-3)
     assert steady_state(params, 20 * L, leak)[P_S] < steady_state(params, 20 * L)[P_S]
-    ramp = Scenario(0.3 * L, 3 * L, 0.0, 4.0, ramp_time=4.0)
+    ramp = FlowStep(0.3 * L, 3 * L, 0.0, 4.0, ramp_time=4.0)
     cracking_flow = {}
     for faults in (HEALTHY, leak):
         w = simulate(params, ramp, faults=faults)

@@ -16,7 +16,7 @@
 
 import numpy as np
 import pytest
-from valve_sim.analysis.envelope import property_findings
+from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.invariants import Monitor, run_alarms, WINDOW_SAMPLES
@@ -40,8 +40,8 @@ def steady_samples(params, flow, count=2 * WINDOW_SAMPLES + 1):
 def test_the_paper_run_and_a_correctly_integrated_faulty_run_raise_no_alarm(params):
     assert simulate_alarms(params, simulate(params)) == []
     broken = HEALTHY.changed({'pilot_spring_broken': True})
-    from valve_sim.core.simulation import Scenario
-    scenario = Scenario(5 * L, 5 * L, 0.1, 0.4)
+    from valve_sim.core.simulation import FlowStep
+    scenario = FlowStep(5 * L, 5 * L, 0.1, 0.4)
     run = simulate(params, scenario, faults=broken)
     assert simulate_alarms(params, run, broken) == []
 

@@ -32,7 +32,7 @@ from valve_sim.core.lanes import advance_lanes
 from valve_sim.core.model import P_S, Y
 from valve_sim.core.parameters import load_parameters, validate
 from valve_sim.core.retuning import check_limits
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import steady_state
 
 
@@ -120,7 +120,7 @@ def test_a_change_that_would_leave_the_limits_is_refused(reference):
 
 def test_an_offline_schedule_beyond_max_inlet_flow_is_refused(reference):
     with pytest.raises(ParameterError, match='inlet flow schedule: .* exceeds max_inlet_flow'):
-        simulate(reference, Scenario(final_flow=200 * LITRE_PER_MINUTE))
+        simulate(reference, FlowStep(final_flow=200 * LITRE_PER_MINUTE))
 
 
 def test_lanes_split_the_same_steps_as_one_valve_alone(reference):

@@ -19,9 +19,9 @@ from pathlib import Path
 import re
 
 import pytest
-from valve_sim.analysis.calibration_requirements import StudyRelieves
+from valve_sim.analysis.calibration.requirements import StudyRelieves
 from valve_sim.analysis.paper import TABLE2_CHANGES
-from valve_sim.analysis.study_cases import case_parameters
+from valve_sim.analysis.studies.cases import case_parameters
 from valve_sim.core.linear import mode_sensitivity, modes
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE

@@ -34,7 +34,7 @@ from valve_sim.core.model import (
     Y_DOT,
 )
 from valve_sim.core.parameters import load_parameters, validate
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -250,11 +250,11 @@ def test_rk4_converges_with_fourth_order(params):
 
 
 def test_measures_agree_across_step_sizes(params):
-    from valve_sim.analysis.measures import step_measures
+    from valve_sim.analysis.steps.measures import step_measures
 
     results = []
     for step in (2e-6, 5e-6, 1e-5):
-        w = simulate(params, Scenario(), step, 1e-4)
+        w = simulate(params, FlowStep(), step, 1e-4)
         results.append(
             step_measures(w.time, w['supply_pressure'], w['main_valve_displacement'], 0.25).values
         )
@@ -266,7 +266,7 @@ def test_closed_valve_start_cracks_and_settles_near_the_preset(params):
     """0 -> 20 L/min from the empty valve: pilot cracks, then the main valve, no NaN, settles."""
     w = simulate(
         params,
-        Scenario(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.01, end_time=1.2),
+        FlowStep(initial_flow=0.0, final_flow=20 * LITRE_PER_MINUTE, step_time=0.01, end_time=1.2),
         1e-5,
         1e-4,
     )
@@ -291,7 +291,7 @@ def test_ramp_from_closed_valve_and_back_down(params):
     """
     w = simulate(
         params,
-        Scenario(
+        FlowStep(
             initial_flow=0.0,
             final_flow=20 * LITRE_PER_MINUTE,
             step_time=0.0,
@@ -371,7 +371,7 @@ def test_stiff_chamber_steps_are_split_and_agree_with_small_steps(params):
     # 3 MPa preset, 25 L/min: the chamber between the main throttles is too stiff for
     # one RK4 step of 10 us (it diverged before steps were split); 2.5 us needs no split.
     low = with_preset_pressure(params, 3e6)
-    scenario = Scenario(5 * LITRE_PER_MINUTE, 25 * LITRE_PER_MINUTE, 0.05, 0.3)
+    scenario = FlowStep(5 * LITRE_PER_MINUTE, 25 * LITRE_PER_MINUTE, 0.05, 0.3)
     split = simulate(low, scenario, 1e-5, 1e-3)
     small = simulate(low, scenario, 2.5e-6, 1e-3)
     scale = np.max(np.abs(small.states), axis=0) + 1e-12

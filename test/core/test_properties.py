@@ -22,7 +22,7 @@ the same strategy (valve_cases).
 """
 
 from hypothesis import assume, given, HealthCheck, settings, strategies as st
-from valve_sim.analysis.envelope import property_findings
+from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.parameters import load_parameters, validate

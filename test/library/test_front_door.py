@@ -22,12 +22,12 @@ import pytest
 import valve_sim as vs
 from valve_sim.commands import cli
 from valve_sim.core.errors import ParameterError, UnavailableError
+from valve_sim.core.flow_step import FlowStep
 from valve_sim.core.realtime_model import RealTimeModel
-from valve_sim.core.scenario import Scenario
 from valve_sim.core.simulation import simulate, simulate_recorded_flow
 from valve_sim.ros import isolation
 
-SHORT = Scenario(step_time=0.05, end_time=0.1)
+SHORT = FlowStep(step_time=0.05, end_time=0.1)
 
 
 def test_import_valve_sim_is_light_and_gives_every_verb():
@@ -69,7 +69,7 @@ def test_parameters_are_validated_when_built_immutable_and_replaced_by_name_or_s
 def test_simulate_refuses_an_invalid_valve_with_a_parameter_error(reference):
     """Before: a negative bulk modulus ran (p_s flat); an empty dict raised KeyError."""
     with pytest.raises(ParameterError, match="'bulk_modulus'"):
-        simulate(dict(reference, bulk_modulus=-1.0), Scenario(end_time=0.3))
+        simulate(dict(reference, bulk_modulus=-1.0), FlowStep(end_time=0.3))
     with pytest.raises(ParameterError, match='missing parameter.*max_inlet_flow'):
         simulate({}, SHORT)
     with pytest.raises(ParameterError, match="'bulk_modulus'"):
@@ -83,7 +83,7 @@ def test_simulate_refuses_an_invalid_valve_with_a_parameter_error(reference):
 
 def test_a_run_is_a_result_with_status_and_message_and_plain_float_measures():
     valve = vs.Parameters()
-    scenario = vs.Scenario(step_time=0.05, end_time=0.3)
+    scenario = vs.FlowStep(step_time=0.05, end_time=0.3)
     run = vs.simulate(valve, scenario, record_interval=1e-3)
     assert (run.status, run.message) == (0, 'the run reached its end')
     measures = vs.step_measures(run.time, run['supply_pressure'],

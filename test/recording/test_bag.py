@@ -31,12 +31,12 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import FluidPressure, JointState
 from std_msgs.msg import Float64
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
 from valve_sim.analysis.recorded_steps import analyse
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import relief_flows, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, relief_flows, simulate
 from valve_sim.recording.bag import (
     BagReader,
     BagWriter,
@@ -68,7 +68,7 @@ def waveforms():
 
     The step is at 0.25 s; its window is then truncated.
     """
-    return simulate(load_parameters().params, Scenario(step_time=0.25, end_time=0.6))
+    return simulate(load_parameters().params, FlowStep(step_time=0.25, end_time=0.6))
 
 
 @pytest.fixture(scope='module')

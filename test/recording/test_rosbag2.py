@@ -31,7 +31,7 @@ from valve_sim.analysis.recorded_steps import analyse
 from valve_sim.commands.cli import main
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import relief_flows, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, relief_flows, simulate
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.rosbag2_metadata import bag_files
 from valve_sim.recording.signal_reader import read_recording
@@ -115,7 +115,7 @@ def layout_problems(value, layout, ordered=True, where='metadata'):
 
 @pytest.fixture(scope='module')
 def waveforms():
-    return simulate(load_parameters().params, Scenario(step_time=0.1, end_time=0.4))
+    return simulate(load_parameters().params, FlowStep(step_time=0.1, end_time=0.4))
 
 
 @pytest.fixture(scope='module')

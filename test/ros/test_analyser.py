@@ -35,8 +35,8 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from valve_harness import flushed
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.recorded_steps import analyse
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import relief_flows
 from valve_sim.recording.bag import BagReader, message_definition

@@ -38,7 +38,7 @@ from valve_harness import Recorder, running_valve
 from valve_sim.core.fault_schedule import load_schedule
 from valve_sim.core.model import P_S
 from valve_sim.core.sensors import default_settings, read_waveforms
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import steady_state
 
 
@@ -127,7 +127,7 @@ def test_a_schedule_gives_the_same_supply_pressure_live_as_offline(faulty, refer
     faulty.run_until(faulty.start_ns + SCHEDULE_END_NS)
     live = published(faulty, 'supply_pressure', faulty.start_ns)
     assert [t - faulty.start_ns for t, _ in live] == list(range(0, SCHEDULE_END_NS + 1, PERIOD_NS))
-    offline = simulate(reference, Scenario(INITIAL_FLOW, INITIAL_FLOW, 0.0, 0.2),
+    offline = simulate(reference, FlowStep(INITIAL_FLOW, INITIAL_FLOW, 0.0, 0.2),
                        record_interval=1e-3, schedule=faulty.schedule)
     _, readings = read_waveforms(offline, default_settings(), 1e-3, AMBIENT)
     np.testing.assert_allclose([p for _, p in live], readings[:, 0], rtol=1e-9, atol=0.0)

@@ -20,8 +20,8 @@ from types import SimpleNamespace
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import pytest
 from rclpy.serialization import serialize_message
-from valve_sim.analysis.signals import SignalMap
-from valve_sim.core.simulation import Scenario, simulate
+from valve_sim.analysis.steps.signals import SignalMap
+from valve_sim.core.simulation import FlowStep, simulate
 from valve_sim.ros.measures_publisher import StepMeasures
 
 
@@ -48,7 +48,7 @@ def test_a_fault_status_change_ends_the_window_live(reference, tmp_path):
     measures.add(recorded, fault_status(0.0, 0.0), 0)  # the settings at the start: no event
     measures.add(recorded, fault_status(0.0, 0.0), 0)  # the same again: no event either
     measures.add(recorded, fault_status(0.5, 0.3), 0)  # a change from 0.5 s on
-    run = simulate(reference, Scenario(step_time=0.25, end_time=1.3), record_interval=1e-3)
+    run = simulate(reference, FlowStep(step_time=0.25, end_time=1.3), record_interval=1e-3)
     for row in zip(run.time, run['supply_pressure'], run['main_valve_displacement'],
                    run.inlet_flow):
         measures._measured(measures.analysis.add(*row))

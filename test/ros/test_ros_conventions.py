@@ -38,7 +38,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from valve_harness import running_valve, TIMEOUT
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.simulation import LITRE_PER_MINUTE, relief_flows, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, relief_flows, simulate
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import analyser_node, recorder
 from valve_sim.ros.live_view import layout_path
@@ -257,7 +257,7 @@ def test_analyser_names_levels_and_hardware_id_after_a_rename(context, tmp_path,
         assert waiting.name == 'renamed_analyser: recording'
         assert waiting.hardware_id == 'rig_7/recorder'
         run.replay.wait_for_subscribers(timeout=TIMEOUT)
-        waveforms = simulate(load_parameters().params, Scenario(step_time=0.05, end_time=0.2))
+        waveforms = simulate(load_parameters().params, FlowStep(step_time=0.05, end_time=0.2))
         relief = relief_flows(load_parameters().params, waveforms)
         run.replay.publish(waveforms, time.time_ns(), every=10, relief=relief)
         recording = run.wait_for(DiagnosticStatus.OK[0], 'recording to')

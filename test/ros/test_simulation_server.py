@@ -158,7 +158,7 @@ def runner(scenario_file, tmp_path_factory):
     Run before the simulator starts: two valves in one namespace would hear each other's
     /clock and inputs.
     """
-    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.ros.scenario_runner import run_scenario
 
     record = run_scenario(load_scenario(scenario_file), tmp_path_factory.mktemp('runner'),

@@ -36,9 +36,9 @@ from valve_harness import running_valve, SpinningNode, stamp_ns, TIMEOUT
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import config_path, load_parameters
 from valve_sim.core.simulation import (
+    FlowStep,
     LITRE_PER_MINUTE,
     relief_flows,
-    Scenario,
     simulate,
     TankPressure,
 )
@@ -209,7 +209,7 @@ def test_a_back_pressure_step_in_the_node_is_the_offline_one(sim_tank, defaults,
     end_time = (probe.clock_ns - start_ns) / 1e9
     offline = simulate(
         reference,
-        Scenario(FLOW, FLOW, end_time=end_time + 0.5e-3),
+        FlowStep(FLOW, FLOW, end_time=end_time + 0.5e-3),
         step_size=defaults['step_size'],
         record_interval=PERIOD_NS / 1e9,
         tank=TankPressure(low, high, step_time=step_time),

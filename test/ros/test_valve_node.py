@@ -37,11 +37,11 @@ import rclpy
 from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import Float64
 from valve_harness import PRESSURE_TOPICS, running_valve, start_node, TIMEOUT
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.step_detection import detect_steps
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
+from valve_sim.analysis.steps.step_detection import detect_steps
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import config_path, load_parameters, SPECS
-from valve_sim.core.simulation import LITRE_PER_MINUTE, Scenario, simulate
+from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE, simulate
 from valve_sim.core.steady_state import (
     cracking_pressure,
     preload_for_cracking_pressure,
@@ -172,7 +172,7 @@ def test_step_response_matches_offline_simulation(sim_valve, reference):
     node = step_measures(t, p_s, x, t_step)
     offline_run = simulate(
         reference,
-        Scenario(INITIAL_FLOW, FINAL_FLOW, step_time=t_step, end_time=t_step + 1.01),
+        FlowStep(INITIAL_FLOW, FINAL_FLOW, step_time=t_step, end_time=t_step + 1.01),
         step_size=1e-5,
         record_interval=1e-4,
     )

@@ -13,15 +13,20 @@
 # limitations under the License.
 
 """
-Response analysis on arrays: the six step-response measures, signals, plots.
+Response analysis on arrays: the six step-response measures, studies, calibration, figures.
 
-Lives here: the measures and step detection, streaming step analysis, the steps of a
-recording (recorded_steps: measures, Figure 5, their text), signal mapping and
-joining, the paper's reference data and study cases (and the study run on a backend
-sized for this machine: study_backend), tolerances, sensitivity and robust
-optimisation, parameter identification (calibration: the fit, its uncertainty and its
-report), the static characteristic (and the model's ramp test), the envelope check,
-matplotlib figures.
+Lives here, in rooms (sub-packages, each __init__ says what it holds and may import),
+one-way from the bottom up:
+  paper            the paper's reference data (Table 1-3, Figure 5), no import of the wing
+  steps/           the six measures of a step, finding steps, signals, the envelope check,
+                   a simulated step's report (simulated_step)
+  characteristic   the static characteristic (and the model's ramp test)
+  plotting         matplotlib figures (Figure 5, the characteristic)
+  recorded_steps   the steps of a recording: measures, Figure 5, their text
+  studies/         the parameter study, tolerance and sensitivity studies on a backend
+  calibration/     parameter identification: the fit, its uncertainty, verdict and report
+  design/          robust design optimisation: yield of a design, the Pareto search
+  scenarios/       bench scenarios as YAML files (BenchScenario), expectations, reports
 May import: valve_sim.core. No ROS and no bag files: recording reads bags and hands
-arrays to this wing.
+arrays to this wing. test/lint/test_layering.py holds each room to its rule.
 """

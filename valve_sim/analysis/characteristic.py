@@ -47,7 +47,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from valve_sim.core.errors import ParameterError, SteadyStateError
-from valve_sim.core.scenario import LITRE_PER_MINUTE
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 
 
 CRACKING_FRACTION = 0.01  # main-stage flow threshold, fraction of the rated flow

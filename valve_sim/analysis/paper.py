@@ -21,7 +21,7 @@ beside a run of the paper's own scenario (is_reference_step).
 
 import math
 
-from valve_sim.core.scenario import LITRE_PER_MINUTE, Scenario
+from valve_sim.core.flow_step import FlowStep, LITRE_PER_MINUTE
 
 
 # Figure 5 / Table 3, Table 1 conditions, under the names of docs/measures.md.
@@ -35,7 +35,7 @@ FIGURE5_MEASURES = {
 }
 
 # The paper's test: 5 L/min, +15 L/min step at 0.25 s, end at 1.25 s.
-REFERENCE_SCENARIO = Scenario(
+REFERENCE_FLOW_STEP = FlowStep(
     initial_flow=5.0 * LITRE_PER_MINUTE,
     final_flow=20.0 * LITRE_PER_MINUTE,
     step_time=0.25,
@@ -59,7 +59,7 @@ def is_reference_step(initial_flow, final_flow):
     return all(
         math.isclose(flow, reference, rel_tol=1e-3)
         for flow, reference in (
-            (initial_flow, REFERENCE_SCENARIO.initial_flow),
-            (final_flow, REFERENCE_SCENARIO.final_flow),
+            (initial_flow, REFERENCE_FLOW_STEP.initial_flow),
+            (final_flow, REFERENCE_FLOW_STEP.final_flow),
         )
     )

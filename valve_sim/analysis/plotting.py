@@ -26,7 +26,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
 import numpy as np  # noqa: E402
-from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
+from valve_sim.analysis.steps.measures import ENVELOPE_DECAY, MEASURE_NAMES  # noqa: E402
 from valve_sim.core.output_files import replacing  # noqa: E402
 
 
@@ -225,13 +225,13 @@ def plot_measures_fit(path, target, measures, waveforms):
     """
     Calibration to measures: the model's step response, and each measure against its target.
 
-    target: calibration_targets.MeasuresTarget; measures: StepMeasures.as_dict() of the
+    target: calibration.targets.MeasuresTarget; measures: StepMeasures.as_dict() of the
     calibrated model; waveforms: its simulation.Waveforms.
     """
     figure, (response, bars) = plt.subplots(
         2, 1, figsize=(8, 8), constrained_layout=True, gridspec_kw={'height_ratios': [3, 2]}
     )
-    t_step = target.scenario.step_time
+    t_step = target.flow_step.step_time
     pressure = waveforms['supply_pressure']
     before = max(int(np.searchsorted(waveforms.time, t_step, side='right')) - 1, 0)
     response.plot(waveforms.time, pressure / pressure[before], color='tab:blue', linewidth=0.9)
@@ -265,7 +265,7 @@ def plot_recording_fit(path, target, states):
     """
     Calibration to a recording: recorded and model supply pressure (and x), and the residual.
 
-    target: calibration_targets.RecordingTarget; states: model states at its sample times.
+    target: calibration.targets.RecordingTarget; states: model states at its sample times.
     The recorded samples are drawn as dots above the model's line, so that both show
     where they agree; the first panel is zoomed on the first step (its first 0.2 s),
     where the dynamics are.

@@ -31,10 +31,10 @@ import math
 from typing import Any
 
 import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
 from valve_sim.analysis.paper import FIGURE5_MEASURES
-from valve_sim.analysis.sample_window import between, last_at_or_before
-from valve_sim.analysis.step_analysis import step_record, StepAnalysis, tank_details
+from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures, StepMeasures, WINDOW
+from valve_sim.analysis.steps.sample_window import between, last_at_or_before
+from valve_sim.analysis.steps.step_analysis import step_record, StepAnalysis, tank_details
 
 
 PLOT_LEAD = (

@@ -15,7 +15,7 @@
 """
 Step measures of each inlet-flow step in a rosbag2 MCAP file or bag folder, as measured live.
 
-Reads the signals of valve_sim.analysis.signals (topics mappable by option, so a real rig's
+Reads the signals of valve_sim.analysis.steps.signals (topics mappable by option, so a real rig's
 bag with other names or types works), joined on the supply-pressure times
 (valve_sim.recording.signal_reader), and measures each step with
 valve_sim.analysis.recorded_steps (step_analysis.StepAnalysis over them). A file whose end is
@@ -29,7 +29,7 @@ pressure-flow curve (a bag holds no main-stage flow; docs/characteristic.md).
 
 Where the bag holds the tank's pressure (valve_node's applied_tank_pressure, or a rig's
 topic by --topic-tank-pressure), the measures and the characteristic take the supply
-pressure above the tank, p_s - p_t (valve_sim.analysis.step_analysis); the relief flow,
+pressure above the tank, p_s - p_t (valve_sim.analysis.steps.step_analysis); the relief flow,
 where recorded, is reported beside the inlet flow and drawn under the pressures.
 """
 

@@ -35,9 +35,7 @@ from pathlib import Path
 import shlex
 import sys
 
-import numpy as np
 from valve_sim.analysis.recorded_steps import analyse
-from valve_sim.analysis.signals import ROLE
 from valve_sim.commands.options import (
     add_options,
     add_signal_arguments,
@@ -46,11 +44,11 @@ from valve_sim.commands.options import (
     number,
     signal_map_from,
 )
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 from valve_sim.core.input_documents import read_json
 from valve_sim.core.input_files import TARGET_MEASURES
 from valve_sim.core.output_files import json_text, make_folder, write_text
-from valve_sim.core.scenario import LITRE_PER_MINUTE
-from valve_sim.recording.signal_reader import read_recording, Recording
+from valve_sim.recording.signal_reader import from_every_signal, read_recording
 
 # The model's and the fit's modules (numba, scipy) are imported in the functions that
 # run them, so that `valve-sim calibrate --help` stays quick.
@@ -226,7 +224,7 @@ def add_arguments(parser):
 
 
 def _target(args, step_size, signal_map):
-    from valve_sim.analysis.calibration_targets import MeasuresTarget, RecordingTarget
+    from valve_sim.analysis.calibration.targets import MeasuresTarget, RecordingTarget
     from valve_sim.core.errors import CalibrationError
 
     if args.target_measures:
@@ -244,92 +242,29 @@ def _target(args, step_size, signal_map):
     recording = read_recording(args.bag, signal_map)
     if recording.problem:
         print(f'valve-sim calibrate: warning: {recording.problem}', file=sys.stderr)
-    recording = from_every_signal(recording, signal_map)
-    main_valve = recording.main_valve if np.any(np.isfinite(recording.main_valve)) else None
-    located = located_steps(recording)
+    recording, note = from_every_signal(recording, signal_map.topics)
+    if note:
+        print(f'valve-sim calibrate: note: {note}', file=sys.stderr)
     try:
-        return RecordingTarget(
-            recording.time - recording.time[0],
-            recording.supply_pressure,
-            recording.inlet_flow,
-            main_valve,
-            step_size,
-            step_times=[t - recording.time[0] for t, _ in located],
-            brackets=[tuple(t - recording.time[0] for t in bracket) for _, bracket in located],
-        )
+        return RecordingTarget.from_recording(recording, step_size)
     except CalibrationError as error:
         raise CalibrationError(f'{args.bag}: {error}') from None
 
 
-def located_steps(recording):
-    """
-    Return [(step time, (first, last))] [s] of the steps analyse locates between flow samples.
-
-    A flowmeter slower than the pressure shows a step only at its next sample (last);
-    analyse locates it from the pressure (step_detection.locate_step), and calibrate fits it.
-    """
-    return [
-        (record['t_step'], tuple(record['details']['t_step_bracket']))
-        for record in analyse(recording)
-        if record['details'].get('t_step_from') == 'supply_pressure'
-    ]
-
-
-def from_every_signal(recording, signal_map):
-    """
-    Return the recording from its first row where every mapped signal it holds has a value.
-
-    A recorder subscribes topic by topic (analyser_node as rosbag2), so its first rows
-    can lack a signal (the main valve, NaN there). Those rows are dropped, and stderr
-    says so; the main valve counts only if the bag holds it at all.
-    """
-    present = {'supply_pressure': recording.supply_pressure, 'inlet_flow': recording.inlet_flow}
-    if np.any(np.isfinite(recording.main_valve)):
-        present['main_valve'] = recording.main_valve
-    known = np.logical_and.reduce([np.isfinite(values) for values in present.values()])
-    first = int(np.argmax(known)) if known.any() else len(known)
-    if first == 0:
-        return recording
-    if first == len(known):
-        from valve_sim.core.errors import CalibrationError
-
-        raise CalibrationError('no sample of the recording has every mapped signal')
-    late = ', '.join(
-        f'{ROLE[role].meaning.split(" [")[0]} ({signal_map.topics[role]})'
-        for role, values in present.items()
-        if not np.isfinite(values[0])
-    )
-    print(
-        f'valve-sim calibrate: note: the recording starts at its first sample, but {late} '
-        f'begins {recording.time[first] - recording.time[0]:.3f} s later: fitting from there '
-        f'(the first {first} samples dropped)',
-        file=sys.stderr,
-    )
-    return Recording(
-        recording.time[first:],
-        recording.supply_pressure[first:],
-        recording.main_valve[first:],
-        recording.pilot_poppet[first:],
-        recording.inlet_flow[first:],
-        recording.problem,
-        None if recording.inlet_flow_time is None else recording.inlet_flow_time[first:],
-    )
-
-
 def run(args):
-    from valve_sim.analysis.calibration import calibrate, CalibrationProblem, FitSettings
-    from valve_sim.analysis.calibration_parameters import (
+    from valve_sim.analysis.calibration.fit import calibrate, CalibrationProblem, FitSettings
+    from valve_sim.analysis.calibration.parameters import (
         fit_parameters,
         fit_ties,
         step_time_parameters,
     )
-    from valve_sim.analysis.calibration_report import (
+    from valve_sim.analysis.calibration.report import (
         parameter_file_text,
         plot_fit,
         report_document,
         report_text,
     )
-    from valve_sim.analysis.calibration_requirements import (
+    from valve_sim.analysis.calibration.requirements import (
         CaseRelieves,
         LandsInsideBore,
         MainSpringRange,
@@ -337,7 +272,7 @@ def run(args):
         PilotFlowLimit,
         StudyRelieves,
     )
-    from valve_sim.analysis.calibration_verdict import judged, verdict_lines
+    from valve_sim.analysis.calibration.verdict import judged, verdict_lines
     from valve_sim.commands.options import ctrl_c_stops
     from valve_sim.core.errors import CalibrationError
 

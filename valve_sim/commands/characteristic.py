@@ -45,8 +45,8 @@ from valve_sim.commands.options import (
     number,
 )
 from valve_sim.core.errors import ParameterError
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 from valve_sim.core.output_files import json_text, make_folder, replacing, write_text
-from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim characteristic --help` stays quick.

@@ -33,7 +33,7 @@ import math
 from pathlib import Path
 import time
 
-from valve_sim.analysis.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.commands.options import add_options
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.core.input_documents import read_json

@@ -25,8 +25,8 @@ the stable key names of docs/model.md ("operating-point --json"), all SI.
 
 
 from valve_sim.commands.options import add_options, flow_value, load_from_arguments
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 from valve_sim.core.output_files import json_text
-from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def add_arguments(parser):

@@ -19,9 +19,9 @@ NSGA-II (pymoo) over the designed parameters (--design); each candidate's nomina
 measures are the objectives (--minimise, --maximise), and its yield, the share of
 valves made within --tolerance that meet --limits (and whose modes decay), comes from
 a quasi-random Monte Carlo on the Dask runner, sampled in rounds and stopped once
-decided (--sequential, analysis.sequential_yield; --budget caps the runs). The
+decided (--sequential, analysis.design.sequential_yield; --budget caps the runs). The
 Pareto designs and the baselines (the reference valve, Table 2) are then confirmed
-with more, independent samples. See valve_sim.analysis.optimisation. Writes into --out:
+with more, independent samples. See valve_sim.analysis.design.optimisation. Writes into --out:
   evaluations/     the runner's results, one file per generation (--resume)
   pareto.csv       each Pareto design: values, nominal measures, both yields
   pareto.json      the problem, the Pareto set, the baselines, the chosen design
@@ -35,12 +35,12 @@ from argparse import ArgumentTypeError
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.robust_yield import MIN_DECAY_RATE
-from valve_sim.analysis.sequential_yield import FIRST_ROUND, STOP_ALPHA
-from valve_sim.analysis.study_backend import check_fits, MAX_RUNS, open_backend
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.tolerances import parse_limits, SAMPLERS
+from valve_sim.analysis.design.robust_yield import MIN_DECAY_RATE
+from valve_sim.analysis.design.sequential_yield import FIRST_ROUND, STOP_ALPHA
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.backend import check_fits, MAX_RUNS, open_backend
+from valve_sim.analysis.studies.cases import preset_protocol
+from valve_sim.analysis.studies.tolerances import parse_limits, SAMPLERS
 from valve_sim.commands.options import (
     add_options,
     add_protocol_arguments,
@@ -58,7 +58,7 @@ from valve_sim.core.output_files import make_folder
 
 # [bytes] a sampled valve's run on the worker that evaluates its candidate: every valve of
 # a candidate runs in one batch, waveforms and all; 1.1-1.5 MiB measured (tracemalloc
-# peak of study_runner.evaluate_batch over 32-128 valves of the step test), rounded up
+# peak of studies.runner.evaluate_batch over 32-128 valves of the step test), rounded up
 BYTES_PER_VALVE = 2 * 1024 * 1024
 MAX_CANDIDATES = 100_000  # population x generations: the rows kept for the Pareto set
 # [bytes] a candidate's row kept in the client (2.4 KiB as JSON), with Python's overhead
@@ -158,7 +158,7 @@ def add_arguments(parser):
 
 def problem_from(args):
     """Return (RobustProblem, the protocol's statement) from the options."""
-    from valve_sim.analysis.optimisation import (
+    from valve_sim.analysis.design.optimisation import (
         exact_text,
         parse_design,
         parse_fraction,
@@ -249,9 +249,9 @@ def _yield_text(result):
 
 
 def run(args):
-    from valve_sim.analysis.optimisation import outcome_of, search
-    from valve_sim.analysis.optimisation_plots import plot_distributions, plot_pareto_front
-    from valve_sim.analysis.optimisation_report import write_outputs
+    from valve_sim.analysis.design.optimisation import outcome_of, search
+    from valve_sim.analysis.design.plots import plot_distributions, plot_pareto_front
+    from valve_sim.analysis.design.report import write_outputs
 
     require('optimise', 'studies', 'pymoo', error=StudyError)
     problem, protocol = problem_from(args)

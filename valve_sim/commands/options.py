@@ -39,11 +39,12 @@ import signal
 import sys
 import threading
 
-from valve_sim.analysis.signals import CLOCKS, ROLES, SignalMap
-from valve_sim.analysis.study_backend import BYTES_PER_WORKER, CORES, MAX_RUNS, WORKERS_PER_CORE
-from valve_sim.analysis.study_cases import DEFAULT_PROTOCOL, PROTOCOLS
+from valve_sim.analysis.steps.signals import CLOCKS, ROLES, SignalMap
+from valve_sim.analysis.studies.backend import BYTES_PER_WORKER, CORES, MAX_RUNS, WORKERS_PER_CORE
+from valve_sim.analysis.studies.cases import DEFAULT_PROTOCOL, PROTOCOLS
 from valve_sim.core.catalogue import CATALOGUE
 from valve_sim.core.errors import ParameterError
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 from valve_sim.core.input_files import PARAMETER_FILE, size_text
 from valve_sim.core.parameters import (
     check_value,
@@ -52,7 +53,6 @@ from valve_sim.core.parameters import (
     SPECS,
     STANDARD_ATMOSPHERE,
 )
-from valve_sim.core.scenario import LITRE_PER_MINUTE
 
 
 def quantity(text, units, kind, example):
@@ -429,7 +429,7 @@ def ctrl_c_stops():
     """
     Within the block, Ctrl-C asks a long computation to stop instead of raising at once.
 
-    Yields should_stop() for the library (e.g. analysis.calibration.calibrate), true once
+    Yields should_stop() for the library (e.g. analysis.calibration.fit.calibrate), true once
     Ctrl-C (SIGINT) was pressed; the computation then ends with what it has. A second
     Ctrl-C raises KeyboardInterrupt as usual (the command line: "interrupted", exit 130).
     Outside the main thread, where Python takes no signals, should_stop() stays false.

@@ -83,7 +83,7 @@ def add_arguments(parser):
 
 def describe(scenario):
     """Return what a checked scenario runs, in a few lines."""
-    from valve_sim.analysis.scenario_file import INPUT_UNITS
+    from valve_sim.analysis.scenarios.bench_scenario import INPUT_UNITS
 
     lines = [f'scenario {scenario.name} ({scenario.path}): {scenario.duration:g} s, '
              f'{scenario.ticks + 1} ticks at {scenario.publish_rate:g} Hz']
@@ -96,7 +96,7 @@ def describe(scenario):
 
 
 def run(args):
-    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.recording.tick_bags import bag_column
 
     scenario = load_scenario(args.file, bag_column)

@@ -34,12 +34,14 @@ import csv
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import MEASURE_NAMES
 from valve_sim.analysis.paper import STUDY_PARAMETERS
-from valve_sim.analysis.sensitivity import sobol_design, sobol_indices
-from valve_sim.analysis.study_backend import check_runs, run_samples
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.tolerances import parse_variations, undefined_reasons, write_samples
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.studies.backend import check_runs
+from valve_sim.analysis.studies.cases import preset_protocol, run_samples
+from valve_sim.analysis.studies.sensitivity import sobol_design, sobol_indices
+from valve_sim.analysis.studies.tolerances import (
+    parse_variations, undefined_reasons, write_samples,
+)
 from valve_sim.commands.options import (
     add_protocol_arguments,
     add_runner_arguments,
@@ -160,7 +162,7 @@ def run(args):
         )
         + '\n'
     )
-    from valve_sim.analysis.study_plots import plot_sobol_indices
+    from valve_sim.analysis.studies.plots import plot_sobol_indices
 
     labels = [SPECS[d.name].symbol for d in distributions]
     for name, entry in indices.items():

@@ -30,9 +30,7 @@ import csv
 import math
 import sys
 
-import numpy as np
-from valve_sim.analysis.measures import MEASURE_NAMES, step_measures
-from valve_sim.analysis.paper import is_reference_step, REFERENCE_SCENARIO
+from valve_sim.analysis.paper import is_reference_step, REFERENCE_FLOW_STEP
 from valve_sim.analysis.recorded_steps import measures_table
 from valve_sim.commands.options import (
     add_options,
@@ -48,10 +46,10 @@ from valve_sim.commands.options import (
 from valve_sim.core.catalogue import split
 from valve_sim.core.errors import ParameterError
 from valve_sim.core.faults import HEALTHY
+from valve_sim.core.flow_step import FlowStep, TankPressure
 from valve_sim.core.input_files import FAULT_SCHEDULE as FAULT_SCHEDULE_FILE, MAX_EVENTS
 from valve_sim.core.output_files import json_text, replacing
 from valve_sim.core.parameters import FAULT_SCHEDULE, load_parameters
-from valve_sim.core.scenario import Scenario, TankPressure
 
 # The model's modules (numba, scipy) are imported in the functions that run it, so that
 # `valve-sim simulate --help` stays quick.
@@ -65,7 +63,7 @@ INTERVAL = number('an interval', 's', 1e-7, 1.0)
 
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure')
-    s = REFERENCE_SCENARIO
+    s = REFERENCE_FLOW_STEP
     parser.add_argument('--initial-flow', type=flow_value, default=s.initial_flow, metavar='Q',
                         help='inlet flow before the step; 0 starts from the closed, empty '
                         'valve (default 5L/min)')
@@ -161,10 +159,10 @@ def rig_topics(text):
     return ['/' + topic.lstrip('/') for topic in topics]
 
 
-def _scenario(args):
+def flow_step_of(args):
     if not args.step_time < args.end_time:
         raise ParameterError('need --step-time < --end-time')
-    return Scenario(
+    return FlowStep(
         args.initial_flow, args.final_flow, args.step_time, args.end_time, args.ramp_time
     )
 
@@ -223,19 +221,20 @@ def load_injection(args, injection):
     return faults, sensors, load_schedule(path) if path else []
 
 
-def is_papers_run(params, scenario):
+def is_papers_run(params, flow_step):
     """Whether a run is the paper's Figure 5 case: its step, on the reference parameters."""
     return (
-        is_reference_step(scenario.initial_flow, scenario.final_flow)
-        and scenario.ramp_time == 0.0
+        is_reference_step(flow_step.initial_flow, flow_step.final_flow)
+        and flow_step.ramp_time == 0.0
         and params == load_parameters().params
     )
 
 
 def run(args):
-    from valve_sim.analysis.step_analysis import tank_details
+    from valve_sim.analysis.steps.simulated_step import measure_run
     from valve_sim.core.sensors import read_waveforms
-    from valve_sim.core.simulation import relief_flows, simulate, simulate_alarms
+    from valve_sim.core.simulation import relief_flows, simulate
+    from valve_sim.recording.valve_topics import publish_interval_for
 
     check_bag_arguments(args)
     if args.flow_interval is not None and not (args.mcap and args.rig_topics):
@@ -244,13 +243,13 @@ def run(args):
     params, settings = loaded.params, loaded.settings
     faults, sensors, schedule = load_injection(args, loaded.injection)
     step_size = settings['step_size']
-    scenario = _scenario(args)
+    flow_step = flow_step_of(args)
     tank = tank_profile(args, params, settings)
     if args.record_interval < step_size:
         raise ParameterError(f'--record-interval must be >= the step size ({step_size:g} s)')
     waveforms = simulate(
         params,
-        scenario,
+        flow_step,
         step_size,
         args.record_interval,
         faults,
@@ -259,46 +258,12 @@ def run(args):
         halt_on_overpressure=True,
         tank=tank,
     )
-    direction = 1 if scenario.final_flow >= scenario.initial_flow else -1
-    measures = step_measures(
-        waveforms.time,
-        waveforms['supply_pressure'] - waveforms.tank_pressure,
-        waveforms['main_valve_displacement'],
-        scenario.step_time,
-        direction,
+    schedule_file = args.faults or loaded.injection.get(FAULT_SCHEDULE)
+    measured = measure_run(
+        params, waveforms, flow_step, faults, schedule_file if schedule else None
     )
-    above_tank = bool(np.any(waveforms.tank_pressure != 0.0))
-    if above_tank:
-        measures.details.update(
-            tank_details(waveforms.time, waveforms.tank_pressure, scenario.step_time)
-        )
-    faulty = bool(faults.active() or waveforms.events)
-    if faulty:
-        schedule_file = args.faults or loaded.injection.get(FAULT_SCHEDULE)
-        cause = '; '.join(
-            [f'faults from the start: {faults.describe()}'] * bool(faults.active())
-            + [f'fault schedule {schedule_file}'] * bool(schedule)
-        )
-        measures.reasons = {name: f'{why} ({cause})' for name, why in measures.reasons.items()}
-    if waveforms.halted:
-        halted_at, why = waveforms.halted
-        overpressure = (
-            f'OVERPRESSURE at t = {halted_at:.6f} s: {why} The model halts there, as '
-            'valve_node does: it holds its last good state to the end of the run, and '
-            f"supply_pressure is reported at burst_pressure = {params['burst_pressure']:g} Pa "
-            '(gauge), the limit it passed'
-        )
-        measures.values = dict.fromkeys(MEASURE_NAMES)
-        measures.reasons = dict.fromkeys(
-            MEASURE_NAMES,
-            f'the run halted at an overpressure at t = {halted_at:.6f} s '
-            '(details.overpressure; stderr)',
-        )
-        measures.details['overpressure'] = {'t': halted_at, 'message': overpressure}
-    # The run's invariants (valve_sim.core.invariants): details.invariant_alarms, stderr.
-    alarms = [] if waveforms.halted else simulate_alarms(params, waveforms, faults)
-    measures.details['invariant_alarms'] = [alarm.as_dict() for alarm in alarms]
-    for alarm in alarms:
+    measures, above_tank = measured.measures, measured.above_tank
+    for alarm in measured.alarms:
         print(f'valve-sim simulate: warning: {alarm}', file=sys.stderr)
     written = args.csv or args.plot or args.mcap
     relief = relief_flows(params, waveforms, faults) if written else None
@@ -313,25 +278,20 @@ def run(args):
             waveforms['supply_pressure'] - waveforms.tank_pressure,
             waveforms['main_valve_displacement'],
             waveforms['poppet_displacement'],
-            scenario.step_time,
+            flow_step.step_time,
             measures.as_dict(),
             flows={'inlet': waveforms.inlet_flow, 'relief': relief[:, 0]},
             pressure='p_s - p_t' if above_tank else 'p_s',
         )
     if args.mcap:
-        # valve_node's 1 kHz ticks where the samples allow it, else every sample.
-        ratio = 1e-3 / args.record_interval
-        interval = (
-            1e-3 if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else args.record_interval
-        )
+        interval = publish_interval_for(args.record_interval)
         _, readings = read_waveforms(waveforms, sensors, interval, settings['ambient_pressure'])
         write_mcap(args, waveforms, settings['ambient_pressure'], interval, readings, relief)
     if args.json:
         print(json_text(measures.as_dict()))
     else:
-        print(measures_table(
-            measures, paper=is_papers_run(params, scenario) and not faulty and not above_tank
-        ))
+        paper = is_papers_run(params, flow_step) and not measured.faulty and not above_tank
+        print(measures_table(measures, paper=paper))
         if above_tank:
             print(
                 f'tank pressure {tank.initial:g} Pa (gauge)'

@@ -21,7 +21,7 @@ the six together as in Table 2: 26 distinct runs of the paper's step test, run
 in batches by the study runner (a local Dask cluster, --scheduler for an existing
 one, a local process pool when dask is not installed).
 
-PROTOCOL (--protocol; valve_sim.analysis.study_cases.PROTOCOLS): how the preset is
+PROTOCOL (--protocol; valve_sim.analysis.studies.cases.PROTOCOLS): how the preset is
 treated between cases.
   held-preset     (default, the paper's) the pilot spring preload is re-solved in
                   every case so that the main valve cracks at the same preset
@@ -45,10 +45,10 @@ import csv
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.measures import ENVELOPE_DECAY, MEASURE_NAMES
-from valve_sim.analysis.paper import REFERENCE_SCENARIO, STUDY_PARAMETERS, STUDY_VARIATIONS
-from valve_sim.analysis.study_backend import open_backend
-from valve_sim.analysis.study_cases import PROTOCOLS, run_all, study_cases
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP, STUDY_PARAMETERS, STUDY_VARIATIONS
+from valve_sim.analysis.steps.measures import ENVELOPE_DECAY, MEASURE_NAMES
+from valve_sim.analysis.studies.backend import open_backend
+from valve_sim.analysis.studies.cases import PROTOCOLS, run_all, study_cases
 from valve_sim.commands.options import (
     add_options,
     add_protocol_arguments,
@@ -148,7 +148,7 @@ def write_figures(out, results, protocol):
             for percent in STUDY_VARIATIONS
             if results[_label('m_p', percent)]['poppet'] is not None
         },
-        REFERENCE_SCENARIO.step_time,
+        REFERENCE_FLOW_STEP.step_time,
     )
     plot_pressure_increment(
         out / 'figure13_P_o.png',

@@ -15,7 +15,7 @@
 """
 Monte Carlo of manufacturing tolerances: how many valves of a batch meet a spec.
 
-Each sampled valve (--vary, see valve_sim.analysis.tolerances for the forms) is
+Each sampled valve (--vary, see valve_sim.analysis.studies.tolerances for the forms) is
 set to the preset pressure before its test, as a technician sets every valve on
 the bench (protocol held-preset: the pilot spring preload re-solved so that it
 cracks at the preset, the cracking pressure of the nominal valve or
@@ -33,9 +33,9 @@ paper's step test (5 -> 20 L/min) is run and measured. Writes into --out:
 from pathlib import Path
 import sys
 
-from valve_sim.analysis.study_backend import check_runs, run_samples
-from valve_sim.analysis.study_cases import preset_protocol
-from valve_sim.analysis.tolerances import (
+from valve_sim.analysis.studies.backend import check_runs
+from valve_sim.analysis.studies.cases import preset_protocol, run_samples
+from valve_sim.analysis.studies.tolerances import (
     draw,
     parse_limits,
     parse_variations,
@@ -118,7 +118,7 @@ def run(args):
     }
     write_samples(out / 'samples.csv', names, values, rows, limits)
     write_text(out / 'summary.json', json_text(summary) + '\n')
-    from valve_sim.analysis.study_plots import plot_measure_cdfs, plot_measures_against
+    from valve_sim.analysis.studies.plots import plot_measure_cdfs, plot_measures_against
 
     plot_measure_cdfs(out / 'measures_cdf.png', rows, limits, f"protocol {protocol['protocol']}")
     for index, name in enumerate(names):

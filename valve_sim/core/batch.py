@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Batch runs for studies: many parameter sets through one scenario, on the lanes kernel.
+Batch runs for studies: many parameter sets through one flow step, on the lanes kernel.
 
 simulate_batch() runs the sets LANES at a time through valve_sim.core.lanes and does
 not integrate the stretch before the step when the start is a stable steady state:
@@ -35,9 +35,9 @@ from typing import Optional
 import numpy as np
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import ParameterError, SteadyStateError
+from valve_sim.core.flow_step import FlowStep
 from valve_sim.core.lanes import advance_lanes
 from valve_sim.core.linear import jacobian
-from valve_sim.core.scenario import Scenario
 from valve_sim.core.simulation import (
     check_schedule,
     recorded_waveforms,
@@ -96,11 +96,11 @@ def is_stable(params, state, inlet_flow):
 
 
 def simulate_batch(
-    params_list: Sequence[Mapping[str, float]], scenario: Scenario = Scenario(),
+    params_list: Sequence[Mapping[str, float]], flow_step: FlowStep = FlowStep(),
     step_size: float = 1e-5, record_interval: float = 1e-4, lanes: int = LANES,
 ) -> list[RunResult]:
     """
-    Run one scenario for many parameter sets; a list of RunResults, one per set, in order.
+    Run one flow step for many parameter sets; a list of RunResults, one per set, in order.
 
     A run's waveforms are those simulate() gives (the same sample times), except that the
     stretch before the step is not integrated but held at the exact steady state
@@ -110,18 +110,18 @@ def simulate_batch(
     kernel advances together.
     """
     record_every = max(1, int(round(record_interval / step_size)))
-    flows = step_flows(scenario, step_size)
-    lead = steady_lead(flows, scenario.initial_flow, record_every)
+    flows = step_flows(flow_step, step_size)
+    lead = steady_lead(flows, flow_step.initial_flow, record_every)
     results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
     for index, params in enumerate(params_list):
         try:
-            state = steady_state(params, scenario.initial_flow)
+            state = steady_state(params, flow_step.initial_flow)
             check_schedule(params, flows)
         except (ParameterError, SteadyStateError) as error:
             results[index] = RunResult(error=error)
             continue
         starts[index] = (state, coefficients(params))
-        groups[lead if is_stable(params, state, scenario.initial_flow) else 0].append(index)
+        groups[lead if is_stable(params, state, flow_step.initial_flow) else 0].append(index)
     for skipped, ready in groups.items():
         for first in range(0, len(ready), max(1, lanes)):
             group = ready[first:first + max(1, lanes)]
@@ -141,7 +141,7 @@ def simulate_batch(
                         flows,
                         record_every,
                         step_size,
-                        scenario.initial_flow,
+                        flow_step.initial_flow,
                         held=skipped // record_every,
                     )
                 )

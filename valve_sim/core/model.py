@@ -64,6 +64,9 @@ and a stuck main valve (main_valve_free) act in derivatives() here. With no faul
 term is skipped, so the healthy model is computed exactly as without them.
 
 fastest_chamber_rate() tells the integrator when a fixed step must be split.
+
+About 400 lines on purpose: the paper's equations 1-16 in one module, the functions
+numba compiles into one kernel together.
 """
 
 from collections import namedtuple

@@ -46,7 +46,7 @@ def compile_kernels():
     from valve_sim.core.parameters import load_parameters
     from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
     from valve_sim.core.sensors import SensorStage
-    from valve_sim.core.simulation import Scenario, simulate
+    from valve_sim.core.simulation import FlowStep, simulate
 
     loaded = load_parameters()
     params, settings = loaded.params, loaded.settings
@@ -56,7 +56,7 @@ def compile_kernels():
     model.start(0)
     model.advance_to(NS_PER_S // 1000, flow, NS_PER_S, 0.0)
     SensorStage()
-    simulate(params, Scenario(step_time=STEP_TIME, end_time=END_TIME), record_interval=1e-3)
+    simulate(params, FlowStep(step_time=STEP_TIME, end_time=END_TIME), record_interval=1e-3)
 
 
 def cache_folder():

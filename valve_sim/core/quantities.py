@@ -17,7 +17,7 @@ Physical quantities written in a file: a number in SI units, or a number and a u
 
     5 L/min   20L/min   8.33e-5   7 MPa   70 bar   0.25   250 ms
 
-A bench scenario (valve_sim.analysis.scenario_file) writes its flows, pressures and
+A bench scenario (valve_sim.analysis.scenarios.bench_scenario) writes its flows, pressures and
 times so. Each dimension has its table of units (factor to SI); a bare number is SI.
 Pressures here are the model's gauge pressures [Pa] (docs/model.md).
 """
@@ -26,7 +26,7 @@ import math
 import re
 
 from valve_sim.core.errors import ParameterError
-from valve_sim.core.scenario import LITRE_PER_MINUTE
+from valve_sim.core.flow_step import LITRE_PER_MINUTE
 
 
 FLOW = ('flow', 'm^3/s', {'m^3/s': 1.0, 'm3/s': 1.0, 'L/min': LITRE_PER_MINUTE,

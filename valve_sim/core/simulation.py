@@ -13,9 +13,9 @@
 # limitations under the License.
 
 """
-Offline runs of the valve model: an inlet-flow scenario in, sampled waveforms out.
+Offline runs of the valve model: an inlet-flow step in, sampled waveforms out.
 
-A Scenario (valve_sim.core.scenario) is the paper's test: the valve at the exact steady state of
+A FlowStep (valve_sim.core.flow_step) is the paper's test: the valve at the exact steady state of
 initial_flow, the inlet flow changed to final_flow at step_time (at once, or over
 ramp_time), and the run ended at end_time. initial_flow = 0 starts from the
 empty, closed valve. The tank's pressure, the second input, is a TankPressure profile
@@ -24,7 +24,10 @@ the valve passed to the tank at each sample. Faults (a FaultSet) hold from the s
 fault schedule (valve_sim.core.fault_schedule) changes them at the ticks valve_node would.
 
 simulate() integrates the whole run; run_flows() any inlet-flow schedule. The batch
-runs of studies (many parameter sets through one scenario) are valve_sim.core.batch's.
+runs of studies (many parameter sets through one flow step) are valve_sim.core.batch's.
+
+Over 400 lines on purpose: every offline run (simulate, simulate_recorded_flow, the
+characteristic's ramp) goes through run_flows and the helpers here that it shares.
 """
 
 from __future__ import annotations
@@ -37,6 +40,11 @@ from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import OverpressureError, ParameterError
 from valve_sim.core.fault_schedule import FaultEvent, tick_index
 from valve_sim.core.faults import FAULT_NAMES, FaultSet, HEALTHY
+from valve_sim.core.flow_step import (  # noqa: F401 (also offered here)
+    FlowStep,
+    LITRE_PER_MINUTE,
+    TankPressure,
+)
 from valve_sim.core.integrator import advance, step_inputs
 from valve_sim.core.invariants import run_alarms
 from valve_sim.core.jit import jit
@@ -49,11 +57,6 @@ from valve_sim.core.model import (
     X_DOT,
 )
 from valve_sim.core.parameters import validate
-from valve_sim.core.scenario import (  # noqa: F401 (also offered here)
-    LITRE_PER_MINUTE,
-    Scenario,
-    TankPressure,
-)
 from valve_sim.core.steady_state import steady_state
 
 
@@ -168,15 +171,15 @@ def relief_flows(params, waveforms, faults=HEALTHY):
     return out
 
 
-def step_flows(scenario, step_size):
+def step_flows(flow_step, step_size):
     """
     Inlet flow [m^3/s] held during each RK4 step of a run.
 
     Each step holds the flow at its midpoint: exact for a step on the grid,
     second order for a ramp.
     """
-    steps = int(round(scenario.end_time / step_size))
-    return scenario.inlet_flow((np.arange(steps) + 0.5) * step_size)
+    steps = int(round(flow_step.end_time / step_size))
+    return flow_step.inlet_flow((np.arange(steps) + 0.5) * step_size)
 
 
 def step_tank_pressures(tank, steps, step_size):
@@ -332,7 +335,7 @@ def run_flows(
 
 def simulate(
     params: Mapping[str, float],
-    scenario: Scenario = Scenario(),
+    flow_step: FlowStep = FlowStep(),
     step_size: float = 1e-5,
     record_interval: float = 1e-4,
     faults: FaultSet = HEALTHY,
@@ -342,20 +345,20 @@ def simulate(
     tank: TankPressure = TankPressure(),
 ) -> Waveforms:
     """
-    Run a scenario with fixed-step RK4; returns Waveforms sampled every record_interval [s].
+    Run a flow step with fixed-step RK4; returns Waveforms sampled every record_interval [s].
 
     tank: the tank's pressure, a TankPressure (default: at ambient); the run starts
     at the steady state of its initial value. faults, schedule, tick_interval,
     halt_on_overpressure: as run_flows. Raises IntegrationError if the run diverges,
     SteadyStateError if the start fails.
     """
-    flows = step_flows(scenario, step_size)
+    flows = step_flows(flow_step, step_size)
     return run_flows(
         params,
         flows,
         step_size,
         record_interval,
-        scenario.initial_flow,
+        flow_step.initial_flow,
         faults,
         schedule,
         tick_interval,

@@ -45,6 +45,9 @@ and releases the slave object, which crashes the master at its next call.
 
 scipy.linalg is imported before valve_sim (and so before numba): loaded after numba, its
 Fortran runtime's exit handler aborts a C master at exit (docs/fmu.md).
+
+Over 400 lines on purpose: one class whose methods are the FMI calls, in the one file
+pythonfmu copies into the FMU.
 """
 
 import math

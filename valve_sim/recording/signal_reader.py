@@ -20,7 +20,7 @@ order (rosbag2_metadata.bag_files), with BagReader; each channel that carries a
 mapped role gets a decoder from the first of decoder_factories that has one for its
 encoding and schema (the mcap library's DecoderFactory protocol: decoder_for(
 message_encoding, schema) -> a function of the message bytes, or None; default
-mcap_ros2's CDR decoder), and an analysis.signals.Extractor that takes the roles'
+mcap_ros2's CDR decoder), and an analysis.steps.signals.Extractor that takes the roles'
 values from the decoded messages. The Joiner puts them on the supply pressure's
 time axis; the result is a Recording of arrays, what the step analysis
 (analysis.recorded_steps) and calibration take.
@@ -29,13 +29,13 @@ time axis; the result is a Recording of arrays, what the step analysis
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 import os
 from typing import Any, Optional, Union
 
 import numpy as np
-from valve_sim.analysis.measure_windows import SettingChanges
-from valve_sim.analysis.signals import (
+from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.signals import (
     Extractor,
     FLUID_PRESSURE,
     Joiner,
@@ -45,13 +45,13 @@ from valve_sim.analysis.signals import (
     seconds,
     SignalMap,
 )
-from valve_sim.core.errors import InputFileError
+from valve_sim.core.errors import CalibrationError, InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.rosbag2_metadata import bag_files
 
 
 # What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
-# (then T_s comes from the pressure, valve_sim.analysis.measures).
+# (then T_s comes from the pressure, valve_sim.analysis.steps.measures).
 BAG_REQUIRED = ('supply_pressure', 'inlet_flow')
 
 
@@ -79,6 +79,46 @@ class Recording:
             self.supply_pressure,
             self.supply_pressure - self.tank_pressure,
         )
+
+
+def from_every_signal(recording, topics=None):
+    """
+    Return (the recording from its first row where every signal it holds has a value, note).
+
+    A recorder subscribes topic by topic (analyser_node as rosbag2), so its first rows
+    can lack a signal (the main valve, NaN there): they are dropped, every array of the
+    recording cut alike, and note (None when nothing was dropped) says which signal
+    began how much later. The supply pressure and the inlet flow always count, the main
+    valve only if the recording holds it at all. topics: {role: topic} to name them by
+    (a SignalMap's topics). CalibrationError when no row has every signal.
+    """
+    present = {'supply_pressure': recording.supply_pressure, 'inlet_flow': recording.inlet_flow}
+    if np.any(np.isfinite(recording.main_valve)):
+        present['main_valve'] = recording.main_valve
+    known = np.logical_and.reduce([np.isfinite(values) for values in present.values()])
+    first = int(np.argmax(known)) if known.any() else len(known)
+    if first == 0:
+        return recording, None
+    if first == len(known):
+        raise CalibrationError('no sample of the recording has every mapped signal')
+    late = ', '.join(
+        f'{ROLE[role].meaning.split(" [")[0]} ({(topics or {}).get(role, role)})'
+        for role, values in present.items()
+        if not np.isfinite(values[0])
+    )
+    note = (
+        f'the recording starts at its first sample, but {late} begins '
+        f'{recording.time[first] - recording.time[0]:.3f} s later: fitting from there '
+        f'(the first {first} samples dropped)'
+    )
+    rows = len(recording.time)
+    cut = {
+        field.name: getattr(recording, field.name)[first:]
+        for field in fields(recording)
+        if isinstance(getattr(recording, field.name), np.ndarray)
+        and len(getattr(recording, field.name)) == rows
+    }
+    return replace(recording, **cut), note
 
 
 def read_recording(

@@ -22,7 +22,7 @@ replays a rig's recorded flow (valve_sim.core.input_profile, series).
 """
 
 import numpy as np
-from valve_sim.analysis.tick_series import TickSeries
+from valve_sim.analysis.scenarios.tick_series import TickSeries
 from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader

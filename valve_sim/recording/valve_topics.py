@@ -71,6 +71,7 @@ PRESSURE_FRAMES = dict(  # where each pressure is measured
 TANK_FRAME = 'tank_port'  # applied_tank_pressure's place (and an offline bag's tank_pressure)
 DEFAULT_FRAME_PREFIX = NODE_NAME + '/'
 NS_PER_S = 1_000_000_000
+TICK_INTERVAL = 1e-3  # [s] valve_node's default tick (publish_rate 1 kHz)
 # Receive time - send time of an offline bag's messages: one hop of the bench's bare echo
 # round trip on this machine (p50 0.66 ms, p99 1.56 ms, docs/valve_node.md) is 0.33 ms
 # (p50); modelled as a fixed part plus an exponential jitter, capped so that each
@@ -172,6 +173,17 @@ def transport_delays(count, seed=TRANSPORT_SEED):
     """Return count receive - send delays [ns] of the offline bag's transport model (seeded)."""
     jitter = np.random.default_rng(seed).exponential(TRANSPORT_JITTER_NS, count)
     return TRANSPORT_DELAY_NS + np.minimum(jitter, TRANSPORT_JITTER_CAP_NS).astype(np.int64)
+
+
+def publish_interval_for(record_interval):
+    """
+    Return the interval [s] an offline bag publishes at, for waveforms sampled this often.
+
+    valve_node's 1 kHz ticks (TICK_INTERVAL) where they are a whole number of samples,
+    else every sample (a record interval coarser than 1 ms, or not a divisor of it).
+    """
+    ratio = TICK_INTERVAL / record_interval
+    return TICK_INTERVAL if abs(ratio - round(ratio)) < 1e-9 and ratio >= 1 else record_interval
 
 
 def samples_per_publish(waveforms, publish_interval):

@@ -78,7 +78,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
-from valve_sim.analysis.signals import REQUIRED, ROLE, SignalMap
+from valve_sim.analysis.steps.signals import REQUIRED, ROLE, SignalMap
 from valve_sim.core.catalogue import ANALYSER_DOUBLES, ANALYSER_SPECS
 from valve_sim.core.errors import InputFileError, OutputFileError, USER_ERRORS
 from valve_sim.core.output_files import make_folder

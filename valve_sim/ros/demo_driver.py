@@ -30,14 +30,14 @@ import re
 import time
 
 import numpy as np
-from valve_sim.analysis.measures import WINDOW
-from valve_sim.analysis.paper import REFERENCE_SCENARIO
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.recorded_steps import sampling_problem
+from valve_sim.analysis.steps.measures import WINDOW
 from valve_sim.core.errors import IncompleteRunError, WaitTimeoutError
 
 
-INITIAL_FLOW = REFERENCE_SCENARIO.initial_flow  # [m^3/s] 5 L/min
-FINAL_FLOW = REFERENCE_SCENARIO.final_flow  # [m^3/s] 20 L/min
+INITIAL_FLOW = REFERENCE_FLOW_STEP.initial_flow  # [m^3/s] 5 L/min
+FINAL_FLOW = REFERENCE_FLOW_STEP.final_flow  # [m^3/s] 20 L/min
 HOLD_TIME = 1.0  # [s] at the initial flow, once everything is recorded
 # Share of the wall-clock time the valve's model time must advance over the hold: a node
 # still compiling, or skipping lag, advances far less; a loaded but working one about 1.

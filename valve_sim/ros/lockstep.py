@@ -46,6 +46,9 @@ state does not come within RESEND is published again.
 The driver spins its own node on the calling thread (rclpy's EventsExecutor where
 there is one), so waiting costs no thread hand-over; as fast as the node can by
 default, or paced to rate times real time.
+
+Over 400 lines on purpose: Lockstep is one state machine (clock, inputs, ticks,
+waits), kept in one class with its messages.
 """
 
 import struct

@@ -15,8 +15,8 @@
 """
 analyser_node's measures publisher: every inlet-flow step measured, saved and published.
 
-StepMeasures joins the analysed signals (valve_sim.analysis.signals), finds and
-measures each step of the applied inlet flow (valve_sim.analysis.step_analysis; a
+StepMeasures joins the analysed signals (valve_sim.analysis.steps.signals), finds and
+measures each step of the applied inlet flow (valve_sim.analysis.steps.step_analysis; a
 change in valve_node's fault_status ends a step's window as any input change does),
 appends each record to the recording's .measures.json and publishes it on
 step_measures (MEASURES_QOS: reliable, transient local) as one DiagnosticArray
@@ -30,10 +30,10 @@ import struct
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from valve_sim.analysis.measure_windows import SettingChanges
-from valve_sim.analysis.measures import MEASURE_NAMES
-from valve_sim.analysis.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
-from valve_sim.analysis.step_analysis import MeasuresFile, StepAnalysis
+from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.analysis.steps.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
+from valve_sim.analysis.steps.step_analysis import MeasuresFile, StepAnalysis
 from valve_sim.core.errors import InputFileError, output_error
 from valve_sim.recording.cdr import read_message
 from valve_sim.recording.valve_topics import TOPIC_TYPES
@@ -52,7 +52,7 @@ def measures_message(record, name, hardware_id, bag, start=None):
     """
     Build the step_measures DiagnosticArray of a step record.
 
-    The record is one of valve_sim.analysis.step_analysis; name and hardware_id
+    The record is one of valve_sim.analysis.steps.step_analysis; name and hardware_id
     the status's; bag the name of the file it was recorded in; start [s] the time of
     its first analysed sample (the message says how long after it the step came).
     """

@@ -29,8 +29,8 @@ reports (on /diagnostics) that it has recorded every state, since in lockstep th
 runs ahead of the analyser's drain, stops both nodes with SIGINT, reads the bag the
 analyser closed, checks that it holds every state of the run and that each tick
 applied the flow sent for it, and judges the expectations on it
-(valve_sim.analysis.expectations). The outputs are written by
-valve_sim.analysis.scenario_report, for a run that failed too (run_and_report): with
+(valve_sim.analysis.scenarios.expectations). The outputs are written by
+valve_sim.analysis.scenarios.report, for a run that failed too (run_and_report): with
 what was measured up to the failure, each expectation judged on its own.
 """
 
@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from valve_sim.analysis.expectations import evaluate
+from valve_sim.analysis.scenarios.expectations import evaluate
 from valve_sim.core.errors import IncompleteRunError, USER_ERRORS
 from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
@@ -297,13 +297,13 @@ def measure_partial(record):
 def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
                    ticks_per_clock=None):
     """
-    Run a scenario and write its reports (scenario_report); returns (RunRecord, paths).
+    Run a scenario and write its reports (scenarios.report); returns (RunRecord, paths).
 
     A run that cannot complete still gets every report, with what was measured up to
     the failure and the error (JUnit: the checks and an error case); the error is then
     raised again.
     """
-    from valve_sim.analysis.scenario_report import write_reports
+    from valve_sim.analysis.scenarios.report import write_reports
 
     record = RunRecord(scenario, folder)
     try:

@@ -262,7 +262,7 @@ def failed(message):
 def main(args=None):
     """Run valve_simulator until SIGINT, SIGTERM or STATE_QUITTING; returns the exit code."""
     from rclpy.utilities import remove_ros_args
-    from valve_sim.analysis.scenario_file import load_scenario
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.core.errors import USER_ERRORS
 
     parser = argparse.ArgumentParser(prog='valve_simulator', description=__doc__.split('\n')[1])

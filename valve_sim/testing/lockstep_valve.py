@@ -46,8 +46,8 @@ import tempfile
 import time
 from typing import Any, Optional, Union
 
-from valve_sim.analysis.scenario_file import live_change, start_parameter
-from valve_sim.analysis.tick_series import SIGNALS, TickSeries
+from valve_sim.analysis.scenarios.bench_scenario import live_change, start_parameter
+from valve_sim.analysis.scenarios.tick_series import SIGNALS, TickSeries
 from valve_sim.core.errors import (
     InputFileError,
     NodeExitError,

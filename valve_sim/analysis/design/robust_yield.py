@@ -1,0 +1,264 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The yield of one design under its machining tolerances: a whole Monte Carlo as one work unit.
+
+A candidate case is a study-runner case (analysis.studies.runner) whose work is the
+Monte Carlo of one design:
+  index, label     bookkeeping (unique index within its results file)
+  params           the complete parameter set the design is applied to (SI)
+  design           {parameter name: value} of the candidate
+  protocol         'held-preset' or 'frozen-preload' (analysis.studies.cases.PROTOCOLS)
+  preset_pressure  [Pa] the preset the design is set to (held preset), else None
+  tolerances       variation texts (analysis.studies.tolerances), stated about the design's values
+  samples, sampler, seed   the Monte Carlo's points (analysis.studies.tolerances.draw)
+  limits           limit texts ('P_1_percent<=3.2'); min_decay_rate [1/s] or None
+  scenario, step_size
+  keep_samples     whether the row keeps every sampled valve's row (for figures)
+  stop_alpha       the sequential rule's alpha (analysis.design.sequential_yield), or None:
+                   every valve runs, as in the confirmation
+  first_round, required_yield, objectives ([measure, sense] pairs), front (the
+                   objective points, to minimise, of the designs found feasible so far)
+
+evaluate_candidates(cases) -> rows is the work unit. For each candidate it loads the
+nominal valve as `valve-sim ... --params FILE` loads the design's parameter file
+(design.report.write_parameter_file: the values, then preset_pressure sets the
+pilot spring preload), draws the sampled valves about it as `valve-sim tolerance`
+does (same distributions, sampler and seed, each valve set to the nominal valve's
+cracking pressure), runs the nominal valve, and then the samples in rounds through
+studies.runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
+analysis.design.sequential_yield decides (a row does not depend on its batch, so a valve
+is judged the same in any round).
+
+check_candidate_row(row) checks a row read back from a results file (--resume) before
+it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
+
+A sampled valve passes when its run meets every limit (tolerances.passes) and, with
+min_decay_rate, every linear mode decays at least that fast at both flows of the
+test (core.linear.slowest_decay_rate; the default 3 1/s is 95 % within the measures'
+1 s window, the stability calibrate asks of Table 2). The yield is passed / samples
+with its Clopper-Pearson interval (tolerances.yield_interval).
+"""
+
+from dataclasses import replace
+
+from valve_sim.analysis.design.sequential_yield import DECISIONS, dominated, look, rounds
+from valve_sim.analysis.steps.measures import WINDOW
+from valve_sim.analysis.studies.cases import preset_protocol, sample_cases
+from valve_sim.analysis.studies.tolerances import (
+    draw,
+    parse_limits,
+    parse_variations,
+    passes,
+    summarise,
+    yield_interval,
+)
+from valve_sim.core.errors import MODEL_ERRORS
+from valve_sim.core.input_files import shown
+from valve_sim.core.parameters import validate
+
+
+MIN_DECAY_RATE = 3.0 / WINDOW  # [1/s] a mode decays by 95 % (e^-3) within the window
+DECAY_FAILURE = 'a mode decays too slowly'
+
+
+def nominal_valve(case):
+    """Return the validated nominal parameters of a candidate, set to its preset."""
+    params = validate({**case['params'], **case['design']})
+    if case['protocol'] == 'held-preset':
+        from valve_sim.core.steady_state import with_preset_pressure
+
+        params = with_preset_pressure(params, case['preset_pressure'])
+    return params
+
+
+def decay_rate(params, row, scenario):
+    """Return the slowest decay rate [1/s] of a run's valve as it was set, or None."""
+    if row['error'] is not None:
+        return None
+    from valve_sim.core.linear import slowest_decay_rate
+
+    try:
+        return slowest_decay_rate(
+            {**params, 'pilot_spring_preload': row['pilot_spring_preload']},
+            (scenario.initial_flow, scenario.final_flow),
+        )
+    except MODEL_ERRORS:
+        return None
+
+
+def decays(row, min_decay_rate):
+    """Tell whether a run's valve (a row with its decay_rate) meets min_decay_rate (or None)."""
+    return min_decay_rate is None or (
+        row['decay_rate'] is not None and row['decay_rate'] >= min_decay_rate
+    )
+
+
+def valve_passes(row, limits, min_decay_rate):
+    """Tell whether a run's valve meets every limit and the decay rate."""
+    return passes(row, limits) and decays(row, min_decay_rate)
+
+
+def evaluate_candidates(cases):
+    """Return the rows of candidate cases, in their order (the work unit of a backend)."""
+    return [evaluate_candidate(case) for case in cases]
+
+
+def evaluate_candidate(case):
+    """
+    Return the row of one candidate: its nominal measures, the yield and its interval.
+
+    row: index, label, design, error (the nominal valve could not be set: then no
+    sample runs), preset_pressure (the sampled valves'), nominal (the runner's row of
+    the nominal valve with decay_rate and pass), samples (the valves run),
+    planned_samples, runs (nominal included), decision (analysis.design.sequential_yield),
+    passed, yield, ci95, pass (one '1' or '0' per valve run, in sample order),
+    failures (per limit, failed runs, slow decay), percentiles of the measures over
+    the valves run, and sample_rows (every sampled valve's row, with its sampled
+    values) when keep_samples. Without stop_alpha every valve runs, whatever the
+    nominal valve does.
+    """
+    planned = case['samples']
+    row = {key: case[key] for key in ('index', 'label', 'design')}
+    row.update(samples=0, planned_samples=planned, runs=0, decision='nominal')
+    limits = parse_limits(','.join(case['limits']))
+    try:
+        nominal = nominal_valve(case)
+    except MODEL_ERRORS as error:
+        return {**row, 'error': str(error), 'passed': 0, 'yield': 0.0,
+                'ci95': yield_interval(0, planned), 'pass': ''}
+    preset, _ = preset_protocol(case['protocol'], nominal)
+    distributions = parse_variations(case['tolerances'], nominal)
+    names = [d.name for d in distributions]
+    values = draw(distributions, planned, case['seed'], case['sampler'])
+    cases = sample_cases(nominal, names, values, preset, case['step_size'])
+    (nominal_row,) = _runs(case, limits, [replace(cases[0], index=planned, params=nominal)])
+    alpha = case.get('stop_alpha')
+    point = _objective_point(case, nominal_row)
+    sample_rows, decision = [], 'nominal'
+    if alpha is None or (nominal_row['pass'] and point is not None):
+        counts = rounds(planned, case['first_round']) if alpha is not None else [planned]
+        for number, count in enumerate(counts):
+            sample_rows += _runs(case, limits, cases[len(sample_rows):count])
+            decision = 'full'
+            if number == len(counts) - 1:
+                break
+            passed = sum(run['pass'] for run in sample_rows)
+            decision = look(passed, count, case['required_yield'], alpha, len(counts) - 1)
+            if decision is None and dominated(point, case['front']):
+                decision = 'dominated'
+            if decision is not None:
+                break
+    verdicts = [run['pass'] for run in sample_rows]
+    passed, count = sum(verdicts), len(verdicts)
+    summary = summarise(sample_rows, limits)
+    slow = sum(1 for run in sample_rows
+               if run['error'] is None and not decays(run, case['min_decay_rate']))
+    row.update(
+        error=None,
+        preset_pressure=preset,
+        nominal=nominal_row,
+        samples=count,
+        runs=count + 1,
+        decision=decision,
+        passed=passed,
+        ci95=yield_interval(passed, count) if count else [0.0, 1.0],
+        failures={**summary['failures'], DECAY_FAILURE: slow},
+        percentiles=summary['percentiles'],
+        **{'yield': passed / count if count else 0.0,
+           'pass': ''.join('01'[v] for v in verdicts)},
+    )
+    if case['keep_samples']:
+        for run, sample in zip(sample_rows, values):
+            run['sample'] = dict(zip(names, map(float, sample)))
+        row['sample_rows'] = sample_rows
+    return row
+
+
+def _runs(case, limits, valves):
+    """Run valves (runner cases) as one batch; return their rows with decay_rate and pass."""
+    from valve_sim.analysis.studies.runner import evaluate_batch  # numba: on the worker
+
+    runs = evaluate_batch(valves)
+    rate = case['min_decay_rate']
+    for run, valve in zip(runs, valves):
+        run['decay_rate'] = (
+            decay_rate(valve.params, run, case['scenario']) if rate is not None else None
+        )
+        run['pass'] = valve_passes(run, limits, rate)
+    return runs
+
+
+def _objective_point(case, nominal_row):
+    """Return the nominal valve's objective values to minimise, or None if one is missing."""
+    measures = nominal_row['measures']
+    point = [measures.get(measure) for measure, _ in case['objectives']]
+    if None in point:
+        return None
+    return [v if sense == 'minimise' else -v for v, (_, sense) in zip(point, case['objectives'])]
+
+
+def check_candidate_row(row):
+    """
+    Raise ValueError naming the key unless row is a candidate row as evaluate_candidate makes it.
+
+    The resume check of studies.results.read_results for the optimisation's results files:
+    the nominal valve's row and every kept sample row are checked as the runner's rows.
+    """
+    from valve_sim.analysis.studies.results import check_row, is_number
+
+    if not isinstance(row, dict):
+        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+    index, samples = row.get('index'), row.get('samples')
+    for key, value in (('index', index), ('samples', samples), ('passed', row.get('passed'))):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ValueError(f"key '{key}' must be an integer >= 0, got {shown(value)}")
+    if not isinstance(row.get('label'), str) or not isinstance(row.get('pass'), str):
+        raise ValueError("keys 'label' and 'pass' must be text")
+    if row.get('decision', 'full') not in DECISIONS:
+        raise ValueError(f"key 'decision' must be one of {', '.join(DECISIONS)}")
+    design = row.get('design')
+    if not isinstance(design, dict) or not all(map(is_number, design.values())):
+        raise ValueError(f"key 'design' must map parameter names to numbers, got {shown(design)}")
+    ci95 = row.get('ci95')
+    if not is_number(row.get('yield')) or not (
+        isinstance(ci95, list) and len(ci95) == 2 and all(map(is_number, ci95))
+    ):
+        raise ValueError("keys 'yield' and 'ci95' must be a number and two numbers")
+    if row.get('error') is not None:
+        if not isinstance(row['error'], str):
+            raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+        return
+    nominal = row.get('nominal')
+    _check_inner(check_row, nominal, 'nominal')
+    decay = nominal.get('decay_rate')
+    if not (decay is None or is_number(decay)) or not isinstance(nominal.get('pass'), bool):
+        raise ValueError("key 'nominal' must hold a decay_rate (a number or null) and a pass")
+    for key in ('failures', 'percentiles'):
+        if not isinstance(row.get(key), dict):
+            raise ValueError(f"key '{key}' must be a JSON object, got {shown(row.get(key))}")
+    sample_rows = row.get('sample_rows', [])
+    if not isinstance(sample_rows, list):
+        raise ValueError("key 'sample_rows' must list the sampled valves' rows")
+    for number, sample_row in enumerate(sample_rows):
+        _check_inner(check_row, sample_row, f'sample_rows[{number}]')
+
+
+def _check_inner(check, row, key):
+    """check(row) for a row inside a row: a ValueError names the key it is under."""
+    try:
+        check(row)
+    except ValueError as error:
+        raise ValueError(f"key '{key}': {error}") from None

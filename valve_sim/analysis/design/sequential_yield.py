@@ -1,0 +1,122 @@
+# Copyright 2026 valve_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Sequential yield: a candidate's valves sampled in rounds, stopped once its yield is decided.
+
+The rounds are prefixes of the candidate's one draw of `samples` valves (the same
+unit-cube points every candidate shares, tolerances.draw): the valves run after k
+rounds are the first rounds[k] of the full sample, so a valve is the same whether
+it runs in one round or several. Rounds double from `first` (16) up to the full
+sample; with Sobol points a power-of-two prefix is itself a balanced Sobol sample.
+
+At each interim look (every round but the last) the yield's two-sided Clopper-Pearson
+interval is taken at confidence 1 - alpha / looks (Bonferroni over the looks):
+  'below'  its upper end is below the required yield: the candidate misses it;
+  'above'  its lower end is at or above the required yield: it meets it;
+otherwise the next round runs. With the samples taken as independent, the chance
+that a candidate whose true yield meets the target is stopped 'below' at any look
+is at most alpha / 2, and that one whose true yield misses it is stopped 'above' at
+most alpha / 2 (the union bound over the looks). A candidate that no look decides
+runs its full sample and is judged as without rounds: passed / samples against the
+required yield. Two more verdicts come before or between the rounds, and neither
+decides a yield:
+  'nominal'    the nominal valve breaks a limit, decays too slowly, lacks an
+               objective or cannot be set: infeasible whatever its yield, no sample runs;
+  'dominated'  after a look, its nominal objectives are dominated by a design already
+               found feasible: it cannot enter the Pareto set, so its yield is left
+               undecided (the estimate so far guides the optimiser; the report does not
+               count it as meeting the yield).
+"""
+
+from valve_sim.analysis.studies.tolerances import yield_interval
+
+FIRST_ROUND = 16  # valves in a candidate's first round
+STOP_ALPHA = 0.05  # the chance of a wrong early stop, split over the looks
+DECISIONS = ('nominal', 'below', 'above', 'dominated', 'full')
+
+
+def rounds(samples, first=FIRST_ROUND):
+    """Return the valve counts after each round: first, doubling, ending at samples."""
+    counts, count = [], max(1, min(first, samples))
+    while count < samples:
+        counts.append(count)
+        count *= 2
+    return counts + [samples]
+
+
+def look(passed, total, required_yield, alpha, looks):
+    """Return 'below', 'above' or None: the yield decided at one of `looks` interim looks."""
+    low, high = yield_interval(passed, total, 1.0 - alpha / looks)
+    if high < required_yield:
+        return 'below'
+    if low >= required_yield:
+        return 'above'
+    return None
+
+
+def dominated(point, front):
+    """Tell whether a point (objective values to minimise) is dominated by one of front."""
+    return any(
+        all(f <= p for f, p in zip(other, point)) and any(f < p for f, p in zip(other, point))
+        for other in front
+    )
+
+
+def runs_of(row):
+    """Return the runs a candidate row took: its sampled valves and its nominal one."""
+    return row.get('runs', row['samples'] + 1)
+
+
+def planned_runs_of(row):
+    """Return the runs the row's candidate would take with its full sample, nominal included."""
+    return row.get('planned_samples', row['samples']) + 1
+
+
+class RunTally:
+    """The runs a search spent, and saved against full samples; said in its progress line."""
+
+    def __init__(self, progress):
+        self.progress, self.spent, self.saved, self.counted = progress, 0, 0, set()
+        self.generation = progress.label
+
+    def add(self, rows):
+        """Count candidate rows (each once, by index) and restate the progress label."""
+        for row in rows:
+            if row['index'] not in self.counted:
+                self.counted.add(row['index'])
+                self.spent += runs_of(row)
+                self.saved += planned_runs_of(row) - runs_of(row)
+        self.progress.label = (
+            f'{self.generation} ({self.spent:,} runs spent, {self.saved:,} saved)'
+        )
+
+    def counting(self, backend):
+        """Return backend with every batch of rows counted as it arrives."""
+        return _CountingBackend(backend, self)
+
+
+class _CountingBackend:
+    """A backend whose batches of rows a RunTally counts before the runner sees them."""
+
+    def __init__(self, backend, tally):
+        self.backend, self.tally = backend, tally
+
+    def __getattr__(self, name):
+        return getattr(self.backend, name)
+
+    def run(self, evaluate, batches):
+        for rows in self.backend.run(evaluate, batches):
+            self.tally.add(rows)
+            yield rows
