@@ -31,6 +31,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.steps.measures import MEASURE_NAMES
@@ -444,6 +445,15 @@ def test_sobol_indices_of_the_ishigami_function_through_the_runner(tmp_path):
             error = abs(indices[key][i] - expected[key][i])
             assert error <= max(0.03, 1.5 * indices[key + '_conf'][i]), (key, i, error)
             assert indices[key + '_conf'][i] < 0.1
+
+
+def test_sobol_confidence_intervals_repeat_for_every_seed_zero_included():
+    distributions = [Distribution(f'x{i}', 'uniform', 0.0, 1.0, '') for i in (1, 2)]
+    values = sobol_design(distributions, 64, seed=0)
+    outputs = values[:, 0] + 0.5 * values[:, 1] ** 2
+    first, again = (sobol_indices(distributions, outputs, seed=0) for _ in range(2))
+    for key in ('S1_conf', 'ST_conf'):
+        assert np.array_equal(first[key], again[key]), key
 
 
 @pytest.mark.parametrize(

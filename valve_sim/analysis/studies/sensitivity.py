@@ -54,7 +54,9 @@ def sobol_indices(distributions, outputs, seed):
     """
     S1, S1_conf, ST, ST_conf (arrays, one per parameter) of outputs in design order.
 
-    CONFIDENCE intervals by bootstrap (half-widths). outputs must be finite:
+    CONFIDENCE intervals by bootstrap (half-widths), drawn from seed + 1: SALib seeds
+    its bootstrap only for a true seed, so seed 0 would draw from numpy's global state
+    and give other intervals on every run. outputs must be finite:
     undefined values make the indices undefined and raise UndefinedResultError
     (a ValueError).
     """
@@ -71,7 +73,7 @@ def sobol_indices(distributions, outputs, seed):
         calc_second_order=False,
         num_resamples=RESAMPLES,
         conf_level=CONFIDENCE,
-        seed=seed,
+        seed=seed + 1,
     )
     keys = ('S1', 'S1_conf', 'ST', 'ST_conf')
     return {key: np.asarray(result[key], dtype=float) for key in keys}
