@@ -163,7 +163,11 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={PACKAGE: ['py.typed']},  # PEP 561: the package ships its types
+    package_data={PACKAGE: ['py.typed'],  # PEP 561: the package ships its types
+                  # the FMU binary's sources, compiled by valve_sim.fmu.export_binary
+                  PACKAGE + '.fmu': ['_pythonfmu_export/LICENSE', '_pythonfmu_export/README.md',
+                                     '_pythonfmu_export/*/*.cpp', '_pythonfmu_export/*/*.hpp',
+                                     '_pythonfmu_export/*/*.h']},
     python_requires='>=3.10',
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),

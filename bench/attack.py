@@ -69,6 +69,11 @@ CLASS_MODULES = {  # attack step: the suite's modules it imports
 }
 
 NS_PER_S = 1_000_000_000
+WINDOW_SAMPLES = 200  # published samples per window, idle or under attack (1 kHz: 0.2 s)
+IDLE_WINDOWS = 3  # idle windows after each schedule, each as long as its window
+FREEZE_RATIO = 5.0  # the largest gap under attack / the worst idle window's: above, a freeze
+# (the freezes found took seconds or for ever; the checker process reading a file competes
+# for the cores, so gaps under attack run above idle ones by that alone: 1.9x measured)
 
 
 class Report:
@@ -116,29 +121,55 @@ def refusal(report, klass, attack, *arguments, also='', within=60):
     report.add(klass, attack, refused, f'{seconds:.2f} s: {line[-70:]}')
 
 
-def attack_live_schedules(report, context, folder):
-    """Class 1, live: each hostile schedule set on a running node."""
+def attack_live_schedules(report, context, folder, only=None):
+    """
+    Class 1, live: each hostile schedule set on a running node (only: names holding it).
+
+    A freeze (the tick blocked while a file is read) is told from the machine's own
+    jitter side by side: after each schedule, IDLE_WINDOWS idle windows of as many
+    published samples as its window had (from setting it to WINDOW_SAMPLES after it was
+    refused). The node survives a schedule if, beyond refusing it, its largest gap
+    between published stamps stays within FREEZE_RATIO times the worst idle window's of
+    this run (a wall-clock bound would measure the machine's load, not the node).
+    """
     from test_hostile_node import BAD_SCHEDULES, largest_stamp_gap, schedule_in_effect
     from hostile_inputs import make_file
     from valve_harness import running_valve
 
+    rows = []
     with running_valve(context, folder / 'valve_node.log', namespace='/attack') as (
         process, probe
     ):
         for number, (kind, content) in enumerate(BAD_SCHEDULES.items()):
+            if only and only not in kind:
+                continue
             path = folder / f'schedule_{number}.yaml'
             make_file(path, content)
             start, started = probe.count(), time.monotonic()
             result = probe.set_parameters(fault_schedule=str(path))[0]
             in_effect = schedule_in_effect(probe)
-            probe.wait_for_new_samples(200)
-            gap_ms = largest_stamp_gap(probe, start) / 1e6
-            report.add(
-                '1 files', f'fault_schedule: {kind}',
-                process.poll() is None and in_effect == '' and gap_ms < 100,
-                f'{"refused at once" if not result.successful else "refused once read"} in '
-                f'{time.monotonic() - started:.2f} s; largest gap {gap_ms:.1f} ms',
-            )
+            seconds = time.monotonic() - started
+            probe.wait_for_new_samples(WINDOW_SAMPLES)
+            gap_ms, samples = largest_stamp_gap(probe, start) / 1e6, probe.count() - start
+            idle_ms = 0.0
+            for _ in range(IDLE_WINDOWS):
+                idle = probe.count()
+                probe.wait_for_new_samples(samples)
+                idle_ms = max(idle_ms, largest_stamp_gap(probe, idle) / 1e6)
+            rows.append((kind, process.poll() is None and in_effect == '', result.successful,
+                         seconds, gap_ms, idle_ms))
+            print(f'  measured {kind[:40]}: largest gap {gap_ms:.1f} ms, idle {idle_ms:.1f} ms',
+                  flush=True)
+    worst_idle_ms = max((row[5] for row in rows), default=0.0)
+    for kind, refused, accepted_first, seconds, gap_ms, idle_ms in rows:
+        report.add(
+            '1 files', f'fault_schedule: {kind}',
+            refused and gap_ms <= FREEZE_RATIO * worst_idle_ms,
+            f'{"refused once read" if accepted_first else "refused at once"} in '
+            f'{seconds:.2f} s; largest gap {gap_ms:.1f} ms = '
+            f'{gap_ms / worst_idle_ms:.2f} x idle worst {worst_idle_ms:.1f} ms '
+            f'(its idle windows: {idle_ms:.1f} ms)',
+        )
 
 
 def attack_readers(report, folder):
@@ -476,7 +507,7 @@ def measure(args):
     with tempfile.TemporaryDirectory(prefix='valve_sim_attack_') as folder:
         folder = Path(folder)
         steps = {
-            'live': lambda path: attack_live_schedules(report, context, path),
+            'live': lambda path: attack_live_schedules(report, context, path, args.schedule),
             'readers': lambda path: attack_readers(report, path),
             'sim': lambda path: attack_clock_and_roll_backs(report, context, path),
             'wire': lambda path: attack_wire(report, path),
@@ -506,6 +537,8 @@ def main():
     parser.add_argument('--json', type=Path, default=REPO / 'out' / 'attack.json')
     parser.add_argument('--only', action='append', choices=tuple(CLASS_MODULES),
                         help='run only this attack step (repeatable; default: all)')
+    parser.add_argument('--schedule', metavar='TEXT',
+                        help='live: only the hostile schedules whose name holds TEXT')
     parser.add_argument('--check-imports', action='store_true',
                         help="only import each class's suite modules; exit 1 naming any that fail")
     args = parser.parse_args()

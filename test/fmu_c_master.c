@@ -18,21 +18,25 @@
  * normally (the exit status tells whether the FMU lets its master end cleanly).
  * test_fmu.py compiles and runs it.
  *
- *   fmu_c_master BINARY RESOURCE_URI GUID VR_INLET VR_OUT Q0 Q1 STEP_TIME END_TIME DT [refuse]
+ *   fmu_c_master BINARY RESOURCE_URI GUID VR_INLET VR_OUT Q0 Q1 STEP_TIME END_TIME DT
+ *                [refuse|failstart]
  *
  * Runs the inlet-flow step Q0 -> Q1 [m^3/s] at STEP_TIME [s] to END_TIME at the
  * communication step DT [s]; prints "time value" of the output VR_OUT after each step
  * (%.17g) and exits 1 at the first status that is not fmi2OK. With "refuse", it first
  * asks for three steps the FMU must refuse with fmi2Discard (an infinite step, a NaN
- * time, a step of 1e6 s; exit 3 otherwise), then runs as above. The logger prints the
- * category and aborts on a NULL one. On Linux the binary needs libpython loaded first
- * (LD_PRELOAD) and the environment docs/fmu.md gives (valve_sim.fmu.environment).
+ * time, a step of 1e6 s; exit 3 otherwise), then runs as above. With "failstart" (Q0 nan),
+ * fmi2ExitInitializationMode must return fmi2Error (exit 4 otherwise), then it terminates,
+ * frees, unloads and exits 0. The logger prints the category and aborts on a NULL one.
+ * On Linux the binary needs libpython loaded first (LD_PRELOAD) and the environment
+ * docs/fmu.md gives (valve_sim.fmu.environment).
  */
 #include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "fmi2Functions.h"
 
@@ -70,7 +74,8 @@ int main(int argc, char **argv)
     LOAD(fmi2Instantiate) LOAD(fmi2SetupExperiment) LOAD(fmi2EnterInitializationMode)
     LOAD(fmi2ExitInitializationMode) LOAD(fmi2SetReal) LOAD(fmi2GetReal) LOAD(fmi2DoStep)
     LOAD(fmi2Terminate) LOAD(fmi2FreeInstance)
-    int refuse = argc == 12;
+    int refuse = argc == 12 && strcmp(argv[11], "refuse") == 0;
+    int failstart = argc == 12 && strcmp(argv[11], "failstart") == 0;
     fmi2ValueReference inlet = (fmi2ValueReference)atoi(argv[4]);
     fmi2ValueReference out = (fmi2ValueReference)atoi(argv[5]);
     double q0 = atof(argv[6]), q1 = atof(argv[7]), step_time = atof(argv[8]);
@@ -84,11 +89,21 @@ int main(int argc, char **argv)
     }
     if (fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK
         || fmi2EnterInitializationMode(c) != fmi2OK
-        || fmi2SetReal(c, &inlet, 1, &q0) != fmi2OK
-        || fmi2ExitInitializationMode(c) != fmi2OK) {
+        || fmi2SetReal(c, &inlet, 1, &q0) != fmi2OK) {
         fprintf(stderr, "initialisation failed\n");
         return 1;
     }
+    fmi2Status started = fmi2ExitInitializationMode(c);
+    fprintf(stderr, "fmi2ExitInitializationMode: status %d\n", (int)started);
+    if (failstart) {
+        fmi2Status terminated = fmi2Terminate(c);
+        fmi2FreeInstance(c);
+        int closed = dlclose(library);
+        fprintf(stderr, "fmi2Terminate: status %d; fmi2FreeInstance returned; dlclose %d\n",
+                (int)terminated, closed);
+        return started == fmi2Error && terminated == fmi2OK && closed == 0 ? 0 : 4;
+    }
+    if (started != fmi2OK) return 1;
     double bad[3][2] = {{0.0, INFINITY}, {NAN, dt}, {0.0, 1e6}};  /* (time, step) */
     for (int i = 0; refuse && i < 3; ++i) {
         fmi2Status status = fmi2DoStep(c, bad[i][0], bad[i][1], fmi2True);

@@ -33,17 +33,20 @@ import site
 import subprocess
 import sys
 import tracemalloc
+import zipfile
 
 import numpy as np
 import pytest
 from test_cli import valve_sim
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.steps.measures import MEASURE_NAMES, step_measures
+from valve_sim.core.errors import BuildError
 from valve_sim.core.model import P_S, X
 from valve_sim.core.parameters import PARAMETERS, SPECS
 from valve_sim.core.simulation import FlowStep, simulate
 from valve_sim.core.steady_state import cracking_pressure, steady_state, with_preset_pressure
 from valve_sim.fmu.environment import master_environment
+from valve_sim.fmu.export_binary import compile_library, missing_tools
 from valve_sim.fmu.fmi_calls import MAX_COMMUNICATION_STEP
 
 fmpy = pytest.importorskip('fmpy')
@@ -55,6 +58,7 @@ from fmpy.fmi2 import (  # noqa: E402
     fmi2CallbackLoggerTYPE,
     fmi2Discard,
     fmi2Error,
+    fmi2OK,
     fmi2Warning,
     FMU2Slave,
 )
@@ -71,7 +75,9 @@ OUTPUTS = ('supply_pressure', 'main_valve_displacement', 'relief_flow', 'halted'
 
 @pytest.fixture(scope='module')
 def fmu(tmp_path_factory):
-    """Build the FMU with `valve-sim fmu`; return its path."""
+    """Build the FMU with `valve-sim fmu`; return its path (its binary compiled once, cached)."""
+    if missing_tools():  # like fmpy missing: this machine cannot build one
+        pytest.skip(missing_tools())
     path = tmp_path_factory.mktemp('fmu') / 'valve.fmu'
     result = valve_sim('fmu', '--out', str(path))
     assert path.is_file() and 'ReliefValve' in result.stderr
@@ -147,6 +153,14 @@ def test_fmpy_validates_the_fmu_and_its_variables_carry_units_and_sources(fmu, r
     assert validate_fmu(str(fmu)) == []
     description = fmpy.read_model_description(str(fmu), validate=True)
     assert description.fmiVersion == '2.0' and description.coSimulation is not None
+    assert '64-bit Linux only' in description.description
+    with zipfile.ZipFile(fmu) as packed:  # valve_sim's binary only, with its licences
+        names = packed.namelist()
+        assert [n for n in names if n.startswith('binaries/')] == [
+            'binaries/linux64/ReliefValve.so']
+        assert 'Permission is hereby granted' in packed.read(
+            'documentation/licenses/pythonfmu-export.txt').decode()
+        assert 'BSD 2-Clause' in packed.read('documentation/licenses/fmi2-headers.txt').decode()
     experiment = description.defaultExperiment
     start_stop_step = (experiment.startTime, experiment.stopTime, experiment.stepSize)
     assert start_stop_step == ('0.0', '1.0', '0.001')
@@ -316,8 +330,10 @@ def test_bad_steps_a_tank_below_vacuum_and_steps_after_terminate_are_discarded_w
         valve.step()
     assert refusal.value.status == fmi2Discard and 'below vacuum' in valve.log[-1][1]
     assert valve.get(*OUTPUTS[:3]) == held  # nothing integrated
-    assert math.isnan(valve.fmu.getReal([10**6])[0])  # no such variable: logged, not fatal
-    assert valve.log[-1][0] == fmi2Error and 'get_real failed' in valve.log[-1][1]
+    with pytest.raises(FMICallException) as error:
+        valve.fmu.getReal([10**6])  # no such variable: fmi2Error, logged, the instance kept
+    assert error.value.status == fmi2Error
+    assert valve.log[-1] == (fmi2Error, 'getReal: KeyError: 1000000', b'logStatusError')
     valve.set_values(tank_pressure=0.0)
     valve.step()  # the instance goes on
     valve.fmu.terminate()
@@ -327,28 +343,58 @@ def test_bad_steps_a_tank_below_vacuum_and_steps_after_terminate_are_discarded_w
     valve.fmu.freeInstance()
 
 
-def test_a_failed_start_is_logged_and_the_instance_starts_once_the_input_is_corrected(
+def test_a_failed_start_is_an_error_with_its_reason_and_the_instance_can_be_reset(
     unzipped, reference
 ):
-    valve = Valve(unzipped, 'failed start', {'inlet_flow': math.nan}).initialise()
-    assert valve.log[-1][0] == fmi2Error and 'could not start' in valve.log[-1][1]
-    with pytest.raises(FMICallException) as refusal:
-        valve.step()
-    assert refusal.value.status == fmi2Discard and 'could not start' in valve.log[-1][1]
+    """fmi2ExitInitializationMode at a NaN flow: fmi2Error; fmi2Reset, a good flow: it runs."""
+    valve = Valve(unzipped, 'failed start', {'inlet_flow': math.nan})
+    with pytest.raises(FMICallException) as error:
+        valve.initialise()
+    assert error.value.status == fmi2Error
+    status, message, category = valve.log[-1]
+    assert (status, category) == (fmi2Error, b'logStatusError')
+    assert message.startswith('exitInitializationMode: ParameterError: the FMU could not start: '
+                              'input refused: inlet flow must be finite')
+    valve.fmu.reset()
+    valve.fmu.setupExperiment(startTime=0.0)
+    valve.fmu.enterInitializationMode()
     valve.set_values(inlet_flow=Q1)
-    valve.time = 0.0  # nothing was integrated: the same step again
-    start = steady_state(reference, Q1)
+    valve.initialise()
     valve.step()
-    assert valve.get('supply_pressure')[0] == pytest.approx(start[P_S], rel=1e-6)
+    assert valve.get('supply_pressure')[0] == pytest.approx(steady_state(reference, Q1)[P_S],
+                                                            rel=1e-6)
     valve.close()
 
 
-def test_errors_reach_the_master_with_debug_logging_off_and_each_message_a_category(unzipped):
-    valve = Valve(unzipped, 'quiet', {'inlet_flow': math.nan}, logging=False).initialise()
+def test_errors_reach_the_master_with_debug_logging_off_the_rest_only_with_it_on(
+    unzipped, reference
+):
+    failed = Valve(unzipped, 'quiet start', {'inlet_flow': math.nan}, logging=False)
+    with pytest.raises(FMICallException):
+        failed.initialise()
+    failed.close()  # fmi2Terminate and fmi2FreeInstance after fmi2Error: no crash
+    valve = Valve(unzipped, 'quiet', {'max_inlet_flow': 10.0}, logging=False).initialise()
+    valve.set_values(inlet_flow=math.nan)
     with pytest.raises(FMICallException):
         valve.step()
-    assert [(status, category) for status, _, category in valve.log] == [
-        (fmi2Error, b'logStatusError')] * 2  # the failed start, the refused step
+
+    def overpressure_and_back():
+        valve.set_values(inlet_flow=1.0)
+        trace(valve, 3)
+        valve.set_values(inlet_flow=Q0)
+        trace(valve, 1)  # 'the model advances again': a message of status fmi2OK
+
+    overpressure_and_back()
+    assert [(status, category) for status, _, category in failed.log + valve.log] == [
+        (fmi2Error, b'logStatusError'), (fmi2Error, b'logStatusError'),
+        (fmi2Warning, b'logStatusWarning')]  # the failed start, the NaN step, the overpressure
+    valve.fmu.setDebugLogging(True, [])
+    overpressure_and_back()
+    assert (fmi2OK, b'logAll') == valve.log[-1][::2] and 'advances again' in valve.log[-1][1]
+    valve.fmu.setDebugLogging(False, [])
+    logged = len(valve.log)
+    overpressure_and_back()
+    assert [status for status, _, _ in valve.log[logged:]] == [fmi2Warning]
     valve.close()
 
 
@@ -366,8 +412,9 @@ def test_without_valve_sim_the_fmu_says_why_at_error_level_and_what_to_do(fmu, t
         [sys.executable, '-S', '-c', script], cwd=tmp_path, capture_output=True, text=True,
         env={**os.environ, 'PYTHONPATH': os.pathsep.join(site.getsitepackages())}, timeout=300,
     )
-    reason = "ModuleNotFoundError: No module named 'valve_sim'"
-    assert f'[ERROR] the valve_sim FMU cannot start: {reason}' in result.stdout, (
+    reason = ('ImportError: the valve_sim FMU cannot start: ModuleNotFoundError: No module named '
+              "'valve_sim'")
+    assert f'[ERROR] instantiate: {reason}' in result.stdout, (
         result.stdout + result.stderr)
     assert 'pip install' in result.stdout and 'docs/fmu.md' in result.stdout
     assert 'raised: Failed to instantiate' in result.stdout
@@ -470,12 +517,11 @@ def test_the_start_closed_or_at_the_steady_state_of_the_inputs(unzipped, referen
     main, pilot, leakage = steady.get('main_stage_flow', 'pilot_flow', 'seat_leakage_flow')
     assert steady.get('relief_flow') == [main + pilot + leakage]
     assert main + pilot + leakage == pytest.approx(Q0, rel=1e-9)  # steady: all flow relieved
-    wrong = Valve(unzipped, 'wrong', strings={'initial_state': 'open'}).initialise()
+    wrong = Valve(unzipped, 'wrong', strings={'initial_state': '%s%n 100%'})
     with pytest.raises(FMICallException) as refusal:
-        wrong.step()
-    assert refusal.value.status == fmi2Discard
-    assert any(status == fmi2Error and 'initial_state must be one of steady, closed' in message
-               for status, message, _ in wrong.log)
+        wrong.initialise()
+    assert refusal.value.status == fmi2Error  # the '%' reach the logger's format doubled:
+    assert "initial_state must be one of steady, closed, got '%s%n 100%'" in wrong.log[-1][1]
     for valve in (closed, steady, wrong):
         valve.close()
 
@@ -527,7 +573,7 @@ def c_master(unzipped, tmp_path, path, *flows):
     return subprocess.run(
         [str(master), str(folder / 'binaries' / 'linux64' / 'ReliefValve.so'),
          (folder / 'resources').as_uri(), description.guid, str(refs['inlet_flow']),
-         str(refs['supply_pressure']), *map(repr, flows)],
+         str(refs['supply_pressure']), *(f if isinstance(f, str) else repr(f) for f in flows)],
         env={**os.environ, 'PATH': path, **master_environment()},
         capture_output=True, text=True, timeout=300,
     )
@@ -557,6 +603,25 @@ def test_a_c_master_runs_the_papers_step_and_exits_cleanly_from_any_shell(
     bare = c_master(unzipped, tmp_path, '/usr/bin:/bin', Q0, Q1, STEP_TIME, 0.01, INTERVAL)
     assert bare.returncode == 0, bare.stderr[-3000:]
     assert len(bare.stdout.splitlines()) == 10
+    failed = c_master(unzipped, tmp_path, '/usr/bin:/bin', math.nan, Q1, STEP_TIME, 0.01,
+                      INTERVAL, 'failstart')  # fmi2Error, then terminate, free, dlclose
+    assert failed.returncode == 0, failed.stderr[-3000:]
+    assert ('[c_master status 3 logStatusError] exitInitializationMode: ParameterError: '
+            'the FMU could not start') in failed.stderr
+
+
+def test_no_compiler_or_a_failed_compilation_is_one_line(tmp_path, monkeypatch):
+    """A BuildError (a ValveSimError: the CLI prints it in one line); nothing half-built."""
+    target = tmp_path / 'cache' / 'libpythonfmu-export.so'
+    monkeypatch.setenv('CXX', str(tmp_path / 'no-such-compiler'))
+    with pytest.raises(BuildError, match=r'needs a C\+\+ compiler .* found no compiler$'):
+        compile_library(target, say=print)
+    monkeypatch.setenv('CXX', shutil.which('false'))
+    with pytest.raises(BuildError, match='failed .false exit 1.: its command and messages are in'
+                       ) as failed:
+        compile_library(target, say=print)
+    assert '\n' not in str(failed.value) and not target.exists()
+    assert [p.name for p in target.parent.iterdir()] == ['build.log']
 
 
 def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
@@ -571,10 +636,12 @@ def test_the_command_builds_its_parameters_in_as_defaults(tmp_path, reference):
     result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
                                output=['supply_pressure'])
     assert result['supply_pressure'][0] == steady_state(params, Q0)[P_S]
-    for tank, started in ((-8.9e4, True), (-9.1e4, False)):  # vacuum at its ambient: -9e4
-        result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
-                                   start_values={'tank_pressure': tank})
-        assert (len(result) == 3 and result['supply_pressure'].all()) == started, tank
+    result = fmpy.simulate_fmu(str(path), stop_time=0.002, output_interval=INTERVAL,
+                               start_values={'tank_pressure': -8.9e4})  # vacuum: -9e4 gauge
+    assert len(result) == 3 and result['supply_pressure'].all()
+    with pytest.raises(FMICallException) as refused:
+        fmpy.simulate_fmu(str(path), stop_time=0.002, start_values={'tank_pressure': -9.1e4})
+    assert refused.value.status == fmi2Error
     refused = valve_sim('fmu', '--out', str(tmp_path / 'valve.zip'), check=False)
     assert refused.returncode == 1 and '--out must name a .fmu file' in refused.stderr
 

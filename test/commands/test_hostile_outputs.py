@@ -109,9 +109,10 @@ def test_a_fifo_or_folder_inside_an_output_folder_is_refused(tmp_path):
     with pytest.raises(OutputFileError, match='is a FIFO'):
         output_files.fresh_file(tmp_path / 'report.txt')
     (tmp_path / 'folder').mkdir()
-    with pytest.raises(IsADirectoryError):
+    with pytest.raises(IsADirectoryError) as refused:  # caught as before, and a ValveSimError
         with output_files.replacing(tmp_path / 'folder') as stream:
             stream.write('x')
+    assert isinstance(refused.value, OutputFileError)
 
 
 def test_fmu_out_through_a_link_to_a_fifo_is_one_line_and_the_fifo_kept(

@@ -83,3 +83,24 @@ def test_the_licence_file_matches_package_xml():
     assert '<license>Apache-2.0</license>' in (ROOT / 'package.xml').read_text()
     assert 'Apache License' in (ROOT / 'LICENSE').read_text()
     assert 'Version 2.0' in (ROOT / 'LICENSE').read_text()
+
+
+def test_vendored_sources_keep_their_licences_where_ament_copyright_does_not_look(lint_paths):
+    """
+    Third-party C/C++ (the FMU binary's, pythonfmu's MIT) sits in a folder starting with '_'.
+
+    ament_copyright skips those folders, as it skips the vendored simulation_interfaces
+    outside the lint paths; the folder keeps pythonfmu's LICENSE, each FMI header its BSD
+    notice, as their licences ask.
+    """
+    vendored = [
+        path for root in map(Path, lint_paths) if root.is_dir() for path in root.rglob('*')
+        if path.suffix in ('.c', '.cc', '.cpp', '.cxx', '.h', '.hh', '.hpp', '.hxx')
+        and any(part.startswith(('_', '.')) for part in path.relative_to(root).parts[:-1])
+    ]
+    assert len(vendored) >= 3, 'the FMU binary sources: valve_sim/fmu/_pythonfmu_export'
+    for path in vendored:
+        folder = next(parent for parent in path.parents if parent.name.startswith('_'))
+        assert 'Permission is hereby granted' in (folder / 'LICENSE').read_text(), path
+        if path.parent.name == 'fmi':
+            assert 'BSD 2-Clause' in path.read_text(encoding='latin-1'), path

@@ -162,6 +162,9 @@ def test_the_install_space_has_its_code_config_and_launch_file(install):
         check=True,
     ).stdout.split()
     assert Path(module).is_relative_to(install), 'the installed code, not the source tree'
+    fmu_binary_sources = Path(module).parent / 'fmu' / '_pythonfmu_export'  # valve-sim fmu builds
+    assert (fmu_binary_sources / 'pythonfmu' / 'fmi2.cpp').is_file()
+    assert (fmu_binary_sources / 'LICENSE').is_file()
     assert Path(config) == install / 'share' / 'valve_sim' / 'config' / 'reference.yaml'
     share = install / 'share' / 'valve_sim'
     for name in ('package.xml', 'LICENSE', 'config/table2.yaml', 'launch/valve_sim.launch.py',

@@ -23,6 +23,7 @@ same bytes, and the scenario runner's bytes for the same scenario (its bag); the
 of docs/scenarios.md as it stands. Then quit.
 """
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -45,6 +46,7 @@ from simulation_interfaces.srv import (
     StepSimulation,
 )
 from valve_harness import REPO, SpinningNode, stop_node, TIMEOUT
+from valve_sim.core.errors import MissingExtraError
 from valve_sim.ros.lockstep import stamp_ns, START_NS
 from valve_sim.ros.spinning import EXECUTORS
 
@@ -328,3 +330,14 @@ def test_quitting_ends_the_simulator(simulator):
     client, _, folder, process = simulator
     assert client.set_state(SimulationState.STATE_QUITTING).result == Result.RESULT_OK
     assert process.wait(TIMEOUT) == 0, (folder / 'simulator.log').read_text()
+
+
+def test_without_simulation_interfaces_it_says_what_to_install(monkeypatch):
+    """The missing package is a ValveSimError (one line) and still an ImportError."""
+    for name in [name for name in sys.modules if name.startswith('simulation_interfaces')]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, 'simulation_interfaces', None)  # its import fails
+    spec = importlib.util.find_spec('valve_sim.ros.simulation_server')
+    with pytest.raises(MissingExtraError, match='ros-jazzy-simulation-interfaces') as refused:
+        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    assert isinstance(refused.value, ImportError) and '\n' not in str(refused.value)

@@ -44,7 +44,8 @@ def run(args):
 
     loaded = load_from_arguments(args)
     params, settings = loaded.params, loaded.settings
-    path = build(args.out, params, settings)
+    path = build(args.out, params, settings,
+                 say=lambda text: print(f'valve-sim fmu: {text}', file=sys.stderr, flush=True))
     print(f'wrote {path}: FMI 2.0 co-simulation, model ReliefValve; it needs Python with '
           'valve_sim installed where it runs (docs/fmu.md)', file=sys.stderr)
     return 0

@@ -29,6 +29,7 @@ here, once, and imported from here; each keeps the builtin base callers catch it
       InputFileError (ValueError)       a file the user gave cannot be read or is wrong
         ProfileError                     a malformed input profile (input_profile)
       OutputFileError (OSError)         a file or folder the user named cannot be written
+        OutputFolderError (IsADirectoryError) a file to write is a folder
       MissingExtraError (ImportError)   an optional feature's extra is not installed
       IntegrationError (RuntimeError)   a run diverged
         OverpressureError                a chamber pressure passed burst_pressure
@@ -39,6 +40,7 @@ here, once, and imported from here; each keeps the builtin base callers catch it
       UnavailableError (RuntimeError)   what a run needs is held by another (a ROS domain)
       WaitTimeoutError (TimeoutError)   what a run waited for did not come within its limit
       NodeExitError (ChildProcessError) a node a run started ended, or did not end cleanly
+      BuildError (RuntimeError)         what valve_sim compiles could not be built (the FMU's)
 """
 
 
@@ -129,6 +131,14 @@ class WaitTimeoutError(ValveSimError, TimeoutError):
 
 class NodeExitError(ValveSimError, ChildProcessError):
     """A node a run started ended while it was needed, or did not end cleanly; see its log."""
+
+
+class BuildError(ValveSimError, RuntimeError):
+    """What valve_sim compiles could not be built: the FMU's binary (no compiler, no headers)."""
+
+
+class OutputFolderError(OutputFileError, IsADirectoryError):
+    """A file the user named for output is a folder: nothing is written there."""
 
 
 # What one valve of a study or a calibration can fail with (recorded as that case's error).

@@ -49,7 +49,7 @@ import tempfile
 import time
 import xml.etree.ElementTree as ElementTree
 
-from valve_sim.core.errors import output_error, OutputFileError
+from valve_sim.core.errors import output_error, OutputFileError, OutputFolderError
 
 NO_LINK = os.O_NOFOLLOW | os.O_CLOEXEC
 # What a write meets when the file system refuses more (full, over quota, read-only, too big),
@@ -80,8 +80,8 @@ def target(path, explicit=False):
     Nothing or a regular file there: replaced whole (in place False), at the path a link
     leads to if explicit (the user named it), else at path (a link there replaced). A
     character device or a FIFO the user named: written to in place (True). A folder is an
-    IsADirectoryError; anything else (a device or FIFO inside an output folder, a socket)
-    an OutputFileError in one line.
+    OutputFolderError (an IsADirectoryError); anything else (a device or FIFO inside an
+    output folder, a socket) an OutputFileError in one line.
     """
     path = Path(path)
     try:
@@ -94,7 +94,7 @@ def target(path, explicit=False):
     if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
         return Path(os.path.realpath(path) if explicit else os.path.abspath(path)), False
     if stat.S_ISDIR(mode):
-        raise IsADirectoryError(21, 'is a directory, not a file', str(path))
+        raise OutputFolderError(errno.EISDIR, 'is a directory, not a file', str(path))
     if explicit and (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
         return path, True
     raise OutputFileError(f'{path} is {_kind(mode)}, not a regular file: not written there')
@@ -111,7 +111,7 @@ def replacing(path, mode='w', explicit=False, **options):
 
     mode and options as for open() ('w', 'wb', newline=...). explicit: the user named
     path (a link there is followed; a device or FIFO there written in place, target()).
-    An existing directory at path is an IsADirectoryError; a file that cannot be
+    An existing directory at path is an OutputFolderError; a file that cannot be
     written an OutputFileError.
     """
     written, in_place = target(path, explicit)

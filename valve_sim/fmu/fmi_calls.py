@@ -13,19 +13,13 @@
 # limitations under the License.
 
 """
-What the slave's FMI calls share: no exception out, a communication step checked and streamed.
-
-pythonfmu 0.7's binary answers a Python exception from any call with fmi2Fatal, releases
-the slave object and reaches it again in fmi2Terminate (SIGSEGV in the master), and logs
-that fatal with a NULL category. So each FMI method of the slave is guarded(): any
-exception is logged (status error) and the call returns its refusal (doStep: fmi2Discard).
+What the slave's doStep calls share: a communication step checked and streamed.
 
 A communication step is checked first (check_step: finite, forward from the FMU's time, at
 most MAX_COMMUNICATION_STEP) and integrated in chunks of CHUNK_STEPS internal steps
 (advance_streaming), so memory does not grow with the step and time is proportional to it.
 """
 
-from functools import wraps
 import math
 
 from valve_sim.core.errors import IntegrationError, ParameterError
@@ -35,30 +29,6 @@ from valve_sim.core.realtime_model import NS_PER_S
 MAX_COMMUNICATION_STEP = 3600.0  # [s] one doStep at most: an hour of model time
 CHUNK_STEPS = 8192  # internal steps integrated per call of the model: 64 kB of inputs
 NEVER_SKIP_NS = 2**62  # the master's clock is the model's: no lag is ever skipped
-
-
-def guarded(refusal):
-    """
-    Decorate an FMI method so that no exception leaves it: logged, refusal returned.
-
-    refusal(slave, *args): the value returned instead (a callable, so get_real can
-    return one value per reference asked for). slave._master: its MasterLogger or None.
-    """
-
-    def decorate(method):
-        @wraps(method)
-        def call(slave, *args):
-            if slave._master is not None:  # debug logging set on since: ours, not pythonfmu's
-                slave._master.wants(0)
-            try:
-                return method(slave, *args)
-            except Exception as error:  # noqa: B902 (the FMI boundary: nothing may pass)
-                slave.log(f'{method.__name__} failed, refused: {type(error).__name__}: {error}',
-                          slave.ERROR)
-                return refusal(slave, *args)
-        return call
-
-    return decorate
 
 
 def check_step(current_time, step_size, clock_ns):

@@ -17,23 +17,20 @@ The module pythonfmu packs as the FMU's entry: the slave of valve_sim, or why it
 
 The FMU's binary runs this file from the FMU's resources/ in an embedded Python. It
 takes ReliefValve from the valve_sim installed there; where that import fails (no
-valve_sim, a missing dependency), ReliefValve is master_logger's stand-in (the FMU
-carries a copy of that module), which logs the reason with status error through the
-master's logger, whatever its logging setting, and fails fmi2Instantiate.
-
-pythonfmu 0.7's binary runs this file again for each instance with this module's globals
-and then releases one reference to them that it never took: the reference taken here
-each time keeps the module's namespace alive however many instances come.
+valve_sim, a missing dependency), it raises ImportError with the reason and what to
+install or set, which the binary (export_binary) logs with status error, whatever the
+master's logging setting, and fmi2Instantiate fails. Standard library only here.
 """
 
-import ctypes
-
-ctypes.pythonapi.Py_IncRef(ctypes.py_object(globals()))
+import sys
 
 try:
     from valve_sim.fmu.relief_valve_slave import ReliefValve  # noqa: F401 (pythonfmu's)
 except Exception as error:  # noqa: B902 (whatever stops the import is reported)
-    from master_logger import unavailable_slave  # resources/master_logger.py
-    from pythonfmu import Fmi2Slave
-
-    ReliefValve = unavailable_slave(error, Fmi2Slave)
+    raise ImportError(
+        f'the valve_sim FMU cannot start: {type(error).__name__}: {error}. The Python '
+        f'{sys.version.split()[0]} this FMU runs in ({sys.prefix}) needs valve_sim and its '
+        "dependencies: `pip install -e '.[wheels,fmu]'` in a valve_sim clone, or set "
+        'PYTHONPATH (and, in a C master, LD_PRELOAD and PYTHONHOME) as docs/fmu.md says: '
+        '`python -m valve_sim.fmu.environment` prints them'
+    ) from None

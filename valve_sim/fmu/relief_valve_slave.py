@@ -37,11 +37,12 @@ trial-run as valve_node plans it (core.retuning.plan_change: the cracking point 
 once), then applied. An overpressure halts the model as it halts valve_node
 (supply_pressure at burst_pressure, the rest held): fmi2OK with a logged warning. A
 divergence keeps the last good state: fmi2Discard with the reason logged, until an input
-or a parameter changes. An invalid input (NaN, negative, beyond the limits), a refused
-parameter change or a failed start: fmi2Discard, nothing integrated, the reason logged
-with status error; the instance stays usable (a failed start is tried again at each step).
-No call lets an exception out (fmi_calls.guarded): pythonfmu 0.7 returns fmi2Fatal for one
-and releases the slave object, which crashes the master at its next call.
+or a parameter changes. An invalid input (NaN, negative, beyond the limits) or a refused
+parameter change: fmi2Discard, nothing integrated, the reason logged with status error; the
+instance stays usable. A failed start raises in exit_initialization_mode: fmi2Error with
+the reason (valve_sim's build of pythonfmu's binary, export_binary, makes any exception of
+an FMI call fmi2Error with its message, the instance kept for fmi2Terminate, fmi2Reset or
+fmi2FreeInstance; it passes warnings and errors to the master whatever its logging setting).
 
 scipy.linalg is imported before valve_sim (and so before numba): loaded after numba, its
 Fortran runtime's exit handler aborts a C master at exit (docs/fmu.md).
@@ -50,7 +51,6 @@ Over 400 lines on purpose: one class whose methods are the FMI calls, in the one
 pythonfmu copies into the FMU.
 """
 
-import math
 from pathlib import Path
 
 from pythonfmu import (
@@ -84,8 +84,7 @@ from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel
 from valve_sim.core.retuning import plan_change, planned_parameters
 from valve_sim.core.sensors import SensorStage
 from valve_sim.core.steady_state import cracking_pressure
-from valve_sim.fmu.fmi_calls import advance_streaming, check_step, guarded
-from valve_sim.fmu.master_logger import MasterLogger
+from valve_sim.fmu.fmi_calls import advance_streaming, check_step
 from valve_sim.fmu.model_description import (
     parameter_description,
     Quantity,
@@ -117,18 +116,17 @@ class ReliefValve(Fmi2Slave):
     """The direct-pressure-sensing water-hydraulic relief valve of valve_sim (one instance)."""
 
     author = 'valve_sim developers'
-    license = 'Apache-2.0'  # noqa: A003 (pythonfmu's attribute)
+    license = 'Apache-2.0; its binary MIT and BSD-2-Clause (documentation/licenses)'  # noqa: A003
     version = __version__
     description = (
         'valve_sim relief valve: inlet flow and tank pressure in; chamber pressures (gauge), '
-        'valve positions and the relief flow out. Needs Python with valve_sim installed.'
+        'valve positions and the relief flow out. Runs on 64-bit Linux only (one binary, '
+        'binaries/linux64), in a Python with valve_sim installed.'
     )
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=1e-3)
-    ERROR = Fmi2Status.error
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._master = MasterLogger.attach(kwargs.get('logger'), self.instance_name)
         self.modelName = 'ReliefValve'
         path = Path(self.resources or '.') / PARAMETER_FILE
         loaded = load_parameters(path if path.is_file() else None)
@@ -201,25 +199,23 @@ class ReliefValve(Fmi2Slave):
         """Return pythonfmu's XML with the units and initial unknowns (model_description)."""
         return with_units_and_unknowns(super().to_xml(model_options or {}), self.vars.values())
 
-    # --- FMI calls: none lets an exception out (pythonfmu would end the instance) ------------
+    # --- FMI calls: an exception is fmi2Error with its message (export_binary) ------------
 
-    @guarded(lambda slave, *args: None)
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         if not abs(start_time) <= 1e9:
             raise ParameterError(f'startTime must be finite, at most 1e9 s, got {start_time!r}')
         self._start_ns = round(start_time * NS_PER_S)
 
-    @guarded(lambda slave, *args: None)
     def exit_initialization_mode(self):
         """
         Start the model: the steady state at the inputs, or the closed valve.
 
         Its kernels are compiled (or loaded from numba's cache) here, not in the first
-        step. A start that fails is logged with status error and tried again at each step.
+        step. A start that fails raises ParameterError: fmi2Error with the reason.
         """
-        self._start()
+        if not self._start():
+            raise ParameterError(self._failed)
 
-    @guarded(lambda slave, *args: False)
     def do_step(self, current_time, step_size):
         """
         Integrate from current_time over step_size [s]; True: fmi2OK, False: fmi2Discard.
@@ -242,32 +238,11 @@ class ReliefValve(Fmi2Slave):
             return False
         return True
 
-    @guarded(lambda slave, *args: None)
     def terminate(self):
         self._terminated = True
 
-    get_real = guarded(lambda slave, vrs: [math.nan] * len(vrs))(Fmi2Slave.get_real)
-    get_integer = guarded(lambda slave, vrs: [0] * len(vrs))(Fmi2Slave.get_integer)
-    get_boolean = guarded(lambda slave, vrs: [False] * len(vrs))(Fmi2Slave.get_boolean)
-    get_string = guarded(lambda slave, vrs: [''] * len(vrs))(Fmi2Slave.get_string)
-    set_real = guarded(lambda slave, *args: None)(Fmi2Slave.set_real)
-    set_integer = guarded(lambda slave, *args: None)(Fmi2Slave.set_integer)
-    set_boolean = guarded(lambda slave, *args: None)(Fmi2Slave.set_boolean)
-    set_string = guarded(lambda slave, *args: None)(Fmi2Slave.set_string)
-
-    def log(self, msg, status=Fmi2Status.ok, category=None, debug=None):
-        """
-        Log for the master: through its logger directly, errors always (master_logger).
-
-        Else queued for pythonfmu, '%' doubled: the master's logger takes it as a format.
-        """
-        if self._master is None:
-            super().log(str(msg).replace('%', '%%'), status, category)
-        elif self._master.wants(status.value):
-            self._master.log(msg, status.value, category)
-
-    def _start(self, quiet=False):
-        """Start the model at the inputs as set; else say why (status error) unless quiet."""
+    def _start(self):
+        """Start the model at the inputs as set: True, else False with self._failed why."""
         try:
             if self.initial_state not in INITIAL_STATES:
                 raise ParameterError(
@@ -283,9 +258,6 @@ class ReliefValve(Fmi2Slave):
             model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
         except REFUSED as error:
             self._failed = f'the FMU could not start: {error}'
-            if not quiet:
-                self.log(f'{self._failed}; it starts at the first step after the cause is gone',
-                         Fmi2Status.error)
             return False
         self._failed = None
         self.model = model
@@ -301,7 +273,7 @@ class ReliefValve(Fmi2Slave):
         """do_step's work; raises what refuses the step or IntegrationError."""
         if self._terminated:
             raise ParameterError('doStep after terminate: the instance has ended')
-        if self.model is None and not self._start(quiet=True):  # the step says why
+        if self.model is None and not self._start():  # the step says why
             raise ParameterError(self._failed)
         model = self.model
         now_ns = check_step(current_time, step_size, self._clock_ns)

@@ -53,7 +53,9 @@ try:
         StepSimulation,
     )
 except ImportError as error:
-    raise ImportError(
+    from valve_sim.core.errors import MissingExtraError  # a ValveSimError and an ImportError
+
+    raise MissingExtraError(
         f'{error}: valve_simulator needs simulation_interfaces: `python3 run.py install` builds '
         'it into .venv (interfaces/README.md); on a ROS install: ros-jazzy-simulation-interfaces'
     ) from None
