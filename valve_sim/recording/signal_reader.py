@@ -34,7 +34,7 @@ import os
 from typing import Any, Optional, Union
 
 import numpy as np
-from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.input_events import ParameterChanges, SettingChanges
 from valve_sim.analysis.steps.signals import (
     Extractor,
     FLUID_PRESSURE,

@@ -30,7 +30,7 @@ import struct
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.input_events import ParameterChanges, SettingChanges
 from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.analysis.steps.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
 from valve_sim.analysis.steps.step_analysis import MeasuresFile, StepAnalysis
