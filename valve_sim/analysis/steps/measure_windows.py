@@ -59,7 +59,7 @@ SECOND_PEAK_MEASURES = ('r_d', 'T_d_ms')
 # re-estimated every TANK_NOISE_EVERY), and at least TANK_STEP_FLOOR [Pa]: far above
 # valve_node's rounding of the applied tank pressure, far below any back-pressure step.
 TANK_STEP_FLOOR = 1e3
-TANK_NOISE_FACTOR = 10.0  # normal noise: one false cut in ~1e11 samples (docs/measures.md)
+TANK_NOISE_FACTOR = 10.0  # normal noise: one false cut in ~6e11 samples (docs/measures.md)
 TANK_NOISE_SAMPLES = 1000
 TANK_NOISE_EVERY = 100
 TANK_NOISE_FIRST = 10  # no tank change is looked for before this many samples
