@@ -174,7 +174,7 @@ def test_a_fault_or_parameter_event_inside_the_window_ends_it(reference, alone):
 
 
 def series_of(waves, **columns):
-    """The TickSeries of a run (columns: replaced), as the scenario report takes it."""
+    """Return the TickSeries of a run (columns: replaced), as the scenario report takes it."""
     found = {name: np.full(len(waves.time), np.nan) for name in SIGNALS}
     found.update(supply_pressure=waves['supply_pressure'],
                  main_valve=waves['main_valve_displacement'], inlet_flow=waves.inlet_flow,
@@ -184,7 +184,7 @@ def series_of(waves, **columns):
 
 
 def test_ticks_without_their_supply_pressure_are_left_out_not_a_crash(reference):
-    """A 6 s ramp+sine scenario crashed in its report (TypeError in at_rest): 3 ticks had no p_s."""
+    """A 6 s ramp+sine run crashed in its report (TypeError in at_rest): 3 ticks lacked p_s."""
     waves = run(reference, staircase(0.3), STAIRCASE[0] * LITRE_PER_MINUTE)
     whole = series_of(waves).steps()
     pressure = waves['supply_pressure'].copy()
@@ -208,7 +208,7 @@ def test_an_event_that_leaves_every_value_as_it_was_is_no_change(reference, alon
     path.write_text(
         'duration: 1.3\n'
         'valve: {parameters: {damping_orifice_diameter: 0.0008}}\n'
-        "inputs: {inlet_flow: {initial: 5 L/min, changes: [{at: 0.25, step: 20 L/min}]}}\n"
+        'inputs: {inlet_flow: {initial: 5 L/min, changes: [{at: 0.25, step: 20 L/min}]}}\n'
         'events:\n'
         '  - {t: 0.4, set: {fault.main_valve_stuck: false, input_timeout: 2.0}}\n'
         '  - {t: 0.5, set: {fault.damping_orifice_blockage: 0.0, d_c: 0.0008}}\n'

@@ -68,7 +68,7 @@ def test_a_fault_status_change_ends_the_window_live(reference, tmp_path):
 
 @pytest.fixture(scope='module')
 def plain(tmp_path_factory):
-    """A bag of valve_node's topics, the paper's step (5 -> 20 L/min at 0.25 s), 1.3 s."""
+    """Return a bag of valve_node's topics: the paper's step (5 -> 20 L/min at 0.25 s), 1.3 s."""
     import subprocess
     import sys
 
@@ -129,21 +129,21 @@ def parameter_events(start):
     parameter, or a parameter of a node in another namespace.
     """
     return [
-        (start, parameter_event(start, '/valve_node', declared=[
+        (start, parameter_event(start, '/relief_valve', declared=[
             ('damping_orifice_diameter', 0.0008), ('publish_rate', 1000.0)])),
-        (start + 0.4, parameter_event(start + 0.4, '/valve_node',
+        (start + 0.4, parameter_event(start + 0.4, '/relief_valve',
                                       changed=[('damping_orifice_diameter', 0.0008)])),
-        (start + 0.45, parameter_event(start + 0.45, '/valve_node',
+        (start + 0.45, parameter_event(start + 0.45, '/relief_valve',
                                        changed=[('publish_rate', 500.0)])),
-        (start + 0.5, parameter_event(start + 0.5, '/rig2/valve_node',
+        (start + 0.5, parameter_event(start + 0.5, '/rig2/relief_valve',
                                       changed=[('damping_orifice_diameter', 0.0009)])),
-        (start + 0.6, parameter_event(start + 0.6, '/valve_node',
+        (start + 0.6, parameter_event(start + 0.6, '/relief_valve',
                                       changed=[('damping_orifice_diameter', 0.0009)])),
     ]
 
 
 def test_a_parameter_change_ends_the_window_live_and_offline_alike(plain, tmp_path):
-    """`ros2 param set /valve_node d_c ...` ends it; a value it had, or publish_rate, does not."""
+    """`ros2 param set /relief_valve d_c ...` ends it; a value it had, publish_rate do not."""
     from rcl_interfaces.msg import ParameterEvent
     from valve_sim.analysis.recorded_steps import analyse
     from valve_sim.recording.bag import BagReader, BagWriter
@@ -167,7 +167,7 @@ def test_a_parameter_change_ends_the_window_live_and_offline_alike(plain, tmp_pa
     (offline,) = analyse(read_recording(changed))
     cut = offline['details']['window_cut']
     assert cut['time'] == pytest.approx(start + 0.599)
-    assert cut['by'] == ('the parameter change on /valve_node: damping_orifice_diameter = '
+    assert cut['by'] == ('the parameter change on /relief_valve: damping_orifice_diameter = '
                          f'0.0009 at {start + 0.6:.6f} s')
     assert offline['T_s_ms'] is None and offline['T_1_ms'] == pytest.approx(plain_step['T_1_ms'])
 
@@ -194,7 +194,7 @@ def test_a_parameter_change_ends_the_window_live_and_offline_alike(plain, tmp_pa
 
 
 def test_a_namespaced_analyser_watches_its_own_valve_node():
-    """In /rig1, /rig1/valve_node's changes count, the root's not."""
+    """In /rig1, /rig1/relief_valve's changes count, the root's not."""
     from valve_sim.analysis.steps.input_events import ParameterChanges
     from valve_sim.analysis.steps.signals import ROLES
     from rclpy.serialization import deserialize_message
@@ -202,8 +202,8 @@ def test_a_namespaced_analyser_watches_its_own_valve_node():
 
     rig = SignalMap(topics={role.name: '/rig1/' + role.topic for role in ROLES})
     changes = ParameterChanges(rig.valve_namespace())
-    for node in ('/valve_node', '/rig1/valve_node'):
+    for node in ('/relief_valve', '/rig1/relief_valve'):
         event = changes.update(deserialize_message(
             parameter_event(1.0, node, changed=[('main_valve_mass', 0.1)]), ParameterEvent))
-    assert event == (1.0, 'the parameter change on /rig1/valve_node: main_valve_mass = 0.1')
-    assert list(changes.nodes) == ['/rig1/valve_node']
+    assert event == (1.0, 'the parameter change on /rig1/relief_valve: main_valve_mass = 0.1')
+    assert list(changes.nodes) == ['/rig1/relief_valve']
