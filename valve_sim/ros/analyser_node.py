@@ -18,11 +18,11 @@ analyser_node: records valve_node's topics to MCAP and measures every inlet-flow
 It records as rosbag2 does.
 
   sub  every topic of the parameter `topics` (relative names resolve in the node's
-       namespace), serialized, of whatever type the graph reports for it, and always
-       /parameter_events (rcl_interfaces/msg/ParameterEvent, every node's parameter
-       changes, recorded whole as rosbag2 would): a change of a parameter of valve_node
-       (a node in the namespace of the supply-pressure topic) that changes the model
-       ends a step's window (analysis.steps.input_events, docs/measures.md)
+       namespace), serialized, of whatever type the graph reports for it; by default
+       /parameter_events too (rcl_interfaces/msg/ParameterEvent, every node's parameter
+       changes, recorded whole as rosbag2 would) and fault_status: a change of valve_node's
+       settings there (a node in the namespace of the supply-pressure topic) that changes
+       the model ends a step's window (analysis.steps.input_events, docs/measures.md)
   pub  step_measures   diagnostic_msgs/msg/DiagnosticArray, reliable, transient local:
        one message per measured step, header.stamp = t_step, one DiagnosticStatus
        (name "<node name>: step measures", hardware_id = the parameter hardware_id,
@@ -175,9 +175,9 @@ class ValveAnalyser(Node):
             joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
             ambient_pressure=settings['ambient_pressure'],
         )
-        wanted = dict.fromkeys(  # the analysed ones always, parameter events included
+        wanted = dict.fromkeys(
             [self.resolve_topic_name(t) for t in settings['topics']]
-            + list(signal_map.topics.values()) + [PARAMETER_EVENTS_TOPIC]
+            + list(signal_map.topics.values())
         )
         optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
         self.hardware_id = diagnostics.declare_hardware_id(self)
