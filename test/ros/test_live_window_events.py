@@ -78,27 +78,34 @@ def plain(tmp_path_factory):
     return path
 
 
-def test_a_fault_status_change_in_a_bag_ends_the_window_offline(plain, tmp_path):
-    """valve-sim analyse reads fault_status beside the valve's topics: the same rule."""
-    from valve_sim.analysis.recorded_steps import analyse
+def copy_with(bag, path, topic, type_name, messages):
+    """Copy a bag to path, with a topic of type_name added: messages [(time [s], bytes)]."""
     from valve_sim.recording.bag import BagReader, BagWriter
-    from valve_sim.recording.signal_reader import read_recording
 
-    faulted = tmp_path / 'faulted.mcap'
-    reader, writer = BagReader(plain), BagWriter(faulted)
+    reader, writer = BagReader(bag), BagWriter(path)
     try:
         for channel, schema, message in reader.messages():
             if channel.topic not in writer.channels:
                 writer.add_topic(channel.topic, schema.name)
             writer.write(writer.channels[channel.topic], message.data, message.log_time,
                          message.publish_time)
-        status = writer.add_topic('/fault_status', 'diagnostic_msgs/msg/DiagnosticArray')
-        start = round(read_recording(plain).time[0] * 1e9)  # [ns] the first tick's stamp
-        for time, blockage in ((0.0, 0.0), (0.5, 0.3)):
-            stamp = start + round(time * 1e9)
-            writer.write(status, fault_status(stamp / 1e9, blockage), stamp, stamp)
+        added = writer.add_topic(topic, type_name)
+        for time, data in messages:
+            writer.write(added, data, round(time * 1e9), round(time * 1e9))
     finally:
         writer.close()
+
+
+def test_a_fault_status_change_in_a_bag_ends_the_window_offline(plain, tmp_path):
+    """valve-sim analyse reads fault_status beside the valve's topics: the same rule."""
+    from valve_sim.analysis.recorded_steps import analyse
+    from valve_sim.recording.signal_reader import read_recording
+
+    faulted = tmp_path / 'faulted.mcap'
+    start = read_recording(plain).time[0]  # [s] the first tick's stamp
+    copy_with(plain, faulted, '/fault_status', 'diagnostic_msgs/msg/DiagnosticArray',
+              [(start + time, fault_status(start + time, blockage))
+               for time, blockage in ((0.0, 0.0), (0.5, 0.3))])
     (plain_step,) = analyse(read_recording(plain))
     (step,) = analyse(read_recording(faulted))
     assert 'window_cut' not in plain_step['details'] and plain_step['T_s_ms'] is not None
@@ -146,23 +153,12 @@ def test_a_parameter_change_ends_the_window_live_and_offline_alike(plain, tmp_pa
     """`ros2 param set /relief_valve d_c ...` ends it; a value it had, publish_rate do not."""
     from rcl_interfaces.msg import ParameterEvent
     from valve_sim.analysis.recorded_steps import analyse
-    from valve_sim.recording.bag import BagReader, BagWriter
     from valve_sim.recording.signal_reader import read_recording
 
     changed = tmp_path / 'changed.mcap'
     start = read_recording(plain).time[0]  # [s] the first tick's stamp
-    reader, writer = BagReader(plain), BagWriter(changed)
-    try:
-        for channel, schema, message in reader.messages():
-            if channel.topic not in writer.channels:
-                writer.add_topic(channel.topic, schema.name)
-            writer.write(writer.channels[channel.topic], message.data, message.log_time,
-                         message.publish_time)
-        topic = writer.add_topic('/parameter_events', 'rcl_interfaces/msg/ParameterEvent')
-        for time, data in parameter_events(start):
-            writer.write(topic, data, round(time * 1e9), round(time * 1e9))
-    finally:
-        writer.close()
+    copy_with(plain, changed, '/parameter_events', 'rcl_interfaces/msg/ParameterEvent',
+              parameter_events(start))
     (plain_step,) = analyse(read_recording(plain))
     (offline,) = analyse(read_recording(changed))
     cut = offline['details']['window_cut']
