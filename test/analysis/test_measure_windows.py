@@ -171,3 +171,74 @@ def test_a_fault_or_parameter_event_inside_the_window_ends_it(reference, alone):
     live = [record for row in rows for record in analysis.add(*row)] + analysis.finish()
     assert live[0]['details']['window_cut']['time'] == pytest.approx(0.399)
     assert 'a parameter change at 0.400000 s' in live[0]['reasons']['T_s_ms']
+
+
+def series_of(waves, **columns):
+    """Return the TickSeries of a run (columns: replaced), as the scenario report takes it."""
+    found = {name: np.full(len(waves.time), np.nan) for name in SIGNALS}
+    found.update(supply_pressure=waves['supply_pressure'],
+                 main_valve=waves['main_valve_displacement'], inlet_flow=waves.inlet_flow,
+                 tank_pressure=waves.tank_pressure)
+    found.update(columns)
+    return TickSeries(waves.time, np.round(waves.time * 1e9).astype(np.int64), found)
+
+
+def test_ticks_without_their_supply_pressure_are_left_out_not_a_crash(reference):
+    """A 6 s ramp+sine run crashed in its report (TypeError in at_rest): 3 ticks lacked p_s."""
+    waves = run(reference, staircase(0.3), STAIRCASE[0] * LITRE_PER_MINUTE)
+    whole = series_of(waves).steps()
+    pressure = waves['supply_pressure'].copy()
+    lost = np.isin(np.round(waves.time, 6), [0.83, 0.831, 0.84])  # in step 2's last 50 ms
+    pressure[lost] = np.nan
+    records = series_of(waves, supply_pressure=pressure).steps()
+    assert len(records) == len(whole) == len(STAIRCASE) - 1
+    assert records[1]['details']['pressure_samples_left_out'] == 3
+    for record, same in zip(records, whole):  # each measure as without the gaps, or null alike
+        for name in MEASURE_NAMES:
+            assert (record[name] is None) == (same[name] is None), name
+            if same[name] is not None:
+                assert record[name] == pytest.approx(same[name], abs=TOLERANCES[name] / 2)
+
+
+def test_an_event_that_leaves_every_value_as_it_was_is_no_change(reference, alone, tmp_path):
+    """A scenario's events that set values they had (or publish-only ones) end no window."""
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+
+    path = tmp_path / 'same.yaml'
+    path.write_text(
+        'duration: 1.3\n'
+        'valve: {parameters: {damping_orifice_diameter: 0.0008}}\n'
+        'inputs: {inlet_flow: {initial: 5 L/min, changes: [{at: 0.25, step: 20 L/min}]}}\n'
+        'events:\n'
+        '  - {t: 0.4, set: {fault.main_valve_stuck: false, input_timeout: 2.0}}\n'
+        '  - {t: 0.5, set: {fault.damping_orifice_blockage: 0.0, d_c: 0.0008}}\n'
+        '  - {t: 0.6, set: {fault.damping_orifice_blockage: 0.3}}\n'
+        'expect: [{no_alarm: {}}]\n')
+    events = load_scenario(path).window_events()
+    assert events == [(0.6, {'fault.damping_orifice_blockage': 0.3})]
+    t = midpoints(1.3)
+    waves = run(reference, np.where(t > FIRST_STEP, 20.0, 5.0) * LITRE_PER_MINUTE,
+                5 * LITRE_PER_MINUTE)
+    record, = steps_of(waves, events)
+    assert record['details']['window_cut']['by'] == \
+        'the event fault.damping_orifice_blockage = 0.3 at 0.600000 s'
+    assert_honest(record, alone[(5, 20)], 'the event fault.damping_orifice_blockage = 0.3')
+
+
+@pytest.mark.parametrize('tank_time', [1.0, None])
+def test_a_noisy_tank_sensor_cuts_no_window_its_step_does(reference, alone, tank_time):
+    """A rig's tank sensor with 300 Pa of noise: only its 1 MPa step ends the window."""
+    t = midpoints(1.6)
+    flows = np.where(t > FIRST_STEP, 20.0, 5.0) * LITRE_PER_MINUTE
+    tank = 0.0 if tank_time is None else np.where(t > tank_time, 1e6, 0.0)
+    waves = run(reference, flows, 5 * LITRE_PER_MINUTE, tank)
+    noise = np.random.default_rng(41).normal(0.0, 300.0, len(waves.time))
+    record, = series_of(waves, tank_pressure=waves.tank_pressure + noise).steps()
+    assert_honest(record, alone[(5, 20)], 'the tank-pressure change at')
+    assert record['T_s_ms'] is not None and record['T_1_ms'] is not None
+    if tank_time is None:
+        assert 'window_cut' not in record['details']
+    else:
+        cut = record['details']['window_cut']
+        assert cut['time'] == pytest.approx(tank_time, abs=1e-3)
+        assert float(cut['by'].split('more than ')[1].split(' Pa')[0]) > 1e3  # from the noise

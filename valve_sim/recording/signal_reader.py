@@ -34,7 +34,7 @@ import os
 from typing import Any, Optional, Union
 
 import numpy as np
-from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.input_events import ParameterChanges, SettingChanges
 from valve_sim.analysis.steps.signals import (
     Extractor,
     FLUID_PRESSURE,
@@ -48,6 +48,7 @@ from valve_sim.analysis.steps.signals import (
 from valve_sim.core.errors import CalibrationError, InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.rosbag2_metadata import bag_files
+from valve_sim.recording.valve_topics import PARAMETER_EVENTS_TOPIC
 
 
 # What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
@@ -68,7 +69,7 @@ class Recording:
     inlet_flow_time: Optional[np.ndarray] = None  # [s] each row's flow sample (None: the row's)
     tank_pressure: Optional[np.ndarray] = None  # [Pa] gauge, NaN where the bag has none
     relief_flow: Optional[np.ndarray] = None  # [m^3/s], NaN where the bag has none
-    events: Optional[list] = None  # [(time [s], what)]: changes in valve_node's fault_status
+    events: Optional[list] = None  # [(time [s], what)]: valve_node's fault and parameter changes
 
     def valve_pressure(self) -> np.ndarray:
         """Return the supply pressure above the tank [Pa]: p_s - p_t where p_t is known."""
@@ -141,15 +142,18 @@ def read_recording(
     optional = [role.name for role in ROLES if role.name not in required]
     joiner, rows = Joiner(required, optional), []
     wanted = {signal_map.topics[role] for role in (*required, *optional)}
-    # valve_node's fault_status beside its supply pressure: its changes end a step's window
-    status_topic = signal_map.topics['supply_pressure'].rsplit('/', 1)[0] + '/fault_status'
-    found, problems, settings, events = set(), [], SettingChanges(), []
+    # valve_node's fault_status beside its supply pressure, and its parameter events: their
+    # changes end a step's window (analysis.steps.input_events)
+    status_topic = signal_map.valve_namespace() + '/fault_status'
+    found, problems, events = set(), [], []
+    settings = {status_topic: SettingChanges(),
+                PARAMETER_EVENTS_TOPIC: ParameterChanges(signal_map.valve_namespace())}
     for file in bag_files(path):  # a file, or the files of a bag folder in order
         reader, extractors = BagReader(file), {}
-        for channel, schema, message in reader.messages(wanted | {status_topic}):
-            if channel.topic == status_topic:
-                events += fault_event(settings, decoder_for(file, channel, schema,
-                                                            decoder_factories), message.data)
+        for channel, schema, message in reader.messages(wanted | set(settings)):
+            if channel.topic in settings:
+                events += setting_event(settings[channel.topic], decoder_for(
+                    file, channel, schema, decoder_factories), message.data)
                 continue
             if channel.id not in extractors:
                 decode = decoder_for(file, channel, schema, decoder_factories)
@@ -208,15 +212,23 @@ def read_recording(
     )
 
 
-def fault_event(settings, decode, data):
-    """Return [(time [s], what)] if a fault_status message changes settings, else []."""
+def setting_event(settings, decode, data):
+    """
+    Return [(time [s], what)] if a message changes settings, else [].
+
+    settings: a SettingChanges (fault_status messages) or a ParameterChanges (parameter
+    events).
+    """
     try:
-        status = decode(data)
+        message = decode(data)
     except Exception:  # noqa: B902 (a message that does not decode is no event)
         return []
-    stamp = status.header.stamp
-    values = {pair.key: pair.value for part in status.status for pair in part.values}
-    event = settings.update(stamp.sec + stamp.nanosec * 1e-9, values)
+    if isinstance(settings, ParameterChanges):
+        event = settings.update(message)
+    else:
+        stamp = message.header.stamp
+        event = settings.update(stamp.sec + stamp.nanosec * 1e-9, {
+            pair.key: pair.value for part in message.status for pair in part.values})
     return [event] if event else []
 
 

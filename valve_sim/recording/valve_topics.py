@@ -62,6 +62,9 @@ TOPIC_TYPES = {
     'inlet_flow_stamped': 'sensor_msgs/msg/JointState',  # lockstep (ros.lockstep_inputs)
     'tank_pressure': 'sensor_msgs/msg/FluidPressure',
 }
+# Every node's parameter changes (rclpy publishes them): valve_node's end a step's window
+PARAMETER_EVENTS_TOPIC = '/parameter_events'
+PARAMETER_EVENT = 'rcl_interfaces/msg/ParameterEvent'
 PRESSURE_FRAMES = dict(  # where each pressure is measured
     zip(
         PRESSURE_TOPICS,

@@ -18,7 +18,11 @@ analyser_node: records valve_node's topics to MCAP and measures every inlet-flow
 It records as rosbag2 does.
 
   sub  every topic of the parameter `topics` (relative names resolve in the node's
-       namespace), serialized, of whatever type the graph reports for it
+       namespace), serialized, of whatever type the graph reports for it; by default
+       /parameter_events too (rcl_interfaces/msg/ParameterEvent, every node's parameter
+       changes, recorded whole as rosbag2 would) and fault_status: a change of valve_node's
+       settings there (a node in the namespace of the supply-pressure topic) that changes
+       the model ends a step's window (analysis.steps.input_events, docs/measures.md)
   pub  step_measures   diagnostic_msgs/msg/DiagnosticArray, reliable, transient local:
        one message per measured step, header.stamp = t_step, one DiagnosticStatus
        (name "<node name>: step measures", hardware_id = the parameter hardware_id,
@@ -83,6 +87,7 @@ from valve_sim.core.catalogue import ANALYSER_DOUBLES, ANALYSER_SPECS
 from valve_sim.core.errors import InputFileError, OutputFileError, USER_ERRORS
 from valve_sim.core.output_files import make_folder
 from valve_sim.recording.bag import BagWriter
+from valve_sim.recording.valve_topics import PARAMETER_EVENTS_TOPIC
 from valve_sim.ros import diagnostics, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.measures_publisher import StepMeasures
@@ -105,6 +110,7 @@ DEFAULT_TOPICS = [
     'tank_pressure',  # the second input, if a bench sends it, and what the valve applied
     'applied_tank_pressure',
     'relief_flow',
+    PARAMETER_EVENTS_TOPIC,  # every node's parameter changes: valve_node's end a window
 ]
 # Recorded once published, never waited for: only a bench with a back pressure sends it.
 OPTIONAL_TOPICS = ('tank_pressure', 'inlet_flow_stamped')

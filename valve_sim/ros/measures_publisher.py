@@ -17,7 +17,8 @@ analyser_node's measures publisher: every inlet-flow step measured, saved and pu
 
 StepMeasures joins the analysed signals (valve_sim.analysis.steps.signals), finds and
 measures each step of the applied inlet flow (valve_sim.analysis.steps.step_analysis; a
-change in valve_node's fault_status ends a step's window as any input change does),
+change in valve_node's fault_status, or of its parameters on /parameter_events, ends a
+step's window as any input change does: analysis.steps.input_events),
 appends each record to the recording's .measures.json and publishes it on
 step_measures (MEASURES_QOS: reliable, transient local) as one DiagnosticArray
 (measures_message; measures_from_message reads one back). The status is named
@@ -30,13 +31,15 @@ import struct
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from valve_sim.analysis.steps.measure_windows import SettingChanges
+from valve_sim.analysis.steps.input_events import ParameterChanges, SettingChanges
 from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.analysis.steps.signals import Extractor, FLOAT64, Joiner, JOINT_STATE, TYPES
 from valve_sim.analysis.steps.step_analysis import MeasuresFile, StepAnalysis
 from valve_sim.core.errors import InputFileError, output_error
 from valve_sim.recording.cdr import read_message
-from valve_sim.recording.valve_topics import TOPIC_TYPES
+from valve_sim.recording.valve_topics import (
+    PARAMETER_EVENT, PARAMETER_EVENTS_TOPIC, TOPIC_TYPES,
+)
 from valve_sim.ros import diagnostics
 from valve_sim.ros.fault_injection import FAULT_STATUS_TOPIC
 
@@ -151,6 +154,8 @@ class StepMeasures:
         if not roles and topic.rsplit('/', 1)[-1] == FAULT_STATUS_TOPIC \
                 and type_name == DIAGNOSTIC_ARRAY:
             return SettingChanges()  # its events end a step's window (measure_windows)
+        if topic == PARAMETER_EVENTS_TOPIC and type_name == PARAMETER_EVENT:
+            return ParameterChanges(self.signal_map.valve_namespace())  # valve_node's events
         try:
             return Extractor(topic, type_name, roles, self.signal_map) if roles else None
         except InputFileError as error:
@@ -165,6 +170,11 @@ class StepMeasures:
             event = recorded.extractor.update(
                 stamp.sec + stamp.nanosec * 1e-9,
                 {pair.key: pair.value for status in message.status for pair in status.values})
+            if event:
+                self.analysis.add_event(*event)
+            return
+        if isinstance(recorded.extractor, ParameterChanges):  # a change of valve_node's?
+            event = recorded.extractor.update(message)
             if event:
                 self.analysis.add_event(*event)
             return

@@ -40,7 +40,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
-from valve_sim.recording.valve_topics import message_class
+from valve_sim.recording.valve_topics import message_class, PARAMETER_EVENTS_TOPIC
 from valve_sim.ros.raw_take import RawTaker
 
 
@@ -264,7 +264,8 @@ class Recorder:
 
         ERROR once a topic cannot be recorded; else WARN while a topic has no
         message or when some were lost; else OK. An optional topic
-        counts once it has a publisher.
+        counts once it has a publisher; /parameter_events is never waited for (it
+        carries a message only when a parameter changes).
         """
         counts = {
             topic: (self.recorded[topic].count if topic in self.recorded else 0)
@@ -272,7 +273,8 @@ class Recorder:
             if topic in self.recorded or topic not in self.optional
         }
         lost = {topic: recorded.lost for topic, recorded in self.recorded.items() if recorded.lost}
-        waiting = [topic for topic, count in counts.items() if count == 0]
+        waiting = [topic for topic, count in counts.items()
+                   if count == 0 and topic != PARAMETER_EVENTS_TOPIC]
         values = {
             'file': str(self.bag.path),
             'messages': str(self.bag.message_count),

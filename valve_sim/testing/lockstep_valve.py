@@ -48,6 +48,7 @@ from typing import Any, Optional, Union
 
 from valve_sim.analysis.scenarios.bench_scenario import live_change, start_parameter
 from valve_sim.analysis.scenarios.tick_series import SIGNALS, TickSeries
+from valve_sim.analysis.steps.input_events import SettingChanges
 from valve_sim.core.errors import (
     InputFileError,
     NodeExitError,
@@ -246,7 +247,7 @@ class LockstepValve:
             raise ParameterError(str(error)) from None
         before = driver.get_parameters(list(resolved))
         driver.set_parameters(resolved)
-        changed = {name: value for name, value in resolved.items() if before[name] != value}
+        changed = SettingChanges(before).changed(resolved)  # that change the model
         if changed:  # a change ends a step's window (docs/measures.md)
             self._events.append((self.time + self.period, changed))
         if 'max_inlet_flow' in resolved:

@@ -41,12 +41,13 @@ problem is one line naming the file, the key and what is wrong (ProfileError, an
 InputFileError).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from valve_sim.analysis.scenarios.expectations import check_times, parse_expectations
-from valve_sim.core.catalogue import section_of
+from valve_sim.analysis.steps.input_events import SettingChanges
+from valve_sim.core.catalogue import CATALOGUE, section_of
 from valve_sim.core.errors import InputFileError, ParameterError, ProfileError
 from valve_sim.core.fault_schedule import (
     check_change,
@@ -108,6 +109,7 @@ class BenchScenario:
     inputs: dict  # input name: core.input_profile.Profile
     events: list  # core.fault_schedule.FaultEvent, names resolved
     expectations: list
+    start_values: dict = field(default_factory=dict)  # ROS name: value in effect at t = 0
 
     @property
     def period_ns(self):
@@ -130,8 +132,17 @@ class BenchScenario:
         return due
 
     def window_events(self):
-        """[(time [s], changes)] of every event: each ends a step's window (docs/measures.md)."""
-        return [(event.time_ns / NS_PER_S, event.changes) for event in self.events]
+        """
+        [(time [s], changes)] of the events that change a value: each ends a step's window.
+
+        Values set to what they were (from start_values on), and settings that do not
+        change the model, are no change (docs/measures.md, input_events).
+        """
+        values, events = SettingChanges(self.start_values), []
+        for event in self.events:
+            changed = values.changed(event.changes)
+            events += [(event.time_ns / NS_PER_S, changed)] if changed else []
+        return events
 
     def supply_pressure_limits(self):
         """supply_pressure_limit [Pa] in effect over the tick ending at each state's time."""
@@ -176,7 +187,8 @@ def _scenario(document, path, read_bag_column):
     if not 0.0 < duration <= MAX_DURATION:
         raise ProfileError('duration', f'must be in (0, {MAX_DURATION:g}] s, got {duration:g} s')
     inputs = _inputs(document['inputs'], path.parent, read_bag_column)
-    params_file, parameters, params, settings = _valve(document.get('valve') or {}, path.parent)
+    params_file, parameters, params, settings, injection = _valve(document.get('valve') or {},
+                                                                  path.parent)
     for name, value in parameters.items():
         if name in FIXED and name != 'publish_rate':
             raise ProfileError(f'valve.parameters.{name}', FIXED[name])
@@ -198,6 +210,9 @@ def _scenario(document, path, read_bag_column):
         inputs=inputs,
         events=events,
         expectations=parse_expectations(document['expect']),
+        start_values={**{name: spec.default for name, spec in CATALOGUE.items()
+                         if section_of(name) in INJECTION},
+                      **params, **settings, **injection, **parameters},
     )
     _check_times(scenario)
     _check_inputs(scenario, params['max_inlet_flow'], params['burst_pressure'])
@@ -271,7 +286,7 @@ def live_change(name, value):
 
 
 def _valve(document, folder):
-    """(params_file, {ROS name: value}, params, settings) of the 'valve' section, checked."""
+    """(params_file, {ROS name: value}, params, settings, injection): 'valve', checked."""
     if not isinstance(document, dict):
         raise ProfileError('valve', 'expected a mapping with params_file and/or parameters')
     for key in document:
@@ -292,7 +307,7 @@ def _valve(document, folder):
             check_change(name, value)
     except ParameterError as error:
         raise ProfileError('valve', str(error)) from None
-    return params_file, parameters, params, settings
+    return params_file, parameters, params, settings, loaded.injection
 
 
 def _event_value(name, value):

@@ -25,7 +25,7 @@ first tick (start_ns, the stamp of t = 0).
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.analysis.steps.measure_windows import event_name
+from valve_sim.analysis.steps.input_events import event_name
 from valve_sim.analysis.steps.step_analysis import StepAnalysis
 from valve_sim.core.quantities import FLOW, LENGTH, PRESSURE, VELOCITY
 

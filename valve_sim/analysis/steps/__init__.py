@@ -16,7 +16,8 @@
 The six step-response measures of one inlet-flow step, and finding the steps.
 
 Lives here: measures (step_measures, the measures' constants), measure_windows (the
-windows and cuts a measure is taken over), sample_window (indices of sampled times),
+windows and cuts a measure is taken over), input_events (which setting and parameter
+changes end a window), sample_window (indices of sampled times),
 step_detection (where a step is), step_analysis (streaming: joined rows in, one
 record per step out), signals (the roles of recorded signals and their joining),
 envelope (a waveform against the limits of an envelope).

@@ -17,8 +17,9 @@ Where a step's window ends, and which measures a window that ends early can carr
 
 The rule (docs/measures.md, "Where a window ends"): a step's window ends at
 measures.WINDOW after it, or earlier at the next change of any input: a flow step or
-ramp, a tank-pressure change, a fault or parameter event (a Cut), or where the
-recording ends. On a window that ends early a measure is reported only if everything
+ramp, a tank-pressure change (beyond the tank signal's noise, InputChanges), a fault or
+parameter event that changes a value the model uses (input_events), a Cut, or where
+the recording ends. On a window that ends early a measure is reported only if everything
 it depends on lies before the end:
 
 - P_o, P_1, r_d and T_s need the settled final value p_inf (x_inf): the response must
@@ -39,6 +40,7 @@ one implementation: measures.step_measures applies it, and step_analysis.StepAna
 changes (InputChanges) and hands each step its Cut.
 """
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,9 +54,15 @@ SETTLING_BAND = 0.05  # settling band: +-5 % of the main-valve step width
 FINAL_VALUE_MEASURES = ('P_o_percent', 'P_1_percent', 'r_d', 'T_s_ms')
 FIRST_PEAK_MEASURES = ('P_1_percent', 'T_1_ms')
 SECOND_PEAK_MEASURES = ('r_d', 'T_d_ms')
-# A tank-pressure change [Pa] that cuts a window: far above valve_node's rounding of the
-# applied tank pressure (absolute minus ambient), far below any back-pressure step.
-TANK_STEP_THRESHOLD = 1e3
+# A tank-pressure change that cuts a window: more than TANK_NOISE_FACTOR times the noise of
+# the tank signal (step_detection.noise_level of its last TANK_NOISE_SAMPLES samples,
+# re-estimated every TANK_NOISE_EVERY), and at least TANK_STEP_FLOOR [Pa]: far above
+# valve_node's rounding of the applied tank pressure, far below any back-pressure step.
+TANK_STEP_FLOOR = 1e3
+TANK_NOISE_FACTOR = 10.0  # normal noise: one false cut in ~6e11 samples (docs/measures.md)
+TANK_NOISE_SAMPLES = 1000
+TANK_NOISE_EVERY = 100
+TANK_NOISE_FIRST = 10  # no tank change is looked for before this many samples
 
 
 @dataclass(frozen=True)
@@ -75,7 +83,7 @@ def early_end(measures, t, supply_pressure, main_valve, window, cut=None, lobes_
     inside the window. details get 'final_value_settled' and, for a cut, 'window_cut'.
     """
     details, values, reasons = measures.details, measures.values, measures.reasons
-    if 'p_inf' not in details or details['window_s'] >= window - TIME_TOLERANCE:
+    if details.get('p_inf') is None or details['window_s'] >= window - TIME_TOLERANCE:
         return measures
     window_s = details['window_s']
     if cut is not None and cut.time <= details['t_step'] + window_s + TIME_TOLERANCE:
@@ -139,7 +147,7 @@ def at_rest(measures, t, supply_pressure, since):
     others (the remains of the last response would shift its peaks, band and settling).
     """
     details, values, reasons = measures.details, measures.values, measures.reasons
-    if since is None or 'p_inf' not in details or since.time <= details['t_step'] - WINDOW:
+    if since is None or details.get('p_inf') is None or since.time <= details['t_step'] - WINDOW:
         return measures
     t_step, p_0, p_inf = details['t_step'], details['p_0'], details['p_inf']
     t, p = np.asarray(t, dtype=float), np.asarray(supply_pressure, dtype=float)
@@ -158,46 +166,37 @@ def at_rest(measures, t, supply_pressure, since):
     return measures
 
 
-def event_name(changes):
-    """Return how a reason names an event that changes {parameter name: value}."""
-    return 'the event ' + ', '.join(f'{name} = {value}' for name, value in changes.items())
-
-
-class SettingChanges:
-    """
-    The events in snapshots of settings, as valve_node's fault_status publishes them.
-
-    Each snapshot holds every fault and sensor setting in effect from its time on; the
-    first is the state at the start, each later one that differs an event.
-    """
-
-    def __init__(self):
-        self.settings = None
-
-    def update(self, time, settings):
-        """Return (time [s], what) if settings {name: value} changed, else None."""
-        last, self.settings = self.settings, dict(settings)
-        changed = {name: value for name, value in settings.items()
-                   if last is not None and last.get(name) != value}
-        return (time, event_name(changed)) if changed else None
-
-
 class InputChanges:
     """
     The changes of the inputs other than the stepped flow, one row at a time.
 
-    The tank pressure p_t [Pa, gauge] (a change of more than TANK_STEP_THRESHOLD from its
-    level; changes within merge_time [s] of one belong to it), and events given by time
-    (add_event: a fault or parameter change that acts from that time on). update() takes
-    each row's time and p_t, and returns the Cuts that row reveals.
+    The tank pressure p_t [Pa, gauge] (a change from its level of more than its threshold,
+    tank_threshold(), from the noise of the samples so far; changes within merge_time [s]
+    of one belong to it), and events given by time (add_event: a fault or parameter
+    change that acts from that time on). update() takes each row's time and p_t, and
+    returns the Cuts that row reveals.
     """
 
     def __init__(self, merge_time=0.05):
         from valve_sim.analysis.steps.step_detection import StepDetector
 
-        self.tank = StepDetector(TANK_STEP_THRESHOLD, merge_time)
+        self.tank = StepDetector(TANK_STEP_FLOOR, merge_time)
+        self.tank_samples, self.tank_count = deque(maxlen=TANK_NOISE_SAMPLES), 0
         self.events = []  # (time [s], what), sorted
         self.previous = None  # [s] the last row's time
+
+    def tank_threshold(self, tank_pressure):
+        """Take a p_t sample [Pa]; return the change that cuts [Pa], None before the first."""
+        from valve_sim.analysis.steps.step_detection import noise_level
+
+        self.tank_samples.append(tank_pressure)
+        self.tank_count = count = self.tank_count + 1
+        if count < TANK_NOISE_FIRST:
+            return None
+        if count < TANK_NOISE_EVERY or count % TANK_NOISE_EVERY == 0:
+            self.tank.threshold = max(TANK_STEP_FLOOR,
+                                      TANK_NOISE_FACTOR * noise_level(self.tank_samples))
+        return self.tank.threshold
 
     def add_event(self, time, what):
         """Note a change that acts from time [s] on (its first row shows it); what: its name."""
@@ -206,10 +205,13 @@ class InputChanges:
     def update(self, time, tank_pressure=None):
         """Feed one row's time [s] and p_t [Pa] (None or nan: unknown); return its Cuts."""
         cuts = []
-        if tank_pressure is not None and tank_pressure == tank_pressure:
+        known = tank_pressure is not None and tank_pressure == tank_pressure
+        threshold = self.tank_threshold(tank_pressure) if known else None
+        if threshold is not None:
             change = self.tank.update(time, tank_pressure)
             if change and change[0] is not None:
-                cuts.append(Cut(change[0], f'the tank-pressure change at {change[0]:.6f} s'))
+                cuts.append(Cut(change[0], f'the tank-pressure change at {change[0]:.6f} s '
+                                           f'(more than {threshold:.3g} Pa)'))
         while self.events and self.events[0][0] <= time + TIME_TOLERANCE:
             acts, what = self.events.pop(0)
             before = self.previous if self.previous is not None else time

@@ -217,11 +217,22 @@ def step_measures(t: ArrayLike, supply_pressure: ArrayLike,
     since: the last change before the step (a Cut). A window that ends early (cut, or
     the recording ends) carries only the measures whose final value and peaks lie inside
     it (measure_windows.early_end); a step soon after a change has P_o only if it starts
-    from rest (measure_windows.at_rest).
+    from rest (measure_windows.at_rest). Samples whose p_s is not finite (NaN: a tick
+    that did not publish it) are left out, counted in details['pressure_samples_left_out']
+    where they fall inside the window.
     """
     end = window if cut is None else min(window, max(cut.time - t_step, 0.0))
+    t, supply_pressure = np.asarray(t, dtype=float), np.asarray(supply_pressure, dtype=float)
+    lost, left_out = ~np.isfinite(supply_pressure), 0  # NaN: a tick without p_s, no sample
+    if lost.any() and len(t) == len(lost):
+        left_out = int(np.count_nonzero(lost & between(t, t_step, t_step + end)))
+        t, supply_pressure = t[~lost], supply_pressure[~lost]
+        if main_valve_displacement is not None and len(main_valve_displacement) == len(lost):
+            main_valve_displacement = np.asarray(main_valve_displacement, dtype=float)[~lost]
     measures = _step_measures(t, supply_pressure, main_valve_displacement, t_step, direction,
                               end)
+    if left_out:
+        measures.details['pressure_samples_left_out'] = left_out
     lobes_closed = measures.details.pop('lobes_closed', 0)
     if cut is not None and 'p_inf' not in measures.details and end < window:
         reason = f'the window is cut to {end:.3f} s by {cut.what}'

@@ -128,6 +128,10 @@ class SignalMap:
         """Role names carried by a topic."""
         return [name for name, mapped in self.topics.items() if mapped == topic]
 
+    def valve_namespace(self):
+        """Return valve_node's namespace ('' or '/rig1'): that of the supply-pressure topic."""
+        return self.topics['supply_pressure'].rsplit('/', 1)[0]
+
 
 def stamp_ns(stamp):
     """Integer nanoseconds of a builtin_interfaces/Time."""

@@ -73,6 +73,21 @@ class StepDetector:
         return step
 
 
+def noise_level(samples):
+    """
+    Return a robust estimate of the standard deviation of the noise on samples.
+
+    From the differences of neighbouring samples, about their median (a ramp is no
+    noise): 1.4826 times their median absolute deviation (the standard deviation of
+    normal noise; a rare step barely moves it), over sqrt(2) (a difference holds the
+    noise of two samples). 0 for fewer than 3 samples.
+    """
+    jumps = np.diff(np.asarray(samples, dtype=float))
+    if len(jumps) < 2:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(jumps - np.median(jumps)))) / math.sqrt(2.0)
+
+
 def locate_step(t, supply_pressure, bracket, direction):
     """
     Locate a step inside bracket (t_a, t_b) [s] from the supply pressure (module docstring).
@@ -88,9 +103,7 @@ def locate_step(t, supply_pressure, bracket, direction):
     if before.sum() < 3:
         return None
     level = float(np.median(p[before]))
-    jumps = np.diff(p[before])
-    noise = 1.4826 * float(np.median(np.abs(jumps - np.median(jumps)))) / math.sqrt(2.0)
-    band = max(ONSET_BAND * noise, 1e-7 * abs(level))
+    band = max(ONSET_BAND * noise_level(p[before]), 1e-7 * abs(level))
     e = direction * (p - level)
     outside = (e > band) & (t > t_a)
     runs = np.ones(max(len(e) - ONSET_SAMPLES + 1, 0), dtype=bool)
