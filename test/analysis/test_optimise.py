@@ -27,6 +27,7 @@ import sys
 
 import numpy as np
 import pytest
+from valve_sim.analysis.design import robust_yield
 from valve_sim.analysis.design.optimisation import (
     outcome_of,
     pareto_front,
@@ -36,7 +37,6 @@ from valve_sim.analysis.design.optimisation import (
     search,
 )
 from valve_sim.analysis.design.report import parameter_file_text
-from valve_sim.analysis.design import robust_yield
 from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
 from valve_sim.analysis.design.sequential_yield import look, rounds, runs_of, STOP_ALPHA
 from valve_sim.analysis.studies.backend import DaskBackend, SerialBackend

@@ -64,8 +64,8 @@ from functools import partial
 import sys
 
 from valve_sim.analysis.design.sequential_yield import DECISIONS, dominated, look, rounds
-from valve_sim.analysis.steps.measures import WINDOW
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
+from valve_sim.analysis.steps.measures import WINDOW
 from valve_sim.analysis.studies.cases import preset_protocol, sample_cases, StudyCase
 from valve_sim.analysis.studies.tolerances import (
     draw,
@@ -75,7 +75,7 @@ from valve_sim.analysis.studies.tolerances import (
     summarise,
     yield_interval,
 )
-from valve_sim.core.errors import MODEL_ERRORS, InputFileError
+from valve_sim.core.errors import InputFileError, MODEL_ERRORS
 from valve_sim.core.input_files import shown
 from valve_sim.core.parameters import validate
 
@@ -312,7 +312,7 @@ def _objective_point(case, nominal_row):
 
 def check_candidate_row(row):
     """
-    Raise InputFileError naming the key unless row is a candidate row as evaluate_candidate makes it.
+    Raise InputFileError naming the key unless row is a candidate row as evaluate_candidate gives.
 
     The resume check of studies.results.read_results for the optimisation's results files:
     the nominal valve's row and every kept sample row are checked as the runner's rows.
@@ -331,7 +331,9 @@ def check_candidate_row(row):
         raise InputFileError(f"key 'decision' must be one of {', '.join(DECISIONS)}")
     design = row.get('design')
     if not isinstance(design, dict) or not all(map(is_number, design.values())):
-        raise InputFileError(f"key 'design' must map parameter names to numbers, got {shown(design)}")
+        raise InputFileError(
+            f"key 'design' must map parameter names to numbers, got {shown(design)}"
+        )
     ci95 = row.get('ci95')
     if not is_number(row.get('yield')) or not (
         isinstance(ci95, list) and len(ci95) == 2 and all(map(is_number, ci95))
