@@ -184,7 +184,7 @@ def verdict(runs):
 
 def full_seconds(runs):
     """Return the full-sample search's wall time: the mean of A's and B's (the load drifts)."""
-    return np.mean([runs[label]['search_s'] for label in ('A', 'B') if label in runs])
+    return float(np.mean([runs[label]['search_s'] for label in ('A', 'B') if label in runs]))
 
 
 def report(name, runs, checks):
