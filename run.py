@@ -27,9 +27,9 @@ The README's two commands, for a machine with nothing but Python 3 and git.
 Each creates .venv beside this file on first use and installs valve_sim into it
 (editable, with its PyPI dependencies and the ROS 2 Jazzy wheels); it reinstalls
 when setup.py changes. After installing it compiles the numba kernels into their
-cache beside the sources (valve_sim.core.precompile), so that valve_node starts at
-once; `install` does that again (after an edit of valve_sim/core, say). Nothing
-needs sourcing.
+cache beside the sources (valve_sim.core.precompile, then the studies' lanes
+kernel: studies.runner.compile_lanes), so that valve_node and a study start at once;
+`install` does that again (after an edit of valve_sim/core, say). Nothing needs sourcing.
 """
 
 import hashlib
@@ -72,6 +72,10 @@ def compile_kernels():
     print('run.py: compiling the model kernels (about 30 s when not cached)', flush=True)
     if subprocess.call([str(BIN / 'python'), '-m', 'valve_sim.core.precompile']) != 0:
         print('run.py: the kernels did not compile; valve_node compiles them at its first start',
+              file=sys.stderr)
+    lanes = 'from valve_sim.analysis.studies.runner import compile_lanes; compile_lanes()'
+    if subprocess.call([str(BIN / 'python'), '-c', lanes]) != 0:  # studies' kernel, once
+        print('run.py: the lanes kernel did not compile; the first study compiles it',
               file=sys.stderr)
 
 

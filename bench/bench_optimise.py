@@ -17,7 +17,8 @@
 # The summary above is also this script's --help description.
 #
 #     nice -n 19 .venv/bin/python bench/bench_optimise.py [--problems first,worked]
-#         [--population P] [--generations G] [--samples N] [--confirm-samples M] [--json FILE]
+#         [--population P] [--generations G] [--samples N] [--confirm-samples M]
+#         [--searches A,N,B] [--json FILE]
 #
 # Side by side in one run, on one local Dask cluster of `cores` workers (started and
 # its kernels loaded first), for each problem of docs/optimise.md (the first example:
@@ -171,14 +172,19 @@ def compare(runs):
 
 def verdict(runs):
     """Return the checks of N against A and B: same Pareto set, at most 10 % of the search."""
-    a, b, n = runs['A'], runs['B'], runs['N']
+    a, b, n = runs['A'], runs.get('B'), runs['N']
     return {
-        'hypervolume': abs(n['hypervolume'] - a['hypervolume'])
+        'hypervolume': None if b is None else abs(n['hypervolume'] - a['hypervolume'])
         <= abs(b['hypervolume'] - a['hypervolume']),
-        'nearest_matches': n['furthest_from'] <= b['furthest_from'],
+        'nearest_matches': None if b is None else n['furthest_from'] <= b['furthest_from'],
         'runs_10_percent': n['search_runs'] <= 0.10 * a['search_runs'],
-        'wall_10_percent': n['search_s'] <= 0.10 * (a['search_s'] + b['search_s']) / 2,
+        'wall_10_percent': n['search_s'] <= 0.10 * full_seconds(runs),
     }
+
+
+def full_seconds(runs):
+    """Return the full-sample search's wall time: the mean of A's and B's (the load drifts)."""
+    return float(np.mean([runs[label]['search_s'] for label in ('A', 'B') if label in runs]))
 
 
 def report(name, runs, checks):
@@ -199,16 +205,15 @@ def report(name, runs, checks):
             print(f"   {design['label']:<15} P_1 {p_1:.4f} %  T_s {t_s:.2f} ms  yield "
                   f'{100 * design["yield"]:.1f} % ({100 * low:.1f}-{100 * high:.1f})  '
                   f'nearest in A at {distance:.4f}')
-    for label in ('A', 'B'):
+    for label in ('A', 'B') if 'B' in runs else ('A',):
         for first, replayed in runs[label]['replayed'].items():
             print(f"the rule replayed on {label}'s full samples, first round {first}: "
                   f"{replayed['decisions']}, {replayed['runs']:,} of {replayed['full_runs']:,} "
                   f"runs; {replayed['differ']} early verdicts differ from the full sample's")
-    a, b, n = runs['A'], runs['B'], runs['N']
-    full_s = (a['search_s'] + b['search_s']) / 2  # the load drifts: A and B flank N
+    a, n = runs['A'], runs['N']
     print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
-          f"{100 * n['search_s'] / full_s:.1f} % of the mean wall time of A's and B's "
-          'searches; '
+          f"{100 * n['search_s'] / full_seconds(runs):.1f} % of the mean wall time of "
+          f"{' and '.join(label for label in ('A', 'B') if label in runs)}'s searches; "
           f'checks {checks}')
 
 
@@ -219,6 +224,9 @@ def main():
     parser.add_argument('--generations', type=int, help="default: each problem's own")
     parser.add_argument('--samples', type=int, default=256)
     parser.add_argument('--confirm-samples', type=int, default=1024)
+    parser.add_argument('--searches', default='A,N,B',
+                        help='which searches, in this order (A and N at least; without B '
+                        'no same-Pareto-set check)')
     parser.add_argument('--json', metavar='FILE')
     parser.add_argument('--keep', metavar='DIR', help="keep every search's results files here")
     args = parser.parse_args()
@@ -240,7 +248,10 @@ def main():
                 population = args.population or spec['population']
                 generations = args.generations or spec['generations']
                 runs = {}
-                for label, seed, sequential in RUNS:
+                chosen = args.searches.split(',')
+                searches = sorted((run for run in RUNS if run[0] in chosen),
+                                  key=lambda run: chosen.index(run[0]))
+                for label, seed, sequential in searches:
                     problem = problem_of(params, spec, args.samples, args.confirm_samples,
                                          seed, sequential)
                     print(f'{name} {label}: {generations} x {population} x {args.samples}',

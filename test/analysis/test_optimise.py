@@ -27,6 +27,7 @@ import sys
 
 import numpy as np
 import pytest
+from valve_sim.analysis.design import robust_yield
 from valve_sim.analysis.design.optimisation import (
     outcome_of,
     pareto_front,
@@ -159,6 +160,30 @@ def test_the_stopping_rule_and_the_common_draws(reference):
                                            front=[[nominal - 0.01]])
     assert (behind['decision'], behind['samples']) == ('dominated', 4)
     assert behind['yield'] == 1.0 and not problem.feasible(behind)
+
+
+def test_split_rounds_and_the_nominal_stage_change_no_row(reference, monkeypatch):
+    # The nominal stage runs a generation's nominal valves as one batch; on a Dask worker
+    # a round of more than SPLIT_VALVES valves goes out as tasks of that many (2 here:
+    # an in-process cluster, so that the patch reaches its worker). Neither changes a row.
+    from distributed import Client, get_task_stream, LocalCluster
+
+    problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], ['P_1_percent<=99'],
+                         ['d_c=±2%,k_p=±5%'], samples=8, stop_alpha=None)
+    cases = [problem.case(i, f'c{i}', {D_C: d}) for i, d in enumerate((0.98e-3, 1.02e-3, -1.0))]
+    alone = evaluate_candidates(cases)
+    assert alone[2]['error'] and not alone[0]['error'] and alone[0]['samples'] == 8
+    staged = robust_yield.nominal_stage(evaluate_candidates, cases, SerialBackend())
+    assert sorted(staged.keywords['nominals']) == [0, 1]  # no nominal valve for the third
+    assert json.dumps(staged(cases)) == json.dumps(alone)
+    monkeypatch.setattr(robust_yield, 'SPLIT_VALVES', 2)
+    with LocalCluster(processes=False, n_workers=1, threads_per_worker=1,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        with get_task_stream(client) as tasks:
+            split = client.submit(evaluate_candidates, cases, pure=False).result()
+    assert json.dumps(split) == json.dumps(alone)
+    chunks = [task for task in tasks.data if task['key'].startswith('_judged_runs')]
+    assert len(chunks) == 8, 'the 8 valves of each of two candidates in tasks of 2'
 
 
 @pytest.mark.parametrize('required, true_yield, wrong', [

@@ -26,7 +26,8 @@ its objectives exist, and its yield is at least the required yield.
 search() runs NSGA-II (pymoo: constraint domination, so feasible designs rank first,
 infeasible ones by their violation) generation by generation, with the designs in the
 unit cube of the bounds and a Latin-hypercube first generation. Each generation's
-candidates go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
+nominal valves run first, as one batch (robust_yield.nominal_stage); its
+candidates then go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
 as far as its verdict needs (analysis.design.sequential_yield: rounds, the nominal screen, a
 stop once a feasible design before it dominates it). The optimiser is
 seeded, and the candidates of a generation follow only from the rows of the ones
@@ -50,6 +51,7 @@ from valve_sim.analysis.design.robust_yield import (
     check_candidate_row,
     evaluate_candidates,
     MIN_DECAY_RATE,
+    nominal_stage,
 )
 from valve_sim.analysis.design.sequential_yield import (
     dominated,
@@ -339,8 +341,9 @@ def search(problem, backend, folder, population, generations, resume=False,
         ]
         path = folder / f'generation_{generation:03d}.jsonl'
         before = tally.spent
+        staged = evaluate if resume else nominal_stage(evaluate, cases, backend)
         rows, computed = _run(cases, path, tally.counting(backend), resume, batch_size,
-                              evaluate, progress, f'in generation {generation}')
+                              staged, progress, f'in generation {generation}')
         tally.add(rows.values())  # those read back from file
         last = tally.spent - before
         on_file += len(cases) - computed
@@ -386,7 +389,8 @@ def confirm(problem, designs, backend, folder, resume=False, evaluate=evaluate_c
     cases = [problem.case(i, label, design, True) for i, (label, design) in enumerate(designs)]
     path = Path(folder) / f'confirm_{fingerprint(cases)}.jsonl'
     progress = Progress('optimise: confirming', len(cases), 0, stream, unit='designs')
-    rows, _ = _run(cases, path, backend, resume, batch_size, evaluate, progress,
+    staged = evaluate if resume else nominal_stage(evaluate, cases, backend)
+    rows, _ = _run(cases, path, backend, resume, batch_size, staged, progress,
                    'while confirming')
     return [rows[case['index']] for case in cases]
 

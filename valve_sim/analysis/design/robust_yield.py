@@ -38,9 +38,17 @@ nominal valve as `valve-sim ... --params FILE` loads the design's parameter file
 pilot spring preload), draws the sampled valves about it as `valve-sim tolerance`
 does (same distributions, sampler and seed, each valve set to the nominal valve's
 cracking pressure), runs the nominal valve, and then the samples in rounds through
-studies.runner.evaluate_batch, one batch of the lanes kernel a round, stopping as
-analysis.design.sequential_yield decides (a row does not depend on its batch, so a valve
-is judged the same in any round).
+studies.runner.evaluate_batch, stopping as analysis.design.sequential_yield decides (a
+row does not depend on its batch, so a valve is judged the same in any round). On a
+Dask worker a round of more than SPLIT_VALVES valves is split into tasks of that many,
+which the other workers take up: a generation then does not wait for one worker to
+run a candidate's whole sample alone.
+
+nominal_stage(evaluate, cases, backend) runs the nominal valves of a generation's
+candidates first, together, as one batch (nominal_rows): the lanes kernel runs LANES
+valves a call, so a lone nominal valve costs about as much as a group of them. Each
+candidate then takes its nominal row from that batch (the same row it would have
+computed alone).
 
 check_candidate_row(row) checks a row read back from a results file (--resume) before
 it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
@@ -52,11 +60,13 @@ test (core.linear.slowest_decay_rate; the default 3 1/s is 95 % within the measu
 with its Clopper-Pearson interval (tolerances.yield_interval).
 """
 
-from dataclasses import replace
+from functools import partial
+import sys
 
 from valve_sim.analysis.design.sequential_yield import DECISIONS, dominated, look, rounds
+from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.steps.measures import WINDOW
-from valve_sim.analysis.studies.cases import preset_protocol, sample_cases
+from valve_sim.analysis.studies.cases import preset_protocol, sample_cases, StudyCase
 from valve_sim.analysis.studies.tolerances import (
     draw,
     parse_limits,
@@ -65,13 +75,16 @@ from valve_sim.analysis.studies.tolerances import (
     summarise,
     yield_interval,
 )
-from valve_sim.core.errors import MODEL_ERRORS
+from valve_sim.core.errors import InputFileError, MODEL_ERRORS
 from valve_sim.core.input_files import shown
 from valve_sim.core.parameters import validate
 
 
 MIN_DECAY_RATE = 3.0 / WINDOW  # [1/s] a mode decays by 95 % (e^-3) within the window
 DECAY_FAILURE = 'a mode decays too slowly'
+# Valves per task when a candidate's round is split over a Dask cluster's workers: a
+# multiple of the lanes kernel's LANES (16), large enough that a task's overhead is small.
+SPLIT_VALVES = 32
 
 
 def nominal_valve(case):
@@ -111,12 +124,56 @@ def valve_passes(row, limits, min_decay_rate):
     return passes(row, limits) and decays(row, min_decay_rate)
 
 
-def evaluate_candidates(cases):
-    """Return the rows of candidate cases, in their order (the work unit of a backend)."""
-    return [evaluate_candidate(case) for case in cases]
+def evaluate_candidates(cases, nominals=None):
+    """
+    Return the rows of candidate cases, in their order (the work unit of a backend).
+
+    nominals: {case index: nominal row} from nominal_rows (the nominal stage), or None.
+    """
+    nominals = nominals or {}
+    return [evaluate_candidate(case, nominals.get(case['index'])) for case in cases]
 
 
-def evaluate_candidate(case):
+def nominal_stage(evaluate, cases, backend):
+    """
+    Return evaluate with the nominal valves of cases run beforehand, as one batch on backend.
+
+    Only for evaluate_candidates (another evaluate, a test's, is returned as it is).
+    """
+    if evaluate is not evaluate_candidates or not cases:
+        return evaluate
+    (nominals,) = backend.run(nominal_rows, [cases])
+    return partial(evaluate_candidates, nominals=nominals)
+
+
+def nominal_rows(cases):
+    """
+    Return {case index: nominal row} of candidate cases, their nominal valves run as one batch.
+
+    A candidate whose nominal valve cannot be set has none (it says why itself).
+    """
+    valves, owners = [], []
+    for case in cases:
+        try:
+            valves.append(_nominal_run(case, nominal_valve(case), len(valves)))
+        except MODEL_ERRORS:
+            continue
+        owners.append(case)
+    rows = _batch_rows(valves)
+    return {
+        case['index']: _judged(case, parse_limits(','.join(case['limits'])), valve, row)
+        | {'index': case['samples']}
+        for case, valve, row in zip(owners, valves, rows)
+    }
+
+
+def _nominal_run(case, nominal, index):
+    """Return the runner case of a candidate's nominal valve (nominal: nominal_valve's)."""
+    preset, _ = preset_protocol(case['protocol'], nominal)
+    return StudyCase(index, nominal, preset, REFERENCE_FLOW_STEP, case['step_size'])
+
+
+def evaluate_candidate(case, nominal_row=None):
     """
     Return the row of one candidate: its nominal measures, the yield and its interval.
 
@@ -128,7 +185,8 @@ def evaluate_candidate(case):
     failures (per limit, failed runs, slow decay), percentiles of the measures over
     the valves run, and sample_rows (every sampled valve's row, with its sampled
     values) when keep_samples. Without stop_alpha every valve runs, whatever the
-    nominal valve does.
+    nominal valve does. nominal_row: the nominal valve's row from nominal_rows, or
+    None: it runs here.
     """
     planned = case['samples']
     row = {key: case[key] for key in ('index', 'label', 'design')}
@@ -144,7 +202,8 @@ def evaluate_candidate(case):
     names = [d.name for d in distributions]
     values = draw(distributions, planned, case['seed'], case['sampler'])
     cases = sample_cases(nominal, names, values, preset, case['step_size'])
-    (nominal_row,) = _runs(case, limits, [replace(cases[0], index=planned, params=nominal)])
+    if nominal_row is None:
+        (nominal_row,) = _runs(case, limits, [_nominal_run(case, nominal, planned)])
     alpha = case.get('stop_alpha')
     point = _objective_point(case, nominal_row)
     sample_rows, decision = [], 'nominal'
@@ -188,17 +247,58 @@ def evaluate_candidate(case):
 
 
 def _runs(case, limits, valves):
-    """Run valves (runner cases) as one batch; return their rows with decay_rate and pass."""
+    """
+    Return the rows of valves (runner cases), with decay_rate and pass, in their order.
+
+    On a Dask worker a round of more than SPLIT_VALVES valves goes out as tasks of
+    SPLIT_VALVES each (worker_client: this task leaves its thread while it waits), so
+    that a candidate's last rounds spread over the workers instead of holding up its
+    generation; elsewhere (a process pool, this process) the round is one batch. A
+    valve's row does not depend on its batch, so the rows are the same either way.
+    """
+    client = _dask_worker_client() if len(valves) > SPLIT_VALVES else None
+    if client is None:
+        return _judged_runs(case, limits, valves)
+    chunks = [valves[i:i + SPLIT_VALVES] for i in range(0, len(valves), SPLIT_VALVES)]
+    with client() as dask:
+        futures = [dask.submit(_judged_runs, case, limits, chunk, pure=False, priority=1)
+                   for chunk in chunks]
+        return [run for rows in dask.gather(futures) for run in rows]
+
+
+def _dask_worker_client():
+    """Return distributed.worker_client when this runs as a Dask task, else None."""
+    if 'distributed' not in sys.modules:  # no Dask in this process: not on a worker
+        return None
+    from distributed import get_worker, worker_client
+
+    try:
+        get_worker()
+    except ValueError:
+        return None
+    return worker_client
+
+
+def _judged_runs(case, limits, valves):
+    """Run valves as one batch; return their rows with decay_rate and pass."""
+    return [_judged(case, limits, valve, row)
+            for valve, row in zip(valves, _batch_rows(valves))]
+
+
+def _batch_rows(valves):
     from valve_sim.analysis.studies.runner import evaluate_batch  # numba: on the worker
 
-    runs = evaluate_batch(valves)
+    return evaluate_batch(valves)
+
+
+def _judged(case, limits, valve, row):
+    """Return a valve's row with its decay_rate and pass (limits: case's, parsed)."""
     rate = case['min_decay_rate']
-    for run, valve in zip(runs, valves):
-        run['decay_rate'] = (
-            decay_rate(valve.params, run, case['scenario']) if rate is not None else None
-        )
-        run['pass'] = valve_passes(run, limits, rate)
-    return runs
+    row['decay_rate'] = (
+        decay_rate(valve.params, row, case['scenario']) if rate is not None else None
+    )
+    row['pass'] = valve_passes(row, limits, rate)
+    return row
 
 
 def _objective_point(case, nominal_row):
@@ -212,7 +312,7 @@ def _objective_point(case, nominal_row):
 
 def check_candidate_row(row):
     """
-    Raise ValueError naming the key unless row is a candidate row as evaluate_candidate makes it.
+    Raise InputFileError naming the key unless row is a candidate row as evaluate_candidate gives.
 
     The resume check of studies.results.read_results for the optimisation's results files:
     the nominal valve's row and every kept sample row are checked as the runner's rows.
@@ -220,45 +320,47 @@ def check_candidate_row(row):
     from valve_sim.analysis.studies.results import check_row, is_number
 
     if not isinstance(row, dict):
-        raise ValueError(f'a row is a JSON object, got {shown(row)}')
+        raise InputFileError(f'a row is a JSON object, got {shown(row)}')
     index, samples = row.get('index'), row.get('samples')
     for key, value in (('index', index), ('samples', samples), ('passed', row.get('passed'))):
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            raise ValueError(f"key '{key}' must be an integer >= 0, got {shown(value)}")
+            raise InputFileError(f"key '{key}' must be an integer >= 0, got {shown(value)}")
     if not isinstance(row.get('label'), str) or not isinstance(row.get('pass'), str):
-        raise ValueError("keys 'label' and 'pass' must be text")
+        raise InputFileError("keys 'label' and 'pass' must be text")
     if row.get('decision', 'full') not in DECISIONS:
-        raise ValueError(f"key 'decision' must be one of {', '.join(DECISIONS)}")
+        raise InputFileError(f"key 'decision' must be one of {', '.join(DECISIONS)}")
     design = row.get('design')
     if not isinstance(design, dict) or not all(map(is_number, design.values())):
-        raise ValueError(f"key 'design' must map parameter names to numbers, got {shown(design)}")
+        raise InputFileError(
+            f"key 'design' must map parameter names to numbers, got {shown(design)}"
+        )
     ci95 = row.get('ci95')
     if not is_number(row.get('yield')) or not (
         isinstance(ci95, list) and len(ci95) == 2 and all(map(is_number, ci95))
     ):
-        raise ValueError("keys 'yield' and 'ci95' must be a number and two numbers")
+        raise InputFileError("keys 'yield' and 'ci95' must be a number and two numbers")
     if row.get('error') is not None:
         if not isinstance(row['error'], str):
-            raise ValueError(f"key 'error' must be text or null, got {shown(row['error'])}")
+            raise InputFileError(f"key 'error' must be text or null, got {shown(row['error'])}")
         return
     nominal = row.get('nominal')
     _check_inner(check_row, nominal, 'nominal')
     decay = nominal.get('decay_rate')
     if not (decay is None or is_number(decay)) or not isinstance(nominal.get('pass'), bool):
-        raise ValueError("key 'nominal' must hold a decay_rate (a number or null) and a pass")
+        raise InputFileError("key 'nominal' must hold a decay_rate (a number or null) and a pass")
     for key in ('failures', 'percentiles'):
         if not isinstance(row.get(key), dict):
-            raise ValueError(f"key '{key}' must be a JSON object, got {shown(row.get(key))}")
+            raise InputFileError(f"key '{key}' must be a JSON object, got {shown(row.get(key))}")
     sample_rows = row.get('sample_rows', [])
     if not isinstance(sample_rows, list):
-        raise ValueError("key 'sample_rows' must list the sampled valves' rows")
+        raise InputFileError("key 'sample_rows' must list the sampled valves' rows")
     for number, sample_row in enumerate(sample_rows):
         _check_inner(check_row, sample_row, f'sample_rows[{number}]')
 
 
 def _check_inner(check, row, key):
-    """check(row) for a row inside a row: a ValueError names the key it is under."""
+    """check(row) for a row inside a row: an InputFileError names the key it is under."""
     try:
         check(row)
-    except ValueError as error:
-        raise ValueError(f"key '{key}': {error}") from None
+    except InputFileError as error:
+        raise InputFileError(f"key '{key}': {error}") from None

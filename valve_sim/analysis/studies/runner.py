@@ -150,6 +150,22 @@ def _measured(case, row, waveforms):
     return row
 
 
+def compile_lanes():
+    """
+    Compile (or load from numba's cache) the lanes kernel every batch runs: run.py's install.
+
+    One reference valve through a short flow step, as evaluate_batch runs it. Done once
+    there, not at the first batch of a study, tolerance run or optimisation, where each
+    Dask worker of a fresh install would compile it at once. Not in core.precompile: that
+    runs in every colcon build, which needs only valve_node's kernels.
+    """
+    from valve_sim.core.parameters import load_parameters
+    from valve_sim.core.flow_step import FlowStep
+
+    simulate_batch([load_parameters().params], FlowStep(step_time=0.01, end_time=0.02),
+                   record_interval=RECORD_INTERVAL)
+
+
 def batches_of(cases, batch_size):
     """Split cases into consecutive batches of at most batch_size."""
     return [cases[i:i + batch_size] for i in range(0, len(cases), batch_size)]
