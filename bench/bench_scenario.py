@@ -34,7 +34,11 @@
 #   (valve_sim.ros.clock_jumps): a round trip per TICKS_PER_CLOCK ticks;
 # - scenario_one_tick: `scenario run` of scenarios/paper_step.yaml, analyser_node
 #   recording every topic, one tick per /clock (as with --wait-topic);
-# - scenario: the same as `scenario run` does it, TICKS_PER_CLOCK ticks per /clock.
+# - scenario: the same as `scenario run` does it, TICKS_PER_CLOCK ticks per /clock;
+# - scenario_k100, scenario_ramp_k100: scenario and scenario_ramp with
+#   MAX_TICKS_PER_CLOCK ticks per /clock (issue 46): the speed-up of fewer round
+#   trips, side by side, and whether the tick topics stay bit for bit the same (each
+#   run's digest of its bag's tick topics, messages with their log and publish times).
 #
 # Each reports its real-time factor (model time per wall time of the stepping), its
 # wall time per tick, and the CPU time per tick of each process over the stepping
@@ -61,7 +65,8 @@ import time
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'scenarios' / 'paper_step.yaml'
 KINDS = ('model', 'round_trip', 'lockstep', 'lockstep_jumps', 'scenario_one_tick',
-         'scenario', 'scenario_ramp')
+         'scenario', 'scenario_ramp', 'scenario_k100', 'scenario_ramp_k100')
+SAME_TICKS = (('scenario', 'scenario_k100'), ('scenario_ramp', 'scenario_ramp_k100'))
 # scenario_ramp: the paper step's run with inputs that change every tick (a ramp 5 -> 20
 # L/min over 0.5 s from 0.25 s, then a sine on top until the end): stamped inputs let it
 # step TICKS_PER_CLOCK ticks per /clock as the step does (issue 42)
@@ -69,7 +74,8 @@ RAMP_SCENARIO = (
     'scenario: paper_ramp\nduration: 1.3\ninputs:\n  inlet_flow:\n    initial: 5 L/min\n'
     '    changes:\n      - {at: 0.25, ramp: 20 L/min, over: 0.5}\n'
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
-JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick')  # need valve_sim.ros.clock_jumps
+JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick', 'scenario_k100',
+              'scenario_ramp_k100')  # need valve_sim.ros.clock_jumps
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
 ATTEMPTS = 5  # runs of a kind that abort before the bench gives up
 BARE_RESPONDER = (
@@ -183,7 +189,14 @@ def lockstep_run(scenario, folder, name, ticks_per_clock=1):
 
 
 def scenario_run(scenario, folder, **options):
-    """Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU."""
+    """
+    Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU.
+
+    Also the digest of its bag's tick topics (lockstep_messages), where the checkout has it.
+    """
+    import hashlib
+
+    from valve_sim.ros import scenario_runner
     from valve_sim.ros.scenario_runner import run_scenario
 
     cpu = {}
@@ -196,7 +209,13 @@ def scenario_run(scenario, folder, **options):
 
     record = run_scenario(scenario, folder, progress=progress, **options)
     assert record.passed, [check.name for check in record.checks if not check.passed]
-    return record.wall_s, cpu_used(cpu['start'], cpu['end'])
+    digest = None
+    if hasattr(scenario_runner, 'lockstep_messages'):
+        from valve_sim.recording.valve_topics import TICK_TOPICS
+
+        messages = scenario_runner.lockstep_messages(record.bag, TICK_TOPICS)
+        digest = hashlib.sha256(repr(sorted(messages.items())).encode()).hexdigest()
+    return record.wall_s, cpu_used(cpu['start'], cpu['end']), digest
 
 
 def measure(kind, folder):
@@ -205,15 +224,21 @@ def measure(kind, folder):
 
     scenario = load_scenario(SCENARIO)
     folder.mkdir(parents=True, exist_ok=True)
+    digest = None
+    options = {}
+    if kind.endswith('_k100'):
+        from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK
+
+        options['ticks_per_clock'] = MAX_TICKS_PER_CLOCK
+    if kind.startswith('scenario_ramp'):
+        (folder / 'ramp.yaml').write_text(RAMP_SCENARIO)
+        scenario = load_scenario(folder / 'ramp.yaml')
     if kind == 'model':
         wall, cpu = model_alone(scenario, folder)
-    elif kind == 'scenario':
-        wall, cpu = scenario_run(scenario, folder)
-    elif kind == 'scenario_ramp':
-        (folder / 'ramp.yaml').write_text(RAMP_SCENARIO)
-        wall, cpu = scenario_run(load_scenario(folder / 'ramp.yaml'), folder)
+    elif kind in ('scenario', 'scenario_ramp', 'scenario_k100', 'scenario_ramp_k100'):
+        wall, cpu, digest = scenario_run(scenario, folder, **options)
     elif kind == 'scenario_one_tick':
-        wall, cpu = scenario_run(scenario, folder, ticks_per_clock=1)
+        wall, cpu, digest = scenario_run(scenario, folder, ticks_per_clock=1)
     elif kind == 'lockstep_jumps':
         from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 
@@ -222,7 +247,7 @@ def measure(kind, folder):
         wall, cpu = lockstep_run(scenario, folder,
                                  'bare_responder' if kind == 'round_trip' else 'valve_node')
     print(json.dumps({'wall_s': wall, 'cpu_s': cpu, 'ticks': scenario.ticks,
-                      'duration_s': scenario.duration}))
+                      'duration_s': scenario.duration, 'digest': digest}))
 
 
 def run_kind(kind, folder, checkout, aborted):
@@ -251,6 +276,7 @@ def summary(runs):
     names = sorted({name for run in runs for name in run['cpu_s']})
     return {'runs': len(runs), 'median_wall_s': wall,
             'walls_s': [run['wall_s'] for run in runs],
+            'digests': sorted({run.get('digest') for run in runs} - {None}),
             'real_time_factor': duration / wall, 'per_tick_ms': wall / ticks * 1e3,
             'cpu_per_tick_ms': {name: statistics.median(run['cpu_s'].get(name, 0.0)
                                                         for run in runs) / ticks * 1e3
@@ -310,6 +336,13 @@ def report(label, results):
                         for name, value in result['cpu_per_tick_ms'].items())
         print(f'  {kind:<17} {result["real_time_factor"]:7.2f}x real time, '
               f'{result["per_tick_ms"]:.3f} ms a tick; CPU ms a tick: {cpu}')
+    for kind, other in SAME_TICKS:
+        if kind in results and other in results:
+            same = results[kind]['digests'] == results[other]['digests'] and len(
+                results[kind]['digests']) == 1
+            gain = results[other]['real_time_factor'] / results[kind]['real_time_factor']
+            print(f'  {kind} vs {other}: tick topics bit for bit the same in every run: '
+                  f'{same}; speed-up {gain:.2f}x')
     for stepping, parts in results['split_per_tick_ms'].items():
         print(f'  where a scenario tick goes, {stepping} [ms of wall]: ' + ', '.join(
             f'{name} {value:.3f}' for name, value in parts.items()))
