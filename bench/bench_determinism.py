@@ -143,7 +143,8 @@ def main():
                     if not same:  # keep what says why, past the temporary folder
                         kept = args.json.parent / 'bench_determinism_failures' / out.name
                         kept.mkdir(parents=True, exist_ok=True)
-                        for log in (*out.glob('*.log'), *out.glob('report.*'), out / 'command.txt'):
+                        for log in (*out.glob('*.log'), *out.glob('report.*'),
+                                    out / 'command.txt'):
                             shutil.copy(log, kept)
                     for bag in bags:
                         bag.unlink()

@@ -22,7 +22,6 @@ the load: the runner waits for the reply stamped for the tick, sends it stamped,
 valve_node waits for it (the lockstep protocol).
 """
 
-from pathlib import Path
 import threading
 
 import numpy as np
@@ -47,7 +46,7 @@ QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def controller_flow(tick):
-    """The controller's flow for the tick from tick k's state [m^3/s]: a ramp of its own."""
+    """Return the controller's flow for the tick from tick k's state [m^3/s]: its own ramp."""
     return (5.0 + 0.05 * tick) * L_PER_MIN
 
 

@@ -64,8 +64,8 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    clock_message, FLOW_AT_END, gid_process, HANDSHAKE, LAST_TOPIC, LateInputError, NS_PER_S, RELIABLE,
-    RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE,
+    clock_message, FLOW_AT_END, gid_process, HANDSHAKE, LAST_TOPIC, LateInputError, NS_PER_S,
+    RELIABLE, RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE,
     TIMEOUT, WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS

@@ -202,7 +202,8 @@ def check_complete(series, scenario, start_ns, flows=None):
         gaps = int(series[name].size - (series[name] == series[name]).sum())
         if gaps:
             raise IncompleteRunError(f'the bag lacks {name} at {gaps} of the ticks of the run')
-    flows = (input_values(scenario)[0] if flows is None else flows)[:scenario.ticks]  # tick k applies the value sampled at its start
+    # tick k applies the value sampled (or sent) for its start
+    flows = (input_values(scenario)[0] if flows is None else flows)[:scenario.ticks]
     wrong = np.flatnonzero(series['inlet_flow'][1:] != flows)
     if wrong.size:
         tick = int(wrong[0])
@@ -222,9 +223,10 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
     with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
     to fill (default: a new one); flow_topic: a wait topic whose controller supplies
-    the inlet flow from the second tick on (ros.scenario_stepper). Raises the errors of a run that cannot complete (a
-    node died, a refused event, a timeout, an incomplete bag), after stopping both
-    nodes; record then holds what the run got to (measure_partial reads the rest).
+    the inlet flow from the second tick on (ros.scenario_stepper). Raises the errors
+    of a run that cannot complete (a node died, a refused event, a timeout, an
+    incomplete bag, another run's nodes in the domain), after stopping both nodes;
+    record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
