@@ -64,9 +64,9 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    clock_message, FLOW_AT_END, gid_process, HANDSHAKE, LAST_TOPIC, LateInputError, NS_PER_S,
-    RELIABLE, RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE,
-    TIMEOUT, WaitTopic)
+    clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, gid_process, HANDSHAKE, LAST_TOPIC,
+    LateInputError, NS_PER_S, RELIABLE, RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END,
+    TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT, WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -211,7 +211,7 @@ class Lockstep:
             return [gid_process(info.endpoint_gid)
                     for info in self.node.get_publishers_info_by_topic(topic)]
 
-        self.spin_until(lambda: pid & 0xFFFF in publishers() or None in publishers(),
+        self.spin_until(lambda: (pid & 0xFFFF) in publishers() or None in publishers(),
                         'valve_node of this run publishing', timeout)
         others = [process for process in publishers() if process != pid & 0xFFFF]
         if others and None not in others:
@@ -219,6 +219,17 @@ class Lockstep:
                 f'{len(others)} other valve_node(s) in this ROS domain publish {topic} '
                 f'(process {others[0]} mod 65536): nodes of another run are up here; stop '
                 'them or run in a domain of its own')
+
+    def flow_reply(self, topic):
+        """Return the wait topic (connected) of a controller's flow replies, or None for None."""
+        if topic is None:
+            return None
+        name = self.node.resolve_topic_name(topic)
+        wait_topic = next(topic for topic in self.wait_topics if topic.topic == name)
+        if not wait_topic.flow_reply:
+            raise IncompleteRunError(f'the flow topic {name} must be a {FLOW_REPLY_TYPE} stamped '
+                                     'with the tick it answers, its velocity[0] the flow [m^3/s]')
+        return wait_topic
 
     def start(self, start_ns=START_NS, period_ns=1_000_000):
         """

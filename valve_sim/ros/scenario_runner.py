@@ -48,7 +48,6 @@ from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.lockstep import (
     HANDSHAKE, Lockstep, lockstep_parameters, NS_PER_S, START_NS)
-from valve_sim.ros.lockstep_protocol import FLOW_REPLY_TYPE
 from valve_sim.ros.node_processes import start_valve_and_analyser
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -255,7 +254,7 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
-            1 if wait_topics else TICKS_PER_CLOCK), record, flow_reply(driver, flow_topic))
+            1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (once a second) says when it has all.
         progress('waiting for analyser_node to record every state')
@@ -288,18 +287,6 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     record.steps = record.series.steps(events=scenario.window_events())
     record.checks = judge(scenario, record.series, record.steps)
     return record
-
-
-def flow_reply(driver, topic):
-    """Return the connected driver's WaitTopic of topic, a controller's flow reply (or None)."""
-    if topic is None:
-        return None
-    name = driver.node.resolve_topic_name(topic)
-    wait_topic = next(wait_topic for wait_topic in driver.wait_topics if wait_topic.topic == name)
-    if not wait_topic.flow_reply:
-        raise IncompleteRunError(f'the flow topic {name} must be a {FLOW_REPLY_TYPE} stamped '
-                                 'with the tick it answers, its velocity[0] the flow [m^3/s]')
-    return wait_topic
 
 
 def judge(scenario, series, steps):
