@@ -30,13 +30,13 @@
 #   lockstep run here has;
 # - lockstep: valve_node alone in lockstep (every tick topic published at 1 kHz, no
 #   recorder), one tick per /clock: model + publishing + round trip;
-# - lockstep_jumps: the same with /clock stepping TICKS_PER_CLOCK ticks at once
-#   (valve_sim.ros.clock_jumps): a round trip per TICKS_PER_CLOCK ticks;
+# - lockstep_jumps: the same with /clock stepping STEP_TICKS ticks at once
+#   (valve_sim.ros.clock_jumps): a round trip per STEP_TICKS ticks;
 # - scenario_one_tick: `scenario run` of scenarios/paper_step.yaml, analyser_node
 #   recording every topic, one tick per /clock (as with --wait-topic);
-# - scenario: the same as `scenario run` does it, TICKS_PER_CLOCK ticks per /clock;
+# - scenario: the same as `scenario run` did it before issue 46, STEP_TICKS ticks per /clock;
 # - scenario_k100, scenario_ramp_k100: scenario and scenario_ramp with
-#   MAX_TICKS_PER_CLOCK ticks per /clock (issue 46): the speed-up of fewer round
+#   MAX_TICKS_PER_CLOCK ticks per /clock (issue 46: the default now): the speed-up of fewer round
 #   trips, side by side, and whether the tick topics stay bit for bit the same (each
 #   run's digest of its bag's tick topics, messages with their log and publish times).
 #
@@ -66,10 +66,11 @@ REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'scenarios' / 'paper_step.yaml'
 KINDS = ('model', 'round_trip', 'lockstep', 'lockstep_jumps', 'scenario_one_tick',
          'scenario', 'scenario_ramp', 'scenario_k100', 'scenario_ramp_k100')
+STEP_TICKS = 10  # ticks per /clock of the kinds scenario*, lockstep_jumps: compared with 100
 SAME_TICKS = (('scenario', 'scenario_k100'), ('scenario_ramp', 'scenario_ramp_k100'))
 # scenario_ramp: the paper step's run with inputs that change every tick (a ramp 5 -> 20
 # L/min over 0.5 s from 0.25 s, then a sine on top until the end): stamped inputs let it
-# step TICKS_PER_CLOCK ticks per /clock as the step does (issue 42)
+# step STEP_TICKS ticks per /clock as the step does (issue 42)
 RAMP_SCENARIO = (
     'scenario: paper_ramp\nduration: 1.3\ninputs:\n  inlet_flow:\n    initial: 5 L/min\n'
     '    changes:\n      - {at: 0.25, ramp: 20 L/min, over: 0.5}\n'
@@ -225,7 +226,7 @@ def measure(kind, folder):
     scenario = load_scenario(SCENARIO)
     folder.mkdir(parents=True, exist_ok=True)
     digest = None
-    options = {}
+    options = {'ticks_per_clock': STEP_TICKS}
     if kind.endswith('_k100'):
         from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK
 
@@ -240,9 +241,7 @@ def measure(kind, folder):
     elif kind == 'scenario_one_tick':
         wall, cpu, digest = scenario_run(scenario, folder, ticks_per_clock=1)
     elif kind == 'lockstep_jumps':
-        from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-
-        wall, cpu = lockstep_run(scenario, folder, 'valve_node', TICKS_PER_CLOCK)
+        wall, cpu = lockstep_run(scenario, folder, 'valve_node', STEP_TICKS)
     else:
         wall, cpu = lockstep_run(scenario, folder,
                                  'bare_responder' if kind == 'round_trip' else 'valve_node')
@@ -294,8 +293,8 @@ def split(results):
     Where a scenario's tick goes [ms of wall], from the kinds' wall times.
 
     One tick per /clock (as with --wait-topic), and, where the checkout has clock jumps,
-    as `scenario run` steps: TICKS_PER_CLOCK ticks per /clock, so a round trip's share
-    of a tick is a round trip over TICKS_PER_CLOCK (the runner's splits at events add a
+    as `scenario` steps: STEP_TICKS ticks per /clock, so a round trip's share
+    of a tick is a round trip over STEP_TICKS (the runner's splits at events add a
     few round trips more); and what inputs that change every tick add to a step's run.
     """
     tick = {kind: result['per_tick_ms'] for kind, result in results.items()}
@@ -315,10 +314,8 @@ def split(results):
         'analyser_and_runner': one_tick - tick['lockstep'],
     }
     if 'lockstep_jumps' in tick:
-        from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-
-        round_trip = tick['round_trip'] / TICKS_PER_CLOCK
-        splits[f'{TICKS_PER_CLOCK} ticks per /clock (scenario run)'] = {
+        round_trip = tick['round_trip'] / STEP_TICKS
+        splits[f'{STEP_TICKS} ticks per /clock (scenario)'] = {
             'model': tick['model'],
             'round_trip_share': round_trip,
             'valve_node_publishing_and_executor': tick['lockstep_jumps'] - round_trip
