@@ -127,8 +127,7 @@ def test_the_run_s_own_error_is_not_replaced_by_the_stop_s(tmp_path, monkeypatch
     assert any('still starting' in line for line in lines)
 
 
-@pytest.mark.parametrize('left_behind', [('valve_node',), ('analyser_node',)])
-def test_a_run_refuses_the_nodes_another_run_left_in_its_domain(tmp_path, left_behind):
+def test_a_run_refuses_a_valve_node_another_run_left_in_its_domain(tmp_path):
     """A valve_node alone: refused by its process (GID) even while the run's own starts."""
     from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.core.errors import IncompleteRunError
@@ -138,16 +137,12 @@ def test_a_run_refuses_the_nodes_another_run_left_in_its_domain(tmp_path, left_b
 
     left = tmp_path / 'left'  # as main's runner left them: no lock, no parent tie
     left.mkdir()
-    commands = {'valve_node': node_command('valve_node', parameters=lockstep_parameters()),
-                'analyser_node': node_command('analyser_node', parameters={
-                    'output_dir': left, 'use_sim_time': 'true'})}
-    ready = {'valve_node': 'ready: ', 'analyser_node': 'recording'}
-    leftovers = [subprocess.Popen(commands[name], stdout=open(left / f'{name}.log', 'w'),
-                                  stderr=subprocess.STDOUT)
-                 for name in left_behind]
+    commands = {'valve_node': node_command('valve_node', parameters=lockstep_parameters())}
+    leftovers = [subprocess.Popen(commands['valve_node'],
+                                  stdout=open(left / 'valve_node.log', 'w'),
+                                  stderr=subprocess.STDOUT)]
     try:
-        until(lambda: all(ready[name] in (left / f'{name}.log').read_text()
-                          for name in left_behind), 'leftovers up')
+        until(lambda: 'ready: ' in (left / 'valve_node.log').read_text(), 'leftover up')
         scenario = load_scenario(Path(__file__).parents[2] / 'scenarios' / 'paper_step.yaml',
                                  bag_column)
         with pytest.raises(IncompleteRunError, match='nodes of another run are up here'):
@@ -156,3 +151,26 @@ def test_a_run_refuses_the_nodes_another_run_left_in_its_domain(tmp_path, left_b
         for process in leftovers:
             process.kill()
             process.wait()
+
+
+def test_an_analyser_recording_outside_the_run_s_folder_is_another_run_s(tmp_path):
+    """Its /diagnostics status names its bag: one outside the run's folder is refused."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from valve_sim.core.errors import IncompleteRunError
+    from valve_sim.ros.scenario_runner import AnalyserStatus
+
+    class Node:
+        def create_subscription(self, *args):
+            self.callback = args[2]
+
+    def status(file):
+        return DiagnosticArray(status=[DiagnosticStatus(
+            name='valve_analyser: recording', values=[KeyValue(key='file', value=file)])])
+
+    node = Node()
+    analyser = AnalyserStatus(node, tmp_path)
+    node.callback(status(str(tmp_path / 'valve_1.mcap')))
+    assert analyser.recording([]) and analyser.values['file'].endswith('valve_1.mcap')
+    node.callback(status('/tmp/elsewhere/valve_2.mcap'))
+    with pytest.raises(IncompleteRunError, match='another analyser_node .* /tmp/elsewhere/'):
+        analyser.recording([])
