@@ -160,6 +160,7 @@ def test_an_analyser_recording_outside_the_run_s_folder_is_another_run_s(tmp_pat
     from valve_sim.ros.scenario_runner import AnalyserStatus
 
     class Node:
+
         def create_subscription(self, *args):
             self.callback = args[2]
 
