@@ -85,12 +85,18 @@ def digest(messages):
 
 
 def run_once(path, out):
-    """Run a scenario; returns (exit code, wall [s], real-time factor or None, stderr tail)."""
+    """
+    Run a scenario; returns (exit code, wall [s], real-time factor or None, stderr tail).
+
+    The command's output (progress lines: how far the run got) goes to out/command.txt.
+    """
     started = time.monotonic()
     completed = subprocess.run(
         [sys.executable, '-m', 'valve_sim.commands.cli', 'scenario', 'run', str(path),
          '--out', str(out)], capture_output=True, text=True, timeout=900)
     wall = time.monotonic() - started
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'command.txt').write_text(completed.stdout + completed.stderr)
     factor = None
     report = out / 'report.json'
     if report.exists():
@@ -137,7 +143,8 @@ def main():
                     if not same:  # keep what says why, past the temporary folder
                         kept = args.json.parent / 'bench_determinism_failures' / out.name
                         kept.mkdir(parents=True, exist_ok=True)
-                        for log in (*out.glob('*.log'), *out.glob('report.*')):
+                        for log in (*out.glob('*.log'), *out.glob('report.*'),
+                                    out / 'command.txt'):
                             shutil.copy(log, kept)
                     for bag in bags:
                         bag.unlink()

@@ -30,11 +30,15 @@
 #   lockstep run here has;
 # - lockstep: valve_node alone in lockstep (every tick topic published at 1 kHz, no
 #   recorder), one tick per /clock: model + publishing + round trip;
-# - lockstep_jumps: the same with /clock stepping TICKS_PER_CLOCK ticks at once
-#   (valve_sim.ros.clock_jumps): a round trip per TICKS_PER_CLOCK ticks;
+# - lockstep_jumps: the same with /clock stepping STEP_TICKS ticks at once
+#   (valve_sim.ros.clock_jumps): a round trip per STEP_TICKS ticks;
 # - scenario_one_tick: `scenario run` of scenarios/paper_step.yaml, analyser_node
 #   recording every topic, one tick per /clock (as with --wait-topic);
-# - scenario: the same as `scenario run` does it, TICKS_PER_CLOCK ticks per /clock.
+# - scenario: the same as `scenario run` did it before issue 46, STEP_TICKS ticks per /clock;
+# - scenario_k100, scenario_ramp_k100: scenario and scenario_ramp with
+#   MAX_TICKS_PER_CLOCK ticks per /clock (issue 46: the default now): the speed-up of fewer round
+#   trips, side by side, and whether the tick topics stay bit for bit the same (each
+#   run's digest of its bag's tick topics, messages with their log and publish times).
 #
 # Each reports its real-time factor (model time per wall time of the stepping), its
 # wall time per tick, and the CPU time per tick of each process over the stepping
@@ -61,15 +65,18 @@ import time
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'scenarios' / 'paper_step.yaml'
 KINDS = ('model', 'round_trip', 'lockstep', 'lockstep_jumps', 'scenario_one_tick',
-         'scenario', 'scenario_ramp')
+         'scenario', 'scenario_ramp', 'scenario_k100', 'scenario_ramp_k100')
+STEP_TICKS = 10  # ticks per /clock of the kinds scenario*, lockstep_jumps: compared with 100
+SAME_TICKS = (('scenario', 'scenario_k100'), ('scenario_ramp', 'scenario_ramp_k100'))
 # scenario_ramp: the paper step's run with inputs that change every tick (a ramp 5 -> 20
 # L/min over 0.5 s from 0.25 s, then a sine on top until the end): stamped inputs let it
-# step TICKS_PER_CLOCK ticks per /clock as the step does (issue 42)
+# step STEP_TICKS ticks per /clock as the step does (issue 42)
 RAMP_SCENARIO = (
     'scenario: paper_ramp\nduration: 1.3\ninputs:\n  inlet_flow:\n    initial: 5 L/min\n'
     '    changes:\n      - {at: 0.25, ramp: 20 L/min, over: 0.5}\n'
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
-JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick')  # need valve_sim.ros.clock_jumps
+JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick', 'scenario_k100',
+              'scenario_ramp_k100')  # need valve_sim.ros.clock_jumps
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
 ATTEMPTS = 5  # runs of a kind that abort before the bench gives up
 BARE_RESPONDER = (
@@ -183,7 +190,14 @@ def lockstep_run(scenario, folder, name, ticks_per_clock=1):
 
 
 def scenario_run(scenario, folder, **options):
-    """Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU."""
+    """
+    Run the scenario as `valve-sim scenario run` does; its stepping's wall [s] and CPU.
+
+    Also the digest of its bag's tick topics (lockstep_messages), where the checkout has it.
+    """
+    import hashlib
+
+    from valve_sim.ros import scenario_runner
     from valve_sim.ros.scenario_runner import run_scenario
 
     cpu = {}
@@ -196,7 +210,13 @@ def scenario_run(scenario, folder, **options):
 
     record = run_scenario(scenario, folder, progress=progress, **options)
     assert record.passed, [check.name for check in record.checks if not check.passed]
-    return record.wall_s, cpu_used(cpu['start'], cpu['end'])
+    digest = None
+    if hasattr(scenario_runner, 'lockstep_messages'):
+        from valve_sim.recording.valve_topics import TICK_TOPICS
+
+        messages = scenario_runner.lockstep_messages(record.bag, TICK_TOPICS)
+        digest = hashlib.sha256(repr(sorted(messages.items())).encode()).hexdigest()
+    return record.wall_s, cpu_used(cpu['start'], cpu['end']), digest
 
 
 def measure(kind, folder):
@@ -205,24 +225,28 @@ def measure(kind, folder):
 
     scenario = load_scenario(SCENARIO)
     folder.mkdir(parents=True, exist_ok=True)
+    digest = None
+    options = {'ticks_per_clock': STEP_TICKS}
+    if kind.endswith('_k100'):
+        from valve_sim.ros.clock_jumps import MAX_TICKS_PER_CLOCK
+
+        options['ticks_per_clock'] = MAX_TICKS_PER_CLOCK
+    if kind.startswith('scenario_ramp'):
+        (folder / 'ramp.yaml').write_text(RAMP_SCENARIO)
+        scenario = load_scenario(folder / 'ramp.yaml')
     if kind == 'model':
         wall, cpu = model_alone(scenario, folder)
-    elif kind == 'scenario':
-        wall, cpu = scenario_run(scenario, folder)
-    elif kind == 'scenario_ramp':
-        (folder / 'ramp.yaml').write_text(RAMP_SCENARIO)
-        wall, cpu = scenario_run(load_scenario(folder / 'ramp.yaml'), folder)
+    elif kind in ('scenario', 'scenario_ramp', 'scenario_k100', 'scenario_ramp_k100'):
+        wall, cpu, digest = scenario_run(scenario, folder, **options)
     elif kind == 'scenario_one_tick':
-        wall, cpu = scenario_run(scenario, folder, ticks_per_clock=1)
+        wall, cpu, digest = scenario_run(scenario, folder, ticks_per_clock=1)
     elif kind == 'lockstep_jumps':
-        from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-
-        wall, cpu = lockstep_run(scenario, folder, 'valve_node', TICKS_PER_CLOCK)
+        wall, cpu = lockstep_run(scenario, folder, 'valve_node', STEP_TICKS)
     else:
         wall, cpu = lockstep_run(scenario, folder,
                                  'bare_responder' if kind == 'round_trip' else 'valve_node')
     print(json.dumps({'wall_s': wall, 'cpu_s': cpu, 'ticks': scenario.ticks,
-                      'duration_s': scenario.duration}))
+                      'duration_s': scenario.duration, 'digest': digest}))
 
 
 def run_kind(kind, folder, checkout, aborted):
@@ -251,6 +275,7 @@ def summary(runs):
     names = sorted({name for run in runs for name in run['cpu_s']})
     return {'runs': len(runs), 'median_wall_s': wall,
             'walls_s': [run['wall_s'] for run in runs],
+            'digests': sorted({run.get('digest') for run in runs} - {None}),
             'real_time_factor': duration / wall, 'per_tick_ms': wall / ticks * 1e3,
             'cpu_per_tick_ms': {name: statistics.median(run['cpu_s'].get(name, 0.0)
                                                         for run in runs) / ticks * 1e3
@@ -268,8 +293,8 @@ def split(results):
     Where a scenario's tick goes [ms of wall], from the kinds' wall times.
 
     One tick per /clock (as with --wait-topic), and, where the checkout has clock jumps,
-    as `scenario run` steps: TICKS_PER_CLOCK ticks per /clock, so a round trip's share
-    of a tick is a round trip over TICKS_PER_CLOCK (the runner's splits at events add a
+    as `scenario` steps: STEP_TICKS ticks per /clock, so a round trip's share
+    of a tick is a round trip over STEP_TICKS (the runner's splits at events add a
     few round trips more); and what inputs that change every tick add to a step's run.
     """
     tick = {kind: result['per_tick_ms'] for kind, result in results.items()}
@@ -289,10 +314,8 @@ def split(results):
         'analyser_and_runner': one_tick - tick['lockstep'],
     }
     if 'lockstep_jumps' in tick:
-        from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-
-        round_trip = tick['round_trip'] / TICKS_PER_CLOCK
-        splits[f'{TICKS_PER_CLOCK} ticks per /clock (scenario run)'] = {
+        round_trip = tick['round_trip'] / STEP_TICKS
+        splits[f'{STEP_TICKS} ticks per /clock (scenario)'] = {
             'model': tick['model'],
             'round_trip_share': round_trip,
             'valve_node_publishing_and_executor': tick['lockstep_jumps'] - round_trip
@@ -310,6 +333,13 @@ def report(label, results):
                         for name, value in result['cpu_per_tick_ms'].items())
         print(f'  {kind:<17} {result["real_time_factor"]:7.2f}x real time, '
               f'{result["per_tick_ms"]:.3f} ms a tick; CPU ms a tick: {cpu}')
+    for kind, other in SAME_TICKS:
+        if kind in results and other in results:
+            same = results[kind]['digests'] == results[other]['digests'] and len(
+                results[kind]['digests']) == 1
+            gain = results[other]['real_time_factor'] / results[kind]['real_time_factor']
+            print(f'  {kind} vs {other}: tick topics bit for bit the same in every run: '
+                  f'{same}; speed-up {gain:.2f}x')
     for stepping, parts in results['split_per_tick_ms'].items():
         print(f'  where a scenario tick goes, {stepping} [ms of wall]: ' + ', '.join(
             f'{name} {value:.3f}' for name, value in parts.items()))

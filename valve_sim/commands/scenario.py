@@ -67,6 +67,11 @@ def add_arguments(parser):
                             type=topic_name,
                             help='a topic another use_sim_time node (your controller) publishes '
                             'once per tick: each tick waits for its message (repeatable)')
+    run_parser.add_argument('--flow-topic', metavar='TOPIC', type=topic_name,
+                            help="the valve's inlet flow from the second tick on comes from your "
+                            "controller's reply to each tick's state on TOPIC (a wait topic): "
+                            'sensor_msgs/JointState, velocity[0] in m^3/s, stamped with the '
+                            'tick it answers (docs/scenarios.md)')
     run_parser.add_argument('--ticks-per-clock', metavar='N',
                             type=number('a tick count', '', 1, MAX_TICKS_PER_CLOCK, integer=True),
                             help='tick periods per /clock message at most (default '
@@ -110,13 +115,13 @@ def run(args):
     name = safe_name(scenario.name)  # one path component, whatever the file says
     folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{name}_{stamp}'
     folder = make_folder(folder).resolve()
-    if args.wait_topic:  # the user's nodes are in the environment's domain: join them
+    if args.wait_topic or args.flow_topic:  # the user's nodes are in this domain: join them
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')
     else:
         domain = claim_domain()
     progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={domain}')
     record, paths = run_and_report(scenario, folder, args.rate, args.wait_topic, args.junit,
-                                   progress, args.ticks_per_clock)
+                                   progress, args.ticks_per_clock, args.flow_topic)
     print()
     print(paths['report'].read_text(), end='')
     for path in (record.bag, *paths.values()):

@@ -41,6 +41,8 @@ import os
 import sys
 
 
+PARENT_VARIABLE = 'VALVE_SIM_PARENT_PID'  # set by ros.node_processes for its node processes
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
 NODE_PROGRAMS = {'valve_node': 'valve_node_main', 'analyser_node': 'analyser_node',  # module
                  'managed_valve_node': 'managed_valve_node',
                  'valve_simulator': 'simulation_server'}
@@ -68,6 +70,12 @@ if sys.argv[:1] == ['-m'] or sys.argv and os.path.basename(sys.argv[0]) in NODE_
         _signal.signal(_signal.SIGTERM, _exit_quietly)
     except ValueError:  # not the main thread: an embedding program's own handlers
         pass
+    _parent = os.environ.pop(PARENT_VARIABLE, '')  # popped: this node's children lack it
+    if _parent.isdigit() and sys.platform.startswith('linux'):
+        import ctypes  # SIGTERM when the run's process ends, even killed: a clean stop
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, _signal.SIGTERM)
+        if os.getppid() != int(_parent):  # it ended before prctl
+            _exit_quietly(_signal.SIGTERM, None)
 
 
 def node_command(program, options=(), parameters=None, ros_args=()):

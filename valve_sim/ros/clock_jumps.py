@@ -28,8 +28,10 @@ The drivers step TICKS_PER_CLOCK periods at a time unless told otherwise.
 
 MAX_TICKS_PER_CLOCK = 100  # the largest jump [tick periods] ticked period by period
 # The lockstep drivers' /clock step [tick periods]: a round trip per this many ticks, not
-# per tick (a use_sim_time node of the user's that publishes once per tick needs 1)
-TICKS_PER_CLOCK = 10
+# per tick (a use_sim_time node of the user's that publishes once per tick needs 1).
+# The largest: the same messages as 10, bit for bit, 1.2-1.7x as fast side by side
+# (bench/bench_scenario.py's *_k100 kinds; docs/benchmarks.md, "Ticks per /clock").
+TICKS_PER_CLOCK = MAX_TICKS_PER_CLOCK
 
 
 def tick_times(previous_ns, now_ns, period_ns, sim_time):

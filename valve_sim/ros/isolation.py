@@ -35,15 +35,16 @@ _held_locks = {}  # domain: the open lock file this process holds it by
 
 def claim_domain(keep_existing=True):
     """
-    Set ROS_DOMAIN_ID to a domain no other run on this machine holds; return it.
+    Set ROS_DOMAIN_ID to a domain no other run on this machine holds, and hold it; return it.
 
     With keep_existing, a ROS_DOMAIN_ID already in the environment (the user's, or a
-    parent run's) is kept. ROS_AUTOMATIC_DISCOVERY_RANGE is set to LOCALHOST unless
-    set. Child processes inherit both.
+    parent run's) is kept if no other process holds it (hold_domain): a run that brings
+    its own nodes never shares a domain with another run's. ROS_AUTOMATIC_DISCOVERY_RANGE
+    is set to LOCALHOST unless set. Child processes inherit both.
     """
+    if keep_existing:
+        return hold_domain()
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    if keep_existing and 'ROS_DOMAIN_ID' in os.environ:
-        return int(os.environ['ROS_DOMAIN_ID'])
     candidates = list(DOMAIN_IDS)
     random.SystemRandom().shuffle(candidates)
     for domain in candidates:
@@ -68,6 +69,17 @@ def _lock(domain):
         return False
     _held_locks[domain] = handle  # held until this process ends
     return True
+
+
+def held_lock_fds():
+    """
+    Return the descriptors of the domain locks this process holds, for its node processes.
+
+    A child that inherits them holds the domain too (flock: until every copy is closed),
+    so a node left running after its run's process died keeps other runs out of its
+    domain instead of answering their /clock.
+    """
+    return tuple(handle.fileno() for handle in _held_locks.values())
 
 
 def hold_domain():

@@ -45,140 +45,37 @@ state does not come within RESEND is published again.
 
 The driver spins its own node on the calling thread (rclpy's EventsExecutor where
 there is one), so waiting costs no thread hand-over; as fast as the node can by
-default, or paced to rate times real time.
-
-Over 400 lines on purpose: Lockstep is one state machine (clock, inputs, ticks,
-waits), kept in one class with its messages.
+default, or paced to rate times real time. Its messages (the /clock bytes, the stamped
+inputs as sent, the wait topics and a controller's flow replies): ros.lockstep_protocol.
 """
 
-import struct
 import time
 
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import Parameter as ParameterMessage
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, JointState
 from valve_sim.core.errors import IncompleteRunError, ParameterError, WaitTimeoutError
 from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
-from valve_sim.recording.cdr import CdrMessage, ENCAPSULATION, STAMP, STAMP_OFFSET
-from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
+from valve_sim.recording.cdr import CdrMessage
+from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
+from valve_sim.ros.lockstep_protocol import (
+    clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, gid_process, HANDSHAKE, LAST_TOPIC,
+    LateInputError, NS_PER_S, RELIABLE, RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END,
+    TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT, WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
-
-
-HANDSHAKE = 'applied_inlet_flow'  # the flow the tick applied
-TANK_HANDSHAKE = 'applied_tank_pressure'  # the tank pressure it applied (absolute)
-TANK_AT_END = struct.Struct('<dd')  # FluidPressure: fluid_pressure, variance, at its end
-TANK_TOLERANCE = 1e-6  # [Pa]: the node's gauge and back to absolute may round
-LAST_TOPIC = TICK_TOPICS[-1]  # published last in a tick: once it is here, the tick is
-FLOW_AT_END = struct.Struct('<d')  # applied_inlet_flow: velocity[0], then an empty effort
-NS_PER_S = 1_000_000_000
-START_NS = NS_PER_S  # /clock of the first tick: past any timer's first period (up to 1 s)
-RESEND = 0.5  # [s] without the state: publish the same /clock again (it is best effort)
-TIMEOUT = 60.0  # [s] for a tick's state, a service answer, discovery
-QUEUE_DEPTH = 1000
-RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-
-
-class LateInputError(IncompleteRunError):
-    """A tick applied another input value than the one sent for it."""
 
 
 def lockstep_parameters(tank=False):
     """Return valve_node's parameters {name: command-line value} for a Lockstep driver."""
     return {'use_sim_time': 'true',
             LOCKSTEP_INPUTS: 'inlet_flow,tank_pressure' if tank else 'inlet_flow'}
-
-
-class SentInput:
-    """
-    One stamped input as the driver sends it: publish(value, stamp_ns), and what a tick applies.
-
-    Stamps never go back (a later stamp is the node's proof that it has them all); a
-    value sent again at the same stamp replaces the one before, at the node too.
-    """
-
-    def __init__(self, publish):
-        self.publish = publish
-        self.sent = []  # [(stamp [ns], value)] from the oldest a tick may still apply
-        self.count = 0  # messages sent
-
-    @property
-    def value(self):
-        """Return the value sent last (None before any)."""
-        return self.sent[-1][1] if self.sent else None
-
-    def send(self, value, stamp_ns):
-        if self.sent and stamp_ns < self.sent[-1][0]:
-            raise ValueError(f'an input stamped {stamp_ns / NS_PER_S:.6f} s after one stamped '
-                             f'{self.sent[-1][0] / NS_PER_S:.6f} s: stamps never go back')
-        self.publish(value, stamp_ns)
-        self.sent.append((stamp_ns, value))
-        self.count += 1
-
-    def cover(self, last_start_ns, end_ns):
-        """Send the held value stamped end_ns unless a stamp past last_start_ns went already."""
-        if self.sent and self.sent[-1][0] <= last_start_ns:
-            self.send(self.sent[-1][1], end_ns)
-
-    def at(self, time_ns):
-        """Return the value the tick starting at time_ns applies; forget the older ones."""
-        index = max((i for i, (stamp, _) in enumerate(self.sent) if stamp <= time_ns),
-                    default=None)
-        if index is None:
-            return None  # none sent: nothing to check
-        del self.sent[:index]
-        return self.sent[0][1]
-
-
-def stamp_ns(data):
-    """Return the header stamp [ns] of a message's CDR bytes (every tick message has one)."""
-    sec, nanosec = STAMP.unpack_from(data, STAMP_OFFSET)
-    return sec * NS_PER_S + nanosec
-
-
-def clock_message(time_ns):
-    """
-    Return a rosgraph_msgs/Clock of time_ns as its CDR bytes, which rclpy publishes as they are.
-
-    Built directly (a Time is the whole message): an rclpy message built and serialized
-    costs the driver about ten times as much on every tick.
-    """
-    return ENCAPSULATION + STAMP.pack(*divmod(time_ns, NS_PER_S))
-
-
-class WaitTopic:
-    """A topic another node publishes once per tick: stamped (header) or counted."""
-
-    def __init__(self, node, topic, type_name):
-        message_type = message_class(type_name)
-        fields = list(message_type.get_fields_and_field_types().items())
-        self.topic = topic
-        self.stamped = bool(fields) and fields[0] == ('header', 'std_msgs/Header')
-        self.latest_ns, self.count, self.count_before = None, 0, 0
-        self.subscription = node.create_subscription(message_type, topic, self._on_message,
-                                                     RELIABLE, raw=True)
-
-    def _on_message(self, data):
-        self.count += 1
-        if self.stamped:
-            self.latest_ns = stamp_ns(data)
-
-    def mark(self):
-        """Note that a tick's /clock goes out: an unstamped topic's next message is that tick's."""
-        self.count_before = self.count
-
-    def has(self, time_ns):
-        """Whether the message of the tick at time_ns has come (unstamped: one since mark())."""
-        if self.stamped:
-            return self.latest_ns is not None and self.latest_ns >= time_ns
-        return self.count > self.count_before
 
 
 class Lockstep:
@@ -279,6 +176,8 @@ class Lockstep:
         until each subscription here is matched with its publisher: a state published
         before that would be lost, and the lockstep would wait for it in vain.
         """
+        if self.processes is not None and 'valve_node' in self.processes.processes:
+            self._own_valve(self.processes.processes['valve_node'].pid, timeout)
         self.spin_until(lambda: self.clock.get_subscription_count() > 0
                         and self.inlet.get_subscription_count() > 0
                         and (self.tank_publisher is None
@@ -297,6 +196,40 @@ class Lockstep:
             self.spin_until(lambda: topic.subscription.get_publisher_count() > 0,
                             f'the wait topic {name} matched', timeout)
             self.wait_topics.append(topic)
+
+    def _own_valve(self, pid, timeout):
+        """
+        Wait for the valve_node of process pid; IncompleteRunError if another answers here too.
+
+        Before any /clock: a valve_node another run left in this ROS domain would answer
+        this run's ticks while its own still starts. Under Fast DDS each publisher's GID
+        names its process (gid_process); under another middleware this is not checked.
+        """
+        topic = self.node.resolve_topic_name(HANDSHAKE)
+
+        def publishers():
+            return [gid_process(info.endpoint_gid)
+                    for info in self.node.get_publishers_info_by_topic(topic)]
+
+        self.spin_until(lambda: (pid & 0xFFFF) in publishers() or None in publishers(),
+                        'valve_node of this run publishing', timeout)
+        others = [process for process in publishers() if process != pid & 0xFFFF]
+        if others and None not in others:
+            raise IncompleteRunError(
+                f'{len(others)} other valve_node(s) in this ROS domain publish {topic} '
+                f'(process {others[0]} mod 65536): nodes of another run are up here; stop '
+                'them or run in a domain of its own')
+
+    def flow_reply(self, topic):
+        """Return the wait topic (connected) of a controller's flow replies, or None for None."""
+        if topic is None:
+            return None
+        name = self.node.resolve_topic_name(topic)
+        wait_topic = next(topic for topic in self.wait_topics if topic.topic == name)
+        if not wait_topic.flow_reply:
+            raise IncompleteRunError(f'the flow topic {name} must be a {FLOW_REPLY_TYPE} stamped '
+                                     'with the tick it answers, its velocity[0] the flow [m^3/s]')
+        return wait_topic
 
     def start(self, start_ns=START_NS, period_ns=1_000_000):
         """

@@ -22,16 +22,21 @@ output in FOLDER/<name>.log. spin_until() spins a driving node until a condition
 holds, and says which node died (and where its log is) if one ends meanwhile.
 """
 
+import os
 import signal
 import subprocess
 import time
 
 from valve_sim.core.errors import NodeExitError, WaitTimeoutError
 from valve_sim.core.output_files import fresh_file
-from valve_sim.ros import node_command
+from valve_sim.ros import node_command, PARENT_VARIABLE
+from valve_sim.ros.isolation import held_lock_fds
 
 
 STOP_TIMEOUT = 20.0  # [s] for each node to finish after SIGINT
+# exit codes of a node that the SIGINT ended before it was up (valve_sim.ros's start-up
+# handler: 128 + SIGINT; earlier still, Python's own KeyboardInterrupt: killed by SIGINT)
+STARTING_CODES = (128 + signal.SIGINT, -signal.SIGINT)
 
 
 class NodeProcesses:
@@ -40,10 +45,14 @@ class NodeProcesses:
     def __init__(self, folder, commands, env=None):
         """Start each of commands {name: argv} with its output in folder/<name>.log."""
         self.folder, self.processes = folder, {}
+        # each node dies with this process (valve_sim.ros: PR_SET_PDEATHSIG) and holds its
+        # domain's lock meanwhile: a node left behind never answers another run's /clock
+        env = {**(os.environ if env is None else env), PARENT_VARIABLE: str(os.getpid())}
         for name, command in commands.items():
             with fresh_file(folder / f'{name}.log') as log:  # a link there not followed
                 self.processes[name] = subprocess.Popen(
-                    command, stdout=log, stderr=subprocess.STDOUT, env=env
+                    command, stdout=log, stderr=subprocess.STDOUT, env=env,
+                    pass_fds=held_lock_fds()
                 )
 
     def log(self, name):
@@ -74,7 +83,12 @@ class NodeProcesses:
                     f'{name} did not stop within {STOP_TIMEOUT:g} s of SIGINT and was killed'
                 )
                 continue
-            if code != 0:
+            if code in STARTING_CODES:
+                failures.append(
+                    f'{name} was still starting when stopped (exit code {code}): it took no '
+                    'part in the run; if the run got that far, other nodes in ROS domain '
+                    f"{os.environ.get('ROS_DOMAIN_ID', '0')} answered in its place")
+            elif code != 0:
                 failures.append(f'{name} exited with code {code}')
         if failures:
             raise NodeExitError('; '.join(failures) + f' (logs in {self.folder})')

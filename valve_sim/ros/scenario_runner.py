@@ -35,17 +35,19 @@ what was measured up to the failure, each expectation judged on its own.
 """
 
 from dataclasses import dataclass, field
+from pathlib import Path
 import time
 
 import numpy as np
 
 from valve_sim.analysis.scenarios.expectations import evaluate
-from valve_sim.core.errors import IncompleteRunError, USER_ERRORS
+from valve_sim.core.errors import IncompleteRunError, NodeExitError, USER_ERRORS
 from valve_sim.recording.tick_bags import tick_series
 from valve_sim.recording.valve_topics import TICK_TOPICS
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER, RECORDING_TASK
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
+from valve_sim.ros.lockstep import (
+    HANDSHAKE, Lockstep, lockstep_parameters, NS_PER_S, START_NS)
 from valve_sim.ros.node_processes import start_valve_and_analyser
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -75,6 +77,7 @@ class RunRecord:
     clock_steps: int = 0  # /clock messages of the stepping (each up to ticks_per_clock ticks)
     start_ns: int = START_NS
     error: str = None  # why the run did not complete
+    flows: object = None  # [m^3/s] the inlet flow sent for each tick (a controller's too)
 
     @property
     def passed(self):
@@ -115,35 +118,57 @@ def start_nodes(scenario, folder):
 
 
 class AnalyserStatus:
-    """analyser_node's latest recording status on /diagnostics, heard by the driver's node."""
+    """
+    The run's own analyser_node's latest recording status on /diagnostics.
 
-    def __init__(self, node):
+    Its own: the one recording into folder. A status of an analyser recording elsewhere
+    (another run's nodes in this ROS domain) is kept in foreign, and check() raises.
+    """
+
+    def __init__(self, node, folder):
         from diagnostic_msgs.msg import DiagnosticArray
 
-        self.values = {}
+        self.values, self.folder, self.foreign = {}, Path(folder).resolve(), None
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_status, 10)
 
     def _on_status(self, array):
         for status in array.status:
             if status.name == f'{ANALYSER}: {RECORDING_TASK}':
-                self.values = {pair.key: pair.value for pair in status.values}
+                values = {pair.key: pair.value for pair in status.values}
+                if Path(values.get('file', '')).resolve().parent == self.folder:
+                    self.values = values
+                else:
+                    self.foreign = values.get('file', '?')
+
+    def check(self):
+        """Raise IncompleteRunError if another analyser_node answers in this ROS domain."""
+        if self.foreign is not None:
+            raise IncompleteRunError(
+                f'another analyser_node in this ROS domain records to {self.foreign}: '
+                'nodes of another run are up here; stop them or run in a domain of its own')
 
     def recording(self, topics):
         """Whether the analyser records each of topics (full names)."""
+        self.check()
         return all(f'qos {topic}' in self.values for topic in topics)
 
     def recorded(self, topics, count):
         """Whether the analyser has recorded at least count messages of each of topics."""
+        self.check()
         return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
 
-def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=None):
+def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=None,
+          flow_reply=None):
     """
     Run the scenario's ticks on a connected Lockstep (ScenarioStepper); returns the wall time [s].
 
-    record: a RunRecord whose wall_s follows the run (for a run that fails midway).
+    record: a RunRecord whose wall_s follows the run (for a run that fails midway);
+    flow_reply: the wait topic whose controller supplies the flow (ScenarioStepper).
     """
-    stepper = ScenarioStepper(scenario, driver, ticks_per_clock)
+    stepper = ScenarioStepper(scenario, driver, ticks_per_clock, flow_reply)
+    if record is not None:
+        record.flows = stepper.flows
     stepper.start()
     started = last_report = time.monotonic()
     while stepper.tick < scenario.ticks:
@@ -159,11 +184,12 @@ def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=No
     return time.monotonic() - started
 
 
-def check_complete(series, scenario, start_ns):
+def check_complete(series, scenario, start_ns, flows=None):
     """
     Raise IncompleteRunError unless the bag holds a state of every tick, none else.
 
-    Also unless every tick applied the inlet flow sent for it (the same float).
+    Also unless every tick applied the inlet flow sent for it (the same float; flows,
+    a tick each: default the scenario's).
     """
     expected = [start_ns + k * scenario.period_ns for k in range(scenario.ticks + 1)]
     if series.stamps_ns.tolist() != expected:
@@ -175,8 +201,8 @@ def check_complete(series, scenario, start_ns):
         gaps = int(series[name].size - (series[name] == series[name]).sum())
         if gaps:
             raise IncompleteRunError(f'the bag lacks {name} at {gaps} of the ticks of the run')
-    flows, _ = input_values(scenario)
-    flows = flows[:scenario.ticks]  # tick k applies the value sampled at its start
+    # tick k applies the value sampled (or sent) for its start
+    flows = (input_values(scenario)[0] if flows is None else flows)[:scenario.ticks]
     wrong = np.flatnonzero(series['inlet_flow'][1:] != flows)
     if wrong.size:
         tick = int(wrong[0])
@@ -187,7 +213,7 @@ def check_complete(series, scenario, start_ns):
 
 
 def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
-                 ticks_per_clock=None, record=None):
+                 ticks_per_clock=None, record=None, flow_topic=None):
     """
     Run a BenchScenario in folder (created); returns its RunRecord with the checks judged.
 
@@ -195,24 +221,28 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     wait_topics: topics other use_sim_time nodes publish once per tick;
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
     with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
-    to fill (default: a new one). Raises the errors of a run that cannot complete (a
-    node died, a refused event, a timeout, an incomplete bag), after stopping both
-    nodes; record then holds what the run got to (measure_partial reads the rest).
+    to fill (default: a new one); flow_topic: a wait topic whose controller supplies
+    the inlet flow from the second tick on (ros.scenario_stepper). Raises the errors
+    of a run that cannot complete (a node died, a refused event, a timeout, an
+    incomplete bag, another run's nodes in the domain), after stopping both nodes;
+    record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
     record = record or RunRecord(scenario, folder)
+    if flow_topic is not None and flow_topic not in wait_topics:
+        wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
     processes = start_nodes(scenario, folder)
     context = rclpy.Context()
     rclpy.init(context=context)
-    driver = None
+    driver, failed = None, True  # failed until the run gets through
     try:
         driver = Lockstep(context, processes=processes, rate=rate,
                           tank='tank_pressure' in scenario.inputs)
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         driver.connect(wait_topics, READY_TIMEOUT)
-        status = AnalyserStatus(driver.node)
+        status = AnalyserStatus(driver.node, folder)
         recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
                                                        recorded)),
@@ -224,7 +254,7 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
-            1 if wait_topics else TICKS_PER_CLOCK), record)
+            1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (once a second) says when it has all.
         progress('waiting for analyser_node to record every state')
@@ -234,16 +264,26 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
                                   for topic, (_, sent) in inputs.items()),
                           f'analyser_node recording all {scenario.ticks + 1} states and '
                           'every input sent', DRAIN_TIMEOUT)
+        others = driver.node.count_publishers(driver.node.resolve_topic_name(HANDSHAKE)) - 1
+        if others > 0:
+            raise IncompleteRunError(f'{others} other valve_node(s) in this ROS domain answered '
+                                     'the run too: stop them or run in a domain of its own')
+        failed = False
     finally:
         if driver is not None:
             driver.close()
         context.try_shutdown()
         progress('stopping both nodes (SIGINT)')
-        processes.stop()
+        try:
+            processes.stop()
+        except NodeExitError as error:
+            if not failed:
+                raise
+            progress(f'then: {error}')  # the run's own error goes on: it says why
     record.bag = next(iter(sorted(folder.glob('*.mcap'))))
     record.series = tick_series(record.bag, start_ns=START_NS,
                                 ambient_pressure=scenario.ambient_pressure)
-    check_complete(record.series, scenario, START_NS)
+    check_complete(record.series, scenario, START_NS, record.flows)
     record.steps = record.series.steps(events=scenario.window_events())
     record.checks = judge(scenario, record.series, record.steps)
     return record
@@ -295,7 +335,7 @@ def measure_partial(record):
 
 
 def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
-                   ticks_per_clock=None):
+                   ticks_per_clock=None, flow_topic=None):
     """
     Run a scenario and write its reports (scenarios.report); returns (RunRecord, paths).
 
@@ -307,7 +347,8 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
 
     record = RunRecord(scenario, folder)
     try:
-        run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record)
+        run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record,
+                     flow_topic)
     except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as error:
         record.error = str(error) or type(error).__name__
         measure_partial(record)

@@ -74,9 +74,12 @@ def change_ticks(values):
 class ScenarioStepper:
     """Steps a connected Lockstep through a BenchScenario: start(), then step(count) or batch()."""
 
-    def __init__(self, scenario, driver, ticks_per_clock=TICKS_PER_CLOCK):
+    def __init__(self, scenario, driver, ticks_per_clock=TICKS_PER_CLOCK, flow_reply=None):
+        if flow_reply is not None:
+            ticks_per_clock = 1  # the controller answers each tick's state
         self.scenario, self.driver, self.ticks_per_clock = scenario, driver, ticks_per_clock
-        self.flows, self.tanks = input_values(scenario)
+        self.flow_reply = flow_reply
+        self.flows, self.tanks = input_values(scenario)  # flows: those sent, a tick each
         self.events = scenario.event_ticks()
         self.changes = {0, *change_ticks(self.flows),
                         *(() if self.tanks is None else change_ticks(self.tanks))}
@@ -112,9 +115,13 @@ class ScenarioStepper:
         stop = min(end, bound, tick + self.ticks_per_clock)
         for change in sorted(self.changes.intersection(range(tick, stop))):
             stamp = START_NS + change * scenario.period_ns
-            driver.set_flow(self.flows[change], stamp)
+            if self.flow_reply is None:
+                driver.set_flow(self.flows[change], stamp)
             if self.tanks is not None:
                 driver.set_tank_pressure(self.tanks[change], stamp)
+        if self.flow_reply is not None and tick > 0:
+            self.flows[tick] = self.flow_reply.reply(self.time_ns)
+            driver.set_flow(self.flows[tick], self.time_ns)
         driver.tick(stop - tick)
         self.tick = stop
         self._after()
