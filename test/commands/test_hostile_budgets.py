@@ -109,26 +109,20 @@ def test_a_feature_without_its_extra_says_which_in_one_line(
 
 def test_one_divergence_after_another_logs_at_most_once_a_second():
     """A tank pressure flipping every tick: each tick a failure, logged rate-limited."""
-    import rclpy
-    from valve_sim.ros.valve_node import ReliefValveNode
+    from valve_sim.ros.node_status import Counters
+    from valve_sim.ros.tick_logs import TickLogs
+    from valve_sim.ros.valve_node import CATCH_UP_LIMIT_PERIODS
 
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    try:
-        node = ReliefValveNode(context=context)
-        lines = []
+    lines = []
 
-        class Logger:
+    class Logger:
 
-            def error(self, text):
-                lines.append(text)
+        def error(self, text):
+            lines.append(text)
 
-            info = warn = error
+        info = warn = error
 
-        node.get_logger = Logger
-        for _ in range(2000):
-            node._report_failure(Outcome(Status.FAILURE, error=IntegrationError('diverged')))
-        node.destroy_node()
-    finally:
-        context.try_shutdown()
+    logs = TickLogs(Logger(), Counters(), CATCH_UP_LIMIT_PERIODS)  # valve_node's, as it makes them
+    for _ in range(2000):
+        logs.failure(Outcome(Status.FAILURE, error=IntegrationError('diverged')), saturated=None)
     assert 1 <= len(lines) <= 10, len(lines)
