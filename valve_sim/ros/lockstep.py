@@ -195,7 +195,22 @@ class Lockstep:
             topic = WaitTopic(self.node, name, types[0])
             self.spin_until(lambda: topic.subscription.get_publisher_count() > 0,
                             f'the wait topic {name} matched', timeout)
+            if topic.flow_reply:  # it answers states: a state sent before it listens is lost
+                self.spin_until(lambda: self._hears_states(name),
+                                f'the controller of {name} subscribing a state of valve_node',
+                                timeout)
             self.wait_topics.append(topic)
+
+    def _hears_states(self, topic):
+        """Whether a node publishing topic subscribes to a topic that valve_node publishes."""
+        nodes = {(info.node_namespace, info.node_name)
+                 for info in self.node.get_publishers_info_by_topic(topic)}
+        valves = {(info.node_namespace, info.node_name) for info in
+                  self.node.get_publishers_info_by_topic(self.node.resolve_topic_name(HANDSHAKE))}
+        states = {name for namespace, node in valves for name, _ in
+                  self.node.get_publisher_names_and_types_by_node(node, namespace)}
+        return any((info.node_namespace, info.node_name) in nodes for state in states
+                   for info in self.node.get_subscriptions_info_by_topic(state))
 
     def _own_valve(self, pid, timeout):
         """
