@@ -142,7 +142,7 @@ def table(figures):
         f"suite of {figures['count']}: {s['suite_all_wall_s']:.2f} s; one-scenario suite "
         f"{s['suite_1_wall_s']:.2f} s; overhead per scenario after the first "
         f"{s['suite_overhead_per_scenario_s']:.3f} s = {suite_ratio:.3f} x alone "
-        f"(target <= 0.1)",
+        '(target <= 0.1)',
         f"kit per test: a process {k['process_per_test_s']:.2f} s (overhead "
         f"{k['process_overhead_s']:.2f} s); session fixture {k['session_per_test_s']:.3f} s "
         f"(overhead {k['session_overhead_s']:.3f} s) = {kit_ratio:.3f} x (target <= 0.1)"])

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Suites of scenarios on one valve_node (issue 46), `valve-sim scenario run A B C` as a user types it.
+Suites of scenarios on one valve_node (issue 46): `valve-sim scenario run A B C` as typed.
 
 One suite: a seized main valve on a 21 MPa supply (a fault and a parameter the next
 must not inherit), a healthy step (its messages must equal, bit for bit, those of the

@@ -321,7 +321,7 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
 
 def report_run(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
                ticks_per_clock=None, valve=None):
-    """Run a scenario and write its reports; returns (RunRecord, paths, the run's error or None)."""
+    """Run a scenario, write its reports; returns (RunRecord, paths, the run's error or None)."""
     from valve_sim.analysis.scenarios.report import write_reports
 
     record = RunRecord(scenario, folder)

@@ -82,7 +82,7 @@ class StartValues:
                     raise ParameterError(problem)
                 value = float(value)
             if name in self.read_only and name not in START_ONLY and value != values[name]:
-                raise ParameterError(f"parameter {name!r} is read-only: a restart keeps "
+                raise ParameterError(f'parameter {name!r} is read-only: a restart keeps '
                                      f'{values[name]!r}; start a new valve_node for {value!r}')
             values[name] = value
         params = {name: values[name] for name in SPECS}

@@ -58,7 +58,7 @@ def lockstep_valve_session(tmp_path_factory):
 
 @pytest.fixture
 def shared_lockstep_valve(request, lockstep_valve_session):
-    """The session's valve_node, restarted for this test as the lockstep_valve mark says."""
+    """Restart the session's valve_node for this test as the lockstep_valve mark says."""
     mark = request.node.get_closest_marker('lockstep_valve')
     options = dict(mark.kwargs) if mark else {}
     unknown = sorted(set(options) - {'parameters', 'initial_flow'})
