@@ -37,7 +37,6 @@ ALLOWED = {
     ('ros/raw_take.py', 'NotImplementedError'): 1,  # abstract method
     ('ros/valve_inputs.py', 'NotImplementedError'): 2,  # abstract methods
     ('commands/calibrate.py', 'ValueError'): 4,  # argparse type functions' "invalid value"
-    ('testing/lockstep_valve.py', 'LookupError'): 1,  # measures(at=...): no step there
     ('fmu/relief_valve_fmu.py', 'ImportError'): 1,  # the FMU's entry, where valve_sim is not
     # importable (its errors with it): standard library only, what fmi2Instantiate reports
     ('core/integrator.py', 'ValueError'): 1,  # i40 rewrites the integrator this round

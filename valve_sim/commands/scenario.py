@@ -22,8 +22,11 @@ ticks (--ticks-per-clock; tick by tick with --wait-topic) as fast as the nodes g
 (--rate: at most that many times real time), feeds the scenario's inputs and events,
 and judges its expectations on the recording. Into --out it writes the bag,
 report.txt, report.json, scenario.png, junit.xml and both nodes' logs; it exits 0 only
-if every expectation holds. `valve-sim scenario check FILE.yaml` reads and checks a file
-without running it. The file format: docs/scenarios.md.
+if every expectation holds. Several files, or a folder (its *.yaml files in name order),
+run as a suite (ros.scenario_suite): valve_node starts once, each scenario from its own
+start in --out/NN_<name>/, one JUnit file with a testsuite per scenario and
+summary.txt in --out; exit 0 only if every scenario passes. `valve-sim scenario check`
+reads and checks files without running them. The file format: docs/scenarios.md.
 """
 
 import argparse
@@ -56,7 +59,9 @@ def add_arguments(parser):
                                     formatter_class=parser.formatter_class,
                                     description='run a scenario on valve_node in lockstep and '
                                     'judge its expectations (exit 0 only if all hold)')
-    run_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
+    run_parser.add_argument('file', metavar='FILE.yaml', nargs='+',
+                            help='the scenario (docs/scenarios.md); several, or a folder of '
+                            'them: a suite on one valve_node')
     run_parser.add_argument('--out', metavar='DIR', help='folder for the bag, reports, figure '
                             'and logs (default: a new scenario_<name>_<date>-<time> folder here)')
     run_parser.add_argument('--rate', type=number('a rate', '', 0.0, 1000.0, low_open=True),
@@ -83,7 +88,8 @@ def add_arguments(parser):
                                       formatter_class=parser.formatter_class,
                                       description='read and check a scenario file; prints what '
                                       'it runs')
-    check_parser.add_argument('file', metavar='FILE.yaml', help='the scenario (docs/scenarios.md)')
+    check_parser.add_argument('file', metavar='FILE.yaml', nargs='+',
+                              help='the scenario (docs/scenarios.md); several, or a folder')
 
 
 def describe(scenario):
@@ -100,30 +106,87 @@ def describe(scenario):
     return '\n'.join(lines)
 
 
+def scenario_files(paths):
+    """Return the scenario files of paths: each file, each folder's *.yaml and *.yml sorted."""
+    from valve_sim.core.errors import InputFileError
+
+    files = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            found = sorted(p for p in path.iterdir()
+                           if p.suffix in ('.yaml', '.yml') and p.is_file())
+            if not found:
+                raise InputFileError(f'{path}: a folder without scenario files (*.yaml)')
+            files += found
+        else:
+            files.append(path)
+    return files
+
+
+def check(files):
+    """Read and check each file, print what it runs or why not; returns the exit code."""
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+    from valve_sim.core.errors import USER_ERRORS
+    from valve_sim.recording.tick_bags import bag_column
+
+    if len(files) == 1:
+        print(describe(load_scenario(files[0], bag_column)))
+        return 0
+    broken = 0
+    for file in files:
+        try:
+            print(describe(load_scenario(file, bag_column)))
+        except USER_ERRORS as error:
+            broken += 1
+            print(f'scenario {file}: ERROR {error}')
+    print(f'{len(files) - broken} of {len(files)} scenario files check')
+    return 1 if broken else 0
+
+
 def run(args):
     from valve_sim.analysis.scenarios.bench_scenario import load_scenario
     from valve_sim.recording.tick_bags import bag_column
 
-    scenario = load_scenario(args.file, bag_column)
+    files = scenario_files(args.file)
     if args.action == 'check':
-        print(describe(scenario))
-        return 0
+        return check(files)
+    scenarios = [load_scenario(file, bag_column) for file in files]  # all checked first
     from valve_sim.ros.isolation import claim_domain
-    from valve_sim.ros.scenario_runner import run_and_report
 
     stamp = time.strftime('%Y%m%d-%H%M%S')
-    name = safe_name(scenario.name)  # one path component, whatever the file says
+    suite = len(args.file) > 1 or Path(args.file[0]).is_dir()
+    name = 'suite' if suite else safe_name(scenarios[0].name)  # one path component
     folder = Path(args.out) if args.out else Path.cwd() / f'scenario_{name}_{stamp}'
     folder = make_folder(folder).resolve()
     if args.wait_topic or args.flow_topic:  # the user's nodes are in this domain: join them
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (unset)')
     else:
         domain = claim_domain()
-    progress(f'{scenario.name}: output folder {folder}; ROS_DOMAIN_ID={domain}')
-    record, paths = run_and_report(scenario, folder, args.rate, args.wait_topic, args.junit,
+    what = f'a suite of {len(scenarios)} scenarios' if suite else scenarios[0].name
+    progress(f'{what}: output folder {folder}; ROS_DOMAIN_ID={domain}')
+    if suite:
+        return run_suite(scenarios, folder, args)
+    from valve_sim.ros.scenario_runner import run_and_report
+
+    record, paths = run_and_report(scenarios[0], folder, args.rate, args.wait_topic, args.junit,
                                    progress, args.ticks_per_clock, args.flow_topic)
     print()
     print(paths['report'].read_text(), end='')
     for path in (record.bag, *paths.values()):
         progress(f'wrote {path}')
     return 0 if record.passed else 1
+
+
+def run_suite(scenarios, folder, args):
+    """Run scenarios as a suite on one valve_node; print the summary; returns the exit code."""
+    from valve_sim.ros import scenario_suite
+
+    records, paths, starts = scenario_suite.run_suite(
+        scenarios, folder, args.rate, args.wait_topic, args.junit, progress,
+        args.ticks_per_clock, args.flow_topic)
+    print()
+    print(paths['summary'].read_text(), end='')
+    progress(f'valve_node started {starts} time(s) for {len(records)} scenarios')
+    for path in paths.values():
+        progress(f'wrote {path}')
+    return 0 if all(record.passed for record in records) else 1

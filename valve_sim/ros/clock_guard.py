@@ -20,10 +20,13 @@ its clock's time, and a negative time raises ValueError in its subscription's
 callback, which ends the node; a time at or past 2^31 s cannot be a
 builtin_interfaces/Time stamp (int32 seconds), which every message the node publishes
 needs. GuardedTimeSource is rclpy's TimeSource that ignores such a message and counts
-it (refused, last_refused); install() puts it in place of a node's own.
+it (refused, last_refused); install() puts it in place of a node's own. Time goes
+back to zero only through restart() (valve_node's ~/restart): the next /clock is then
+a first one.
 """
 
 from rclpy.time_source import TimeSource
+from rosgraph_msgs.msg import Clock
 
 
 NS_PER_S = 1_000_000_000
@@ -63,3 +66,7 @@ class GuardedTimeSource(TimeSource):
             self.last_refused = (msg.clock.sec, msg.clock.nanosec)
             return
         super().clock_callback(msg)
+
+    def restart(self):
+        """Set the clock back to zero, as before the first /clock (a new time base follows)."""
+        super().clock_callback(Clock())

@@ -107,14 +107,17 @@ def valve_arguments(scenario):
     return parameters, ros_args
 
 
+def analyser_parameters(scenario):
+    """Return analyser_node's parameters for a scenario (but its output_dir)."""
+    return {'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': scenario.ambient_pressure,
+            'use_sim_time': 'true'}  # the bag's log times: model time
+
+
 def start_nodes(scenario, folder):
     """Start valve_node (on /clock) and analyser_node for the scenario; returns NodeProcesses."""
-    ambient = scenario.ambient_pressure
     valve, ros_args = valve_arguments(scenario)
-    return start_valve_and_analyser(
-        folder, valve_parameters=valve, valve_ros_args=ros_args,
-        analyser_parameters={'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': ambient,
-                             'use_sim_time': 'true'})  # the bag's log times: model time
+    return start_valve_and_analyser(folder, valve_parameters=valve, valve_ros_args=ros_args,
+                                    analyser_parameters=analyser_parameters(scenario))
 
 
 class AnalyserStatus:
@@ -213,7 +216,7 @@ def check_complete(series, scenario, start_ns, flows=None):
 
 
 def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
-                 ticks_per_clock=None, record=None, flow_topic=None):
+                 ticks_per_clock=None, record=None, flow_topic=None, valve=None):
     """
     Run a BenchScenario in folder (created); returns its RunRecord with the checks judged.
 
@@ -222,19 +225,22 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
     with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
     to fill (default: a new one); flow_topic: a wait topic whose controller supplies
-    the inlet flow from the second tick on (ros.scenario_stepper). Raises the errors
-    of a run that cannot complete (a node died, a refused event, a timeout, an
-    incomplete bag, another run's nodes in the domain), after stopping both nodes;
-    record then holds what the run got to (measure_partial reads the rest).
+    the inlet flow from the second tick on (ros.scenario_stepper); valve: the SuiteValve
+    of a suite (ros.scenario_suite), whose valve_node runs on, restarted for this
+    scenario (else both nodes start here). Raises the errors of a run that cannot
+    complete (a node died, a refused event, a timeout, an incomplete bag, another run's
+    nodes in the domain), after stopping both nodes (a suite's valve_node: the suite
+    does); record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
     record = record or RunRecord(scenario, folder)
     if flow_topic is not None and flow_topic not in wait_topics:
         wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
-    processes = start_nodes(scenario, folder)
-    context = rclpy.Context()
-    rclpy.init(context=context)
+    processes = start_nodes(scenario, folder) if valve is None else valve.start(scenario, folder)
+    context = rclpy.Context() if valve is None else valve.context
+    if valve is None:
+        rclpy.init(context=context)
     driver, failed = None, True  # failed until the run gets through
     try:
         driver = Lockstep(context, processes=processes, rate=rate,
@@ -242,6 +248,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         driver.connect(wait_topics, READY_TIMEOUT)
+        if valve is not None:
+            valve.restart(driver, scenario)
         status = AnalyserStatus(driver.node, folder)
         recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
@@ -272,7 +280,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     finally:
         if driver is not None:
             driver.close()
-        context.try_shutdown()
+        if valve is None:
+            context.try_shutdown()
         progress('stopping both nodes (SIGINT)')
         try:
             processes.stop()
@@ -335,26 +344,35 @@ def measure_partial(record):
 
 
 def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
-                   ticks_per_clock=None, flow_topic=None):
+                   ticks_per_clock=None, flow_topic=None, valve=None):
     """
     Run a scenario and write its reports (scenarios.report); returns (RunRecord, paths).
 
     A run that cannot complete still gets every report, with what was measured up to
     the failure and the error (JUnit: the checks and an error case); the error is then
-    raised again.
+    raised again. valve: as run_scenario's.
     """
+    record, paths, error = report_run(scenario, folder, rate, wait_topics, junit, progress,
+                                      ticks_per_clock, flow_topic=flow_topic, valve=valve)
+    if error is not None:
+        raise error
+    return record, paths
+
+
+def report_run(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
+               ticks_per_clock=None, flow_topic=None, valve=None):
+    """Run a scenario, write its reports; returns (RunRecord, paths, the run's error or None)."""
     from valve_sim.analysis.scenarios.report import write_reports
 
     record = RunRecord(scenario, folder)
     try:
         run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record,
-                     flow_topic)
+                     flow_topic=flow_topic, valve=valve)
     except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as error:
         record.error = str(error) or type(error).__name__
         measure_partial(record)
-        write_reports(record, junit)
-        raise
-    return record, write_reports(record, junit)
+        return record, write_reports(record, junit), error
+    return record, write_reports(record, junit), None
 
 
 def lockstep_messages(bag, topics=(*TICK_TOPICS, STAMPED_FLOW_TOPIC, 'tank_pressure')):

@@ -113,6 +113,13 @@ class CheckedInput(RawTaker):
         """Take stamped messages from now on: each value from its stamp on (hold_at)."""
         self.scheduled = []
 
+    def restart(self, value):
+        """Hold value as at start-up: every value received and its stamps forgotten."""
+        self.value, self.changed, self.received, self.received_ns = value, False, False, None
+        self.covered_ns = None
+        if self.scheduled is not None:
+            self.scheduled = []
+
     def problem(self, value):
         """Return why value is not a valid input, or None."""
         raise NotImplementedError

@@ -27,6 +27,8 @@ Names are relative, so namespaces and remapping work. Pressures are ABSOLUTE [Pa
   pub /diagnostics           diagnostic_msgs/DiagnosticArray  1 Hz (valve_diagnostics)
   pub fault_status           diagnostic_msgs/DiagnosticArray  latched faults and sensor settings
   srv ~/reset                std_srvs/Trigger           the exact steady state of the inlet flow
+  srv ~/restart              rcl_interfaces/SetParametersAtomically  the start-up state, in
+                             place: parameters (and these over them), a new time base
 
 All messages of one tick carry the model time of the state as header.stamp. The model
 (valve_sim.core.realtime_model, no ROS) decides what a tick comes to; this module adapts
@@ -50,7 +52,7 @@ from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.core.realtime_model import NS_PER_S, RealTimeModel, Status
-from valve_sim.ros import diagnostics
+from valve_sim.ros import diagnostics, valve_restart
 from valve_sim.ros.clock_guard import GuardedTimeSource
 from valve_sim.ros.clock_jumps import tick_times
 from valve_sim.ros.fault_injection import (
@@ -166,6 +168,8 @@ class ReliefValveNode(Node):
         self.add_pre_set_parameters_callback(self.parameters.complete)
         self.add_on_set_parameters_callback(self.parameters.check)
         self.add_post_set_parameters_callback(self.parameters.apply)
+        self.start_values = valve_restart.StartValues(self)  # what ~/restart goes back to
+        valve_restart.serve(self)
         self.get_logger().info(
             f'valve at the steady state of {self.inlet_flow:g} m^3/s'
             + (f' into a tank at {self.tank_pressure:g} Pa (gauge)' if self.tank_pressure else '')

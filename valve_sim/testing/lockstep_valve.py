@@ -55,12 +55,14 @@ from valve_sim.core.errors import (
     ParameterError,
     ProfileError,
     UnavailableError,
+    ValveSimError,
     WrongTypeError,
 )
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
 from valve_sim.core.limits import inlet_flow_problem
 from valve_sim.core.output_files import make_folder
-from valve_sim.core.parameters import STANDARD_ATMOSPHERE
+from valve_sim.core.parameter_sections import node_fqn
+from valve_sim.core.parameters import NODE_NAME, STANDARD_ATMOSPHERE
 from valve_sim.core.quantities import FLOW, parse_quantity
 from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
@@ -70,6 +72,7 @@ from valve_sim.ros.isolation import hold_domain
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import ros_value
+from valve_sim.ros.valve_restart import request_restart
 
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
@@ -80,6 +83,20 @@ PathLike = Union[str, 'os.PathLike[str]']
 MAX_STATES = 600_000
 LOG_LINES = 5  # of valve_node's log in the error of a refused start
 _open_kit = []  # the kit open in this process, if any
+
+
+class NoStepError(ValveSimError, LookupError):
+    """The run has no step at the time asked for."""
+
+
+def start_values(parameters, initial_flow):
+    """Return ({ROS name: value} of parameters, the initial flow [m^3/s]); ValueError if wrong."""
+    try:
+        start = dict(start_parameter(name, value, name)
+                     for name, value in (parameters or {}).items())
+        return start, parse_quantity(initial_flow, FLOW)
+    except (ProfileError, ValueError) as error:
+        raise ParameterError(f'lockstep valve: {error}') from None
 
 
 class LockstepValve:
@@ -103,13 +120,9 @@ class LockstepValve:
                 f'a lockstep valve is already open in this process (log in '
                 f'{_open_kit[0].folder}): close it first; two would share /clock and the '
                 "valve's topics")
-        given = dict(parameters or {})
-        try:
-            start = dict(start_parameter(name, value, name) for name, value in given.items())
-            flow = parse_quantity(initial_flow, FLOW)
-        except (ProfileError, ValueError) as error:
-            raise ParameterError(f'lockstep valve: {error}') from None
+        start, flow = start_values(parameters, initial_flow)
         self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
+        self.namespace = namespace
         self._temporary = None if folder else tempfile.mkdtemp(prefix='valve_')
         self.folder = make_folder(Path(folder or self._temporary))
         self.domain = hold_domain()
@@ -126,19 +139,43 @@ class LockstepValve:
         self._driver = None
         _open_kit.append(self)
         try:
-            self._driver = Lockstep(self.context, namespace, self.processes,
-                                    on_state=self._on_state, record_topics=TICK_TOPICS)
-            self._driver.connect(timeout=START_TIMEOUT)
-            self.max_inlet_flow = self._driver.get_parameters(['max_inlet_flow'])[
-                'max_inlet_flow']
-            self._driver.set_flow(flow)
-            self._driver.start(START_NS)
-            self._await_row(START_NS)
+            self._begin(flow)
         except ChildProcessError as error:
             self._fail_start(error)
         except BaseException:
             self.close()
             raise
+
+    def _begin(self, flow):
+        """Connect a new driver to valve_node and take its first state, at flow's steady state."""
+        self._rows, self._latest, self._events = {}, {}, []
+        self._driver = Lockstep(self.context, self.namespace, self.processes,
+                                on_state=self._on_state, record_topics=TICK_TOPICS)
+        self._driver.connect(timeout=START_TIMEOUT)
+        self.max_inlet_flow = self._driver.get_parameters(['max_inlet_flow'])['max_inlet_flow']
+        self._driver.set_flow(flow)
+        self._driver.start(START_NS)
+        self._await_row(START_NS)
+
+    def restart(self, parameters: Optional[Mapping[str, Any]] = None,
+                initial_flow: Union[float, str] = '5 L/min') -> None:
+        """
+        Bring the valve back to a fresh start, in the same valve_node (its ~/restart).
+
+        As a new LockstepValve(parameters, initial_flow) with this one's params_file and
+        namespace: every parameter at its start-up value with parameters over it, no
+        fault, the sensors, preset and tank as those say, the exact steady state of
+        initial_flow, time from 0 again, no state kept. ValueError for a value the node
+        refuses (then nothing changed).
+        """
+        driver = self._live()
+        start, flow = start_values(parameters, initial_flow)
+        request_restart(driver, node_fqn(self.namespace, NODE_NAME),
+                        {**start, 'initial_inlet_flow': flow}, START_TIMEOUT)
+        self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
+        driver.close()  # a new driver: its input stamps start again with the time base
+        self._driver = None
+        self._begin(flow)
 
     def _fail_start(self, error):
         """valve_node ended while starting: raise its reason from its log, which is kept."""
@@ -281,7 +318,7 @@ class LockstepValve:
         """
         Return the analyser's step records of the run so far (docs/measures.md).
 
-        at: the time [s] of one step; then that step's record, or LookupError.
+        at: the time [s] of one step; then that step's record, or NoStepError (a LookupError).
         """
         steps = self.series.steps(events=self._events)
         if at is None:
@@ -289,7 +326,7 @@ class LockstepValve:
         near = [step for step in steps if abs(step['t_step'] - at) <= 1.5 * self.period]
         if not near:
             found = ', '.join(f'{step["t_step"]:g} s' for step in steps) or 'none'
-            raise LookupError(f'no step at {at:g} s (steps at: {found})')
+            raise NoStepError(f'no step at {at:g} s (steps at: {found})')
         return near[0]
 
     def close(self) -> None:

@@ -27,6 +27,15 @@ the plugin, and warns that the mark is unknown).
 
 The mark's keywords are LockstepValve's (parameters, initial_flow, params_file,
 namespace); without it, the reference valve at 5 L/min.
+
+`shared_lockstep_valve` is the same valve for a test, from ONE valve_node per pytest
+session (per xdist worker: each is a session), restarted in place before each test
+(LockstepValve.restart: valve_node's ~/restart): every parameter at its start-up value
+with the mark's parameters over it, no fault, sensors, preset and tank as those say,
+the exact steady state of the mark's initial_flow, time from 0, no state kept. About a
+tenth of a process's start per test (bench/bench_suite.py). The mark takes parameters
+and initial_flow; a params_file or namespace is the session's (the
+`lockstep_valve_session` fixture, which a conftest.py may override).
 """
 
 import pytest
@@ -35,6 +44,29 @@ import pytest
 def pytest_configure(config):
     config.addinivalue_line('markers', 'lockstep_valve(**options): how the lockstep_valve '
                             'fixture starts valve_node (valve_sim.testing.LockstepValve)')
+
+
+@pytest.fixture(scope='session')
+def lockstep_valve_session(tmp_path_factory):
+    """One valve_node in lockstep for the session (a LockstepValve); stopped at its end."""
+    from valve_sim.testing.lockstep_valve import LockstepValve
+
+    valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
+    yield valve
+    valve.close()
+
+
+@pytest.fixture
+def shared_lockstep_valve(request, lockstep_valve_session):
+    """Restart the session's valve_node for this test as the lockstep_valve mark says."""
+    mark = request.node.get_closest_marker('lockstep_valve')
+    options = dict(mark.kwargs) if mark else {}
+    unknown = sorted(set(options) - {'parameters', 'initial_flow'})
+    if unknown:
+        pytest.fail(f"shared_lockstep_valve: the session's valve_node has its {unknown} "
+                    'already; use the lockstep_valve fixture for them', pytrace=False)
+    lockstep_valve_session.restart(**options)
+    return lockstep_valve_session
 
 
 @pytest.fixture

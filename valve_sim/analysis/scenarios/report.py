@@ -22,7 +22,8 @@ one that holds; for a run that could not complete, the checks of what it measure
 to the failure and one error case), so any CI shows the result. The figure draws p_s,
 the valve positions and the inlet flow over the run, the events and the limits of the
 checks that bound a signal. A failed run's report.txt, report.json and figure say the
-error and show the states recorded up to it.
+error and show the states recorded up to it. A suite of scenarios gets one JUnit file
+with a testsuite per scenario, and a summary listing each (write_suite_reports).
 """
 
 from datetime import datetime, timezone
@@ -92,14 +93,36 @@ def report_document(run):
 
 def junit_document(scenario, checks, wall_s=0.0, error=None):
     """Return the JUnit XML of a run as bytes: a test case per check, and the error's case."""
-    word, failed = verdict(checks)
-    tests = len(checks) + (error is not None)
-    counts = {'tests': str(tests), 'failures': str(failed),
-              'errors': str(int(error is not None)), 'skipped': '0', 'time': f'{wall_s:.3f}'}
-    suites = ElementTree.Element('testsuites', name='valve-sim scenario', **counts)
+    return suite_junit_document([(scenario, checks, wall_s, error)])
+
+
+def suite_junit_document(runs):
+    """
+    Return the JUnit XML of runs [(scenario, checks, wall_s, error)] as bytes.
+
+    One testsuite per run (a suite of scenarios has one per scenario): a test case
+    per check, and the error's case for a run that did not complete.
+    """
+    totals = dict.fromkeys(('tests', 'failures', 'errors'), 0)
+    suites = ElementTree.Element('testsuites', name='valve-sim scenario')
+    for scenario, checks, wall_s, error in runs:
+        counts = _testsuite(suites, scenario, checks, wall_s, error)
+        for key in totals:
+            totals[key] += counts[key]
+    suites.attrib.update({key: str(value) for key, value in totals.items()},
+                         skipped='0', time=f'{sum(run[2] for run in runs):.3f}')
+    return xml_bytes(suites)
+
+
+def _testsuite(suites, scenario, checks, wall_s, error):
+    """Add a run's testsuite to suites; return its counts."""
+    _, failed = verdict(checks)
+    counts = {'tests': len(checks) + (error is not None), 'failures': failed,
+              'errors': int(error is not None)}
     suite = ElementTree.SubElement(
         suites, 'testsuite', name=scenario.name, hostname=socket.gethostname(),
-        timestamp=datetime.now(timezone.utc).isoformat(timespec='seconds'), **counts)
+        timestamp=datetime.now(timezone.utc).isoformat(timespec='seconds'),
+        skipped='0', time=f'{wall_s:.3f}', **{key: str(value) for key, value in counts.items()})
     properties = ElementTree.SubElement(suite, 'properties')
     ElementTree.SubElement(properties, 'property', name='file', value=str(scenario.path))
     for check in checks:
@@ -116,7 +139,7 @@ def junit_document(scenario, checks, wall_s=0.0, error=None):
         case = ElementTree.SubElement(suite, 'testcase', classname=f'scenario.{scenario.name}',
                                       name='run', time=f'{wall_s:.3f}')
         ElementTree.SubElement(case, 'error', message=error).text = error
-    return xml_bytes(suites)
+    return counts
 
 
 def plot_run(path, run):
@@ -196,4 +219,25 @@ def write_reports(run, junit_path=None):
     paths['junit'] = write_junit(
         junit_document(run.scenario, run.checks, run.wall_s, run.error), folder, junit_path
     )
+    return paths
+
+
+def suite_summary(runs):
+    """Return a suite's summary as text: a line per run (its verdict and folder), the totals."""
+    lines = []
+    for run in runs:
+        word, failed = verdict(run.checks)
+        lines.append(f'  {"ERROR" if run.error else word:6} {run.scenario.name}: '
+                     f'{len(run.checks) - failed} of {len(run.checks)} checks hold '
+                     f'({run.folder})' + (f'; {run.error}' if run.error else ''))
+    passed = sum(run.passed for run in runs)
+    return '\n'.join([f'suite: {passed} of {len(runs)} scenarios passed', *lines]) + '\n'
+
+
+def write_suite_reports(runs, folder, junit_path=None):
+    """Write a suite's summary.txt and junit.xml (one testsuite per run); return their paths."""
+    paths = {'summary': folder / 'summary.txt'}
+    write_text(paths['summary'], suite_summary(runs))
+    paths['junit'] = write_junit(suite_junit_document(
+        [(run.scenario, run.checks, run.wall_s, run.error) for run in runs]), folder, junit_path)
     return paths
