@@ -66,6 +66,7 @@ from valve_sim.core.model import (
 )
 from valve_sim.core.newton import find_root
 from valve_sim.core.parameters import SPECS, validate
+from valve_sim.core.stability import growing_mode
 
 
 PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5  # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
@@ -320,6 +321,15 @@ def steady_state(
     problem = state_problem(state, params['burst_pressure'])
     if problem:
         raise SteadyStateError(f'the steady state at {inlet_flow:g} m^3/s is refused: {problem}')
+    growing = growing_mode(c, state, inlet_flow, tank_pressure)
+    if growing is not None:
+        # Every balance holds, yet the valve does not rest there: any disturbance grows.
+        raise SteadyStateError(
+            f'no stable steady state at inlet flow {inlet_flow:g} m^3/s'
+            + (f' (faults: {faults.describe()})' if faults.active() else '')
+            + f': the only equilibrium found (p_s = {state[P_S]:.6g} Pa) is unstable, a mode '
+            f'at {abs(growing.imag) / (2 * np.pi):.4g} Hz grows at {growing.real:.3g} 1/s'
+        )
     if 0.0 < params['supply_pressure_limit'] < state[P_S]:
         raise SteadyStateError(
             f'the valve passes {inlet_flow:g} m^3/s only at p_s = {state[P_S]:.6g} Pa, above '
