@@ -41,7 +41,6 @@ ALLOWED = {
     ('testing/lockstep_valve.py', 'LookupError'): 1,  # measures(at=...): no step there
     ('ros/simulation_server.py', 'ImportError'): 1,  # simulation_interfaces missing
     ('fmu/master_logger.py', 'RuntimeError'): 1,  # standard library only: no valve_sim there
-    ('core/integrator.py', 'ValueError'): 1,  # i40 rewrites the integrator this round
     ('analysis/design/robust_yield.py', 'ValueError'): 11,  # rows parsed, caught as ValueError
     ('core/output_files.py', 'IsADirectoryError'): 1,  # i43 rewrites it; a USER_OS_ERROR
     ('__init__.py', 'AttributeError'): 1,  # module __getattr__'s protocol (PEP 562)

@@ -50,10 +50,11 @@ valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
 """
 
 import numpy as np
-from valve_sim.core.errors import IntegrationError, OverpressureError
+from valve_sim.core.errors import IntegrationError, OverpressureError, ParameterError
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import (
     describe_state,
+    highest_chamber,
     NUMERICAL_CEILING,
     state_check,
     STATE_DIVERGED,
@@ -69,6 +70,7 @@ from valve_sim.core.model import (
     P_M,
     P_P,
     P_S,
+    STATE_NAMES,
     X,
     X_DOT,
     Y,
@@ -368,6 +370,7 @@ def limits_error(start, reached, inlet_flows, done, c, step, time, verdict, tank
             f'{state_problem(reached, c.burst_pressure)} {where}; '
             'the last state within the limits is kept.'
         )
+        error.chamber = STATE_NAMES[highest_chamber(reached)]
     else:
         error = IntegrationError(
             f'integration diverged {where}: {describe_state(reached)}. '
@@ -388,7 +391,7 @@ def step_inputs(inlet_flows, tank_pressures):
         return inlet_flows, np.full(len(inlet_flows), float(tank_pressures))
     tank_pressures = np.ascontiguousarray(tank_pressures, dtype=float)
     if tank_pressures.shape != inlet_flows.shape:
-        raise ValueError(
+        raise ParameterError(
             f'{len(tank_pressures)} tank pressures for {len(inlet_flows)} inlet flows'
         )
     return inlet_flows, tank_pressures

@@ -45,7 +45,7 @@ from valve_sim.core.flow_step import (  # noqa: F401 (also offered here)
     LITRE_PER_MINUTE,
     TankPressure,
 )
-from valve_sim.core.integrator import advance, step_inputs, step_problem
+from valve_sim.core.integrator import advance, step_inputs
 from valve_sim.core.invariants import run_alarms
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import schedule_problem, tank_pressure_problem
@@ -57,6 +57,7 @@ from valve_sim.core.model import (
     X_DOT,
 )
 from valve_sim.core.parameters import validate
+from valve_sim.core.step_check import check_integrable
 from valve_sim.core.steady_state import steady_state
 
 
@@ -282,11 +283,7 @@ def run_flows(
     if initial_tank_pressure is None:
         initial_tank_pressure = float(tanks[0]) if len(tanks) else float(tank_pressures)
     state = steady_state(params, initial_flow, faults, initial_tank_pressure)
-    problem = step_problem(
-        coefficients(params, faults), step_size, state, initial_tank_pressure
-    )
-    if problem:
-        raise ParameterError(problem)
+    check_integrable(params, step_size, state, faults, initial_tank_pressure)
     check_schedule(params, flows, tanks)
     initial = state.copy()
     records, events, start, halted = [], [], 0, None

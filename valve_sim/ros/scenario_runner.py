@@ -75,6 +75,7 @@ class RunRecord:
     clock_steps: int = 0  # /clock messages of the stepping (each up to ticks_per_clock ticks)
     start_ns: int = START_NS
     error: str = None  # why the run did not complete
+    invariant_alarms: str = ''  # valve_node's invariant alarm counts as last reported
 
     @property
     def passed(self):
@@ -121,12 +122,16 @@ class AnalyserStatus:
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.values = {}
+        self.invariant_alarms = ''  # valve_node's ('name: count, ...'), heard on the way
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_status, 10)
 
     def _on_status(self, array):
         for status in array.status:
             if status.name == f'{ANALYSER}: {RECORDING_TASK}':
                 self.values = {pair.key: pair.value for pair in status.values}
+            for pair in status.values:
+                if pair.key == 'invariant_alarms':
+                    self.invariant_alarms = pair.value
 
     def recording(self, topics):
         """Whether the analyser records each of topics (full names)."""
@@ -234,6 +239,7 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
                                   for topic, (_, sent) in inputs.items()),
                           f'analyser_node recording all {scenario.ticks + 1} states and '
                           'every input sent', DRAIN_TIMEOUT)
+        record.invariant_alarms = status.invariant_alarms
     finally:
         if driver is not None:
             driver.close()
