@@ -42,8 +42,8 @@ from hypothesis import given, HealthCheck, seed, settings
 from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.parameters import load_parameters
-from valve_sim.core.step_check import check_integrable
 from valve_sim.core.steady_state import steady_state
+from valve_sim.core.step_check import check_integrable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'test' / 'core'))
 from test_properties import catalogue_cases, valve_cases  # noqa: E402,I100 (one copy)

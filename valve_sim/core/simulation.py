@@ -57,8 +57,8 @@ from valve_sim.core.model import (
     X_DOT,
 )
 from valve_sim.core.parameters import validate
-from valve_sim.core.step_check import check_integrable
 from valve_sim.core.steady_state import steady_state
+from valve_sim.core.step_check import check_integrable
 
 
 @dataclass
