@@ -436,11 +436,11 @@ def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, referen
     valve.close()
 
 
-def test_a_divergence_is_discarded_with_its_reason_until_a_parameter_changes(
+def test_a_valve_the_step_cannot_integrate_is_discarded_until_a_parameter_changes(
     unzipped, reference
 ):
-    # A 1 mm^3 intermediate chamber (1 L/min fed from the start: it starts) cannot pass
-    # max_inlet_flow at any sub-step allowed: refused before it runs (core/step_check.py).
+    # A 1 mm^3 intermediate chamber cannot pass max_inlet_flow at any sub-step allowed: the
+    # FMU does not start it (core/step_check.py) and discards each step with the reason.
     valve = Valve(unzipped, 'refused', {'intermediate_volume': 1e-9}).initialise()
     for _ in range(2):
         with pytest.raises(FMICallException) as discard:

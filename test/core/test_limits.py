@@ -98,12 +98,12 @@ def test_overpressure_is_reported_apart_from_divergence(reference):
     assert np.array_equal(state, before)
     flood = np.full(10, 0.05)
     assert crossing_is_accurate(state, flood, 0, coefficients(generous), 1e-5), 'physics'
-    # A 1 mm^3 intermediate chamber needs sub-steps below MIN_SUB_STEP (the runs' start
-    # refuses it, step_check; advance() alone has no such check): a divergence, never an
-    # overpressure, although its first step's supply pressure stays far below the limit.
+    # A 1 mm^3 intermediate chamber needs sub-steps below MIN_SUB_STEP at 100 L/min (a
+    # run's start refuses it, step_check; advance() alone has no such check): a
+    # divergence (at 3 ms), never an overpressure.
     tiny = {**generous, 'intermediate_volume': 1e-9}
     with pytest.raises(IntegrationError, match='diverged') as failure:
-        advance(state, np.full(2000, FLOW), coefficients(tiny), 1e-5)
+        advance(state, np.full(2000, 100 * LITRE_PER_MINUTE), coefficients(tiny), 1e-5)
     assert not isinstance(failure.value, OverpressureError)
 
 

@@ -116,7 +116,7 @@ def simulate_batch(
     results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
     for index, params in enumerate(params_list):
         try:
-            state = steady_state(params, flow_step.initial_flow)
+            state = steady_state(params, flow_step.initial_flow, stable=False)
             check_integrable(params, step_size, state)
             check_schedule(params, flows)
         except (ParameterError, SteadyStateError) as error:

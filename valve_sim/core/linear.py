@@ -99,7 +99,7 @@ def modes(
     """
     import scipy.linalg  # here, not at the top: valve_node's start needs only jacobian
 
-    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure, stable=False)
     eigenvalues, left, right = scipy.linalg.eig(
         jacobian(params, state, inlet_flow, tank_pressure=tank_pressure), left=True, right=True
     )
@@ -176,6 +176,6 @@ def slowest_decay_rate(params, inlet_flows):
     Raises SteadyStateError where a steady state cannot be found.
     """
     return min(
-        float(np.min(-np.linalg.eigvals(jacobian(params, steady_state(params, flow), flow)).real))
-        for flow in inlet_flows
+        float(np.min(-np.linalg.eigvals(jacobian(params, equilibrium, flow)).real))
+        for flow, equilibrium in ((q, steady_state(params, q, stable=False)) for q in inlet_flows)
     )

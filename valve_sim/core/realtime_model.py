@@ -120,7 +120,7 @@ class RealTimeModel:
 
     def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
         params = validate(params)  # ParameterError naming what is wrong or missing
-        self.state = steady_state(params, inlet_flow, faults, tank_pressure)
+        self.state = steady_state(params, inlet_flow, faults, tank_pressure, stable=False)
         check_integrable(params, step_size, self.state, faults, tank_pressure)
         self.tank_pressure = tank_pressure
         self.time_ns = None
@@ -303,7 +303,9 @@ class RealTimeModel:
         steady state beyond the physical limits. A reset resumes a halted model.
         """
         tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
-        self.state = steady_state(self.params, inlet_flow, self.faults, tank_pressure)
+        self.state = steady_state(
+            self.params, inlet_flow, self.faults, tank_pressure, stable=False
+        )
         self.tank_pressure = tank_pressure
         self.monitor.restart()
         self.resume()

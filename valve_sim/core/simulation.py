@@ -282,7 +282,7 @@ def run_flows(
     flows, tanks = step_inputs(flows, tank_pressures)
     if initial_tank_pressure is None:
         initial_tank_pressure = float(tanks[0]) if len(tanks) else float(tank_pressures)
-    state = steady_state(params, initial_flow, faults, initial_tank_pressure)
+    state = steady_state(params, initial_flow, faults, initial_tank_pressure, stable=False)
     check_integrable(params, step_size, state, faults, initial_tank_pressure)
     check_schedule(params, flows, tanks)
     initial = state.copy()

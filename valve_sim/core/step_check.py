@@ -51,7 +51,7 @@ def _max_flow_problem(items, faults, step, tank_pressure):
     params = dict(items)
     flow = params['max_inlet_flow']
     try:
-        state = steady_state(params, flow, faults, tank_pressure)
+        state = steady_state(params, flow, faults, tank_pressure, stable=False)
     except SteadyStateError:
         return None
     rate = fastest_chamber_rate(state, coefficients(params, faults), tank_pressure)
