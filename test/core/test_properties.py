@@ -52,10 +52,16 @@ def valve_cases(draw):
     params = dict(reference)
     for name in SCALED:
         params[name] = reference[name] * draw(st.floats(*SCALE))
+    return preset_and_inputs(draw, params)
+
+
+def preset_and_inputs(draw, params):
+    """Draw a preset for params, faults and inputs: valve_cases' tuple (refused: none)."""
+    from valve_sim.core.errors import ParameterError
     preset = draw(st.floats(3e6, 10e6))
     try:
         params = with_preset_pressure(validate(params), preset)
-    except SteadyStateError:  # a valve refused before any run: no case
+    except (ParameterError, SteadyStateError):  # a valve refused before any run: no case
         assume(False)
     names = draw(st.lists(st.sampled_from(sorted(FAULT_DRAWS)), max_size=2, unique=True))
     faults = HEALTHY.changed({name: draw(FAULT_DRAWS[name]) for name in names})
@@ -90,24 +96,12 @@ def catalogue_value(spec):
 def catalogue_cases(draw, free=FREE_PARAMETERS, steps=STEP_SIZES):
     """Like valve_cases, with free (min, max) parameters drawn over the whole catalogue."""
     from valve_sim.core.catalogue import MODEL
-    from valve_sim.core.errors import ParameterError
     specs = [spec for spec in MODEL if spec.name not in PHYSICAL_LIMITS]
     params = dict(load_parameters().params)
     for spec in draw(st.lists(st.sampled_from(specs), min_size=free[0], max_size=free[1],
                               unique_by=lambda spec: spec.name)):
         params[spec.name] = draw(catalogue_value(spec))
-    preset = draw(st.floats(3e6, 10e6))
-    try:
-        params = with_preset_pressure(validate(params), preset)
-    except (ParameterError, SteadyStateError):  # refused before any run: counted, no case
-        assume(False)
-    names = draw(st.lists(st.sampled_from(sorted(FAULT_DRAWS)), max_size=2, unique=True))
-    faults = HEALTHY.changed({name: draw(FAULT_DRAWS[name]) for name in names})
-    flows = st.floats(0.5 * L, 25 * L)
-    tanks = st.sampled_from([0.0, 0.0, 2e6, 10e6])
-    ramp = draw(st.sampled_from([0.0, 0.0, 0.02]))
-    step = draw(st.sampled_from(steps))
-    return params, faults, draw(flows), draw(flows), draw(tanks), draw(tanks), ramp, step
+    return (*preset_and_inputs(draw, params), draw(st.sampled_from(steps)))
 
 
 @settings(max_examples=MAX_EXAMPLES, deadline=None, derandomize=True,

@@ -128,7 +128,7 @@ class RealTimeModel:
         self._previous = None  # (params, step_size, faults) before the last retune
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
-        self.saturated = None  # [Pa gauge] a chamber is read at this limit while an overpressure halts
+        self.saturated = None  # [Pa gauge] a chamber read at this limit after an overpressure
         self.saturated_chamber = None  # the state name of that chamber (the one that passed it)
         self.monitor = Monitor()  # the invariants, judged after each advance_to()
         self.relief_flows()  # its kernel loads (or compiles) here, not in the first tick
