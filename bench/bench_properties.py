@@ -57,7 +57,7 @@ MAX_CASE_STEPS = 200_000
 def refusal(params, faults, step, initial_flow, initial_tank):
     """Return why a case is refused before its run (its first words, no numbers), or None."""
     try:
-        state = steady_state(params, initial_flow, faults, initial_tank)
+        state = steady_state(params, initial_flow, faults, initial_tank, stable=False)
         check_integrable(params, step, state, faults, initial_tank)
     except (ParameterError, SteadyStateError) as error:
         words = str(error).split(':')[0].split()
@@ -99,7 +99,7 @@ def main():
 
     campaign()
     print(f'{tried[0]} cases tried in {time.perf_counter() - began:.0f} s: '
-          f'{sum(refused.values())} refused before the run, {cut[0]} run cut short to '
+          f'{sum(refused.values())} refused before the run, {cut[0]} runs cut short to '
           f'{MAX_CASE_STEPS} steps, {len(findings)} with findings')
     for reason, count in refused.most_common():
         print(f'  refused {count}x: {reason}')
