@@ -32,11 +32,10 @@
 # cut to at most MAX_CASE_STEPS steps (reported as cut short).
 
 import argparse
+from collections import Counter
 from pathlib import Path
 import sys
 import time
-
-from collections import Counter
 
 from hypothesis import given, HealthCheck, seed, settings
 from valve_sim.analysis.steps.envelope import property_findings

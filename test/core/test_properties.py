@@ -82,7 +82,7 @@ PHYSICAL_LIMITS = ('max_inlet_flow', 'burst_pressure', 'supply_pressure_limit')
 
 
 def catalogue_value(spec):
-    """A strategy for one parameter within its catalogue limits, its limits included."""
+    """Return a strategy for one parameter within its catalogue limits, the limits included."""
     import math
     low, high = spec.minimum, spec.maximum
     if low > 0.0 and high / low >= 10.0:

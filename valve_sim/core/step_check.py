@@ -30,7 +30,7 @@ from functools import lru_cache
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.errors import ParameterError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.integrator import max_splits, STEP_RATE_LIMIT, step_problem
+from valve_sim.core.integrator import max_splits, step_problem, STEP_RATE_LIMIT
 from valve_sim.core.model import fastest_chamber_rate
 from valve_sim.core.steady_state import steady_state
 
