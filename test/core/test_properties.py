@@ -52,10 +52,16 @@ def valve_cases(draw):
     params = dict(reference)
     for name in SCALED:
         params[name] = reference[name] * draw(st.floats(*SCALE))
+    return preset_and_inputs(draw, params)
+
+
+def preset_and_inputs(draw, params):
+    """Draw a preset for params, faults and inputs: valve_cases' tuple (refused: none)."""
+    from valve_sim.core.errors import ParameterError
     preset = draw(st.floats(3e6, 10e6))
     try:
         params = with_preset_pressure(validate(params), preset)
-    except SteadyStateError:  # a valve refused before any run: no case
+    except (ParameterError, SteadyStateError):  # a valve refused before any run: no case
         assume(False)
     names = draw(st.lists(st.sampled_from(sorted(FAULT_DRAWS)), max_size=2, unique=True))
     faults = HEALTHY.changed({name: draw(FAULT_DRAWS[name]) for name in names})
@@ -63,6 +69,47 @@ def valve_cases(draw):
     tanks = st.sampled_from([0.0, 0.0, 2e6, 10e6])
     ramp = draw(st.sampled_from([0.0, 0.0, 0.02]))
     return params, faults, draw(flows), draw(flows), draw(tanks), draw(tanks), ramp
+
+
+# The whole catalogue (core/catalogue.py MODEL): each drawn parameter anywhere within its
+# limits, log-uniform where they span a decade or more, its limits themselves often (the
+# corners: a 0.1 g main valve, a 1 mm^3 chamber). Limits of the run's cost, not of the valve:
+# FREE_PARAMETERS drawn at once in the suite (bench_properties --catalogue draws all), the
+# catalogue's step sizes from STEP_SIZES (1e-7 s runs 100 x longer than 1e-5 s).
+FREE_PARAMETERS = (1, 3)
+STEP_SIZES = (1e-5, 1e-4)
+PHYSICAL_LIMITS = ('max_inlet_flow', 'burst_pressure', 'supply_pressure_limit')
+
+
+def catalogue_value(spec):
+    """Return a strategy for one parameter within its catalogue limits, the limits included."""
+    import math
+    low, high = spec.minimum, spec.maximum
+    if low > 0.0 and high / low >= 10.0:
+        inner = st.floats(math.log(low), math.log(high)).map(math.exp)
+    else:
+        inner = st.floats(low, high)
+    return st.one_of(st.sampled_from([low, high]), inner).map(lambda v: min(max(v, low), high))
+
+
+@st.composite
+def catalogue_cases(draw, free=FREE_PARAMETERS, steps=STEP_SIZES):
+    """Like valve_cases, with free (min, max) parameters drawn over the whole catalogue."""
+    from valve_sim.core.catalogue import MODEL
+    specs = [spec for spec in MODEL if spec.name not in PHYSICAL_LIMITS]
+    params = dict(load_parameters().params)
+    for spec in draw(st.lists(st.sampled_from(specs), min_size=free[0], max_size=free[1],
+                              unique_by=lambda spec: spec.name)):
+        params[spec.name] = draw(catalogue_value(spec))
+    return (*preset_and_inputs(draw, params), draw(st.sampled_from(steps)))
+
+
+@settings(max_examples=MAX_EXAMPLES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(catalogue_cases())
+def test_valves_across_the_catalogue_integrate_soundly(case):
+    params, faults, *inputs, step = case
+    assert property_findings(params, faults, *inputs, end_time=0.1, step_size=step) == []
 
 
 @settings(max_examples=MAX_EXAMPLES, deadline=None, derandomize=True,

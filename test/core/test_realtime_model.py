@@ -17,7 +17,7 @@
 import numpy as np
 import pytest
 from valve_sim.core.coefficients import coefficients
-from valve_sim.core.errors import IntegrationError, OverpressureError
+from valve_sim.core.errors import IntegrationError, OverpressureError, ParameterError
 from valve_sim.core.integrator import advance
 from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters
@@ -90,8 +90,9 @@ def test_divergence_leaves_state_and_model_time_unchanged(model):
 def test_trial_refuses_a_diverging_change_without_touching_the_model(model, reference):
     state = model.state.copy()
     model.trial(reference, 1e-5, FLOW)
-    with pytest.raises(IntegrationError):  # a 0.1 g main valve at 100 us: beyond MAX_SPLITS
-        model.trial({**reference, 'main_valve_mass': 1e-4}, 1e-4, FLOW)
+    # A 1 mm^3 intermediate chamber cannot pass max_inlet_flow at any sub-step allowed.
+    with pytest.raises(ParameterError, match='cannot be integrated'):
+        model.trial({**reference, 'intermediate_volume': 1e-9}, 1e-5, FLOW)
     assert np.array_equal(model.state, state) and model.step_size == 1e-5
 
 
@@ -226,9 +227,12 @@ def test_update_halts_after_a_roll_back_whose_parameters_refuse_the_input(model,
 
 
 def test_update_tells_a_divergence_from_an_overpressure(reference):
-    """A step size a 0.1 g main valve cannot take even split: a divergence, no overpressure."""
-    model = RealTimeModel({**reference, 'main_valve_mass': 1e-4}, 1e-4, FLOW)
+    """A valve the step cannot integrate (retuned without its trial): a divergence."""
+    model = RealTimeModel(reference, 1e-5, FLOW)
     model.start(START_NS)
-    outcome = model.update(START_NS + 100_000_000, 2 * FLOW, max_lag_ns=10**9)
+    model.retune({**reference, 'intermediate_volume': 1e-9}, 1e-5)  # step_check refuses it
+    model._previous = None  # the node would have refused it: here nothing to roll back to
+    outcome = model.update(START_NS + 100_000_000, reference['max_inlet_flow'], 10**9)
     assert outcome.status is Status.FAILURE and not outcome.overpressure
+    assert isinstance(outcome.error, IntegrationError)
     assert model.saturated is None and np.array_equal(model.output_state(), model.state)

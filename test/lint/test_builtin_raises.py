@@ -39,7 +39,6 @@ ALLOWED = {
     ('commands/calibrate.py', 'ValueError'): 4,  # argparse type functions' "invalid value"
     ('fmu/relief_valve_fmu.py', 'ImportError'): 1,  # the FMU's entry, where valve_sim is not
     # importable (its errors with it): standard library only, what fmi2Instantiate reports
-    ('core/integrator.py', 'ValueError'): 1,  # i40 rewrites the integrator this round
     ('__init__.py', 'AttributeError'): 1,  # module __getattr__'s protocol (PEP 562)
 }
 

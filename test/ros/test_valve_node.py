@@ -336,7 +336,8 @@ def invalid_changes(reference):
             ('first_throttle_outer_diameter', 'must exceed'),
         ),
         ({'main_valve_mass': 'heavy'}, ('main_valve_mass', 'must be a number in kg', 'string')),
-        ({'main_valve_mass': 1e-4}, ('diverge',)),  # beyond MAX_SPLITS sub-steps of RK4
+        # 1 mm^3 between the main throttles: sub-steps below 10 ns at max_inlet_flow
+        ({'intermediate_volume': 1e-9}, ('cannot be integrated', 'max_inlet_flow')),
         ({'preset_pressure': 1e5}, ('pilot_spring_preload', 'limits')),
         ({'initial_inlet_flow': 0.0}, ('read-only', 'initial_inlet_flow')),
     ]

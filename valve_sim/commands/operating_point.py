@@ -56,7 +56,7 @@ def operating_point(params, inlet_flow, tank_pressure=0.0):
     from valve_sim.core.steady_state import steady_state
 
     c = coefficients(params)
-    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure, stable=False)
     p_s, p_m, p_p, p_c, x, _, y, _ = (float(v) for v in state)
     _, q_m2, q_n, q_c, q_s, q_p = (float(q) for q in flows(state, c, tank_pressure))
     return {

@@ -45,6 +45,7 @@ from valve_sim.core.simulation import (
     Waveforms,
 )
 from valve_sim.core.steady_state import steady_state
+from valve_sim.core.step_check import check_integrable
 
 
 LANES = 16  # valves simulate_batch advances together (more gives no further gain, bench/)
@@ -115,7 +116,8 @@ def simulate_batch(
     results, starts, groups = [None] * len(params_list), {}, {lead: [], 0: []}
     for index, params in enumerate(params_list):
         try:
-            state = steady_state(params, flow_step.initial_flow)
+            state = steady_state(params, flow_step.initial_flow, stable=False)
+            check_integrable(params, step_size, state)
             check_schedule(params, flows)
         except (ParameterError, SteadyStateError) as error:
             results[index] = RunResult(error=error)

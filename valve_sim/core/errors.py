@@ -98,7 +98,13 @@ class IntegrationError(ValveSimError, RuntimeError):
 
 
 class OverpressureError(IntegrationError):
-    """A chamber pressure passed burst_pressure: a physical limit, not a numerical failure."""
+    """
+    A chamber pressure passed burst_pressure: a physical limit, not a numerical failure.
+
+    chamber: the state name of the chamber that passed it (the highest).
+    """
+
+    chamber = 'supply_pressure'
 
 
 class SteadyStateError(ValveSimError, RuntimeError):

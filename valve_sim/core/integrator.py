@@ -20,10 +20,11 @@ do we, in one kernel shared by the offline tools and the real-time node. After
 each step the valves are kept at their seats and end stops (inelastic contact),
 and the state is checked against the physical limits (valve_sim.core.limits):
 beyond burst_pressure the integration stops with OverpressureError, a
-non-finite or absurd state stops it with IntegrationError. A supply pressure
-beyond burst_pressure counts as an overpressure only if the step that crossed it
-was accurate (one step and two half steps agree): a numerical instability
-that happens to cross the limit first is a divergence.
+non-finite or absurd state stops it with IntegrationError. A chamber beyond
+burst_pressure (the supply, or an inner chamber such as V_p compressed by the main
+valve that a tank step slammed open) counts as an overpressure only if the step
+that crossed it was accurate (one step and two half steps agree in every chamber):
+a numerical instability that happens to cross the limit first is a divergence.
 
 Each step of the schedule is taken as n equal RK4 sub-steps, n chosen by
 splits_needed(): at least what keeps RK4 stable on the stiffest chamber
@@ -37,7 +38,9 @@ paper's operating points n is 1. Before, n was capped at 8 and judged by the
 stiffness bound alone: a state that needed more (a broken or weakened pilot spring,
 a blocked damping orifice) was integrated unstably, and the run settled in a
 numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
-"Step splitting"). A step that needs more than MAX_SPLITS is a divergence.
+"Step splitting"). A step that needs more than max_splits() (MAX_SPLITS, or sub-steps
+of MIN_SUB_STEP at larger steps) is a divergence; step_problem() refuses a valve and step
+that would need more from the start.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -47,10 +50,11 @@ valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
 """
 
 import numpy as np
-from valve_sim.core.errors import IntegrationError, OverpressureError
+from valve_sim.core.errors import IntegrationError, OverpressureError, ParameterError
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import (
     describe_state,
+    highest_chamber,
     NUMERICAL_CEILING,
     state_check,
     STATE_DIVERGED,
@@ -60,11 +64,13 @@ from valve_sim.core.limits import (
 )
 from valve_sim.core.model import (
     derivatives,
+    fastest_body_rate,
     fastest_chamber_rate,
     P_C,
     P_M,
     P_P,
     P_S,
+    STATE_NAMES,
     X,
     X_DOT,
     Y,
@@ -78,10 +84,14 @@ STEP_RATE_LIMIT = 2.0
 # At most this many sub-steps per step (10 ns at the paper's 10 us): beyond it the parameters
 # make a chamber faster than any step the real-time node can afford (a divergence).
 MAX_SPLITS = 1024
+# ... or as many as make sub-steps of MIN_SUB_STEP [s] (about the paper's 10 us / MAX_SPLITS),
+# whichever is more: the physics sets the sub-step a valve needs, so a valve that integrates
+# at 10 us is not a divergence at 100 us (the catalogue's largest step).
+MIN_SUB_STEP = 1e-8
 # A sub-step is accurate when it agrees with two half sub-steps within this share of
 # burst_pressure (pressures) and of the stroke (positions): 1e-6 is 35 Pa at 35 MPa.
 ERROR_TOLERANCE = 1e-6
-# An accurate step: its supply pressure agrees with two half steps' within this share of p_burst.
+# An accurate step: its chamber pressures agree with two half steps' within this share of p_burst.
 CROSSING_TOLERANCE = 1e-3
 # The split is chosen every this many steps (0.1 ms at 10 us) and kept in between, and
 # whenever an input moved since the last choice by more than INPUT_CHANGE (flow [m^3/s],
@@ -171,10 +181,18 @@ def step_error(whole, halves, c):
 
 
 @jit
+def max_splits(step):
+    """Return the most sub-steps a step of size step [s] may take (MAX_SPLITS, MIN_SUB_STEP)."""
+    return max(MAX_SPLITS, int(step / MIN_SUB_STEP))
+
+
+@jit
 def stable_splits(state, c, step, tank_pressure=0.0):
-    """Return the sub-steps that keep RK4 stable on the stiffest chamber (<= MAX_SPLITS + 1)."""
-    rate = fastest_chamber_rate(state, c, tank_pressure)
-    return min(int(step * rate / STEP_RATE_LIMIT) + 1, MAX_SPLITS + 1)
+    """Return the sub-steps keeping RK4 stable on the fastest chamber or body (<= max_splits+1)."""
+    rate = max(
+        fastest_chamber_rate(state, c, tank_pressure), fastest_body_rate(state, c, tank_pressure)
+    )
+    return min(int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step) + 1)
 
 
 @jit
@@ -185,10 +203,11 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     At least what keeps RK4 stable on the stiffest chamber, at least half of previous
     (the last choice), and doubled until a sub-step agrees with two half sub-steps
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
-    than MAX_SPLITS: MAX_SPLITS + 1, which the caller takes as a divergence.
+    than max_splits(step): that + 1, which the caller takes as a divergence.
     """
     splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
-    while splits <= MAX_SPLITS:
+    limit = max_splits(step)
+    while splits <= limit:
         h = step / splits
         # The sub-step, then two half sub-steps, through ONE call of rk4_step: every
         # call site of an inline='always' kernel compiles the model's equations again.
@@ -204,7 +223,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
         if step_error(whole, halves, c) <= 1.0:
             return splits
         splits *= 2
-    return MAX_SPLITS + 1
+    return limit + 1
 
 
 @jit
@@ -238,7 +257,7 @@ def rk4_steps(
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
-    holds those values) or needed more than MAX_SPLITS sub-steps (STATE_DIVERGED).
+    holds those values) or needed more than max_splits(step) sub-steps (STATE_DIVERGED).
     """
     current = as_tuple(state)
     row = 0
@@ -253,7 +272,7 @@ def rk4_steps(
             chosen_q, chosen_p_t = q, p_t
         else:
             splits = max(splits, stable_splits(current, c, step, p_t))
-        if splits > MAX_SPLITS:
+        if splits > max_splits(step):
             state[:] = current
             return k, STATE_DIVERGED
         h = step / splits
@@ -272,6 +291,37 @@ def rk4_steps(
                 row += 1
     state[:] = current
     return inlet_flows.shape[0], STATE_OK
+
+
+def step_problem(c, step, state=None, tank_pressure=0.0):
+    """
+    Return why step [s] cannot integrate the valve of Coefficients c, or None if it can.
+
+    The bodies' modes (model.fastest_body_rate) do not depend on the state but for the
+    flow force, bounded here at p_c - p_t = burst_pressure; the chambers' rates do, and
+    are judged at the start state if given (tank_pressure [Pa, gauge] there). If keeping
+    RK4 stable on either needs more than max_splits(step), the run would diverge at
+    once: it is refused before it starts. (A chamber that the run itself makes that
+    stiff later is still a divergence.)
+    """
+    bound = np.zeros(8)
+    bound[P_C] = c.burst_pressure
+    body = fastest_body_rate(bound, c, 0.0)
+    chamber = 0.0 if state is None else fastest_chamber_rate(state, c, tank_pressure)
+    rate = max(body, chamber)
+    needed, limit = int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step)
+    if needed <= limit:
+        return None
+    what = (
+        'its main valve and pilot poppet on their fluid springs ring at up to '
+        f'{body / (2.0 * np.pi):.4g} Hz' if body >= chamber else
+        f'a chamber relaxes at {chamber:.4g} 1/s at the start state'
+    )
+    return (
+        f'this valve cannot be integrated at step size {step:g} s: {what}, which needs '
+        f'{needed} sub-steps of RK4 per step, more than the {limit} allowed (sub-steps of '
+        f'{step / limit:.3g} s); use heavier bodies or larger chambers'
+    )
 
 
 def crossing_is_accurate(start, inlet_flows, done, c, step, tank_pressures=0.0):
@@ -294,7 +344,7 @@ def crossing_is_accurate(start, inlet_flows, done, c, step, tank_pressures=0.0):
     rk4_steps(
         halves, np.repeat(q, 2), np.repeat(p_t, 2), unlimited, 0.5 * step, 1, np.empty((0, 8))
     )
-    gap = abs(full[P_S] - halves[P_S])  # the supply: the pressure the limit is about
+    gap = np.max(np.abs(full[P_S:P_C + 1] - halves[P_S:P_C + 1]))  # every chamber's
     return bool(gap <= CROSSING_TOLERANCE * c.burst_pressure)
 
 
@@ -320,6 +370,7 @@ def limits_error(start, reached, inlet_flows, done, c, step, time, verdict, tank
             f'{state_problem(reached, c.burst_pressure)} {where}; '
             'the last state within the limits is kept.'
         )
+        error.chamber = STATE_NAMES[highest_chamber(reached)]
     else:
         error = IntegrationError(
             f'integration diverged {where}: {describe_state(reached)}. '
@@ -340,7 +391,7 @@ def step_inputs(inlet_flows, tank_pressures):
         return inlet_flows, np.full(len(inlet_flows), float(tank_pressures))
     tank_pressures = np.ascontiguousarray(tank_pressures, dtype=float)
     if tank_pressures.shape != inlet_flows.shape:
-        raise ValueError(
+        raise ParameterError(
             f'{len(tank_pressures)} tank pressures for {len(inlet_flows)} inlet flows'
         )
     return inlet_flows, tank_pressures

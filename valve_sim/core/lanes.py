@@ -29,7 +29,7 @@ from valve_sim.core.integrator import (
     CHECK_EVERY,
     choice_due,
     limits_error,
-    MAX_SPLITS,
+    max_splits,
     rk4_step,
     splits_needed,
     stable_splits,
@@ -135,7 +135,7 @@ def rk4_lanes(
                     splits[j] = max(splits[j], stable_splits(state, c, step, p_t))
                     alone[j] = faulty[j] or splits[j] > 1
         for j in range(LANES):
-            if completed[j] == steps and splits[j] > MAX_SPLITS:
+            if completed[j] == steps and splits[j] > max_splits(step):
                 completed[j], verdicts[j] = k, STATE_DIVERGED
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):

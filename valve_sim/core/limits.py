@@ -23,15 +23,16 @@ Two parameters bound what the model may be asked and what it may report
 - burst_pressure [Pa, gauge]: no chamber of the real valve gets beyond it, and no
   tank pressure at or beyond it is an input (the tank port is part of the body).
 
-A state is judged by state_check(): OK; OVERPRESSURE, a finite state whose supply
-pressure is beyond burst_pressure (physics: a fault or a flow the valve cannot
-relieve drove it there, and the large supply volume rises slowly, so the step
-that crosses the limit is still an accurate state); or DIVERGED, a state that is
-not finite, beyond what any water-filled chamber can hold in any case, or with one
-of the small inner chambers beyond burst_pressure while the supply is not (numerics
-broke down: a physical pressure rise starts at the supply). The steady-state
-solver, a reset, the integrator after every step and so every published state
-go through it.
+A state is judged by state_check(): OK; OVERPRESSURE, a finite state with a chamber
+beyond burst_pressure (physics: a fault or a flow the valve cannot relieve drove the
+supply there, or a tank pressure stepped near the limit slammed the main valve open
+and its swept volume compressed the pilot chamber beyond the tank); or DIVERGED, a
+state that is not finite or beyond what any water-filled chamber can hold in any
+case. Which chamber rose first says nothing about numerics: the integrator calls a
+crossing an overpressure only if the step that made it was accurate (one step and two
+half steps agree, integrator.crossing_is_accurate), else a divergence. The
+steady-state solver, a reset, the integrator after every step and so every published
+state go through it.
 """
 
 import math
@@ -61,9 +62,12 @@ def state_check(state, burst_pressure):
         if state[i] < PRESSURE_FLOOR or state[i] > NUMERICAL_CEILING:
             return STATE_DIVERGED
         beyond_burst = beyond_burst or state[i] > burst_pressure
-    if not beyond_burst:
-        return STATE_OK
-    return STATE_OVERPRESSURE if state[P_S] > burst_pressure else STATE_DIVERGED
+    return STATE_OVERPRESSURE if beyond_burst else STATE_OK
+
+
+def highest_chamber(state):
+    """Return the index (P_S..P_C) of the chamber at the highest pressure of a state."""
+    return max(range(P_S, P_C + 1), key=lambda i: state[i])
 
 
 def inlet_flow_problem(flow, max_inlet_flow):
@@ -129,15 +133,16 @@ def state_problem(state, burst_pressure):
     """
     Return why a state is impossible, or None if it is within the limits.
 
-    A finite state whose supply pressure is beyond burst_pressure [Pa] is an
-    overpressure, however high (a steady state at an absurd flow); anything else
-    state_check() refuses is not a physical state at all.
+    A finite state with a chamber beyond burst_pressure [Pa]
+    is an overpressure of its highest chamber, however high (a steady state at an
+    absurd flow); anything else state_check() refuses is not a physical state at all.
     """
     if state_check(state, float(burst_pressure)) == STATE_OK:
         return None
-    if math.isfinite(sum(state)) and state[P_S] > burst_pressure:
+    chamber = highest_chamber(state)
+    if math.isfinite(sum(state)) and state[chamber] > burst_pressure:
         return (
-            f'overpressure: supply_pressure = {state[P_S]:.6g} Pa (gauge) exceeds '
+            f'overpressure: {STATE_NAMES[chamber]} = {state[chamber]:.6g} Pa (gauge) exceeds '
             f'burst_pressure (p_burst) = {burst_pressure:g} Pa'
         )
     return f'not a physical state: {describe_state(state)}'

@@ -32,26 +32,14 @@ import math
 
 import numpy as np
 from valve_sim.core.coefficients import coefficients
-from valve_sim.core.model import state_derivative
 from valve_sim.core.parameters import PARAMETERS
+from valve_sim.core.stability import jacobian_of
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
-
-
-STATE_SCALE = np.array([1e6] * 4 + [1e-4, 1e-2, 1e-5, 1e-2])  # typical size of each state
 
 
 def jacobian(params, state, inlet_flow, relative_step=1e-6, tank_pressure=0.0):
     """d(state_dot)/d(state) [8 x 8] at state for inlet flow [m^3/s] and tank pressure [Pa]."""
-    c = coefficients(params)
-    matrix = np.empty((8, 8))
-    for j in range(8):
-        delta = np.zeros(8)
-        delta[j] = STATE_SCALE[j] * relative_step
-        matrix[:, j] = (
-            state_derivative(state + delta, inlet_flow, c, tank_pressure)
-            - state_derivative(state - delta, inlet_flow, c, tank_pressure)
-        ) / (2.0 * delta[j])
-    return matrix
+    return jacobian_of(coefficients(params), state, inlet_flow, tank_pressure, relative_step)
 
 
 STATE_SYMBOLS = ('p_s', 'p_m', 'p_p', 'p_c', 'x', 'x_dot', 'y', 'y_dot')
@@ -111,7 +99,7 @@ def modes(
     """
     import scipy.linalg  # here, not at the top: valve_node's start needs only jacobian
 
-    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure, stable=False)
     eigenvalues, left, right = scipy.linalg.eig(
         jacobian(params, state, inlet_flow, tank_pressure=tank_pressure), left=True, right=True
     )
@@ -188,6 +176,6 @@ def slowest_decay_rate(params, inlet_flows):
     Raises SteadyStateError where a steady state cannot be found.
     """
     return min(
-        float(np.min(-np.linalg.eigvals(jacobian(params, steady_state(params, flow), flow)).real))
-        for flow in inlet_flows
+        float(np.min(-np.linalg.eigvals(jacobian(params, equilibrium, flow)).real))
+        for flow, equilibrium in ((q, steady_state(params, q, stable=False)) for q in inlet_flows)
     )

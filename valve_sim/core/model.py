@@ -243,6 +243,42 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
 
 
 @jit
+def fastest_body_rate(state, c, tank_pressure=0.0):
+    """
+    Return a bound [1/s] on |lambda| of the two bodies' modes: each valve on its fluid springs.
+
+    A valve's motion sweeps its chambers (Eqs. 1-4), whose pressures push it back: a
+    spring beta A^2 / V per chamber, state-independent (the compliances are constant),
+    beside its mechanical spring (and, for the poppet, the flow force's stiffness
+    K_f (p_c - p_t)). omega^2 = sum of the springs / mass, plus the damping's rate c / m.
+    fastest_chamber_rate() leaves these out: a 0.1 g main valve rings at 1.6e6 rad/s,
+    16 x beyond RK4's limit at 10 us, while its chambers are slow.
+    """
+    c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
+    c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
+    main_springs = (
+        c.back_area * c.back_area * c_p
+        + c.supply_force_area * c.supply_force_area * c_s
+        + c.intermediate_force_area * c.intermediate_force_area * c_m
+        + c.main_spring_stiffness
+    )
+    main = (
+        math.sqrt(main_springs / c.main_valve_mass) + c.main_valve_damping / c.main_valve_mass
+    ) * c.main_valve_free
+    poppet_springs = (
+        c.rod_area * c.rod_area * c_s
+        + c.poppet_chamber_area * c.poppet_chamber_area * c_c
+        + c.pilot_spring_stiffness
+        + c.flow_force_gain * abs(state[P_C] - tank_pressure)
+    )
+    poppet = (
+        math.sqrt(poppet_springs / c.pilot_poppet_mass)
+        + c.pilot_poppet_damping / c.pilot_poppet_mass
+    )
+    return max(main, poppet)
+
+
+@jit
 def flows(state, c, tank_pressure=0.0):
     """
     Flows of Eqs. (10)-(15) [m^3/s] as (q_m1, q_m2, q_n, q_c, q_s, q_p).

@@ -49,10 +49,11 @@ from valve_sim.core.errors import IntegrationError, OverpressureError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.invariants import Monitor
-from valve_sim.core.model import P_S, relief_flows
+from valve_sim.core.model import relief_flows, STATE_NAMES
 from valve_sim.core.parameters import validate
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
+from valve_sim.core.step_check import check_integrable
 
 
 NS_PER_S = 1_000_000_000
@@ -119,14 +120,16 @@ class RealTimeModel:
 
     def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
         params = validate(params)  # ParameterError naming what is wrong or missing
-        self.state = steady_state(params, inlet_flow, faults, tank_pressure)
+        self.state = steady_state(params, inlet_flow, faults, tank_pressure, stable=False)
+        check_integrable(params, step_size, self.state, faults, tank_pressure)
         self.tank_pressure = tank_pressure
         self.time_ns = None
         self._use(params, step_size, faults)
         self._previous = None  # (params, step_size, faults) before the last retune
         self._retuned_ns = None  # model time [ns] the last retune took effect (None: at start)
         self.halted = None  # why the model stopped advancing (str), or None while it runs
-        self.saturated = None  # [Pa gauge] p_s is read at this limit while an overpressure halts
+        self.saturated = None  # [Pa gauge] a chamber read at this limit after an overpressure
+        self.saturated_chamber = None  # the state name of that chamber (the one that passed it)
         self.monitor = Monitor()  # the invariants, judged after each advance_to()
         self.relief_flows()  # its kernel loads (or compiles) here, not in the first tick
 
@@ -209,6 +212,7 @@ class RealTimeModel:
             self.halt(str(error))
             if isinstance(error, OverpressureError):
                 self.saturated = self.params['burst_pressure']
+                self.saturated_chamber = error.chamber
             return Outcome(Status.FAILURE, error=error, rolled_back=rolled_back)
         return Outcome(Status.PROGRESS, progress.steps, progress.skipped_ns)
 
@@ -219,15 +223,16 @@ class RealTimeModel:
     def resume(self):
         """Advance again from the held state; return whether the model was halted."""
         halted, self.halted, self.saturated = self.halted, None, None
+        self.saturated_chamber = None
         self.monitor.restart()
         return halted is not None
 
     def output_state(self):
-        """Return the state as read out: p_s at saturated, the limit it passed, if set."""
+        """Return the state as read out: saturated_chamber at saturated, the limit it passed."""
         if self.saturated is None:
             return self.state
         state = self.state.copy()
-        state[P_S] = self.saturated
+        state[STATE_NAMES.index(self.saturated_chamber)] = self.saturated
         return state
 
     def hold_until(self, now_ns):
@@ -239,16 +244,19 @@ class RealTimeModel:
         Integrate TRIAL_STEPS steps from a copy of the state with new parameters (and faults).
 
         tank_pressure [Pa, gauge]: held during the trial (None: the one applied last).
-        Raises IntegrationError if they diverge; the model itself is not touched.
+        Raises ParameterError if the step cannot integrate them at all
+        (step_check), IntegrationError if they diverge; the model itself is not touched.
         """
         state = self.state.copy()
         faults = self.faults if faults is None else apply_faults(state, self.faults, faults)
+        tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
+        check_integrable(params, step_ns(step_size) / NS_PER_S, state, faults, tank_pressure)
         advance(
             state,
             np.full(TRIAL_STEPS, float(inlet_flow)),
             coefficients(params, faults),
             step_ns(step_size) / NS_PER_S,
-            tank_pressures=self.tank_pressure if tank_pressure is None else tank_pressure,
+            tank_pressures=tank_pressure,
         )
 
     def retune(self, params, step_size, faults=None):
@@ -295,7 +303,9 @@ class RealTimeModel:
         steady state beyond the physical limits. A reset resumes a halted model.
         """
         tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
-        self.state = steady_state(self.params, inlet_flow, self.faults, tank_pressure)
+        self.state = steady_state(
+            self.params, inlet_flow, self.faults, tank_pressure, stable=False
+        )
         self.tank_pressure = tank_pressure
         self.monitor.restart()
         self.resume()

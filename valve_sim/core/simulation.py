@@ -58,6 +58,7 @@ from valve_sim.core.model import (
 )
 from valve_sim.core.parameters import validate
 from valve_sim.core.steady_state import steady_state
+from valve_sim.core.step_check import check_integrable
 
 
 @dataclass
@@ -281,7 +282,8 @@ def run_flows(
     flows, tanks = step_inputs(flows, tank_pressures)
     if initial_tank_pressure is None:
         initial_tank_pressure = float(tanks[0]) if len(tanks) else float(tank_pressures)
-    state = steady_state(params, initial_flow, faults, initial_tank_pressure)
+    state = steady_state(params, initial_flow, faults, initial_tank_pressure, stable=False)
+    check_integrable(params, step_size, state, faults, initial_tank_pressure)
     check_schedule(params, flows, tanks)
     initial = state.copy()
     records, events, start, halted = [], [], 0, None

@@ -40,7 +40,7 @@ def steady_curve(params, inlet_flows):
     pressure, main = np.full(len(inlet_flows), np.nan), np.full(len(inlet_flows), np.nan)
     for k, inlet_flow in enumerate(inlet_flows):
         try:
-            state = steady_state(params, inlet_flow)
+            state = steady_state(params, inlet_flow, stable=False)
         except SteadyStateError:
             continue
         pressure[k], main[k] = state[P_S], flows(state, c)[1]
@@ -57,7 +57,7 @@ def flow_for_main_stage_flow(params, main_flow, max_flow):
     c = coefficients(params)
 
     def excess(inlet_flow):
-        return flows(steady_state(params, inlet_flow), c)[1] - main_flow
+        return flows(steady_state(params, inlet_flow, stable=False), c)[1] - main_flow
 
     if excess(max_flow) < 0.0:
         raise SteadyStateError(

@@ -66,6 +66,7 @@ from valve_sim.core.model import (
 )
 from valve_sim.core.newton import find_root
 from valve_sim.core.parameters import SPECS, validate
+from valve_sim.core.stability import growing_mode
 
 
 PSEUDO_TRANSIENT_SUPPLY_VOLUME = 2e-5  # [m^3] small enough to settle within PSEUDO_TRANSIENT_TIME
@@ -273,7 +274,7 @@ def empty_valve(tank_pressure=0.0):
 
 def steady_state(
     params: Mapping[str, float], inlet_flow: float, faults: FaultSet = HEALTHY,
-    tank_pressure: float = 0.0,
+    tank_pressure: float = 0.0, stable: bool = True,
 ) -> np.ndarray:
     """
     Exact steady state [8-array] of the valve for a constant inlet flow [m^3/s].
@@ -285,7 +286,9 @@ def steady_state(
     SteadyStateError when the flow or the tank pressure is not a valid
     input (above max_inlet_flow), when no consistent steady state is found, or when
     the steady state is beyond the physical limits (burst_pressure) or the bench's
-    supply_pressure_limit: a steady state is never an impossible state.
+    supply_pressure_limit: a steady state is never an impossible state. stable: refuse
+    an equilibrium that is linearly unstable too (core/stability.py: the valve does not
+    rest there); False returns it, for a run's start (docs/model.md).
     """
     problem = inlet_flow_problem(inlet_flow, params['max_inlet_flow']) or tank_pressure_problem(
         tank_pressure, params['burst_pressure']
@@ -297,8 +300,8 @@ def steady_state(
     if inlet_flow < TINY_FLOW:
         # The balances are linear in the flow down here (every orifice laminar, the
         # poppet opening proportional to it): extrapolate from two resolvable flows.
-        low = steady_state(params, TINY_FLOW, faults, tank_pressure)
-        high = steady_state(params, 2.0 * TINY_FLOW, faults, tank_pressure)
+        low = steady_state(params, TINY_FLOW, faults, tank_pressure, stable)
+        high = steady_state(params, 2.0 * TINY_FLOW, faults, tank_pressure, stable)
         state = low + (high - low) * (inlet_flow - TINY_FLOW) / TINY_FLOW
         state[Y] = max(state[Y], 0.0)
         return state
@@ -320,6 +323,15 @@ def steady_state(
     problem = state_problem(state, params['burst_pressure'])
     if problem:
         raise SteadyStateError(f'the steady state at {inlet_flow:g} m^3/s is refused: {problem}')
+    growing = growing_mode(c, state, inlet_flow, tank_pressure) if stable else None
+    if growing is not None:
+        # Every balance holds, yet the valve does not rest there: any disturbance grows.
+        raise SteadyStateError(
+            f'no stable steady state at inlet flow {inlet_flow:g} m^3/s'
+            + (f' (faults: {faults.describe()})' if faults.active() else '')
+            + f': the only equilibrium found (p_s = {state[P_S]:.6g} Pa) is unstable, a mode '
+            f'at {abs(growing.imag) / (2 * np.pi):.4g} Hz grows at {growing.real:.3g} 1/s'
+        )
     if 0.0 < params['supply_pressure_limit'] < state[P_S]:
         raise SteadyStateError(
             f'the valve passes {inlet_flow:g} m^3/s only at p_s = {state[P_S]:.6g} Pa, above '

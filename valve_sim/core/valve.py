@@ -135,7 +135,7 @@ def operating_point(params: Mapping[str, float], inlet_flow: float,
     from valve_sim.core.steady_state import steady_state
 
     params = validate(params)
-    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure)
+    state = steady_state(params, inlet_flow, tank_pressure=tank_pressure, stable=False)
     return OperatingPoint(
         float(inlet_flow), float(tank_pressure),
         {name: float(value) for name, value in zip(STATE_NAMES, state)},

@@ -139,7 +139,7 @@ class ReliefValve(Fmi2Slave):
         self._clock_ns = None
         self._applied = None  # (inlet flow, tank pressure) of the last step
         self._alarm_logged = None  # the last invariant alarm logged (core.invariants)
-        self._saturated = False  # halted by an overpressure: p_s shown at burst_pressure
+        self._saturated = False  # halted by an overpressure: the chamber shown at burst_pressure
         self._failed = None  # why the start failed
         self._sensors = SensorStage()  # ideal, for plan_change: the FMU has no sensor stage
         for spec in PARAMETERS:
@@ -289,10 +289,10 @@ class ReliefValve(Fmi2Slave):
         except OverpressureError as error:
             model.hold_until(now_ns)
             model.halt(str(error))
-            self._saturated = True
+            self._saturated = error.chamber
             self.log(
                 f'{error} The model halts there, as valve_node does: it holds its last good '
-                'state and supply_pressure is reported at burst_pressure = '
+                f'state and {error.chamber} is reported at burst_pressure = '
                 f"{model.params['burst_pressure']:g} Pa (gauge), the limit it passed, until "
                 'an input or a parameter changes', Fmi2Status.warning,
             )
@@ -375,8 +375,8 @@ class ReliefValve(Fmi2Slave):
         for index, name in enumerate(STATE_NAMES):
             if name in OUTPUT_STATES:
                 setattr(self, name, float(state[index]))
-        if self._saturated:
-            self.supply_pressure = self.model.params['burst_pressure']
+        if self._saturated in OUTPUT_STATES:  # the chamber that passed burst_pressure
+            setattr(self, self._saturated, self.model.params['burst_pressure'])
         flows = self.model.relief_flows()
         for name, value in zip(OUTPUT_FLOWS, flows):
             setattr(self, name, float(value))

@@ -150,6 +150,7 @@ class NodeStatus:
         conditions=(),
         halted=None,
         saturated=None,
+        chamber='supply_pressure',
     ):
         """
         Build the DiagnosticArray for the window that ends now; start the next window.
@@ -159,12 +160,13 @@ class NodeStatus:
         before the first tick; inputs: InputReport; settings: {name: value} shown as
         they are (units in the names); conditions: [(level, text)] more to report
         (faults, overpressure); halted: why the model stopped advancing, or None
-        while it runs; saturated: [Pa gauge] the limit p_s is published at, or None.
+        while it runs; saturated: [Pa gauge] the limit chamber (a state name) is published
+        at, or None.
         """
         counters, previous = self.counters, self._reported
         status = DiagnosticStatus(name=name, hardware_id=hardware_id)
         status.level, status.message = self._summary(
-            counters, previous, inputs, conditions, halted, saturated
+            counters, previous, inputs, conditions, halted, saturated, chamber
         )
         values = {
             'real_time_factor': self._real_time_factor(steady_now_ns, model_time_ns),
@@ -186,7 +188,10 @@ class NodeStatus:
         array.header.stamp = stamp
         return array
 
-    def _summary(self, counters, previous, inputs, conditions=(), halted=None, saturated=None):
+    def _summary(
+        self, counters, previous, inputs, conditions=(), halted=None, saturated=None,
+        chamber='supply_pressure',
+    ):
         """
         Return (level, message) of the status.
 
@@ -214,7 +219,7 @@ class NodeStatus:
                 'model halted, holding its last good state until a reset, a new inlet flow '
                 'or a parameter change'
                 + (
-                    f'; supply_pressure published at burst_pressure = {saturated:g} Pa '
+                    f'; {chamber} published at burst_pressure = {saturated:g} Pa '
                     '(gauge), the limit it passed'
                     if saturated is not None
                     else ''

@@ -78,6 +78,7 @@ class RunRecord:
     start_ns: int = START_NS
     error: str = None  # why the run did not complete
     flows: object = None  # [m^3/s] the inlet flow sent for each tick (a controller's too)
+    invariant_alarms: str = ''  # valve_node's invariant alarm counts as last reported
 
     @property
     def passed(self):
@@ -132,6 +133,7 @@ class AnalyserStatus:
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.values, self.folder, self.foreign = {}, Path(folder).resolve(), None
+        self.invariant_alarms = ''  # valve_node's ('name: count, ...'), heard on the way
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_status, 10)
 
     def _on_status(self, array):
@@ -142,6 +144,9 @@ class AnalyserStatus:
                     self.values = values
                 else:
                     self.foreign = values.get('file', '?')
+            for pair in status.values:
+                if pair.key == 'invariant_alarms':
+                    self.invariant_alarms = pair.value
 
     def check(self):
         """Raise IncompleteRunError if another analyser_node answers in this ROS domain."""
@@ -276,6 +281,7 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         if others > 0:
             raise IncompleteRunError(f'{others} other valve_node(s) in this ROS domain answered '
                                      'the run too: stop them or run in a domain of its own')
+        record.invariant_alarms = status.invariant_alarms
         failed = False
     finally:
         if driver is not None:

@@ -59,13 +59,13 @@ class TickLogs:
             f'{self._counters.skipped_ticks} tick periods since start'
         )
 
-    def failure(self, outcome, saturated):
+    def failure(self, outcome, saturated, chamber='supply_pressure'):
         """
         Log a failure the model held its last good state after (an Outcome with an error).
 
         At most once a second, with how many were not logged; a roll-back and a halt
-        (FAILURE) are said too. saturated: the model's p_s limit it passed [Pa, gauge],
-        or None.
+        (FAILURE) are said too. saturated: the limit [Pa, gauge] the model's chamber (its
+        state name) passed, or None.
         """
         if not self._failure_logs.due(time.monotonic_ns()):
             self._failures_unlogged += 1
@@ -85,7 +85,7 @@ class TickLogs:
             'the model stops advancing and holds its last good state until a reset, '
             'a new inlet flow or a parameter change'
             + (
-                f'; supply_pressure is published at burst_pressure = {saturated:g} Pa (gauge), '
+                f'; {chamber} is published at burst_pressure = {saturated:g} Pa (gauge), '
                 'the limit it passed, the other topics at their last values'
                 if saturated is not None
                 else ''

@@ -65,6 +65,7 @@ class ValveDiagnostics:
             'fault_schedule_loading': node.schedule_loader.loading,
             'fault_schedule_refused': node.status.schedule_refused,
             'supply_pressure_saturated_at': model.saturated,
+            'saturated_chamber': model.saturated_chamber,
             'fault_schedule_events_pending': injection.schedule.pending(),
             'startup_kernels_s': node.kernels_seconds,
             'receive_threads': node.receive_threads.describe(),
@@ -94,6 +95,7 @@ class ValveDiagnostics:
             conditions,
             model.halted,
             model.saturated,
+            model.saturated_chamber,
         )
         self.publisher.publish(report)
         view = node.live_view

@@ -326,7 +326,7 @@ class ReliefValveNode(Node):
             if outcome.skipped_ns:
                 self.logs.lag_skipped(outcome.skipped_ns)
         elif outcome.error is not None:  # the last good state held; a roll-back followed through
-            self.logs.failure(outcome, self.model.saturated)
+            self.logs.failure(outcome, self.model.saturated, self.model.saturated_chamber)
             if outcome.rolled_back:  # the rest of the undone change too (settings, limits)
                 self.parameters.restore()
 

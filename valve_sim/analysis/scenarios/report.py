@@ -43,6 +43,12 @@ def verdict(checks):
     return 'PASSED' if checks and not failed else 'FAILED', failed
 
 
+def invariant_alarms(run):
+    """Return valve_node's invariant alarms that fired in the run ('name: count, ...'), or ''."""
+    counts = getattr(run, 'invariant_alarms', '') or ''
+    return ', '.join(part for part in counts.split(', ') if part and not part.endswith(': 0'))
+
+
 def report_text(run):
     """Return the report as text: the verdict, how the run went, one line per check."""
     scenario = run.scenario
@@ -59,6 +65,9 @@ def report_text(run):
     if run.error:
         lines[2:2] = [f'  ERROR: the run did not complete: {run.error}',
                       f'  the checks below judge the {states} states recorded up to the failure']
+    alarms = invariant_alarms(run)
+    if alarms:  # valve_sim.core.invariants: valve_node's counts on /diagnostics
+        lines.append(f'  WARNING: invariant alarms of valve_node: {alarms}')
     if scenario.description:
         lines.insert(1, f'  {scenario.description}')
     width = max((len(check.name) for check in run.checks), default=0)
@@ -76,6 +85,7 @@ def report_document(run):
         'file': str(scenario.path),
         'passed': run.passed,
         'error': run.error,
+        'invariant_alarms': invariant_alarms(run),
         'checks': [check.as_dict() for check in run.checks],
         'run': {
             'duration_s': scenario.duration,
