@@ -35,6 +35,20 @@ NAMES = sorted(VALVE_NODE_SPECS)  # every parameter of the catalogue: model, fau
 FRESH = {}  # what the first test found at its start
 
 
+@pytest.fixture(scope='module')
+def lockstep_valve_session(tmp_path_factory):
+    """The plugin's session valve, for this module only (the override its docs offer).
+
+    The suite's later tests start valve_nodes of their own in this session's ROS domain:
+    a session valve_node left running would answer their /clock too.
+    """
+    from valve_sim.testing.lockstep_valve import LockstepValve
+
+    valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
+    yield valve
+    valve.close()
+
+
 def first_ticks(valve):
     """Return the valve's parameters and its states over its first 50 ms at 5 -> 12 L/min."""
     valve.advance(0.01)
