@@ -37,10 +37,12 @@ FRESH = {}  # what the first test found at its start
 
 @pytest.fixture(scope='module')
 def lockstep_valve_session(tmp_path_factory):
-    """The plugin's session valve, for this module only (the override its docs offer).
+    """
+    Give the module the plugin's session valve, stopped at the module's end.
 
-    The suite's later tests start valve_nodes of their own in this session's ROS domain:
-    a session valve_node left running would answer their /clock too.
+    The override the plugin's docs offer: the suite's later tests start valve_nodes of
+    their own in this session's ROS domain, and a session valve_node left running would
+    answer their /clock too.
     """
     from valve_sim.testing.lockstep_valve import LockstepValve
 

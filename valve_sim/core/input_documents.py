@@ -182,9 +182,33 @@ def _refuse_number(node, where, what):
 
 # --- JSON -------------------------------------------------------------------------------------
 
-# A string or a bracket; a string not closed runs to the end. Possessive: the regex keeps no
-# state per character or escape (a backtracking group took ~140 bytes a character).
-_JSON_TOKEN = re.compile(r'"(?:[^"\\]++|\\.)*+"?|[\[\]{}]', re.DOTALL)
+# The characters that open or close something: a bracket, or a string's quote.
+_JSON_SPECIAL = re.compile(r'[\[\]{}"]')
+
+
+def _brackets(text):
+    """
+    Yield the brackets of JSON text that lie outside its strings, in order.
+
+    One pass and no state per character (a regex with a backtracking group kept ~140
+    bytes a character; possessive quantifiers, which keep none, need Python 3.11). A
+    string not closed runs to the end.
+    """
+    position = 0
+    while (found := _JSON_SPECIAL.search(text, position)) is not None:
+        position = found.end()
+        if found.group() != '"':
+            yield found.group()
+            continue
+        while (quote := text.find('"', position)) >= 0:  # the quote that ends the string
+            escape = quote
+            while escape > position and text[escape - 1] == '\\':
+                escape -= 1
+            position = quote + 1
+            if (quote - escape) % 2 == 0:  # an even run of backslashes escapes none
+                break
+        else:
+            return
 
 
 class _BadNumber(ValueError):
@@ -205,8 +229,7 @@ def parse_json(text, kind, source):
     """
     where = f'{kind.name} {source}'
     depth = brackets = 0
-    for token in _JSON_TOKEN.finditer(text):  # memory: one match at a time, none per character
-        bracket = text[token.start()]
+    for bracket in _brackets(text):
         if bracket in '[{':
             depth, brackets = depth + 1, brackets + 1
             if depth > MAX_DEPTH:
