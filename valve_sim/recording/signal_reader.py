@@ -48,7 +48,6 @@ from valve_sim.analysis.steps.signals import (
 from valve_sim.core.errors import CalibrationError, InputFileError
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.rosbag2_metadata import bag_files
-from valve_sim.recording.valve_topics import PARAMETER_EVENTS_TOPIC
 
 
 # What a bag must hold: a rig records supply pressure and inlet flow, rarely the main valve
@@ -144,6 +143,8 @@ def read_recording(
     wanted = {signal_map.topics[role] for role in (*required, *optional)}
     # valve_node's fault_status beside its supply pressure, and its parameter events: their
     # changes end a step's window (analysis.steps.input_events)
+    from valve_sim.recording.valve_topics import PARAMETER_EVENTS_TOPIC  # imports the model
+
     status_topic = signal_map.valve_namespace() + '/fault_status'
     found, problems, events = set(), [], []
     settings = {status_topic: SettingChanges(),
