@@ -61,7 +61,8 @@ except ImportError as error:
     ) from None
 from valve_sim.core.errors import IncompleteRunError
 from valve_sim.ros import node_command, spinning
-from valve_sim.ros.lockstep import LateInputError, Lockstep, NS_PER_S
+from valve_sim.ros.lockstep import Lockstep, NS_PER_S
+from valve_sim.ros.lockstep_protocol import LateInputError
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import READY_TIMEOUT, valve_arguments
 from valve_sim.ros.scenario_stepper import ScenarioStepper
