@@ -483,18 +483,19 @@ def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, referen
     valve.close()
 
 
-def test_a_valve_the_step_cannot_integrate_is_discarded_until_a_parameter_changes(
-    unzipped, reference
-):
+def test_a_valve_the_step_cannot_integrate_does_not_start_and_can_be_reset(unzipped, reference):
     # A 1 mm^3 intermediate chamber cannot pass max_inlet_flow at any sub-step allowed: the
-    # FMU does not start it (core/step_check.py) and discards each step with the reason.
-    valve = Valve(unzipped, 'refused', {'intermediate_volume': 1e-9}).initialise()
-    for _ in range(2):
-        with pytest.raises(FMICallException) as discard:
-            valve.step()
-        assert discard.value.status == fmi2Discard
+    # FMU does not start it (core/step_check.py): fmi2Error with the reason, then a reset.
+    valve = Valve(unzipped, 'refused', {'intermediate_volume': 1e-9})
+    with pytest.raises(FMICallException) as refusal:
+        valve.initialise()
+    assert refusal.value.status == fmi2Error
     assert any('cannot be integrated' in entry[1] for entry in valve.log), valve.log
+    valve.fmu.reset()
+    valve.fmu.setupExperiment(startTime=0.0)
+    valve.fmu.enterInitializationMode()
     valve.set_values(intermediate_volume=reference['intermediate_volume'])
+    valve.initialise()
     assert np.all(np.isfinite(trace(valve, 10)))
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]
     valve.close()

@@ -343,7 +343,7 @@ def test_a_run_that_cannot_complete_still_writes_its_junit_with_the_error(tmp_pa
     """run_and_report: the error becomes the JUnit file's one case, then is raised again."""
     from valve_sim.ros import scenario_runner
 
-    def no_state(*_):
+    def no_state(*_, **__):
         raise TimeoutError('no state of the valve within the limit')
 
     monkeypatch.setattr(scenario_runner, 'run_scenario', no_state)
