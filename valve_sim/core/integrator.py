@@ -47,6 +47,9 @@ model's derivatives() likewise), so that the compiler keeps a state in registers
 Its two inputs, the inlet flow and the tank pressure, are held over a step; the
 kernels take both as arrays with one value per step. rk4_steps takes it for one
 valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
+
+Over 400 lines on purpose: the RK4 step, the choice of its sub-steps and the checks of
+a step's end are inlined together into every kernel, and are read side by side.
 """
 
 import numpy as np
