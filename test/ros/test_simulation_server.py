@@ -18,8 +18,8 @@ valve_simulator stepped by a client that uses only simulation_interfaces and sta
 One simulator process, driven in file order: its features, the state machine (stopped,
 paused, a step refused while stopped), 1000 ticks stepped (StepSimulation, then the
 SimulateSteps action with its feedback) with the states read from supply_pressure as
-CDR bytes, playing and pausing, a reset, the same 1000 ticks again in one call: the
-same bytes, and the scenario runner's bytes for the same scenario (its bag); the client
+CDR bytes, playing and pausing, a reset (valve_node's ~/restart: the same process, its start
+state heard again), the same 1000 ticks again in one call: the same bytes, and the scenario runner's bytes for the same scenario (its bag); the client
 of docs/scenarios.md as it stands. Then quit.
 """
 
@@ -48,6 +48,7 @@ from simulation_interfaces.srv import (
 from valve_harness import REPO, SpinningNode, stop_node, TIMEOUT
 from valve_sim.core.errors import MissingExtraError
 from valve_sim.ros.lockstep import stamp_ns, START_NS
+from valve_sim.ros.lockstep_protocol import gid_process
 from valve_sim.ros.spinning import EXECUTORS
 
 
@@ -235,6 +236,12 @@ def join(client, matches):
     raise AssertionError(f'no state came in {JOIN_ATTEMPTS} ticks')
 
 
+def valve_processes(client):
+    """Return the processes (PID mod 65536, Fast DDS) publishing supply_pressure."""
+    return {gid_process(info.endpoint_gid)
+            for info in client.node.get_publishers_info_by_topic('/supply_pressure')}
+
+
 def contiguous(states, end_ns):
     """Return states (stamp: bytes) up to end_ns, asserting none is missing after the first."""
     stamps = sorted(stamp for stamp in states if stamp <= end_ns)
@@ -292,17 +299,20 @@ def test_playing_advances_the_clock_and_pausing_stops_it(simulator, stepped):
 def test_after_a_reset_the_same_steps_give_the_same_bytes_as_the_scenario_runner(
         simulator, stepped, runner):
     client, *_ = simulator
+    valve = valve_processes(client)
     with client.condition:  # every state of the run before has come (stepped, playing)
         client.states.clear()
     assert client.call('reset_simulation', ResetSimulation.Request()).result.result == (
         Result.RESULT_OK)
     assert client.get_state() == SimulationState.STATE_STOPPED
     assert client.set_state(SimulationState.STATE_PAUSED).result == Result.RESULT_OK
-    joined = join(client, 2)  # valve_node started again: a new publisher
+    joined = join(client, 1)  # the same valve_node (its ~/restart): matched already
+    assert valve_processes(client) == valve and len(valve) == 1
     assert client.call('step_simulation', StepSimulation.Request(
         steps=TICKS - joined)).result.result == Result.RESULT_OK
     end_ns = START_NS + TICKS * PERIOD_NS
     again = contiguous(client.wait_for_states(end_ns), end_ns)
+    assert min(again) == START_NS  # the start state too, heard: the publisher stayed
     both = set(again) & set(stepped)
     assert len(both) > TICKS - JOIN_ATTEMPTS
     assert {stamp: again[stamp] for stamp in both} == {stamp: stepped[stamp] for stamp in both}

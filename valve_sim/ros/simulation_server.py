@@ -28,10 +28,11 @@ client in any language steps it through the standard services of simulation_inte
   ~/set_simulation_state    SetSimulationState    play (real time), pause, stop (= reset), quit
   ~/step_simulation         StepSimulation        steps ticks while paused
   ~/simulate_steps          SimulateSteps action  the same, with feedback after each tick
-  ~/reset_simulation        ResetSimulation       valve_node started again, /clock at the start
+  ~/reset_simulation        ResetSimulation       valve_node's ~/restart, /clock at the start
 A step is one tick of valve_node (1 / publish_rate of model time). A reset is
 SCOPE_ALL whatever the scope asked: time, state and parameters back to the start, as if
-closed and launched again.
+closed and launched again (valve_node's ~/restart, in the same process: milliseconds
+instead of a process's start; a valve_node that ended is started again).
 """
 
 import argparse
@@ -59,7 +60,7 @@ except ImportError as error:
         f'{error}: valve_simulator needs simulation_interfaces: `python3 run.py install` builds '
         'it into .venv (interfaces/README.md); on a ROS install: ros-jazzy-simulation-interfaces'
     ) from None
-from valve_sim.core.errors import IncompleteRunError
+from valve_sim.core.errors import IncompleteRunError, ParameterError
 from valve_sim.ros import node_command, spinning
 from valve_sim.ros.lockstep import Lockstep, NS_PER_S
 from valve_sim.ros.lockstep_protocol import LateInputError
@@ -81,6 +82,7 @@ FEATURES = [
 PLAY_PERIOD = 0.01  # [s] of wall time between the playing simulator's catch-ups
 MAX_PLAY_TICKS = 100  # ticks one catch-up runs at most: services still answer meanwhile
 STEP_ERRORS = (IncompleteRunError, LateInputError, TimeoutError, ChildProcessError)
+RESTART_ERRORS = STEP_ERRORS + (ParameterError,)
 
 
 class SimulationServer:
@@ -116,14 +118,18 @@ class SimulationServer:
             self.driver = Lockstep(self.context, processes=self.processes,
                                    tank='tank_pressure' in scenario.inputs)
             self.driver.connect((), READY_TIMEOUT)
-            self.stepper = ScenarioStepper(scenario, self.driver)
-            self.stepper.start()
+            self._first_state()
         except STEP_ERRORS:
             self.stop_valve()  # no valve_node left running behind
             raise
+
+    def _first_state(self):
+        """Step the connected driver's valve to its first state (the scenario's start)."""
+        self.stepper = ScenarioStepper(self.scenario, self.driver)
+        self.stepper.start()
         self.node.get_logger().info(
             f'valve_node at {self.stepper.time_ns / NS_PER_S:g} s, stopped; scenario '
-            f'{scenario.name}, steps of {scenario.period_ns / NS_PER_S:g} s')
+            f'{self.scenario.name}, steps of {self.scenario.period_ns / NS_PER_S:g} s')
 
     def stop_valve(self):
         """Stop valve_node (SIGINT) and the driver."""
@@ -134,10 +140,27 @@ class SimulationServer:
         self.processes = self.driver = self.stepper = None
 
     def reset(self):
-        """Back to the start: valve_node started again, stopped."""
+        """
+        Back to the start, stopped: valve_node's ~/restart, in the same process.
+
+        Its start-up parameters are the scenario's, so the restart gives the state of a
+        new valve_node (ros.valve_restart). A valve_node that does not restart (it
+        ended, or the last reset failed) is started again.
+        """
         self.play_timer.cancel()
-        self.stop_valve()
-        self.start()
+        restarted = False
+        if self.stepper is not None:
+            self.stepper = None
+            try:
+                self.driver.restart(timeout=READY_TIMEOUT)
+                self._first_state()
+                restarted = True
+            except RESTART_ERRORS as error:
+                self.node.get_logger().warn(f'valve_node did not restart ({error}): starting '
+                                            'a new one')
+        if not restarted:
+            self.stop_valve()
+            self.start()
         self.state = SimulationState.STATE_STOPPED
 
     def step(self, count):
