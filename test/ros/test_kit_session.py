@@ -25,6 +25,8 @@ restart are checked too. Runs in this order (pytest keeps a module's order; with
 xdist, --dist loadfile keeps them together).
 """
 
+import time
+
 import numpy as np
 import pytest
 from valve_sim.analysis.scenarios.tick_series import SIGNALS
@@ -130,3 +132,32 @@ def test_a_mark_sets_the_start_of_the_shared_valve(shared_lockstep_valve):
         valve.restart({'preset_pressure': '1 kPa'})
     assert valve.get_parameters('preset_pressure') == {'preset_pressure': 5e6}
     assert valve.advance(0.01) == pytest.approx(0.01)
+
+
+def test_diagnostics_count_from_the_restart(shared_lockstep_valve):
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    valve = shared_lockstep_valve
+    valve.advance(0.05)  # 50 ticks after the first state; test 1 ran 350 and overpressured
+    node = rclpy.create_node('diagnostics_listener', context=valve.context)
+    executor = SingleThreadedExecutor(context=valve.context)
+    executor.add_node(node)
+    reports = []
+    node.create_subscription(DiagnosticArray, '/diagnostics', lambda message: reports.extend(
+        {value.key: value.value for value in status.values} for status in message.status
+        if status.name.endswith(': valve model')), 10)
+    try:
+        deadline = time.monotonic() + 60.0  # one report a second of steady time
+        while not reports and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    assert reports, 'no diagnostics report within 60 s'
+    report = reports[0]  # published after the restart (the listener came after it)
+    assert int(report['restarts']) >= 1
+    assert int(report['ticks']) == 51, report  # the first state's tick and 50 more
+    assert float(report['model_time_s']) == pytest.approx(1.05), report  # /clock from 1 s
+    assert report['overpressures'] == '0' and report['halted'] == 'false'

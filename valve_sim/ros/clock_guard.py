@@ -69,4 +69,5 @@ class GuardedTimeSource(TimeSource):
 
     def restart(self):
         """Set the clock back to zero, as before the first /clock (a new time base follows)."""
+        self.refused, self.last_refused = 0, None
         super().clock_callback(Clock())

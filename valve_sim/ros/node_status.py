@@ -34,7 +34,7 @@ LATE_FRACTION = (
 
 @dataclass
 class Counters:
-    """Events since node start, as diagnostics report them."""
+    """Events since node start or its last ~/restart, as diagnostics report them."""
 
     ticks: int = 0
     late_ticks: int = 0  # started over LATE_FRACTION of a period after they were due
@@ -52,6 +52,7 @@ class Counters:
     refused_fault_schedules: int = 0  # schedule files set live that the loader refused
     refused_clock_messages: int = 0  # /clock messages the node cannot represent, ignored
     clock_jumps_back: int = 0  # the clock went back: a new time base
+    restarts: int = 0  # ~/restart calls done since the process started (kept by a restart)
 
 
 class Throttle:
@@ -94,6 +95,18 @@ class NodeStatus:
         self._durations_ns = []
         self._window = (steady_now_ns, None)  # (steady time, model time) at the last report
         self.previous_slot_ns = None  # the slot of the last tick counted by tick_started()
+
+    def restart(self):
+        """Count anew, as at node start (valve_node's ~/restart); only restarts goes on."""
+        restarts = self.counters.restarts + 1
+        for field in fields(Counters):  # in place: the housekeeping holds the counters too
+            setattr(self.counters, field.name, field.default)
+        self.counters.restarts = restarts
+        self._reported = replace(self.counters)
+        self.last_failure = self.schedule_refused = ''
+        self._durations_ns = []
+        self._window = (self._window[0], None)  # no real-time factor across the restart
+        self.previous_slot_ns = None
 
     def tick_started(self, now_ns, newest_slot_ns, period_ns):
         """

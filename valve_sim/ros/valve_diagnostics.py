@@ -42,6 +42,10 @@ class ValveDiagnostics:
         self._node = node
         self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_name = diagnostics.status_name(node, STATUS_TASK)
+        self.restart()
+
+    def restart(self):
+        """Report as from node start (valve_node's ~/restart: a new model, inputs forgotten)."""
         self.input_stale = False
         self.tank_stale = False
         self.tank_from_topic = False  # said once in the log

@@ -114,9 +114,11 @@ class CheckedInput(RawTaker):
         self.scheduled = []
 
     def restart(self, value):
-        """Hold value as at start-up: every value received and its stamps forgotten."""
+        """Hold value as at start-up: every value received, its stamps and counts forgotten."""
         self.value, self.changed, self.received, self.received_ns = value, False, False, None
         self.covered_ns = None
+        self.accepted = self.rejected = self.reported_rejected = self.lost = 0
+        self.last_rejection = ''
         if self.scheduled is not None:
             self.scheduled = []
 

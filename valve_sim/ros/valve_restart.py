@@ -147,7 +147,9 @@ def restart(node, overrides):
     node.tank_input.restart(None)
     node.applied_flow = node.inlet_flow
     node.use_settings(fresh.settings)
-    node.status.previous_slot_ns = None
+    node.status.restart()  # diagnostics count anew, as from a start (restarts: how many)
+    node.diagnostics.restart()
+    node.lockstep_inputs.late = 0
     node.clock_guard.restart()
     node.publish_fault_status()
     return fresh
