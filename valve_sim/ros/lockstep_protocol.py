@@ -174,11 +174,16 @@ def own_valve(node, pid, spin_until, timeout):
 
 
 def hears_states(node, topic):
-    """Whether a node publishing topic subscribes to a topic that valve_node publishes."""
+    """
+    Whether a node publishing topic subscribes to a topic that valve_node publishes.
+
+    An endpoint can be known before its node's name (namespace still ''): not yet.
+    """
     nodes = {(info.node_namespace, info.node_name)
              for info in node.get_publishers_info_by_topic(topic)}
     valves = {(info.node_namespace, info.node_name) for info in
-              node.get_publishers_info_by_topic(node.resolve_topic_name(HANDSHAKE))}
+              node.get_publishers_info_by_topic(node.resolve_topic_name(HANDSHAKE))
+              if info.node_namespace.startswith('/')}
     states = {name for namespace, valve in valves for name, _ in
               node.get_publisher_names_and_types_by_node(valve, namespace)}
     return any((info.node_namespace, info.node_name) in nodes for state in states
