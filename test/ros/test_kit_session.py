@@ -31,13 +31,14 @@ import numpy as np
 import pytest
 from valve_sim.analysis.scenarios.tick_series import SIGNALS
 from valve_sim.core.catalogue import VALVE_NODE_SPECS
+from valve_sim.ros.lockstep_protocol import clock_message, stamp_ns, START_NS
 from valve_sim.testing.lockstep_valve import NoStepError
 
 
 pytest_plugins = ['valve_sim.testing.pytest_plugin']
 NAMES = sorted(VALVE_NODE_SPECS)  # every parameter of the catalogue: model, faults, sensors
 FRESH = {}  # what the first test found at its start
-SENT = []  # (topic, bytes) the driver published since the test's start
+SENT = []  # (topic, bytes) the driver published since the test's start (its restart)
 
 
 def distinct(sent):
@@ -51,30 +52,21 @@ def sent_in_test():
     SENT.clear()
 
 
-@pytest.fixture(scope='module')
-def lockstep_valve_session(tmp_path_factory):
-    """
-    Give the module the plugin's session valve, stopped at the module's end.
-
-    The override the plugin's docs offer: the suite's later tests start valve_nodes of
-    their own in this session's ROS domain, and a session valve_node left running would
-    answer their /clock too.
-    """
+@pytest.fixture(scope='module', autouse=True)
+def record_sent():
+    """Record the messages the driver publishes as bytes (/clock, the stamped flow)."""
     from rclpy.publisher import Publisher
-    from valve_sim.testing.lockstep_valve import LockstepValve
 
     publish = Publisher.publish
-    def record(publisher, message):  # the driver's raw messages (/clock, the stamped flow)
+
+    def record(publisher, message):
         if isinstance(message, bytes):
             SENT.append((publisher.topic_name, message))
         publish(publisher, message)
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(Publisher, 'publish', record)
-        valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
-        FRESH['driver'], FRESH['new driver sent'] = valve._driver, distinct(SENT)
-        yield valve
-        valve.close()
+        yield
 
 
 def first_ticks(valve):
@@ -91,9 +83,11 @@ def test_a_test_that_changes_every_kind_of_setting_and_halts_the_model(
         valve_node_kernels, shared_lockstep_valve):
     valve = shared_lockstep_valve
     FRESH['parameters'], FRESH['series'] = first_ticks(valve)
-    FRESH['sent'] = distinct(SENT)
-    # the start after the restart: as a new driver's (the first flow and /clock)
-    assert FRESH['sent'][:2] == FRESH['new driver sent'] and len(FRESH['sent']) > 2
+    FRESH['sent'], FRESH['driver'] = distinct(SENT), valve._driver
+    # the start after the restart, as a new driver's: the first flow stamped 1 s, /clock 1 s
+    (flow_topic, flow), clock = FRESH['sent'][:2]
+    assert flow_topic == '/inlet_flow_stamped' and stamp_ns(flow) == START_NS
+    assert clock == ('/clock', clock_message(START_NS)) and len(FRESH['sent']) > 2
     valve.set_parameters(preset_pressure='6 MPa', k_p=9000.0, tank_pressure='2 bar',
                          burst_pressure='10 MPa')
     valve.set_parameters({'sensor.supply_pressure.bias': 1e5, 'sensor.noise_seed': 7})

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-valve_sim.testing as a user's suite uses it: the pytest fixture and the context manager.
+valve_sim.testing as a user's suite uses it: the pytest fixtures and the context manager.
 
 The tests read as the README's example does; what they assert holds of any valve the
 model describes (the state follows every tick; a seized main valve stays put while
@@ -32,9 +32,9 @@ pytest_plugins = ['valve_sim.testing.pytest_plugin']
 
 
 @pytest.mark.lockstep_valve(parameters={'supply_pressure_limit': '21 MPa'})
-def test_the_fixture_a_stuck_main_valve_stays_put_and_p_s_meets_the_supply_relief(
-        lockstep_valve, valve_node_kernels):
-    valve = lockstep_valve
+def test_the_session_fixture_a_stuck_main_valve_stays_put_and_p_s_meets_the_supply_relief(
+        valve_node_kernels, shared_lockstep_valve):
+    valve = shared_lockstep_valve
     valve.advance(0.1)
     seized_at = valve.state['main_valve']
     valve.inject('main_valve_stuck')
@@ -47,15 +47,16 @@ def test_the_fixture_a_stuck_main_valve_stays_put_and_p_s_meets_the_supply_relie
         valve.set_parameters(no_such_parameter=1.0)
 
 
-def test_the_context_manager_records_every_tick_and_measures_the_step(valve_node_kernels):
-    with lockstep_valve(initial_flow='5 L/min') as valve:
-        valve.advance(0.25)
-        valve.set_flow('20 L/min')
-        valve.set_parameters(k_p=valve.get_parameters('pilot_spring_stiffness')[
-            'pilot_spring_stiffness'])  # a paper symbol, the same value: nothing changes
-        valve.advance(1.05)
-        series, step = valve.series, valve.measures(at=0.25)
-        latest = valve.state
+def test_the_fixture_records_every_tick_and_measures_the_step(valve_node_kernels,
+                                                              lockstep_valve):
+    valve = lockstep_valve  # a valve_node of the test's own
+    valve.advance(0.25)
+    valve.set_flow('20 L/min')
+    valve.set_parameters(k_p=valve.get_parameters('pilot_spring_stiffness')[
+        'pilot_spring_stiffness'])  # a paper symbol, the same value: nothing changes
+    valve.advance(1.05)
+    series, step = valve.series, valve.measures(at=0.25)
+    latest = valve.state
     assert np.array_equal(series.stamps_ns - series.stamps_ns[0],
                           np.arange(1301) * 1_000_000)  # every tick, t = 0 .. 1.3 s
     assert np.all(series['inlet_flow'][:251] == pytest.approx(5 / 60000))

@@ -44,12 +44,24 @@ def claim_domain(keep_existing=True):
     """
     if keep_existing:
         return hold_domain()
+    domain = claim_apart()
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    return domain
+
+
+def claim_apart():
+    """
+    Hold a domain no run on this machine holds, this process's included; return it.
+
+    ROS_DOMAIN_ID is left as it is: for nodes that must stay apart from the rest of
+    this process's runs (the test kit's session valve, up while other tests run their
+    own nodes in the environment's domain).
+    """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    candidates = list(DOMAIN_IDS)
+    candidates = [domain for domain in DOMAIN_IDS if domain not in _held_locks]
     random.SystemRandom().shuffle(candidates)
     for domain in candidates:
         if _lock(domain):
-            os.environ['ROS_DOMAIN_ID'] = str(domain)
             return domain
     raise UnavailableError(
         f'every ROS domain 1-101 is held by another run (locks in {LOCK_FOLDER})'

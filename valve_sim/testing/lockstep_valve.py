@@ -24,12 +24,15 @@ parameter changes act from the next tick, so a test repeats exactly.
 Values are SI, or text with a unit ('20 L/min', '21 MPa'); parameters by ROS name or
 paper symbol. Pressures read back are gauge [Pa], as the model's (tick_series).
 
-Isolation: one open kit per process (a second is refused: both would share /clock and
-the valve's topics); the kit runs in the environment's ROS_DOMAIN_ID unless another
-process holds it (another pytest-xdist worker, another test run), then in a free one it
-claims (valve_sim.ros.isolation.hold_domain, set in os.environ): a node of the test
-that talks to the valve (a controller under test) must be created after the valve,
-in the same process. Arguments are checked at the call (ValueError, TypeError, one
+Isolation: one open kit per process and domain (a second is refused: both would share
+/clock and the valve's topics); the kit runs in the environment's ROS_DOMAIN_ID unless
+another process holds it (another pytest-xdist worker, another test run), then in a
+free one it claims (valve_sim.ros.isolation.hold_domain, set in os.environ): a node of
+the test that talks to the valve (a controller under test) must be created after the
+valve, in the same process. A kit opened apart=True (the session fixture's) runs in a
+domain of its own and leaves ROS_DOMAIN_ID alone, so the rest of the process's runs
+never hear it; the shared_lockstep_valve fixture sets ROS_DOMAIN_ID to its domain for
+the test that uses it. Arguments are checked at the call (ValueError, TypeError, one
 line); any call after close() raises RuntimeError; a start valve_node refuses raises
 ChildProcessError with the node's reason, and keeps its log.
 """
@@ -67,7 +70,7 @@ from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
 from valve_sim.ros import node_command
 from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
-from valve_sim.ros.isolation import hold_domain
+from valve_sim.ros.isolation import claim_apart, hold_domain
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import ros_value
@@ -104,16 +107,19 @@ class LockstepValve:
     parameters: {name: value} valve_node starts with (ROS name or paper symbol, SI or
     with a unit); initial_flow: the inlet flow it starts at the steady state of;
     params_file: its --params-file; namespace: the valve's; folder: where its log goes
-    (default: a temporary folder). Call close() (or use lockstep_valve()) to stop it.
+    (default: a temporary folder); apart: in a ROS domain of its own (domain), held
+    for it, ROS_DOMAIN_ID left as it is: the session fixture's valve, up while other
+    tests run nodes of their own. Call close() (or use lockstep_valve()) to stop it.
     """
 
     def __init__(self, parameters: Optional[Mapping[str, Any]] = None,
                  initial_flow: Union[float, str] = '5 L/min',
                  params_file: Optional[PathLike] = None, namespace: str = '',
-                 folder: Optional[PathLike] = None) -> None:
+                 folder: Optional[PathLike] = None, apart: bool = False) -> None:
         import rclpy
 
-        if _open_kit:
+        self.domain = claim_apart() if apart else hold_domain()
+        if any(kit.domain == self.domain for kit in _open_kit):
             raise UnavailableError(
                 f'a lockstep valve is already open in this process (log in '
                 f'{_open_kit[0].folder}): close it first; two would share /clock and the '
@@ -123,17 +129,17 @@ class LockstepValve:
         self.namespace = namespace
         self._temporary = None if folder else tempfile.mkdtemp(prefix='valve_')
         self.folder = make_folder(Path(folder or self._temporary))
-        self.domain = hold_domain()
         ros_args = ['--params-file', str(params_file)] if params_file else []
         if namespace:
             ros_args += ['-r', f'__ns:={namespace}']
         values = {**lockstep_parameters(), 'initial_inlet_flow': repr(flow),
                   **{name: ros_value(value) for name, value in start.items()}}
         self.processes = NodeProcesses(self.folder, {
-            'valve_node': node_command('valve_node', parameters=values, ros_args=ros_args)})
+            'valve_node': node_command('valve_node', parameters=values, ros_args=ros_args)},
+            env={**os.environ, 'ROS_DOMAIN_ID': str(self.domain)})
         self._rows, self._latest, self._events = {}, {}, []
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        rclpy.init(context=self.context, domain_id=self.domain)
         self._driver = None
         _open_kit.append(self)
         try:

@@ -35,7 +35,10 @@ with the mark's parameters over it, no fault, sensors, preset and tank as those 
 the exact steady state of the mark's initial_flow, time from 0, no state kept. About a
 tenth of a process's start per test (bench/bench_suite.py). The mark takes parameters
 and initial_flow; a params_file or namespace is the session's (the
-`lockstep_valve_session` fixture, which a conftest.py may override).
+`lockstep_valve_session` fixture, which a conftest.py may override). The session's
+valve_node runs in a ROS domain of its own (LockstepValve apart=True), so it never
+answers the /clock of the suite's other runs (a lockstep_valve per test, a scenario
+run); ROS_DOMAIN_ID is its domain during a test that uses it.
 """
 
 import pytest
@@ -48,17 +51,23 @@ def pytest_configure(config):
 
 @pytest.fixture(scope='session')
 def lockstep_valve_session(tmp_path_factory):
-    """One valve_node in lockstep for the session (a LockstepValve); stopped at its end."""
+    """One valve_node in lockstep for the session, in a domain apart; stopped at its end."""
     from valve_sim.testing.lockstep_valve import LockstepValve
 
-    valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
+    valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'),
+                          apart=True)
     yield valve
     valve.close()
 
 
 @pytest.fixture
-def shared_lockstep_valve(request, lockstep_valve_session):
-    """Restart the session's valve_node for this test as the lockstep_valve mark says."""
+def shared_lockstep_valve(request, lockstep_valve_session, monkeypatch):
+    """
+    Restart the session's valve_node for this test as the lockstep_valve mark says.
+
+    ROS_DOMAIN_ID is the valve's for the test: a node it creates (a controller under
+    test) talks to the valve.
+    """
     mark = request.node.get_closest_marker('lockstep_valve')
     options = dict(mark.kwargs) if mark else {}
     unknown = sorted(set(options) - {'parameters', 'initial_flow'})
@@ -66,6 +75,7 @@ def shared_lockstep_valve(request, lockstep_valve_session):
         pytest.fail(f"shared_lockstep_valve: the session's valve_node has its {unknown} "
                     'already; use the lockstep_valve fixture for them', pytrace=False)
     lockstep_valve_session.restart(**options)
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(lockstep_valve_session.domain))
     return lockstep_valve_session
 
 
