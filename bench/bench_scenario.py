@@ -18,6 +18,7 @@
 #
 #     flock /tmp/valve_sim_bench.lock python bench/bench_scenario.py [--repeats 3] [--json F]
 #         [--baseline DIR]
+#     python bench/bench_scenario.py --every-input [--repeats 3] [--json F]
 #
 # In one run, on a ROS domain of its own (localhost only), each --repeats times, in turn,
 # each in a fresh process:
@@ -75,6 +76,38 @@ RAMP_SCENARIO = (
     'scenario: paper_ramp\nduration: 1.3\ninputs:\n  inlet_flow:\n    initial: 5 L/min\n'
     '    changes:\n      - {at: 0.25, ramp: 20 L/min, over: 0.5}\n'
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
+# --every-input: 60 s of model time with every input kind the format has (issue 46): the
+# inlet flow's step, ramp, sine and a recorded series (CSV), a tank pressure profile
+# (step, ramp, sine) and events setting a fault, a sensor and a live parameter
+EVERY_INPUT = """scenario: every_input_60s
+description: every input kind for 60 s
+duration: 60
+inputs:
+  inlet_flow:
+    initial: 5 L/min
+    changes:
+      - {at: 5, step: 15 L/min}
+      - {at: 15, ramp: 25 L/min, over: 10}
+      - {at: 30, sine: {amplitude: 3 L/min, frequency: 2}, over: 10}
+      - {at: 42, series: {csv: flow.csv, time: t, value: q, unit: L/min}}
+  tank_pressure:
+    initial: 0 bar
+    changes:
+      - {at: 10, step: 2 bar}
+      - {at: 20, ramp: 5 bar, over: 10}
+      - {at: 50, sine: {amplitude: 1 bar, frequency: 1}, over: 5}
+events:
+  - {t: 35, set: {fault.seat_leakage_diameter: 0.0002}}
+  - {t: 45, set: {sensor.supply_pressure.bias: 100000}}
+  - {t: 55, set: {supply_pressure_limit: 25 MPa}}
+expect:
+  - no_alarm: {}
+"""
+# the command's progress lines that end each phase, in order (ros.scenario_runner)
+PHASES = (('start-up: nodes, discovery', 'scenario: running '),
+          ('stepping', 'scenario: waiting for analyser_node to record'),
+          ('analyser drain', 'scenario: stopping both nodes'),
+          ('stop, analysis, reports', None))
 JUMP_KINDS = ('lockstep_jumps', 'scenario_one_tick', 'scenario_k100',
               'scenario_ramp_k100')  # need valve_sim.ros.clock_jumps
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')
@@ -345,6 +378,58 @@ def report(label, results):
             f'{name} {value:.3f}' for name, value in parts.items()))
 
 
+def every_input(folder, repeats):
+    """
+    `valve-sim scenario run` of EVERY_INPUT as a command, repeats times; print the figures.
+
+    Each run: the whole command's wall (real-time factor), the stepping's (report.json
+    run.wall_s), the wall of each phase (from the command's progress lines, read as
+    they come) and the CPU of the command with its nodes (getrusage of the children).
+    """
+    import math
+    import resource
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / 'flow.csv').write_text('t,q\n' + ''.join(
+        f'{k / 10:.1f},{10 + 4 * math.sin(k / 10) + 2 * (k % 10 < 5):.4f}\n'
+        for k in range(81)))  # 8 s at 10 Hz, a sine and a square wave [L/min]
+    path = folder / 'every_input.yaml'
+    path.write_text(EVERY_INPUT)
+    runs = []
+    for repeat in range(repeats):
+        out = folder / f'run_{repeat}'
+        cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+        started = time.monotonic()
+        command = subprocess.Popen(
+            [sys.executable, '-m', 'valve_sim.commands.cli', 'scenario', 'run', str(path),
+             '--out', str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        marks, phase, lines = {}, 0, []
+        for line in command.stdout:
+            lines.append(line)
+            while PHASES[phase][1] and line.startswith(PHASES[phase][1]):
+                marks[PHASES[phase][0]] = time.monotonic() - started
+                phase += 1
+        whole = time.monotonic() - started
+        if command.wait() != 0:
+            raise SystemExit('scenario run failed:\n' + ''.join(lines[-20:]))
+        marks[PHASES[-1][0]] = whole
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        ends = [marks[name] for name, _ in PHASES]
+        stepping = json.loads(next(out.rglob('report.json')).read_text())['run']['wall_s']
+        runs.append({'whole_s': whole, 'stepping_s': stepping,
+                     'cpu_s': after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime,
+                     'phases_s': dict(zip(marks, [ends[0]] + [
+                         b - a for a, b in zip(ends, ends[1:])]))})
+        run = runs[-1]
+        print(f'every input, run {repeat + 1}: whole command {run["whole_s"]:.1f} s = '
+              f'{60 / run["whole_s"]:.2f}x real time (target >= 3); stepping '
+              f'{stepping:.1f} s = {60 / stepping:.2f}x (target >= 4); CPU of the command '
+              f'and its nodes {run["cpu_s"]:.1f} s ({run["cpu_s"] / whole:.2f} cores); '
+              'phases: ' + ', '.join(f'{name} {value:.1f} s'
+                                     for name, value in run['phases_s'].items()), flush=True)
+    return runs
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--repeats', type=int, default=3, help='runs of each kind')
@@ -352,6 +437,9 @@ def main():
     parser.add_argument('--json', type=Path, help='also write the figures as JSON')
     parser.add_argument('--baseline', type=Path,
                         help='another checkout of valve_sim, measured alongside (before/after)')
+    parser.add_argument('--every-input', action='store_true',
+                        help='instead: `scenario run` of 60 s with every input kind, '
+                        '--repeats times (whole command and stepping against real time)')
     parser.add_argument('--measure', choices=KINDS, help=argparse.SUPPRESS)
     parser.add_argument('--folder', type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -360,6 +448,15 @@ def main():
     from valve_sim.ros.isolation import claim_domain
 
     claim_domain(keep_existing=False)  # the measuring processes inherit the domain
+    if args.every_input:
+        print(f'load average at start: {os.getloadavg()}', flush=True)
+        with tempfile.TemporaryDirectory() as temporary:
+            runs = every_input(Path(temporary), args.repeats)
+        print(f'load average at end: {os.getloadavg()}')
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(runs, indent=2) + '\n')
+        return None
     checkouts = {'this checkout': REPO}
     if args.baseline:
         checkouts['baseline'] = args.baseline.resolve()

@@ -16,7 +16,8 @@
 
 # The summary above is also this script's --help description.
 #
-#     nice python bench/bench_suite.py [--scenarios 20] [--alone 3] [--tests 10] [--json F]
+#     nice python bench/bench_suite.py [--scenarios 20] [--alone 3] [--tests 10]
+#                                      [--parts scenarios,kit] [--json F]
 #
 # In one run, on a ROS domain of its own (localhost only), side by side:
 #
@@ -29,7 +30,9 @@
 #   its restart of valve_node, its own analyser_node, discovery, the bag and reports;
 # - kit: --tests tests of 10 ms of model time each, a LockstepValve per test (start,
 #   close) against one LockstepValve restarted before each (the session fixture's
-#   way); the per-test overhead is the time per test less the advance's own.
+#   way: apart, the same driver); the per-test overhead is the time per test less the
+#   advance's own; the process's start and close and the restart's ~/restart round
+#   trip are reported apart.
 #
 # Targets (issue 46): suite overhead per scenario <= 0.1 x alone's; kit overhead per
 # test <= 0.1 x a process per test's. The load average at start and end is printed.
@@ -108,44 +111,71 @@ def measure_kit(work, tests):
         valve.advance(0.01)
         return time.monotonic() - started
 
-    per_process, advances = [], []
+    per_process, advances, starts, closes = [], [], [], []
     for index in range(tests):
         started = time.monotonic()
         valve = LockstepValve(folder=work / f'kit_{index}')
+        starts.append(time.monotonic() - started)
         advances.append(one_test(valve))
+        closing = time.monotonic()
         valve.close()
+        closes.append(time.monotonic() - closing)
         per_process.append(time.monotonic() - started)
-    shared, shared_advances = [], []
-    valve = LockstepValve(folder=work / 'kit_session')
+    shared, shared_advances, restarts, requests = [], [], [], []
+    valve = LockstepValve(folder=work / 'kit_session', apart=True)  # the session fixture's
+    driver, request = valve._driver, valve._driver.request_restart
+    driver.request_restart = lambda *a: requests.append(timed(request, *a))  # the round trip
     try:
         for _ in range(tests):
             started = time.monotonic()
             valve.restart()
+            restarts.append(time.monotonic() - started)
             shared_advances.append(one_test(valve))
             shared.append(time.monotonic() - started)
     finally:
         valve.close()
     return {'process_per_test_s': statistics.median(per_process),
             'process_overhead_s': statistics.median(per_process) - statistics.median(advances),
+            'process_start_s': statistics.median(starts),
+            'process_close_s': statistics.median(closes),
             'session_per_test_s': statistics.median(shared),
-            'session_overhead_s': statistics.median(shared) - statistics.median(shared_advances)}
+            'session_overhead_s': statistics.median(shared) - statistics.median(shared_advances),
+            'session_restart_s': statistics.median(restarts),
+            'session_restart_round_trip_s': statistics.median(requests),
+            'advance_10ms_s': statistics.median(advances + shared_advances)}
+
+
+def timed(call, *args):
+    """Return the wall time [s] of call(*args)."""
+    started = time.monotonic()
+    call(*args)
+    return time.monotonic() - started
 
 
 def table(figures):
-    s, k = figures['scenarios'], figures['kit']
-    suite_ratio = s['suite_overhead_per_scenario_s'] / s['alone_overhead_median_s']
-    kit_ratio = k['session_overhead_s'] / k['process_overhead_s']
-    return '\n'.join([
-        f"load average {figures['load_start']} -> {figures['load_end']}",
-        f"scenario overhead alone (a command each): {s['alone_overhead_median_s']:.2f} s "
-        f"(median of {len(s['alone_overhead_s'])})",
-        f"suite of {figures['count']}: {s['suite_all_wall_s']:.2f} s; one-scenario suite "
-        f"{s['suite_1_wall_s']:.2f} s; overhead per scenario after the first "
-        f"{s['suite_overhead_per_scenario_s']:.3f} s = {suite_ratio:.3f} x alone "
-        '(target <= 0.1)',
-        f"kit per test: a process {k['process_per_test_s']:.2f} s (overhead "
-        f"{k['process_overhead_s']:.2f} s); session fixture {k['session_per_test_s']:.3f} s "
-        f"(overhead {k['session_overhead_s']:.3f} s) = {kit_ratio:.3f} x (target <= 0.1)"])
+    lines = [f"load average {figures['load_start']:.1f} -> {figures['load_end']:.1f}"]
+    if 'scenarios' in figures:
+        s = figures['scenarios']
+        suite_ratio = s['suite_overhead_per_scenario_s'] / s['alone_overhead_median_s']
+        lines += [
+            f"scenario overhead alone (a command each): {s['alone_overhead_median_s']:.2f} s "
+            f"(median of {len(s['alone_overhead_s'])})",
+            f"suite of {figures['count']}: {s['suite_all_wall_s']:.2f} s; one-scenario suite "
+            f"{s['suite_1_wall_s']:.2f} s; overhead per scenario after the first "
+            f"{s['suite_overhead_per_scenario_s']:.3f} s = {suite_ratio:.3f} x alone "
+            '(target <= 0.1)']
+    if 'kit' in figures:
+        k = figures['kit']
+        kit_ratio = k['session_overhead_s'] / k['process_overhead_s']
+        lines += [
+            f"kit per test: a process {k['process_per_test_s']:.2f} s (overhead "
+            f"{k['process_overhead_s']:.2f} s: start {k['process_start_s']:.2f} s, close "
+            f"{k['process_close_s']:.2f} s); session fixture {k['session_per_test_s']:.4f} s "
+            f"(overhead {k['session_overhead_s']:.4f} s = {kit_ratio:.4f} x, target <= 0.1; "
+            f"restart {k['session_restart_s'] * 1e3:.2f} ms, of it the ~/restart round trip "
+            f"{k['session_restart_round_trip_s'] * 1e3:.2f} ms); advance(0.01) "
+            f"{k['advance_10ms_s'] * 1e3:.2f} ms"]
+    return '\n'.join(lines)
 
 
 def main():
@@ -153,13 +183,19 @@ def main():
     parser.add_argument('--scenarios', type=int, default=20, help='short scenarios in the suite')
     parser.add_argument('--alone', type=int, default=3, help='of them run a command each')
     parser.add_argument('--tests', type=int, default=10, help='kit tests each way')
+    parser.add_argument('--parts', default='scenarios,kit',
+                        help='what to measure, comma-separated: scenarios, kit')
     parser.add_argument('--json', type=Path, default=REPO / 'out' / 'bench_suite.json')
     args = parser.parse_args()
+    parts = set(args.parts.split(','))
     env = isolated_environment()
     figures = {'count': args.scenarios, 'load_start': os.getloadavg()[0]}
     with tempfile.TemporaryDirectory(prefix='bench_suite_') as work:
-        figures['scenarios'] = measure_scenarios(Path(work), args.scenarios, args.alone, env)
-        figures['kit'] = measure_kit(Path(work), args.tests)
+        if 'scenarios' in parts:
+            figures['scenarios'] = measure_scenarios(Path(work), args.scenarios, args.alone,
+                                                     env)
+        if 'kit' in parts:
+            figures['kit'] = measure_kit(Path(work), args.tests)
     figures['load_end'] = os.getloadavg()[0]
     print(table(figures))
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -18,9 +18,10 @@ valve_simulator stepped by a client that uses only simulation_interfaces and sta
 One simulator process, driven in file order: its features, the state machine (stopped,
 paused, a step refused while stopped), 1000 ticks stepped (StepSimulation, then the
 SimulateSteps action with its feedback) with the states read from supply_pressure as
-CDR bytes, playing and pausing, a reset (valve_node's ~/restart: the same process, its start
-state heard again), the same 1000 ticks again in one call: the same bytes, and the scenario runner's bytes for the same scenario (its bag); the client
-of docs/scenarios.md as it stands. Then quit.
+CDR bytes, playing and pausing, a reset (valve_node's ~/restart: the same process, its
+start state heard again), the same 1000 ticks again in one call: the same bytes, and
+the scenario runner's bytes for the same scenario (its bag); the client of
+docs/scenarios.md as it stands. Then quit.
 """
 
 import importlib.util
