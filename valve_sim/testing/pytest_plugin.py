@@ -32,8 +32,9 @@ namespace); without it, the reference valve at 5 L/min.
 session (per xdist worker: each is a session), restarted in place before each test
 (LockstepValve.restart: valve_node's ~/restart): every parameter at its start-up value
 with the mark's parameters over it, no fault, sensors, preset and tank as those say,
-the exact steady state of the mark's initial_flow, time from 0, no state kept. About a
-tenth of a process's start per test (bench/bench_suite.py). The mark takes parameters
+the exact steady state of the mark's initial_flow, time from 0, no state kept; the same
+driver goes on (Lockstep.restart): a few milliseconds a test against seconds for a
+process's start (bench/bench_suite.py). The mark takes parameters
 and initial_flow; a params_file or namespace is the session's (the
 `lockstep_valve_session` fixture, which a conftest.py may override). The session's
 valve_node runs in a ROS domain of its own (LockstepValve apart=True), so it never
