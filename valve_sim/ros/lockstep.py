@@ -390,16 +390,21 @@ class Lockstep:
         state heard, start() next (its inputs first); it keeps its discovery (the valve,
         the wait topics: their nodes restart too, if they have to), so it sends the same
         messages, bit for bit, as a new driver would. A refused restart (ParameterError)
-        changes neither. The valve's messages of the run before, still on their way, are
-        taken first (before the node answered, it had published them all).
+        changes neither. The tick messages of the run before still on their way (the
+        valve's, the wait topics') are taken first: the valve published its own before
+        it answered.
         """
         reason = self.request_restart(self.valve_name, overrides, timeout)
         heard = None
-        while heard != self.heard:  # until a spin takes none
-            heard = self.heard
+        while heard != self._taken():  # until a spin takes none
+            heard = self._taken()
             self.executor.spin_once(timeout_sec=0)
         self._reset()
         return reason
+
+    def _taken(self):
+        """Return how many tick messages (the valve's, the wait topics') this took so far."""
+        return self.heard + sum(topic.count for topic in self.wait_topics)
 
     def close(self):
         self.executor.shutdown()
