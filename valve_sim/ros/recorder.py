@@ -42,6 +42,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, PARAMETER_EVENTS_TOPIC
 from valve_sim.ros.raw_take import RawTaker
+from valve_sim.ros.start_parameters import StartParameters, STATUS_KEY
 
 
 READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
@@ -149,6 +150,9 @@ class Recorder:
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
         self.unreadable_since = {}  # topic -> when only unreadable types were first seen
         self.clock_ns = None  # the node's /clock time at this drain, None off /clock
+        # valve_node's values at the start, written on /parameter_events (start_parameters)
+        self.start_parameters = StartParameters(
+            node, measures.signal_map.topics['supply_pressure'], self._write_start_parameters)
 
     @property
     def subscriptions(self):
@@ -207,6 +211,8 @@ class Recorder:
                     'topic of one type only)'
                 )
             self.other_types[topic] = others
+        if PARAMETER_EVENTS_TOPIC in self.recorded:
+            self.start_parameters.poll()
 
     def _still_waiting_for_a_readable_type(self, topic):
         """
@@ -244,6 +250,12 @@ class Recorder:
         recorded.count += 1
         if recorded.extractor:
             self.measures.add(recorded, data, received)
+
+    def _write_start_parameters(self, data, received_ns):
+        """Write the start snapshot (a ParameterEvent) after what /parameter_events has queued."""
+        self.drain()
+        self._record(self.recorded[PARAMETER_EVENTS_TOPIC], data,
+                     {'received_timestamp': received_ns, 'source_timestamp': received_ns})
 
     def _warn_lost(self, topic, lost):
         """
@@ -289,6 +301,8 @@ class Recorder:
             {f'other types on {topic}': ', '.join(others) for topic, others in mixed.items()}
         )
         values['refused /clock messages'] = str(refused_clock)
+        if self.start_parameters.read:
+            values[STATUS_KEY] = self.start_parameters.status()
         message = (
             f'cannot record {", ".join(self.unrecordable)}'
             if self.unrecordable

@@ -49,6 +49,7 @@ from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.lockstep import (
     HANDSHAKE, Lockstep, lockstep_parameters, NS_PER_S, START_NS)
 from valve_sim.ros.node_processes import start_valve_and_analyser
+from valve_sim.ros.start_parameters import STATUS_KEY as START_PARAMETERS
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
@@ -156,9 +157,14 @@ class AnalyserStatus:
                 'nodes of another run are up here; stop them or run in a domain of its own')
 
     def recording(self, topics):
-        """Whether the analyser records each of topics (full names)."""
+        """
+        Whether the analyser records each of topics (full names), valve_node's start values too.
+
+        The start values (ros.start_parameters) come before any change the run makes.
+        """
         self.check()
-        return all(f'qos {topic}' in self.values for topic in topics)
+        return all(f'qos {topic}' in self.values for topic in topics) \
+            and bool(self.values.get(START_PARAMETERS))
 
     def recorded(self, topics, count):
         """Whether the analyser has recorded at least count messages of each of topics."""
@@ -230,12 +236,12 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
     with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
     to fill (default: a new one); flow_topic: a wait topic whose controller supplies
-    the inlet flow from the second tick on (ros.scenario_stepper); valve: the SuiteValve
-    of a suite (ros.scenario_suite), whose valve_node runs on, restarted for this
-    scenario (else both nodes start here). Raises the errors of a run that cannot
+    the inlet flow from the second tick on (ros.scenario_stepper); valve: the SuiteNodes
+    of a suite (ros.scenario_suite), whose nodes run on, restarted for this scenario
+    (else both nodes start here). Raises the errors of a run that cannot
     complete (a node died, a refused event, a timeout, an incomplete bag, another run's
-    nodes in the domain), after stopping both nodes (a suite's valve_node: the suite
-    does); record then holds what the run got to (measure_partial reads the rest).
+    nodes in the domain), after stopping both nodes (a suite's: its recording closed,
+    the suite stops them); record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
@@ -253,8 +259,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         driver.connect(wait_topics, READY_TIMEOUT)
-        if valve is not None:
-            valve.restart(driver, scenario)
+        if valve is not None:  # both nodes at the scenario's start, the bag in folder
+            valve.restart(scenario, folder)
         status = AnalyserStatus(driver.node, folder)
         recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
@@ -288,7 +294,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
             driver.close()
         if valve is None:
             context.try_shutdown()
-        progress('stopping both nodes (SIGINT)')
+        progress('stopping both nodes (SIGINT)' if valve is None
+                 else "closing the scenario's recording (analyser_node restarts)")
         try:
             processes.stop()
         except NodeExitError as error:
