@@ -19,8 +19,10 @@ The first test changes every kind of setting a test can (model parameters, the p
 a fault, a sensor, the tank pressure) and halts the model (a seized main valve with no
 supply relief: overpressure); the next must find the start-up valve: every parameter
 as at the first test's start, and the same states, bit for bit, as the first test's
-first ticks. A mark's parameters and a refused restart are checked too. Runs in this
-order (pytest keeps a module's order; with xdist, --dist loadfile keeps them together).
+first ticks, from the same driver sending the same messages (/clock and the stamped
+flow, bytes as published) as a new driver would. A mark's parameters and a refused
+restart are checked too. Runs in this order (pytest keeps a module's order; with
+xdist, --dist loadfile keeps them together).
 """
 
 import numpy as np
@@ -33,6 +35,18 @@ from valve_sim.testing.lockstep_valve import NoStepError
 pytest_plugins = ['valve_sim.testing.pytest_plugin']
 NAMES = sorted(VALVE_NODE_SPECS)  # every parameter of the catalogue: model, faults, sensors
 FRESH = {}  # what the first test found at its start
+SENT = []  # (topic, bytes) the driver published since the test's start
+
+
+def distinct(sent):
+    """Return the messages sent without repeats in a row (a /clock resent under load)."""
+    return [message for i, message in enumerate(sent) if i == 0 or message != sent[i - 1]]
+
+
+@pytest.fixture(autouse=True)
+def sent_in_test():
+    """Forget the messages sent before the test (its valve's restart is the test's)."""
+    SENT.clear()
 
 
 @pytest.fixture(scope='module')
@@ -44,11 +58,21 @@ def lockstep_valve_session(tmp_path_factory):
     their own in this session's ROS domain, and a session valve_node left running would
     answer their /clock too.
     """
+    from rclpy.publisher import Publisher
     from valve_sim.testing.lockstep_valve import LockstepValve
 
-    valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
-    yield valve
-    valve.close()
+    publish = Publisher.publish
+    def record(publisher, message):  # the driver's raw messages (/clock, the stamped flow)
+        if isinstance(message, bytes):
+            SENT.append((publisher.topic_name, message))
+        publish(publisher, message)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Publisher, 'publish', record)
+        valve = LockstepValve(folder=tmp_path_factory.mktemp('lockstep_valve_session'))
+        FRESH['driver'], FRESH['new driver sent'] = valve._driver, distinct(SENT)
+        yield valve
+        valve.close()
 
 
 def first_ticks(valve):
@@ -65,6 +89,9 @@ def test_a_test_that_changes_every_kind_of_setting_and_halts_the_model(
         valve_node_kernels, shared_lockstep_valve):
     valve = shared_lockstep_valve
     FRESH['parameters'], FRESH['series'] = first_ticks(valve)
+    FRESH['sent'] = distinct(SENT)
+    # the start after the restart: as a new driver's (the first flow and /clock)
+    assert FRESH['sent'][:2] == FRESH['new driver sent'] and len(FRESH['sent']) > 2
     valve.set_parameters(preset_pressure='6 MPa', k_p=9000.0, tank_pressure='2 bar',
                          burst_pressure='10 MPa')
     valve.set_parameters({'sensor.supply_pressure.bias': 1e5, 'sensor.noise_seed': 7})
@@ -82,6 +109,8 @@ def test_a_test_that_changes_every_kind_of_setting_and_halts_the_model(
 def test_the_next_test_finds_the_start_up_valve(shared_lockstep_valve):
     assert FRESH, 'runs after the test before it'
     parameters, series = first_ticks(shared_lockstep_valve)
+    assert shared_lockstep_valve._driver is FRESH['driver']  # no new driver, no discovery
+    assert distinct(SENT) == FRESH['sent']
     assert parameters == FRESH['parameters']
     assert len(series['stamps']) == 51
     for name, values in series.items():  # bit for bit: the same states at the same stamps

@@ -33,7 +33,8 @@ between an input's topic and /clock. valve_node ticks a jump of count periods pe
 period (ros.clock_jumps), a state each, so a ramp or a sine goes TICKS_PER_CLOCK ticks
 per /clock like a step; the driver saves count - 1 round trips. Parameter changes go
 between tick() calls and act from the next tick: the same run twice gives the same
-states, bit for bit.
+states, bit for bit. restart() restarts the valve (its ~/restart) and the driver with
+it: the next run needs no new driver, no new discovery.
 
 A tick is complete when the last of the tick topics valve_node publishes
 (valve_topics.TICK_TOPICS) has come with its stamp, and applied_inlet_flow (the
@@ -64,9 +65,10 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, gid_process, HANDSHAKE, LAST_TOPIC,
-    LateInputError, NS_PER_S, RELIABLE, RESEND, SentInput, stamp_ns, START_NS, TANK_AT_END,
-    TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT, WaitTopic)
+    clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states, LAST_TOPIC,
+    LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients, SentInput,
+    SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT,
+    WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -104,19 +106,12 @@ class Lockstep:
         self._flow_message.float64s(0)  # position
         self._flow_offset = self._flow_message.float64s(1)  # velocity: the flow [m^3/s]
         self._flow_message.float64s(0)  # effort
-        self.flows = SentInput(self._publish_flow)
-        self.tanks = None  # the tank pressures [Pa absolute], with tank=True
-        self.parameters = AsyncParameterClient(self.node, node_fqn(namespace, NODE_NAME))
+        self.valve_name = node_fqn(namespace, NODE_NAME)
+        self.parameters = AsyncParameterClient(self.node, self.valve_name)
+        self.restart_clients = RestartClients(self.node, self.spin_until)
         self.wait_topics = []
-        self.time_ns = None  # stamp of the valve's latest state
-        self.applied = None  # the flow applied over the tick ending at time_ns [m^3/s]
-        self.clock_ns = None  # last /clock published
-        self.period_ns = None
-        self._paced_from = None  # (wall time, clock) pacing starts from
-        self._applied_ns = self._last_ns = None
-        self.applied_tank = None  # the tank pressure applied over the tick ending at time_ns
-        self._tank_ns = None
         self.tank_publisher = None
+        self.heard = 0  # tick messages taken, counted
         self.subscriptions = [self.node.create_subscription(
             JointState, HANDSHAKE, self._on_handshake, RELIABLE, raw=True),
             self.node.create_subscription(
@@ -126,19 +121,40 @@ class Lockstep:
         if tank:
             self.tank_publisher = self.node.create_publisher(FluidPressure, 'tank_pressure',
                                                              INPUT_QOS)
-            self.tanks = SentInput(self._publish_tank)
             self.subscriptions.append(self.node.create_subscription(
                 FluidPressure, TANK_HANDSHAKE, self._on_tank, RELIABLE, raw=True))
             handshakes += (TANK_HANDSHAKE,)
+        self._reset()
         for topic in record_topics:
             if topic not in handshakes:
                 self.subscriptions.append(self.node.create_subscription(
                     message_class(TOPIC_TYPES[topic]), topic,
-                    lambda data, topic=topic: on_state(topic, data), RELIABLE, raw=True))
+                    lambda data, topic=topic: self._on_state(topic, data), RELIABLE, raw=True))
         self.on_state = on_state
         self.record_topics = set(record_topics)
 
+    def _reset(self):
+        """Forget the run: as a new driver before start() (no input sent, no state heard)."""
+        self.flows = SentInput(self._publish_flow)
+        # the tank pressures [Pa absolute], with tank=True
+        self.tanks = None if self.tank_publisher is None else SentInput(self._publish_tank)
+        self.time_ns = None  # stamp of the valve's latest state
+        self.applied = None  # the flow applied over the tick ending at time_ns [m^3/s]
+        self.clock_ns = None  # last /clock published
+        self.period_ns = None
+        self._paced_from = None  # (wall time, clock) pacing starts from
+        self._applied_ns = self._last_ns = None
+        self.applied_tank = None  # the tank pressure applied over the tick ending at time_ns
+        self._tank_ns = None
+        for topic in self.wait_topics:
+            topic.reset()
+
+    def _on_state(self, topic, data):
+        self.heard += 1
+        self.on_state(topic, data)
+
     def _on_handshake(self, data):
+        self.heard += 1
         self._applied_ns = stamp_ns(data)
         self.applied = FLOW_AT_END.unpack_from(data, len(data) - 12)[0]
         self._update_time()
@@ -146,12 +162,14 @@ class Lockstep:
             self.on_state(HANDSHAKE, data)
 
     def _on_last(self, data):
+        self.heard += 1
         self._last_ns = stamp_ns(data)
         self._update_time()
         if LAST_TOPIC in self.record_topics:
             self.on_state(LAST_TOPIC, data)
 
     def _on_tank(self, data):
+        self.heard += 1
         self._tank_ns = stamp_ns(data)
         self.applied_tank = TANK_AT_END.unpack_from(data, len(data) - TANK_AT_END.size)[0]
         self._update_time()
@@ -166,7 +184,8 @@ class Lockstep:
             self.time_ns = min(stamps)
 
     def spin_until(self, condition, what, timeout=TIMEOUT):
-        spin_until(self.executor, condition, timeout, what, self.processes, period=RESEND)
+        """Spin until condition() holds, checking it every SPIN_SLICE (graph changes wake none)."""
+        spin_until(self.executor, condition, timeout, what, self.processes, period=SPIN_SLICE)
 
     def connect(self, wait_topics=(), timeout=TIMEOUT):
         """
@@ -177,7 +196,8 @@ class Lockstep:
         before that would be lost, and the lockstep would wait for it in vain.
         """
         if self.processes is not None and 'valve_node' in self.processes.processes:
-            self._own_valve(self.processes.processes['valve_node'].pid, timeout)
+            own_valve(self.node, self.processes.processes['valve_node'].pid, self.spin_until,
+                      timeout)
         self.spin_until(lambda: self.clock.get_subscription_count() > 0
                         and self.inlet.get_subscription_count() > 0
                         and (self.tank_publisher is None
@@ -185,8 +205,8 @@ class Lockstep:
                         'valve_node subscribing /clock and its inputs', timeout)
         self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subscriptions),
                         'valve_node publishing its states to this driver', timeout)
-        if not self.parameters.wait_for_services(timeout_sec=timeout):
-            raise WaitTimeoutError(f'no parameter services of valve_node within {timeout:g} s')
+        self.spin_until(self.parameters.services_are_ready, 'the parameter services of '
+                        'valve_node', timeout)
         for topic in wait_topics:
             name = self.node.resolve_topic_name(topic)
             self.spin_until(lambda: self.node.count_publishers(name) > 0,
@@ -196,44 +216,10 @@ class Lockstep:
             self.spin_until(lambda: topic.subscription.get_publisher_count() > 0,
                             f'the wait topic {name} matched', timeout)
             if topic.flow_reply:  # it answers states: a state sent before it listens is lost
-                self.spin_until(lambda: self._hears_states(name),
+                self.spin_until(lambda: hears_states(self.node, name),
                                 f'the controller of {name} subscribing a state of valve_node',
                                 timeout)
             self.wait_topics.append(topic)
-
-    def _hears_states(self, topic):
-        """Whether a node publishing topic subscribes to a topic that valve_node publishes."""
-        nodes = {(info.node_namespace, info.node_name)
-                 for info in self.node.get_publishers_info_by_topic(topic)}
-        valves = {(info.node_namespace, info.node_name) for info in
-                  self.node.get_publishers_info_by_topic(self.node.resolve_topic_name(HANDSHAKE))}
-        states = {name for namespace, node in valves for name, _ in
-                  self.node.get_publisher_names_and_types_by_node(node, namespace)}
-        return any((info.node_namespace, info.node_name) in nodes for state in states
-                   for info in self.node.get_subscriptions_info_by_topic(state))
-
-    def _own_valve(self, pid, timeout):
-        """
-        Wait for the valve_node of process pid; IncompleteRunError if another answers here too.
-
-        Before any /clock: a valve_node another run left in this ROS domain would answer
-        this run's ticks while its own still starts. Under Fast DDS each publisher's GID
-        names its process (gid_process); under another middleware this is not checked.
-        """
-        topic = self.node.resolve_topic_name(HANDSHAKE)
-
-        def publishers():
-            return [gid_process(info.endpoint_gid)
-                    for info in self.node.get_publishers_info_by_topic(topic)]
-
-        self.spin_until(lambda: (pid & 0xFFFF) in publishers() or None in publishers(),
-                        'valve_node of this run publishing', timeout)
-        others = [process for process in publishers() if process != pid & 0xFFFF]
-        if others and None not in others:
-            raise IncompleteRunError(
-                f'{len(others)} other valve_node(s) in this ROS domain publish {topic} '
-                f'(process {others[0]} mod 65536): nodes of another run are up here; stop '
-                'them or run in a domain of its own')
 
     def flow_reply(self, topic):
         """Return the wait topic (connected) of a controller's flow replies, or None for None."""
@@ -391,6 +377,29 @@ class Lockstep:
         future = self.parameters.get_parameters(names)
         self.spin_until(future.done, 'the answer of valve_node to get_parameters')
         return future.result().values
+
+    def request_restart(self, node_name, overrides=None, timeout=TIMEOUT):
+        """Call node_name's ~/restart (RestartClients.call); returns the node's reason."""
+        return self.restart_clients.call(node_name, overrides, timeout)
+
+    def restart(self, overrides=None, timeout=TIMEOUT):
+        """
+        Restart the valve (its ~/restart with overrides) and this driver with it; returns why.
+
+        The driver is then as a new one connected to a new valve_node: no input sent, no
+        state heard, start() next (its inputs first); it keeps its discovery (the valve,
+        the wait topics: their nodes restart too, if they have to), so it sends the same
+        messages, bit for bit, as a new driver would. A refused restart (ParameterError)
+        changes neither. The valve's messages of the run before, still on their way, are
+        taken first (before the node answered, it had published them all).
+        """
+        reason = self.request_restart(self.valve_name, overrides, timeout)
+        heard = None
+        while heard != self.heard:  # until a spin takes none
+            heard = self.heard
+            self.executor.spin_once(timeout_sec=0)
+        self._reset()
+        return reason
 
     def close(self):
         self.executor.shutdown()

@@ -17,7 +17,9 @@ The lockstep protocol's messages on the driver's side: /clock, stamped inputs, w
 
 What ros.lockstep's driver sends and hears, apart from its state machine: the /clock
 bytes (clock_message), a tick message's stamp (stamp_ns), the stamped inputs as sent
-(SentInput: stamps never go back; the value each tick applies), and the topics other
+(SentInput: stamps never go back; the value each tick applies), the graph checks of
+its connect (own_valve, hears_states), the clients of nodes' ~/restart (RestartClients),
+and the topics other
 use_sim_time nodes publish once per tick (WaitTopic; with FLOW_REPLY_TYPE, a
 controller's flow reply, stamped with the tick it answers). The valve's side of the
 same protocol: ros.lockstep_inputs.
@@ -25,8 +27,9 @@ same protocol: ros.lockstep_inputs.
 
 import struct
 
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from valve_sim.core.errors import IncompleteRunError, ValveSimError
+from valve_sim.core.errors import IncompleteRunError, ParameterError, ValveSimError
 from valve_sim.recording.cdr import ENCAPSULATION, read_message, STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS
 
@@ -40,6 +43,7 @@ FLOW_AT_END = struct.Struct('<d')  # applied_inlet_flow: velocity[0], then an em
 NS_PER_S = 1_000_000_000
 START_NS = NS_PER_S  # /clock of the first tick: past any timer's first period (up to 1 s)
 RESEND = 0.5  # [s] without the state: publish the same /clock again (it is best effort)
+SPIN_SLICE = 0.01  # [s] between checks of a wait's condition (a graph change wakes no spin)
 TIMEOUT = 60.0  # [s] for a tick's state, a service answer, discovery
 QUEUE_DEPTH = 1000
 RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
@@ -109,6 +113,78 @@ def gid_process(gid):
     return int.from_bytes(gid[4:6], 'little') if gid[:2] == FAST_DDS_VENDOR else None
 
 
+class RestartClients:
+    """
+    The clients of nodes' ~/restart (rcl_interfaces/srv/SetParametersAtomically), kept.
+
+    node: the driver's; spin_until(condition, what, timeout): the driver's wait. One
+    client per node, made at its first call and kept for the driver's life.
+    """
+
+    def __init__(self, node, spin_until):
+        self.node, self.spin_until, self.clients = node, spin_until, {}
+
+    def call(self, node_name, overrides=None, timeout=TIMEOUT):
+        """
+        Call the ~/restart of node_name (its full name) with overrides {name: value}.
+
+        Returns the node's reason; ParameterError with it if it refuses (the node is
+        then unchanged).
+        """
+        from rcl_interfaces.srv import SetParametersAtomically
+
+        if node_name not in self.clients:
+            self.clients[node_name] = self.node.create_client(
+                SetParametersAtomically, f'{node_name}/restart')
+        client = self.clients[node_name]
+        self.spin_until(client.service_is_ready, f'the service {node_name}/restart', timeout)
+        future = client.call_async(SetParametersAtomically.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg()
+            for name, value in (overrides or {}).items()]))
+        self.spin_until(future.done, f'the answer of {node_name} to ~/restart', timeout)
+        result = future.result().result
+        if not result.successful:
+            raise ParameterError(result.reason)
+        return result.reason
+
+
+def own_valve(node, pid, spin_until, timeout):
+    """
+    Wait for the valve_node of process pid; IncompleteRunError if another answers here too.
+
+    Before any /clock: a valve_node another run left in this ROS domain would answer
+    this run's ticks while its own still starts. Under Fast DDS each publisher's GID
+    names its process (gid_process); under another middleware this is not checked.
+    spin_until(condition, what, timeout): the driver's.
+    """
+    topic = node.resolve_topic_name(HANDSHAKE)
+
+    def publishers():
+        return [gid_process(info.endpoint_gid)
+                for info in node.get_publishers_info_by_topic(topic)]
+
+    spin_until(lambda: (pid & 0xFFFF) in publishers() or None in publishers(),
+               'valve_node of this run publishing', timeout)
+    others = [process for process in publishers() if process != pid & 0xFFFF]
+    if others and None not in others:
+        raise IncompleteRunError(
+            f'{len(others)} other valve_node(s) in this ROS domain publish {topic} '
+            f'(process {others[0]} mod 65536): nodes of another run are up here; stop '
+            'them or run in a domain of its own')
+
+
+def hears_states(node, topic):
+    """Whether a node publishing topic subscribes to a topic that valve_node publishes."""
+    nodes = {(info.node_namespace, info.node_name)
+             for info in node.get_publishers_info_by_topic(topic)}
+    valves = {(info.node_namespace, info.node_name) for info in
+              node.get_publishers_info_by_topic(node.resolve_topic_name(HANDSHAKE))}
+    states = {name for namespace, valve in valves for name, _ in
+              node.get_publisher_names_and_types_by_node(valve, namespace)}
+    return any((info.node_namespace, info.node_name) in nodes for state in states
+               for info in node.get_subscriptions_info_by_topic(state))
+
+
 def stamp_ns(data):
     """Return the header stamp [ns] of a message's CDR bytes (every tick message has one)."""
     sec, nanosec = STAMP.unpack_from(data, STAMP_OFFSET)
@@ -153,6 +229,11 @@ class WaitTopic:
             message = read_message(FLOW_REPLY_TYPE, data)
             if message is not None and len(message.velocity) == 1:
                 self.replies[self.latest_ns] = message.velocity[0]
+
+    def reset(self):
+        """Forget the stamps and replies heard (the nodes restart with a new time base)."""
+        self.latest_ns, self.count_before = None, self.count
+        self.replies.clear()
 
     def mark(self):
         """Note that a tick's /clock goes out: an unstamped topic's next message is that tick's."""

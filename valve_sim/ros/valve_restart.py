@@ -179,24 +179,11 @@ def serve(node):
 
 def request_restart(driver, valve_name, overrides=None, timeout=60.0):
     """
-    Restart the valve_node valve_name (its full name) from a Lockstep driver; returns the reason.
+    Call the ~/restart of valve_name (its full name) from a Lockstep driver; returns the reason.
 
     overrides: {name: value} over its start-up parameters. Raises ParameterError with
-    the node's reason if it refuses (it is then unchanged).
+    the node's reason if it refuses (it is then unchanged). The driver keeps the client
+    (Lockstep.request_restart); Lockstep.restart restarts the driver's valve and the
+    driver with it.
     """
-    from rcl_interfaces.srv import SetParametersAtomically
-
-    client = driver.node.create_client(SetParametersAtomically, f'{valve_name}/restart')
-    try:
-        driver.spin_until(client.service_is_ready, f'the service {valve_name}/restart', timeout)
-        request = SetParametersAtomically.Request(parameters=[
-            Parameter(name, value=value).to_parameter_msg()
-            for name, value in (overrides or {}).items()])
-        future = client.call_async(request)
-        driver.spin_until(future.done, 'the answer of valve_node to ~/restart', timeout)
-    finally:
-        driver.node.destroy_client(client)
-    result = future.result().result
-    if not result.successful:
-        raise ParameterError(result.reason)
-    return result.reason
+    return driver.request_restart(valve_name, overrides, timeout)

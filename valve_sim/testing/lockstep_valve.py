@@ -61,8 +61,7 @@ from valve_sim.core.errors import (
 from valve_sim.core.faults import PREFIX as FAULT_PREFIX
 from valve_sim.core.limits import inlet_flow_problem
 from valve_sim.core.output_files import make_folder
-from valve_sim.core.parameter_sections import node_fqn
-from valve_sim.core.parameters import NODE_NAME, STANDARD_ATMOSPHERE
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.core.quantities import FLOW, parse_quantity
 from valve_sim.recording.tick_bags import state_values
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS, TOPIC_TYPES
@@ -72,7 +71,6 @@ from valve_sim.ros.isolation import hold_domain
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters, NS_PER_S, START_NS
 from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import ros_value
-from valve_sim.ros.valve_restart import request_restart
 
 
 START_TIMEOUT = 180.0  # [s] valve_node's start-up (a cold kernel compile) and discovery
@@ -148,10 +146,14 @@ class LockstepValve:
 
     def _begin(self, flow):
         """Connect a new driver to valve_node and take its first state, at flow's steady state."""
-        self._rows, self._latest, self._events = {}, {}, []
         self._driver = Lockstep(self.context, self.namespace, self.processes,
                                 on_state=self._on_state, record_topics=TICK_TOPICS)
         self._driver.connect(timeout=START_TIMEOUT)
+        self._first_state(flow)
+
+    def _first_state(self, flow):
+        """Take the connected driver's first state, at flow's steady state; no state kept."""
+        self._rows, self._latest, self._events = {}, {}, []
         self.max_inlet_flow = self._driver.get_parameters(['max_inlet_flow'])['max_inlet_flow']
         self._driver.set_flow(flow)
         self._driver.start(START_NS)
@@ -170,12 +172,9 @@ class LockstepValve:
         """
         driver = self._live()
         start, flow = start_values(parameters, initial_flow)
-        request_restart(driver, node_fqn(self.namespace, NODE_NAME),
-                        {**start, 'initial_inlet_flow': flow}, START_TIMEOUT)
+        driver.restart({**start, 'initial_inlet_flow': flow}, START_TIMEOUT)
         self.ambient_pressure = float(start.get('ambient_pressure', STANDARD_ATMOSPHERE))
-        driver.close()  # a new driver: its input stamps start again with the time base
-        self._driver = None
-        self._begin(flow)
+        self._first_state(flow)  # the same driver: its discovery holds
 
     def _fail_start(self, error):
         """valve_node ended while starting: raise its reason from its log, which is kept."""
