@@ -30,7 +30,7 @@ It records as rosbag2 does.
        (P_o_percent ... T_s_ms: the number, or "none"), "<measure>_reason" for
        each undefined one, and t_step_s, direction (+1 / -1), flow_before_m3_s,
        window_s, note (a truncated window) and bag (the file it was recorded in).
-  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "<node name>:
+  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, every status_period (1 s): "<node name>:
        recording": the file, the messages recorded per topic and, for a topic with
        one publisher, the messages lost on the way (gaps in its publication
        sequence numbers), the QoS of each subscription ("qos /topic":
@@ -120,7 +120,7 @@ ANALYSED = REQUIRED + ('tank_pressure',)
 RECORDING_TASK = 'recording'
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
 # The node's own doubles (read-only), from the parameter catalogue: step_threshold,
-# step_merge_time, drain_period, flush_interval. It declares them after ambient_pressure
+# step_merge_time, drain_period, flush_interval, status_period. It declares them after ambient_pressure
 # (ANALYSER_DOUBLES: by default the standard atmosphere).
 DOUBLE_PARAMETERS = ANALYSER_SPECS
 # Every parameter the node declares, but hardware_id (valve_sim.ros.diagnostics): the
@@ -173,6 +173,7 @@ class ValveAnalyser(Node):
         self.hardware_id = diagnostics.declare_hardware_id(self)
         self.measures_publisher = self.create_publisher(DiagnosticArray, 'step_measures',
                                                         MEASURES_QOS)
+        self.parameter_clients = {}  # kept across recordings (start_parameters)
         self.bag, self.measures, self.recorder = self.new_recording(self.start_settings)
         self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         # On the steady clock: recording must not stop while a simulation's /clock pauses.
@@ -180,7 +181,8 @@ class ValveAnalyser(Node):
         self.create_timer(DISCOVERY_PERIOD, lambda: self.recorder.discover(), clock=steady)
         self.drain_timer = self.create_timer(self.start_settings['drain_period'],
                                              lambda: self.recorder.drain(), clock=steady)
-        self.create_timer(1.0, self._publish_status, clock=steady)
+        self.status_timer = self.create_timer(self.start_settings['status_period'],
+                                              self._publish_status, clock=steady)
         analyser_restart.serve(self)
 
     def new_recording(self, settings):
@@ -209,7 +211,8 @@ class ValveAnalyser(Node):
                                 settings['step_merge_time'], self.hardware_id, bag.path,
                                 self.measures_publisher)
         recorder = Recorder(self, bag, wanted, optional, settings['queue_depth'],
-                            settings['flush_interval'], measures)
+                            settings['flush_interval'], measures,
+                            parameter_clients=self.parameter_clients)
         self.get_logger().info(f'recording {", ".join(wanted)} to {bag.path}')
         return bag, measures, recorder
 
@@ -226,12 +229,13 @@ class ValveAnalyser(Node):
         except OSError as error:
             problem = self.write_failure(error)
             self.get_logger().error(str(problem))
-        for subscription in self.recorder.subscriptions:
-            self.destroy_subscription(subscription)
-        self.recorder.start_parameters.close()
+        kept = self.recorder.handed_over()
         self.bag, self.measures, self.recorder = recording
+        self.recorder.kept = kept
         self.drain_timer.timer_period_ns = round(settings['drain_period'] * 1e9)
+        self.status_timer.timer_period_ns = round(settings['status_period'] * 1e9)
         self.clock_guard.restart()  # a new time base, as before the first /clock
+        self.recorder.discover()  # the kept subscriptions back in use now
         return problem
 
     def _declare_parameters(self):

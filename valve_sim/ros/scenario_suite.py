@@ -16,8 +16,8 @@
 A suite of bench scenarios on one valve_node: `valve-sim scenario run DIR` (or FILE FILE ...).
 
 valve_node and analyser_node start once (SuiteNodes); before each scenario both are
-restarted in place through their ~/restart services, from a node of the suite's whose
-clients live as long as the suite: valve_node (ros.valve_restart) with every parameter
+restarted in place through their ~/restart services, from the suite's Lockstep driver,
+connected once and kept (its restart clients too): valve_node (ros.valve_restart) with every parameter
 back to its start-up value and the scenario's over it, faults, sensors and schedule as
 its file says, the exact steady state of its initial inputs, a new time base from the
 first /clock; then analyser_node (ros.analyser_restart) into the scenario's folder
@@ -42,8 +42,8 @@ from valve_sim.core.parameter_sections import node_fqn
 from valve_sim.core.parameters import NODE_NAME
 from valve_sim.ros import node_command
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER
-from valve_sim.ros.lockstep import lockstep_parameters
-from valve_sim.ros.node_processes import NodeProcesses, spin_until
+from valve_sim.ros.lockstep import Lockstep, lockstep_parameters
+from valve_sim.ros.node_processes import NodeProcesses
 from valve_sim.ros.scenario_runner import analyser_parameters, READY_TIMEOUT, report_run
 
 
@@ -80,27 +80,23 @@ def start_values(scenario):
 
 class SuiteNodes:
     """
-    The valve_node and analyser_node of a suite, in an rclpy context of the suite's.
+    The valve_node and analyser_node of a suite, and its Lockstep driver (ros.lockstep).
 
-    Started, restarted (ros.valve_restart, ros.analyser_restart), stopped. starts: how
-    many times the suite started them.
+    In an rclpy context of the suite's: started, restarted (ros.valve_restart,
+    ros.analyser_restart), stopped. The driver is connected once per start of the nodes
+    and kept across restarts (Lockstep.restart). rate, wait_topics: as
+    scenario_runner.run_scenario's, for every scenario. starts: how many times the suite
+    started the nodes.
     """
 
-    def __init__(self):
+    def __init__(self, rate=None, wait_topics=()):
         import rclpy
-        from rcl_interfaces.srv import SetParametersAtomically
-        from rclpy.executors import SingleThreadedExecutor
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node('valve_sim_suite', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.restarts = {name: self.node.create_client(SetParametersAtomically,
-                                                       f'{node_fqn("", name)}/restart')
-                         for name in (NODE_NAME, ANALYSER)}
+        self.rate, self.wait_topics = rate, wait_topics
         self.scratch = tempfile.mkdtemp(prefix='valve-sim-suite-')
-        self.processes, self.key, self.starts = None, None, 0
+        self.processes, self.driver, self.key, self.starts = None, None, None, 0
 
     def start(self, scenario, folder):
         """
@@ -125,36 +121,37 @@ class SuiteNodes:
             self.key, self.starts = key, self.starts + 1
         return ScenarioNodes(self)
 
+    def connect(self):
+        """Return the suite's Lockstep driver, connected to the running nodes."""
+        if self.driver is None:
+            driver = Lockstep(self.context, processes=self.processes, rate=self.rate,
+                              tank=self.key[1])
+            try:
+                driver.connect(self.wait_topics, READY_TIMEOUT)
+            except BaseException:
+                driver.close()
+                raise
+            self.driver = driver
+        return self.driver
+
     def restart(self, scenario, folder):
-        """Restart valve_node at the scenario's start, then analyser_node into folder."""
-        self._request(NODE_NAME, scenario.parameters)
+        """Restart valve_node (and the driver) at the scenario's start, then analyser_node."""
+        self.driver.restart(scenario.parameters, READY_TIMEOUT)
         self.record_into(folder, scenario.ambient_pressure)
 
     def record_into(self, folder, ambient_pressure=None):
         """Restart analyser_node: its recording closed, a new one in folder."""
-        self._request(ANALYSER, {'output_dir': str(folder)} if ambient_pressure is None else
-                      {'output_dir': str(folder), 'ambient_pressure': float(ambient_pressure)})
-
-    def _request(self, name, overrides):
-        """Call the node name's ~/restart; raises ParameterError with its reason if refused."""
-        from rcl_interfaces.srv import SetParametersAtomically
-        from rclpy.parameter import Parameter
-
-        client = self.restarts[name]
-        spin_until(self.executor, client.service_is_ready, READY_TIMEOUT,
-                   f'the service {name}/restart', self.processes)
-        future = client.call_async(SetParametersAtomically.Request(parameters=[
-            Parameter(key, value=value).to_parameter_msg() for key, value in overrides.items()]))
-        spin_until(self.executor, future.done, READY_TIMEOUT,
-                   f'the answer of {name} to ~/restart', self.processes)
-        result = future.result().result
-        if not result.successful:
-            raise ParameterError(result.reason)
-        return result.reason
+        overrides = {'output_dir': str(folder)}
+        if ambient_pressure is not None:
+            overrides['ambient_pressure'] = float(ambient_pressure)
+        self.driver.request_restart(node_fqn('', ANALYSER), overrides, READY_TIMEOUT)
 
     def stop(self):
-        """Stop both nodes (SIGINT); returns why they did not end cleanly, or None."""
+        """Stop both nodes (SIGINT) and the driver; returns why they did not end cleanly, or None."""
         processes, self.processes = self.processes, None
+        if self.driver is not None:
+            self.driver.close()
+            self.driver = None
         if processes is None:
             return None
         try:
@@ -168,8 +165,6 @@ class SuiteNodes:
         try:
             return self.stop()
         finally:
-            self.executor.shutdown()
-            self.node.destroy_node()
             self.context.try_shutdown()
             shutil.rmtree(self.scratch, ignore_errors=True)
 
@@ -194,7 +189,9 @@ def run_suite(scenarios, out, rate=None, wait_topics=(), junit=None, progress=pr
     from valve_sim.analysis.scenarios.report import write_suite_reports
 
     records = []
-    nodes = SuiteNodes()
+    if flow_topic is not None and flow_topic not in wait_topics:
+        wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
+    nodes = SuiteNodes(rate, wait_topics)
     try:
         for scenario, folder in zip(scenarios, scenario_folders(scenarios, out)):
             progress(f'{scenario.name} ({len(records) + 1} of {len(scenarios)}): {folder}')

@@ -43,9 +43,8 @@ STATUS_KEY = 'start parameters'  # the recording status's key: whose values were
 class Read:
     """One node's read under way: its two clients, the call waited for, when asked, the names."""
 
-    def __init__(self, node, name):
-        self.lister = node.create_client(ListParameters, f'{name}/list_parameters')
-        self.getter = node.create_client(GetParameters, f'{name}/get_parameters')
+    def __init__(self, clients):
+        self.lister, self.getter = clients
         self.future, self.stamp_ns, self.names = None, None, None
 
 
@@ -55,12 +54,15 @@ class StartParameters:
 
     node: the analyser node (its clients); supply_topic: the supply-pressure topic's full
     name; write(data, received_ns): writes a serialized ParameterEvent as received on
-    /parameter_events. poll() advances each read a step (from the discovery timer: no
-    callback, no blocking); read: {node full name: number of parameters written}.
+    /parameter_events; clients: {node full name: (list client, get client)}, the
+    node's, kept across its recordings (a new client waits for discovery again). poll()
+    advances each read a step (from the discovery timer: no callback, no blocking);
+    read: {node full name: number of parameters written}.
     """
 
-    def __init__(self, node, supply_topic, write):
+    def __init__(self, node, supply_topic, write, clients):
         self.node, self.supply_topic, self.write = node, supply_topic, write
+        self.clients = clients
         self.read = {}
         self.pending = {}  # node full name: its Read
 
@@ -69,7 +71,11 @@ class StartParameters:
         for info in self.node.get_publishers_info_by_topic(self.supply_topic):
             name = node_fqn(info.node_namespace, info.node_name)
             if name not in self.read and name not in self.pending:
-                self.pending[name] = Read(self.node, name)
+                if name not in self.clients:
+                    self.clients[name] = (
+                        self.node.create_client(ListParameters, f'{name}/list_parameters'),
+                        self.node.create_client(GetParameters, f'{name}/get_parameters'))
+                self.pending[name] = Read(self.clients[name])
         for name, read in list(self.pending.items()):
             self._advance(name, read)
 
@@ -93,18 +99,11 @@ class StartParameters:
             self.write(serialize_message(event), time.time_ns())
             self.read[name] = len(values)
             del self.pending[name]
-            self._destroy(read)
-
-    def _destroy(self, read):
-        self.node.destroy_client(read.lister)
-        self.node.destroy_client(read.getter)
 
     def status(self):
         """Return the status value: whose parameters were read ('' while none)."""
         return ', '.join(f'{name} ({count})' for name, count in self.read.items())
 
     def close(self):
-        """Destroy the clients of reads not answered."""
-        for read in self.pending.values():
-            self._destroy(read)
+        """Forget the reads not answered (the recording ends)."""
         self.pending = {}
