@@ -112,7 +112,7 @@ def test_a_suite_runs_each_scenario_from_its_own_start_as_if_alone(tmp_path, val
 
 def assert_live_windows_are_the_reports(folder):
     """
-    The analyser's live measures.json has the scenario report's steps and windows (issue 41).
+    Assert that the analyser's live measures.json has the report's steps and windows (issue 41).
 
     The window ends at the change of damping_orifice_diameter only: a parameter set to its
     own value is no change, live as offline (the analyser knows valve_node's start values).

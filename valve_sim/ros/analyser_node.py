@@ -30,8 +30,8 @@ It records as rosbag2 does.
        (P_o_percent ... T_s_ms: the number, or "none"), "<measure>_reason" for
        each undefined one, and t_step_s, direction (+1 / -1), flow_before_m3_s,
        window_s, note (a truncated window) and bag (the file it was recorded in).
-  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, every status_period (1 s): "<node name>:
-       recording": the file, the messages recorded per topic and, for a topic with
+  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, every status_period (1 s):
+       "<node name>: recording": the file, the messages recorded per topic and, for a topic with
        one publisher, the messages lost on the way (gaps in its publication
        sequence numbers), the QoS of each subscription ("qos /topic":
        reliable/volatile ...); ERROR once a wanted topic cannot be recorded (its type
@@ -120,7 +120,8 @@ ANALYSED = REQUIRED + ('tank_pressure',)
 RECORDING_TASK = 'recording'
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
 # The node's own doubles (read-only), from the parameter catalogue: step_threshold,
-# step_merge_time, drain_period, flush_interval, status_period. It declares them after ambient_pressure
+# step_merge_time, drain_period, flush_interval, status_period. It declares them after
+# ambient_pressure
 # (ANALYSER_DOUBLES: by default the standard atmosphere).
 DOUBLE_PARAMETERS = ANALYSER_SPECS
 # Every parameter the node declares, but hardware_id (valve_sim.ros.diagnostics): the

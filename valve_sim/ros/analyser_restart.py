@@ -21,11 +21,14 @@ as valve_node's, valve_sim.ros.valve_restart) starts recording anew as if the no
 been launched with the request's parameters too (over its start-up values, not over
 an earlier restart's): the current recording is closed as at shutdown (what is queued
 taken and written, the open steps measured and published, the file closed with its
-summary, or metadata.yaml for a bag folder), every subscription of it dropped; a new
-recording opens (a new file in output_dir, its own .measures.json, its topics
-subscribed afresh as they are found, valve_node's start parameters read again:
+summary, or metadata.yaml for a bag folder); a new recording opens (a new file in
+output_dir, its own .measures.json, valve_node's start parameters read again:
 ros.start_parameters) and the node's clock goes back to zero through its guard, so the
-next /clock starts a new time base as a first one does. The node's parameters then
+next /clock starts a new time base as a first one does. A topic recorded before keeps
+its subscription if the new recording records it with the same type and QoS (its
+publishers stay matched: nothing sent after the restart is missed while a new one
+would match); a transient-local topic's subscription is made anew, so its publishers'
+history comes again, as to a new node (recorder.Recorder.handed_over). The node's parameters then
 read as the new recording's. The new file is created before anything else changes: a
 refused request (an unknown parameter, a wrong value, a folder that cannot be made, a
 parameter only a new process can change: use_sim_time, hardware_id) leaves the current

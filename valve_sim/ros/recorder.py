@@ -163,7 +163,7 @@ class Recorder:
 
     @property
     def subscriptions(self):
-        """Return the set of the recorded (and kept) topics' subscriptions: the drain takes them."""
+        """Return the recorded (and kept) topics' subscriptions: the drain takes them."""
         return {recorded.subscription
                 for recorded in (*self.recorded.values(), *self.kept.values())}
 

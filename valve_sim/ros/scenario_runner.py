@@ -49,8 +49,8 @@ from valve_sim.ros.clock_jumps import TICKS_PER_CLOCK
 from valve_sim.ros.lockstep import (
     HANDSHAKE, Lockstep, lockstep_parameters, NS_PER_S, START_NS)
 from valve_sim.ros.node_processes import start_valve_and_analyser
-from valve_sim.ros.start_parameters import STATUS_KEY as START_PARAMETERS
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
+from valve_sim.ros.start_parameters import STATUS_KEY as START_PARAMETERS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
 
@@ -287,7 +287,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
             1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
-        # lose the states still on their way. Its status (every STATUS_PERIOD) says when it has all.
+        # lose the states still on their way. Its status (each STATUS_PERIOD) says when it has
+        # all.
         progress('waiting for analyser_node to record every state')
         driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
                                                       TICK_TOPICS), scenario.ticks + 1)

@@ -15,22 +15,23 @@
 """
 A suite of bench scenarios on one valve_node: `valve-sim scenario run DIR` (or FILE FILE ...).
 
-valve_node and analyser_node start once (SuiteNodes); before each scenario both are
-restarted in place through their ~/restart services, from the suite's Lockstep driver,
-connected once and kept (its restart clients too): valve_node (ros.valve_restart) with every parameter
-back to its start-up value and the scenario's over it, faults, sensors and schedule as
-its file says, the exact steady state of its initial inputs, a new time base from the
-first /clock; then analyser_node (ros.analyser_restart) into the scenario's folder
-(NN_<name>/): a bag of its own, its .measures.json, valve_node's start parameters read
-after valve_node's restart. When the scenario has run, analyser_node restarts into a
-scratch folder of the suite's (deleted at its end), which closes the scenario's bag
-before its reports are written (ros.scenario_runner.report_run). The suite writes
-summary.txt and one JUnit file with a testsuite per scenario. The node logs are in the
-folder of the scenario that started the nodes. New nodes start for a scenario whose
-read-only start values differ (its params_file, a tank_pressure input or none: the
-lockstep inputs), and after any scenario that did not complete (a node died or
-halted, a timeout, a refused event or restart): that one ends as an error case, the
-next starts on fresh nodes.
+valve_node and analyser_node start once (SuiteNodes), with one Lockstep driver
+(connected once, its restart clients kept). Before each scenario both nodes are
+restarted in place through their ~/restart services: valve_node and the driver
+(Lockstep.restart, ros.valve_restart) with every parameter back to its start-up value
+and the scenario's over it, faults, sensors and schedule as its file says, the exact
+steady state of its initial inputs, a new time base from the first /clock; then
+analyser_node (ros.analyser_restart) into the scenario's folder (NN_<name>/): a bag of
+its own, its .measures.json, valve_node's start parameters read after valve_node's
+restart (so the restart's parameter changes go to the bag before). When the scenario
+has run, analyser_node restarts into a scratch folder of the suite's (deleted at its
+end), which closes the scenario's bag before its reports are written
+(ros.scenario_runner.report_run). The suite writes summary.txt and one JUnit file with
+a testsuite per scenario. The node logs are in the folder of the scenario that started
+the nodes. New nodes start for a scenario whose read-only start values differ (its
+params_file, a tank_pressure input or none: the lockstep inputs), and after any
+scenario that did not complete (a node died or halted, a timeout, a refused event or
+restart): that one ends as an error case, the next starts on fresh nodes.
 """
 
 import shutil
@@ -39,7 +40,6 @@ import tempfile
 from valve_sim.core.errors import NodeExitError, ParameterError, WaitTimeoutError
 from valve_sim.core.output_files import make_folder, safe_name
 from valve_sim.core.parameter_sections import node_fqn
-from valve_sim.core.parameters import NODE_NAME
 from valve_sim.ros import node_command
 from valve_sim.ros.analyser_node import NODE_NAME as ANALYSER
 from valve_sim.ros.lockstep import Lockstep, lockstep_parameters
@@ -147,7 +147,7 @@ class SuiteNodes:
         self.driver.request_restart(node_fqn('', ANALYSER), overrides, READY_TIMEOUT)
 
     def stop(self):
-        """Stop both nodes (SIGINT) and the driver; returns why they did not end cleanly, or None."""
+        """Stop both nodes (SIGINT) and the driver; returns why they did not stop cleanly."""
         processes, self.processes = self.processes, None
         if self.driver is not None:
             self.driver.close()
