@@ -167,14 +167,13 @@ class AnalyserStatus:
                 'nodes of another run are up here; stop them or run in a domain of its own')
 
     def recording(self, topics):
-        """
-        Whether the analyser records each of topics (full names), valve_node's start values too.
-
-        The start values (ros.start_parameters) come before any change the run makes.
-        """
+        """Whether the analyser records each of topics (full names)."""
         self.check()
-        return all(f'qos {topic}' in self.values for topic in topics) \
-            and bool(self.values.get(START_PARAMETERS))
+        return all(f'qos {topic}' in self.values for topic in topics)
+
+    def read_start_parameters(self):
+        """Whether the analyser has read valve_node's start values (ros.start_parameters)."""
+        return bool(self.values.get(START_PARAMETERS))
 
     def recorded(self, topics, count):
         """Whether the analyser has recorded at least count messages of each of topics."""
@@ -275,9 +274,12 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
             valve.restart(scenario, folder)
         status = AnalyserStatus(driver.node, folder)
         recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
+        # valve_node's start values in the bag before any change the run makes
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
-                                                       recorded)),
-                          'analyser_node recording every topic', READY_TIMEOUT)
+                                                       recorded))
+                          and status.read_start_parameters(),
+                          "analyser_node recording every topic and valve_node's parameters",
+                          READY_TIMEOUT)
         inputs = driver.input_publishers()  # matched by both nodes: none sent is lost
         driver.spin_until(lambda: all(publisher.get_subscription_count() >= 2
                                       for publisher, _ in inputs.values()),
