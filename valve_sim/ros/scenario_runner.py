@@ -392,17 +392,16 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
 def report_run(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
                ticks_per_clock=None, flow_topic=None, valve=None):
     """Run a scenario, write its reports; returns (RunRecord, paths, the run's error or None)."""
-    from valve_sim.analysis.scenarios.report import write_reports
+    from valve_sim.analysis.scenarios.report import plot_run, write_reports
 
-    record = RunRecord(scenario, folder)
+    record, error = RunRecord(scenario, folder), None
     try:
         run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record,
                      flow_topic=flow_topic, valve=valve)
-    except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as error:
-        record.error = str(error) or type(error).__name__
+    except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as run_error:
+        record.error, error = str(run_error) or type(run_error).__name__, run_error
         measure_partial(record)
-        return record, write_reports(record, junit), error
-    return record, write_reports(record, junit), None
+    return record, write_reports(record, junit, plot_run if valve is None else valve.plot), error
 
 
 def lockstep_messages(bag, topics=(*TICK_TOPICS, STAMPED_FLOW_TOPIC, 'tank_pressure')):

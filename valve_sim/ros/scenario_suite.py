@@ -34,6 +34,8 @@ scenario that did not complete (a node died or halted, a timeout, a refused even
 restart): that one ends as an error case, the next starts on fresh nodes.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+import copy
 import shutil
 import tempfile
 
@@ -97,6 +99,15 @@ class SuiteNodes:
         self.rate, self.wait_topics = rate, wait_topics
         self.scratch = tempfile.mkdtemp(prefix='valve-sim-suite-')
         self.processes, self.driver, self.key, self.starts = None, None, None, 0
+        # one thread draws each scenario's figure while the next runs (this thread only
+        # waits on the nodes meanwhile); nothing else here uses matplotlib
+        self.figures, self.drawn = ThreadPoolExecutor(max_workers=1), []
+
+    def plot(self, path, run):
+        """Draw run's figure to path in the figure thread (close() waits for it)."""
+        from valve_sim.analysis.scenarios.report import plot_run
+
+        self.drawn.append(self.figures.submit(plot_run, path, copy.copy(run)))
 
     def start(self, scenario, folder):
         """
@@ -161,12 +172,19 @@ class SuiteNodes:
         return None
 
     def close(self):
-        """Stop both nodes and the suite's rclpy context; delete the scratch folder."""
+        """
+        Stop both nodes and the suite's rclpy context; delete the scratch folder.
+
+        Then wait for the figures; raises the error of one that could not be written.
+        """
         try:
             return self.stop()
         finally:
             self.context.try_shutdown()
             shutil.rmtree(self.scratch, ignore_errors=True)
+            self.figures.shutdown(wait=True)
+            for drawn in self.drawn:
+                drawn.result()
 
 
 def scenario_folders(scenarios, out):

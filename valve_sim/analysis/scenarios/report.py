@@ -219,8 +219,12 @@ def write_junit(document, folder, junit_path=None):
     return path
 
 
-def write_reports(run, junit_path=None):
-    """Write report.txt, report.json, scenario.png and junit.xml (or junit_path); return paths."""
+def write_reports(run, junit_path=None, plot=plot_run):
+    """
+    Write report.txt, report.json, scenario.png and junit.xml (or junit_path); return paths.
+
+    plot(path, run) draws the figure (a suite's draws it while the next scenario runs).
+    """
     folder = run.folder
     paths = {
         'report': folder / 'report.txt',
@@ -229,7 +233,7 @@ def write_reports(run, junit_path=None):
     }
     write_text(paths['report'], report_text(run))
     write_text(paths['json'], json_text(report_document(run)) + '\n')
-    plot_run(paths['figure'], run)
+    plot(paths['figure'], run)
     paths['junit'] = write_junit(
         junit_document(run.scenario, run.checks, run.wall_s, run.error), folder, junit_path
     )
