@@ -26,7 +26,8 @@ its own, its .measures.json, valve_node's start parameters read after valve_node
 restart (so the restart's parameter changes go to the bag before). When the scenario
 has run, analyser_node restarts into a scratch folder of the suite's (deleted at its
 end), which closes the scenario's bag before its reports are written
-(ros.scenario_runner.report_run). The suite writes summary.txt and one JUnit file with
+(ros.scenario_runner.report_run; its figure in a thread of the suite's while the next
+scenario runs). The suite writes summary.txt and one JUnit file with
 a testsuite per scenario. The node logs are in the folder of the scenario that started
 the nodes. New nodes start for a scenario whose read-only start values differ (its
 params_file, a tank_pressure input or none: the lockstep inputs), and after any
