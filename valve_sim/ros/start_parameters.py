@@ -69,6 +69,8 @@ class StartParameters:
     def poll(self):
         """Ask a new supply-pressure publisher for its parameters; write those answered."""
         for info in self.node.get_publishers_info_by_topic(self.supply_topic):
+            if not info.node_namespace.startswith('/'):
+                continue  # an endpoint known before its node's name: not yet
             name = node_fqn(info.node_namespace, info.node_name)
             if name not in self.read and name not in self.pending:
                 if name not in self.clients:
