@@ -22,10 +22,14 @@ next starts on a fresh valve_node), and the healthy step again. The suite's JUni
 a testsuite per scenario, its summary lists each, and the exit code says one failed.
 """
 
+import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
 
+import pytest
+from valve_sim.analysis.steps.measures import MEASURE_NAMES
+from valve_sim.ros.lockstep import NS_PER_S, START_NS
 from valve_sim.ros.scenario_runner import lockstep_messages
 
 
@@ -38,9 +42,15 @@ events: [{t: 0.05, set: {fault.main_valve_stuck: true}}]
 expect:
   - alarm: {after: 0.1, within: 0.6}
 """
+# Two parameter events inside the step's window: one sets the value in effect (no change,
+# the window runs on: after STUCK's 21 MPa too, for a restart sets it back), one a new one
+# (it ends the window)
 HEALTHY = """scenario: healthy
 duration: 0.25
 inputs: {inlet_flow: {initial: 8 L/min, changes: [{at: 0.05, step: 20 L/min}]}}
+events:
+  - {t: 0.1, set: {supply_pressure_limit: 0}}
+  - {t: 0.2, set: {damping_orifice_diameter: 0.9 mm}}
 expect:
   - never_above: {signal: supply_pressure, value: 7.5 MPa}
   - no_alarm: {}
@@ -92,9 +102,34 @@ def test_a_suite_runs_each_scenario_from_its_own_start_as_if_alone(tmp_path, val
     for folder in ('2_healthy', '4_healthy'):
         bag, = (tmp_path / 'suite' / folder).glob('*.mcap')
         assert lockstep_messages(bag) == expected, folder
+    for folder in (tmp_path / 'alone', tmp_path / 'suite' / '2_healthy',
+                   tmp_path / 'suite' / '4_healthy'):
+        assert_live_windows_are_the_reports(folder)
     # and the seized valve's fault was its own: the healthy step never raised the alarm
     stuck_log = (tmp_path / 'suite' / '1_stuck' / 'report.txt').read_text()
     assert 'PASSED' in stuck_log.splitlines()[0]
+
+
+def assert_live_windows_are_the_reports(folder):
+    """
+    Assert that the analyser's live measures.json has the report's steps and windows (issue 41).
+
+    The window ends at the change of damping_orifice_diameter only: a parameter set to its
+    own value is no change, live as offline (the analyser knows valve_node's start values).
+    """
+    live = json.loads(next(folder.glob('*.measures.json')).read_text())['steps']
+    offline = json.loads((folder / 'report.json').read_text())['steps']
+    assert len(live) == len(offline) == 1, (live, offline)
+    start = START_NS / NS_PER_S  # live times are the model clock's
+    assert live[0]['t_step'] - start == pytest.approx(offline[0]['t_step'], abs=1e-9)
+    cut = live[0]['details']['window_cut']
+    assert cut['time'] - start == pytest.approx(0.2, abs=2e-3), cut
+    assert 'damping_orifice_diameter' in cut['by'] and 'supply_pressure_limit' not in cut['by']
+    for name in MEASURE_NAMES:
+        assert (live[0][name] is None) == (offline[0][name] is None), name
+        if live[0][name] is not None:
+            assert live[0][name] == pytest.approx(offline[0][name], rel=1e-9), name
+    assert all('damping_orifice_diameter' in reason for reason in live[0]['reasons'].values())
 
 
 def test_check_takes_a_folder_and_names_each_broken_file(tmp_path):

@@ -574,6 +574,8 @@ ANALYSER_SPECS = (
     _analyser('flush_interval', 't_flush', 's', 0.05, 60.0, 1.0,
               'longest time recorded data waits before its chunk is handed to the operating '
               'system'),
+    _analyser('status_period', 't_status', 's', 0.01, 60.0, 1.0,
+              'period of the recording status on /diagnostics (a lockstep run waits on it)'),
 )
 
 CATALOGUE = {

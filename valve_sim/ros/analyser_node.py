@@ -30,8 +30,8 @@ It records as rosbag2 does.
        (P_o_percent ... T_s_ms: the number, or "none"), "<measure>_reason" for
        each undefined one, and t_step_s, direction (+1 / -1), flow_before_m3_s,
        window_s, note (a truncated window) and bag (the file it was recorded in).
-  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, 1 Hz: "<node name>:
-       recording": the file, the messages recorded per topic and, for a topic with
+  pub  /diagnostics    diagnostic_msgs/msg/DiagnosticArray, every status_period (1 s):
+       "<node name>: recording": the file, the messages recorded per topic and, for a topic with
        one publisher, the messages lost on the way (gaps in its publication
        sequence numbers), the QoS of each subscription ("qos /topic":
        reliable/volatile ...); ERROR once a wanted topic cannot be recorded (its type
@@ -88,9 +88,9 @@ from valve_sim.core.errors import InputFileError, OutputFileError, USER_ERRORS
 from valve_sim.core.output_files import make_folder
 from valve_sim.recording.bag import BagWriter
 from valve_sim.recording.valve_topics import PARAMETER_EVENTS_TOPIC
-from valve_sim.ros import diagnostics, spinning
+from valve_sim.ros import analyser_restart, diagnostics, spinning
 from valve_sim.ros.clock_guard import GuardedTimeSource
-from valve_sim.ros.measures_publisher import StepMeasures
+from valve_sim.ros.measures_publisher import MEASURES_QOS, StepMeasures
 from valve_sim.ros.recorder import Recorder
 from valve_sim.ros.ros_parameters import declare
 
@@ -120,7 +120,8 @@ ANALYSED = REQUIRED + ('tank_pressure',)
 RECORDING_TASK = 'recording'
 DISCOVERY_PERIOD = 0.1  # [s] how often topics not yet seen are looked for (as rosbag2 does)
 # The node's own doubles (read-only), from the parameter catalogue: step_threshold,
-# step_merge_time, drain_period, flush_interval. It declares them after ambient_pressure
+# step_merge_time, drain_period, flush_interval, status_period. It declares them after
+# ambient_pressure
 # (ANALYSER_DOUBLES: by default the standard atmosphere).
 DOUBLE_PARAMETERS = ANALYSER_SPECS
 # Every parameter the node declares, but hardware_id (valve_sim.ros.diagnostics): the
@@ -169,7 +170,28 @@ class ValveAnalyser(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.clock_guard = GuardedTimeSource.install(self)
-        settings = self._declare_parameters()
+        self.start_settings = self._declare_parameters()
+        self.hardware_id = diagnostics.declare_hardware_id(self)
+        self.measures_publisher = self.create_publisher(DiagnosticArray, 'step_measures',
+                                                        MEASURES_QOS)
+        self.parameter_clients = {}  # kept across recordings (start_parameters)
+        self.bag, self.measures, self.recorder = self.new_recording(self.start_settings)
+        self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # On the steady clock: recording must not stop while a simulation's /clock pauses.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(DISCOVERY_PERIOD, lambda: self.recorder.discover(), clock=steady)
+        self.drain_timer = self.create_timer(self.start_settings['drain_period'],
+                                             lambda: self.recorder.drain(), clock=steady)
+        self.status_timer = self.create_timer(self.start_settings['status_period'],
+                                              self._publish_status, clock=steady)
+        analyser_restart.serve(self)
+
+    def new_recording(self, settings):
+        """
+        Open a new recording of settings ({parameter: value}); returns (bag, measures, recorder).
+
+        Raises OutputFileError if its file cannot be created (nothing else changes then).
+        """
         signal_map = SignalMap(
             topics={role: self.resolve_topic_name(settings[f'{role}_topic']) for role in ANALYSED},
             joints={role: settings[f'{role}_joint'] for role in ANALYSED if ROLE[role].joint},
@@ -180,26 +202,42 @@ class ValveAnalyser(Node):
             + list(signal_map.topics.values())
         )
         optional = {self.resolve_topic_name(topic) for topic in OPTIONAL_TOPICS}
-        self.hardware_id = diagnostics.declare_hardware_id(self)
-        self.bag = BagWriter(
+        bag = BagWriter(
             self._new_bag_path(Path(settings['output_dir']), settings['bag_folder']),
             folder=settings['bag_folder'],
             custom_data={'recorded_by': 'valve_sim analyser_node ' + self.hardware_id},
             new=True,
         )
-        self.measures = StepMeasures(self, signal_map, settings['step_threshold'],
-                                     settings['step_merge_time'], self.hardware_id,
-                                     self.bag.path)
-        self.measures_publisher = self.measures.publisher
-        self.recorder = Recorder(self, self.bag, wanted, optional, settings['queue_depth'],
-                                 settings['flush_interval'], self.measures)
-        self.status_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        # On the steady clock: recording must not stop while a simulation's /clock pauses.
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(DISCOVERY_PERIOD, self.recorder.discover, clock=steady)
-        self.create_timer(settings['drain_period'], self.recorder.drain, clock=steady)
-        self.create_timer(1.0, self._publish_status, clock=steady)
-        self.get_logger().info(f'recording {", ".join(wanted)} to {self.bag.path}')
+        measures = StepMeasures(self, signal_map, settings['step_threshold'],
+                                settings['step_merge_time'], self.hardware_id, bag.path,
+                                self.measures_publisher)
+        recorder = Recorder(self, bag, wanted, optional, settings['queue_depth'],
+                            settings['flush_interval'], measures,
+                            parameter_clients=self.parameter_clients)
+        self.get_logger().info(f'recording {", ".join(wanted)} to {bag.path}')
+        return bag, measures, recorder
+
+    def restart(self, settings, recording):
+        """
+        Close the recording as at shutdown; go on with recording, new (bag, measures, recorder).
+
+        settings: the new recording's parameters. Returns the error met closing the old
+        one (its file then abandoned as it is on disk), or None.
+        """
+        try:
+            self.close()
+            problem = None
+        except OSError as error:
+            problem = self.write_failure(error)
+            self.get_logger().error(str(problem))
+        kept = self.recorder.handed_over()
+        self.bag, self.measures, self.recorder = recording
+        self.recorder.kept = kept
+        self.drain_timer.timer_period_ns = round(settings['drain_period'] * 1e9)
+        self.status_timer.timer_period_ns = round(settings['status_period'] * 1e9)
+        self.clock_guard.restart()  # a new time base, as before the first /clock
+        self.recorder.discover()  # the kept subscriptions back in use now
+        return problem
 
     def _declare_parameters(self):
         """Declare the parameters (all read-only: restart to change); returns {name: value}."""

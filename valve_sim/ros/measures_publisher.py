@@ -108,19 +108,21 @@ class StepMeasures:
 
     node: the analyser node (it publishes step_measures and logs); signal_map: where each
     signal is found; step_threshold [m^3/s] and step_merge_time [s] as the parameters;
-    hardware_id: the status's; bag_path: the recording (the measures file goes beside it).
+    hardware_id: the status's; bag_path: the recording (the measures file goes beside it);
+    publisher: the node's step_measures publisher, one for all its recordings (default: new).
     The recorder hands it each message of an analysed topic (add), and asks it which
     type of a topic it reads (type_to_record) and how (extractor).
     """
 
     def __init__(self, node, signal_map, step_threshold, step_merge_time, hardware_id,
-                 bag_path):
+                 bag_path, publisher=None):
         self.node, self.signal_map, self.hardware_id = node, signal_map, hardware_id
         self.bag_name = bag_path.name
         self.file = MeasuresFile(bag_path.with_suffix('.measures.json'), bag_path.name)
         self.joiner = Joiner(optional=('tank_pressure',))
         self.analysis = StepAnalysis(step_threshold, step_merge_time)
-        self.publisher = node.create_publisher(DiagnosticArray, 'step_measures', MEASURES_QOS)
+        self.publisher = publisher or node.create_publisher(DiagnosticArray, 'step_measures',
+                                                            MEASURES_QOS)
 
     @property
     def count(self):

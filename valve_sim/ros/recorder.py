@@ -42,6 +42,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from valve_sim.recording.cdr import STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, PARAMETER_EVENTS_TOPIC
 from valve_sim.ros.raw_take import RawTaker
+from valve_sim.ros.start_parameters import StartParameters, STATUS_KEY
 
 
 READABLE_TYPE_GRACE = 5.0  # [s] an analysed topic's wait for a publisher of a type it reads
@@ -136,11 +137,17 @@ class Recorder:
     topics to record (full names, in order); optional: those of them a status does not
     wait for until they have a publisher; queue_depth: each subscription's queue;
     flush_interval [s]: the longest time written data waits for its chunk to be
-    flushed; measures: the measures publisher (type_to_record, extractor, add).
+    flushed; measures: the measures publisher (type_to_record, extractor, add); kept:
+    the last recording's handed_over() subscriptions, after a restart; parameter_clients:
+    the node's clients of valve_node's parameter services (StartParameters).
     """
 
-    def __init__(self, node, bag, wanted, optional, queue_depth, flush_interval, measures):
+    def __init__(self, node, bag, wanted, optional, queue_depth, flush_interval, measures,
+                 kept=None, parameter_clients=None):
         self.node, self.bag, self.measures = node, bag, measures
+        # {topic: RecordedTopic} of the recording before a restart: its subscription is
+        # used again if it fits (no new match, no message missed meanwhile), else dropped
+        self.kept = dict(kept or {})
         self.wanted, self.optional = wanted, optional
         self.queue_depth, self.flush_interval = queue_depth, flush_interval
         self.last_flush = self.last_loss_warning = time.monotonic()
@@ -149,11 +156,33 @@ class Recorder:
         self.other_types = {}  # recorded topic -> types of other publishers, not recorded
         self.unreadable_since = {}  # topic -> when only unreadable types were first seen
         self.clock_ns = None  # the node's /clock time at this drain, None off /clock
+        # valve_node's values at the start, written on /parameter_events (start_parameters)
+        self.start_parameters = StartParameters(
+            node, measures.signal_map.topics['supply_pressure'], self._write_start_parameters,
+            {} if parameter_clients is None else parameter_clients)
 
     @property
     def subscriptions(self):
-        """Return the set of the recorded topics' subscriptions: the drain takes them."""
-        return {recorded.subscription for recorded in self.recorded.values()}
+        """Return the recorded (and kept) topics' subscriptions: the drain takes them."""
+        return {recorded.subscription
+                for recorded in (*self.recorded.values(), *self.kept.values())}
+
+    def handed_over(self):
+        """
+        Return {topic: RecordedTopic} whose subscriptions a restart's recording may keep.
+
+        A transient-local topic's subscription is dropped here instead: a new one gets
+        its publishers' history again, as a new node's would.
+        """
+        kept = {}
+        for topic, recorded in self.recorded.items():
+            if recorded.qos.endswith('transient_local'):
+                self.node.destroy_subscription(recorded.subscription)
+            else:
+                kept[topic] = recorded
+        self.recorded = {}
+        self.start_parameters.close()
+        return kept
 
     def discover(self):
         """
@@ -183,8 +212,7 @@ class Recorder:
             # when it subscribes (listed with its count even if no message ever comes).
             channel = self.bag.add_topic(topic, type_name, [qos_offer(o) for o in offers])
             self.recorded[topic] = recorded = RecordedTopic(
-                self.node.create_subscription(message_type, topic, lambda _: None, qos,
-                                              raw=True),
+                self._subscription(topic, message_type, type_name, qos),
                 type_name,
                 None,
                 self.measures.extractor(topic, type_name),
@@ -207,6 +235,21 @@ class Recorder:
                     'topic of one type only)'
                 )
             self.other_types[topic] = others
+        for kept in self.kept.values():  # no longer wanted, or no publisher now
+            self.node.destroy_subscription(kept.subscription)
+        self.kept = {}
+        if PARAMETER_EVENTS_TOPIC in self.recorded:
+            self.start_parameters.poll()
+
+    def _subscription(self, topic, message_type, type_name, qos):
+        """Return the subscription of a topic to record: the one kept if it fits, else new."""
+        kept = self.kept.pop(topic, None)
+        if kept is not None and (kept.type_name, kept.qos, kept.subscription.qos_profile.depth) \
+                == (type_name, qos_name(qos), qos.depth):
+            return kept.subscription
+        if kept is not None:
+            self.node.destroy_subscription(kept.subscription)
+        return self.node.create_subscription(message_type, topic, lambda _: None, qos, raw=True)
 
     def _still_waiting_for_a_readable_type(self, topic):
         """
@@ -244,6 +287,12 @@ class Recorder:
         recorded.count += 1
         if recorded.extractor:
             self.measures.add(recorded, data, received)
+
+    def _write_start_parameters(self, data, received_ns):
+        """Write the start snapshot (a ParameterEvent) after what /parameter_events has queued."""
+        self.drain()
+        self._record(self.recorded[PARAMETER_EVENTS_TOPIC], data,
+                     {'received_timestamp': received_ns, 'source_timestamp': received_ns})
 
     def _warn_lost(self, topic, lost):
         """
@@ -289,6 +338,8 @@ class Recorder:
             {f'other types on {topic}': ', '.join(others) for topic, others in mixed.items()}
         )
         values['refused /clock messages'] = str(refused_clock)
+        if self.start_parameters.read:
+            values[STATUS_KEY] = self.start_parameters.status()
         message = (
             f'cannot record {", ".join(self.unrecordable)}'
             if self.unrecordable

@@ -50,6 +50,7 @@ from valve_sim.ros.lockstep import (
     HANDSHAKE, Lockstep, lockstep_parameters, NS_PER_S, START_NS)
 from valve_sim.ros.node_processes import start_valve_and_analyser
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
+from valve_sim.ros.start_parameters import STATUS_KEY as START_PARAMETERS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
 
 
@@ -61,6 +62,9 @@ READY_TIMEOUT = 180.0  # [s] start-up (a cold kernel compile on a loaded machine
 ANALYSER_QUEUE_DEPTH = 100_000
 PROGRESS_INTERVAL = 2.0  # [s] of wall time between progress lines
 DRAIN_TIMEOUT = 120.0  # [s] for analyser_node to record the states still on their way
+# [s] analyser_node's recording status, which the run waits on before its first tick and
+# after its last (the default, 1 s, would add up to a second to each)
+STATUS_PERIOD = 0.05
 
 
 @dataclass
@@ -111,7 +115,8 @@ def valve_arguments(scenario):
 def analyser_parameters(scenario):
     """Return analyser_node's parameters for a scenario (but its output_dir)."""
     return {'queue_depth': ANALYSER_QUEUE_DEPTH, 'ambient_pressure': scenario.ambient_pressure,
-            'use_sim_time': 'true'}  # the bag's log times: model time
+            'use_sim_time': 'true',  # the bag's log times: model time
+            'status_period': STATUS_PERIOD}
 
 
 def start_nodes(scenario, folder):
@@ -134,7 +139,13 @@ class AnalyserStatus:
 
         self.values, self.folder, self.foreign = {}, Path(folder).resolve(), None
         self.invariant_alarms = ''  # valve_node's ('name: count, ...'), heard on the way
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_status, 10)
+        self.node = node
+        self.subscription = node.create_subscription(DiagnosticArray, '/diagnostics',
+                                                     self._on_status, 10)
+
+    def close(self):
+        """Stop listening (a suite's driver node lives on)."""
+        self.node.destroy_subscription(self.subscription)
 
     def _on_status(self, array):
         for status in array.status:
@@ -159,6 +170,10 @@ class AnalyserStatus:
         """Whether the analyser records each of topics (full names)."""
         self.check()
         return all(f'qos {topic}' in self.values for topic in topics)
+
+    def read_start_parameters(self):
+        """Whether the analyser has read valve_node's start values (ros.start_parameters)."""
+        return bool(self.values.get(START_PARAMETERS))
 
     def recorded(self, topics, count):
         """Whether the analyser has recorded at least count messages of each of topics."""
@@ -230,12 +245,12 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     ticks_per_clock: tick periods per /clock step at most (None: TICKS_PER_CLOCK, or 1
     with wait topics, whose nodes must see every tick's /clock); record: the RunRecord
     to fill (default: a new one); flow_topic: a wait topic whose controller supplies
-    the inlet flow from the second tick on (ros.scenario_stepper); valve: the SuiteValve
-    of a suite (ros.scenario_suite), whose valve_node runs on, restarted for this
-    scenario (else both nodes start here). Raises the errors of a run that cannot
+    the inlet flow from the second tick on (ros.scenario_stepper); valve: the SuiteNodes
+    of a suite (ros.scenario_suite), whose nodes run on, restarted for this scenario
+    (else both nodes start here). Raises the errors of a run that cannot
     complete (a node died, a refused event, a timeout, an incomplete bag, another run's
-    nodes in the domain), after stopping both nodes (a suite's valve_node: the suite
-    does); record then holds what the run got to (measure_partial reads the rest).
+    nodes in the domain), after stopping both nodes (a suite's: its recording closed,
+    the suite stops them); record then holds what the run got to (measure_partial reads the rest).
     """
     import rclpy
 
@@ -243,23 +258,28 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     if flow_topic is not None and flow_topic not in wait_topics:
         wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
     processes = start_nodes(scenario, folder) if valve is None else valve.start(scenario, folder)
-    context = rclpy.Context() if valve is None else valve.context
     if valve is None:
+        context = rclpy.Context()
         rclpy.init(context=context)
-    driver, failed = None, True  # failed until the run gets through
+    driver, status, failed = None, None, True  # failed until the run gets through
     try:
-        driver = Lockstep(context, processes=processes, rate=rate,
-                          tank='tank_pressure' in scenario.inputs)
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
-        driver.connect(wait_topics, READY_TIMEOUT)
-        if valve is not None:
-            valve.restart(driver, scenario)
+        if valve is None:
+            driver = Lockstep(context, processes=processes, rate=rate,
+                              tank='tank_pressure' in scenario.inputs)
+            driver.connect(wait_topics, READY_TIMEOUT)
+        else:  # the suite's driver, connected once; both nodes at the scenario's start
+            driver = valve.connect()
+            valve.restart(scenario, folder)
         status = AnalyserStatus(driver.node, folder)
         recorded = RECORDED + (('tank_pressure',) if 'tank_pressure' in scenario.inputs else ())
+        # valve_node's start values in the bag before any change the run makes
         driver.spin_until(lambda: status.recording(map(driver.node.resolve_topic_name,
-                                                       recorded)),
-                          'analyser_node recording every topic', READY_TIMEOUT)
+                                                       recorded))
+                          and status.read_start_parameters(),
+                          "analyser_node recording every topic and valve_node's parameters",
+                          READY_TIMEOUT)
         inputs = driver.input_publishers()  # matched by both nodes: none sent is lost
         driver.spin_until(lambda: all(publisher.get_subscription_count() >= 2
                                       for publisher, _ in inputs.values()),
@@ -269,7 +289,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
             1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
-        # lose the states still on their way. Its status (once a second) says when it has all.
+        # lose the states still on their way. Its status (each STATUS_PERIOD) says when it has
+        # all.
         progress('waiting for analyser_node to record every state')
         driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
                                                       TICK_TOPICS), scenario.ticks + 1)
@@ -284,11 +305,14 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         record.invariant_alarms = status.invariant_alarms
         failed = False
     finally:
-        if driver is not None:
-            driver.close()
+        if status is not None:
+            status.close()
         if valve is None:
+            if driver is not None:
+                driver.close()
             context.try_shutdown()
-        progress('stopping both nodes (SIGINT)')
+        progress('stopping both nodes (SIGINT)' if valve is None
+                 else "closing the scenario's recording (analyser_node restarts)")
         try:
             processes.stop()
         except NodeExitError as error:
@@ -368,17 +392,16 @@ def run_and_report(scenario, folder, rate=None, wait_topics=(), junit=None, prog
 def report_run(scenario, folder, rate=None, wait_topics=(), junit=None, progress=print,
                ticks_per_clock=None, flow_topic=None, valve=None):
     """Run a scenario, write its reports; returns (RunRecord, paths, the run's error or None)."""
-    from valve_sim.analysis.scenarios.report import write_reports
+    from valve_sim.analysis.scenarios.report import plot_run, write_reports
 
-    record = RunRecord(scenario, folder)
+    record, error = RunRecord(scenario, folder), None
     try:
         run_scenario(scenario, folder, rate, wait_topics, progress, ticks_per_clock, record,
                      flow_topic=flow_topic, valve=valve)
-    except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as error:
-        record.error = str(error) or type(error).__name__
+    except (*USER_ERRORS, TimeoutError, RuntimeError, ChildProcessError) as run_error:
+        record.error, error = str(run_error) or type(run_error).__name__, run_error
         measure_partial(record)
-        return record, write_reports(record, junit), error
-    return record, write_reports(record, junit), None
+    return record, write_reports(record, junit, plot_run if valve is None else valve.plot), error
 
 
 def lockstep_messages(bag, topics=(*TICK_TOPICS, STAMPED_FLOW_TOPIC, 'tank_pressure')):
