@@ -65,7 +65,7 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states, LAST_TOPIC,
+    answer, clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states, LAST_TOPIC,
     LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients, SentInput,
     SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT,
     WaitTopic)
@@ -356,10 +356,9 @@ class Lockstep:
 
         Raises ValueError with valve_node's reason if it refuses them.
         """
-        future = self.parameters.set_parameters_atomically(
-            [Parameter(name, value=value) for name, value in changes.items()])
-        self.spin_until(future.done, 'the answer of valve_node to a parameter change')
-        result = future.result().result
+        parameters = [Parameter(name, value=value) for name, value in changes.items()]
+        result = answer(lambda: self.parameters.set_parameters_atomically(parameters),
+                        self.spin_until, 'the answer of valve_node to a parameter change').result
         if not result.successful:
             raise ParameterError(f'valve_node refused {changes}: {result.reason}')
 
@@ -374,9 +373,8 @@ class Lockstep:
                 for name, value in zip(names, values)}
 
     def _get(self, names):
-        future = self.parameters.get_parameters(names)
-        self.spin_until(future.done, 'the answer of valve_node to get_parameters')
-        return future.result().values
+        return answer(lambda: self.parameters.get_parameters(names), self.spin_until,
+                      'the answer of valve_node to get_parameters').values
 
     def request_restart(self, node_name, overrides=None, timeout=TIMEOUT):
         """Call node_name's ~/restart (RestartClients.call); returns the node's reason."""

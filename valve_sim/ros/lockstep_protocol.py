@@ -26,10 +26,12 @@ same protocol: ros.lockstep_inputs.
 """
 
 import struct
+import time
 
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from valve_sim.core.errors import IncompleteRunError, ParameterError, ValveSimError
+from valve_sim.core.errors import (IncompleteRunError, ParameterError, ValveSimError,
+                                   WaitTimeoutError)
 from valve_sim.recording.cdr import ENCAPSULATION, read_message, STAMP, STAMP_OFFSET
 from valve_sim.recording.valve_topics import message_class, TICK_TOPICS
 
@@ -45,6 +47,9 @@ START_NS = NS_PER_S  # /clock of the first tick: past any timer's first period (
 RESEND = 0.5  # [s] without the state: publish the same /clock again (it is best effort)
 SPIN_SLICE = 0.01  # [s] between checks of a wait's condition (a graph change wakes no spin)
 TIMEOUT = 60.0  # [s] for a tick's state, a service answer, discovery
+# [s] a service request not answered by then is sent again: under load Fast DDS may drop an
+# answer (its server waits only briefly for the client's reply reader to match, rmw_fastrtps)
+ANSWER_RESEND = 2.0
 QUEUE_DEPTH = 1000
 RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 FAST_DDS_VENDOR = b'\x01\x0f'  # an endpoint GID's first bytes under Fast DDS (eProsima)
@@ -113,6 +118,28 @@ def gid_process(gid):
     return int.from_bytes(gid[4:6], 'little') if gid[:2] == FAST_DDS_VENDOR else None
 
 
+def answer(call, spin_until, what, timeout=TIMEOUT):
+    """
+    Return the answer to the request that call() sends, sending it again while none comes.
+
+    call() sends a request and returns its future; spin_until(condition, what, timeout):
+    the driver's wait. For requests whose repetition changes nothing more (parameters
+    read or set to the same values, a ~/restart), so that a dropped answer (ANSWER_RESEND)
+    costs seconds, not the whole timeout. Raises WaitTimeoutError after timeout.
+    """
+    deadline, sent = time.monotonic() + timeout, 0
+    while True:
+        future, sent = call(), sent + 1
+        try:
+            spin_until(future.done, what, max(min(ANSWER_RESEND, deadline - time.monotonic()), 0))
+            return future.result()
+        except WaitTimeoutError as error:
+            future.cancel()  # its answer, if it still comes, is dropped (rclpy's Client)
+            if time.monotonic() >= deadline:
+                raise WaitTimeoutError(
+                    f'no {what} within {timeout:g} s ({sent} requests sent)') from error
+
+
 class RestartClients:
     """
     The clients of nodes' ~/restart (rcl_interfaces/srv/SetParametersAtomically), kept.
@@ -138,11 +165,11 @@ class RestartClients:
                 SetParametersAtomically, f'{node_name}/restart')
         client = self.clients[node_name]
         self.spin_until(client.service_is_ready, f'the service {node_name}/restart', timeout)
-        future = client.call_async(SetParametersAtomically.Request(parameters=[
+        request = SetParametersAtomically.Request(parameters=[
             Parameter(name, value=value).to_parameter_msg()
-            for name, value in (overrides or {}).items()]))
-        self.spin_until(future.done, f'the answer of {node_name} to ~/restart', timeout)
-        result = future.result().result
+            for name, value in (overrides or {}).items()])
+        result = answer(lambda: client.call_async(request), self.spin_until,
+                        f'the answer of {node_name} to ~/restart', timeout).result
         if not result.successful:
             raise ParameterError(result.reason)
         return result.reason

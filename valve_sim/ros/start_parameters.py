@@ -35,6 +35,7 @@ from rcl_interfaces.msg import Parameter, ParameterEvent
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.serialization import serialize_message
 from valve_sim.core.parameter_sections import node_fqn
+from valve_sim.ros.lockstep_protocol import ANSWER_RESEND
 
 
 STATUS_KEY = 'start parameters'  # the recording status's key: whose values were read
@@ -46,6 +47,11 @@ class Read:
     def __init__(self, clients):
         self.lister, self.getter = clients
         self.future, self.stamp_ns, self.names = None, None, None
+        self.sent = None  # time.monotonic() of the request waited for
+
+    def send(self, future):
+        """Wait for future, the answer to the request just sent."""
+        self.future, self.sent = future, time.monotonic()
 
 
 class StartParameters:
@@ -85,13 +91,15 @@ class StartParameters:
         """Send the next request of a read whose last one was answered; write the values."""
         if read.future is None:
             if read.lister.service_is_ready() and read.getter.service_is_ready():
-                read.future = read.lister.call_async(ListParameters.Request(depth=0))
+                read.send(read.lister.call_async(ListParameters.Request(depth=0)))
         elif not read.future.done():
-            return
+            if time.monotonic() - read.sent > ANSWER_RESEND:  # its answer dropped: ask anew
+                read.future.cancel()
+                read.future, read.names = None, None
         elif read.names is None:
             read.names = list(read.future.result().result.names)
             read.stamp_ns = self.node.get_clock().now().nanoseconds
-            read.future = read.getter.call_async(GetParameters.Request(names=read.names))
+            read.send(read.getter.call_async(GetParameters.Request(names=read.names)))
         else:
             values = read.future.result().values
             event = ParameterEvent(node=name, new_parameters=[
