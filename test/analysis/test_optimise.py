@@ -195,6 +195,13 @@ def test_split_rounds_and_the_nominal_stage_change_no_row(reference, monkeypatch
     assert alone[2]['error'] and not alone[0]['error'] and alone[0]['samples'] == 8
     two = Recording()
     staged = robust_yield.nominal_stage(evaluate_candidates, cases, two)
+    assert [[case['index'] for case in batch] for batch in two.batches] == [[0, 1, 2]]
+    from valve_sim.core.batch import LANES
+
+    assert robust_yield.NOMINAL_GROUP == LANES
+    monkeypatch.setattr(robust_yield, 'NOMINAL_GROUP', 2)  # 3 valves: two batches of 2 and 1
+    two.batches = []
+    staged = robust_yield.nominal_stage(evaluate_candidates, cases, two)
     assert [[case['index'] for case in batch] for batch in two.batches] == [[0, 1], [2]]
     assert sorted(staged.keywords['nominals']) == [0, 1]  # no nominal valve for the third
     assert json.dumps(staged(cases)) == json.dumps(alone)

@@ -45,8 +45,9 @@ which the other workers take up: a generation then does not wait for one worker 
 run a candidate's whole sample alone.
 
 nominal_stage(evaluate, cases, backend) runs the nominal valves of a generation's
-candidates first, together, one batch per worker (nominal_rows): the lanes kernel runs
-LANES valves a call, so a lone nominal valve costs about as much as a group of them.
+candidates first, together, one batch per worker (nominal_rows; no batch of fewer than
+NOMINAL_GROUP valves but one): the lanes kernel runs LANES valves a call, so a lone
+nominal valve costs about as much as a group of them.
 Each candidate then takes its nominal valve and row from that stage (the same row it
 would have computed alone) and draws its samples only if it samples at all.
 
@@ -91,6 +92,8 @@ DECAY_FAILURE = 'a mode decays too slowly'
 # Valves per task when a candidate's round is split over a Dask cluster's workers: a
 # multiple of the lanes kernel's LANES (16), large enough that a task's overhead is small.
 SPLIT_VALVES = 32
+# The lanes kernel's LANES: the nominal stage makes no more batches than groups of this many.
+NOMINAL_GROUP = 16
 
 
 def nominal_valve(case):
@@ -145,11 +148,14 @@ def nominal_stage(evaluate, cases, backend):
     """
     Return evaluate with the nominal valves of cases run beforehand, in one batch per worker.
 
-    Only for evaluate_candidates (another evaluate, a test's, is returned as it is).
+    No more batches than groups of NOMINAL_GROUP valves: a batch of fewer valves than
+    the lanes kernel advances at once costs a whole kernel call. Only for
+    evaluate_candidates (another evaluate, a test's, is returned as it is).
     """
     if evaluate is not evaluate_candidates or not cases:
         return evaluate
-    size = -(-len(cases) // max(1, min(backend.workers, len(cases))))
+    parts = max(1, min(backend.workers, -(-len(cases) // NOMINAL_GROUP)))
+    size = -(-len(cases) // parts)
     nominals = {}
     for part in backend.run(nominal_rows, [cases[i:i + size] for i in range(0, len(cases), size)]):
         nominals.update(part)
