@@ -112,14 +112,22 @@ class RunTally:
         return _CountingBackend(backend, self)
 
 
-class _CountingBackend:
-    """A backend whose batches of rows a RunTally counts before the runner sees them."""
+class _Wrapped:
+    """A backend that passes everything but run() on to the backend it wraps."""
 
-    def __init__(self, backend, tally):
-        self.backend, self.tally = backend, tally
+    def __init__(self, backend):
+        self.backend = backend
 
     def __getattr__(self, name):
         return getattr(self.backend, name)
+
+
+class _CountingBackend(_Wrapped):
+    """A backend whose batches of rows a RunTally counts before the runner sees them."""
+
+    def __init__(self, backend, tally):
+        super().__init__(backend)
+        self.tally = tally
 
     def run(self, evaluate, batches):
         for rows in self.backend.run(evaluate, batches):
@@ -169,14 +177,12 @@ def _candidate_key(case, nominal):
     return (1 if dominated(point, case['front']) else 2, min(margins, default=0.0))
 
 
-class _Ordered:
+class _Ordered(_Wrapped):
     """A backend whose batches go out sorted by key, the largest first."""
 
     def __init__(self, backend, key):
-        self.backend, self.key = backend, key
-
-    def __getattr__(self, name):
-        return getattr(self.backend, name)
+        super().__init__(backend)
+        self.key = key
 
     def run(self, evaluate, batches):
         return self.backend.run(evaluate, sorted(batches, key=self.key, reverse=True))
