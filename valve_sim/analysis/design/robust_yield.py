@@ -45,11 +45,11 @@ which the other workers take up: a generation then does not wait for one worker 
 run a candidate's whole sample alone.
 
 nominal_stage(evaluate, cases, backend) runs the nominal valves of a generation's
-candidates first, together, one batch per worker (nominal_rows; no batch of fewer than
-NOMINAL_GROUP valves but one): the lanes kernel runs LANES valves a call, so a lone
-nominal valve costs about as much as a group of them.
-Each candidate then takes its nominal valve and row from that stage (the same row it
-would have computed alone) and draws its samples only if it samples at all.
+candidates first, together, one batch per worker (nominal_rows; no more batches than
+groups of NOMINAL_GROUP valves): the lanes kernel runs LANES valves a call, so a lone
+nominal valve costs about as much as a group of them. Each candidate then takes its
+nominal valve and row from that stage (the same row it would have computed alone) and
+draws its samples only if it samples at all.
 
 check_candidate_row(row) checks a row read back from a results file (--resume) before
 it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
@@ -156,8 +156,9 @@ def nominal_stage(evaluate, cases, backend):
         return evaluate
     parts = max(1, min(backend.workers, -(-len(cases) // NOMINAL_GROUP)))
     size = -(-len(cases) // parts)
+    batches = [cases[i:i + size] for i in range(0, len(cases), size)]
     nominals = {}
-    for part in backend.run(nominal_rows, [cases[i:i + size] for i in range(0, len(cases), size)]):
+    for part in backend.run(nominal_rows, batches):
         nominals.update(part)
     return partial(evaluate_candidates, nominals=nominals)
 
