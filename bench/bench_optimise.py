@@ -32,8 +32,9 @@
 # objective) and each design's nearest match in A (with both confirmed yield
 # intervals). N passes when it differs from A by no more than B does (hypervolume,
 # largest nearest-match distance either way), and its search stage takes at most
-# 10 % of A's runs and wall time. Without --population/--generations each problem
-# runs at its docs/optimise.md budget (an hour or more per search on 2 cores).
+# 10 % of A's runs and wall time (the workers' CPU seconds are reported too: on a
+# shared machine the load decides the wall time). Without --population/--generations
+# each problem runs at its docs/optimise.md budget (an hour or more per search on 2 cores).
 
 import argparse
 import json
@@ -91,9 +92,9 @@ def problem_of(params, spec, samples, confirm_samples, seed, sequential):
 
 def one_search(problem, backend, folder, population, generations):
     """Return the measures of one search and its confirmation."""
-    start = time.perf_counter()
+    cpu, start = workers_cpu(backend), time.perf_counter()
     records = search(problem, backend, folder, population, generations)
-    searched = time.perf_counter()
+    searched, cpu = time.perf_counter(), workers_cpu(backend) - cpu
     outcome = outcome_of(problem, records, backend, folder, False)
     confirmed = time.perf_counter()
     rows = [row for _, row in records]
@@ -103,7 +104,7 @@ def one_search(problem, backend, folder, population, generations):
     for row in rows:
         decisions[row.get('decision', 'full')] = decisions.get(row.get('decision', 'full'), 0) + 1
     return {
-        'search_s': searched - start, 'confirm_s': confirmed - searched,
+        'search_s': searched - start, 'confirm_s': confirmed - searched, 'search_cpu_s': cpu,
         'search_runs': sum(map(runs_of, rows)), 'full_runs': sum(map(planned_runs_of, rows)),
         'confirm_runs': sum(runs_of(c) for _, _, c in outcome['pareto'] if c)
         + sum(map(runs_of, outcome['baselines'].values())),
@@ -114,6 +115,11 @@ def one_search(problem, backend, folder, population, generations):
                      'objectives': problem.scores(row)[0], 'ci95': confirm['ci95'],
                      'yield': confirm['yield']} for row, confirm in designs],
     }
+
+
+def workers_cpu(backend):
+    """Return the CPU seconds the cluster's worker processes have used so far."""
+    return sum(backend.client.run(time.process_time).values())
 
 
 def replay(rows, required_yield, first_round=FIRST_ROUND, alpha=STOP_ALPHA):
@@ -193,7 +199,8 @@ def report(name, runs, checks):
     for label, run in runs.items():
         share = 100 * run['search_runs'] / run['full_runs']
         print(f"{label}: search {run['search_runs']:,} runs ({share:.1f} % of full "
-              f"samples), {run['search_s']:.0f} s; confirmation {run['confirm_runs']:,} runs, "
+              f"samples), {run['search_s']:.0f} s ({run['search_cpu_s']:.0f} s of the "
+              f"workers' CPU); confirmation {run['confirm_runs']:,} runs, "
               f"{run['confirm_s']:.0f} s; decisions {run['decisions']}; "
               f"{len(run['designs'])} of {run['pareto_searched']} Pareto designs meet the yield "
               f"on confirmation; hypervolume {run.get('hypervolume', 0):.4f}; furthest nearest "
@@ -213,7 +220,8 @@ def report(name, runs, checks):
     a, n = runs['A'], runs['N']
     print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
           f"{100 * n['search_s'] / full_seconds(runs):.1f} % of the mean wall time of "
-          f"{' and '.join(label for label in ('A', 'B') if label in runs)}'s searches; "
+          f"{' and '.join(label for label in ('A', 'B') if label in runs)}'s searches, "
+          f"{100 * n['search_cpu_s'] / a['search_cpu_s']:.1f} % of A's workers' CPU; "
           f'checks {checks}')
 
 

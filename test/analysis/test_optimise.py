@@ -38,7 +38,13 @@ from valve_sim.analysis.design.optimisation import (
 )
 from valve_sim.analysis.design.report import parameter_file_text
 from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
-from valve_sim.analysis.design.sequential_yield import look, rounds, runs_of, STOP_ALPHA
+from valve_sim.analysis.design.sequential_yield import (
+    longest_first,
+    look,
+    rounds,
+    runs_of,
+    STOP_ALPHA,
+)
 from valve_sim.analysis.studies.backend import DaskBackend, SerialBackend
 from valve_sim.analysis.studies.cases import preset_protocol
 from valve_sim.analysis.studies.tolerances import parse_variations, unit_samples
@@ -162,10 +168,24 @@ def test_the_stopping_rule_and_the_common_draws(reference):
     assert behind['yield'] == 1.0 and not problem.feasible(behind)
 
 
+class Recording(SerialBackend):
+    """A serial backend of two workers that records its batches."""
+
+    workers = 2
+
+    def __init__(self):
+        self.batches = []
+
+    def run(self, evaluate, batches):
+        self.batches += batches
+        return super().run(evaluate, batches)
+
+
 def test_split_rounds_and_the_nominal_stage_change_no_row(reference, monkeypatch):
-    # The nominal stage runs a generation's nominal valves as one batch; on a Dask worker
-    # a round of more than SPLIT_VALVES valves goes out as tasks of that many (2 here:
-    # an in-process cluster, so that the patch reaches its worker). Neither changes a row.
+    # The nominal stage runs a generation's nominal valves as one batch per worker, the
+    # candidates go out longest first; on a Dask worker a round of more than SPLIT_VALVES
+    # valves goes out as tasks of that many (2 here: an in-process cluster, so that the
+    # patch reaches its worker). None of them changes a row.
     from distributed import Client, get_task_stream, LocalCluster
 
     problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], ['P_1_percent<=99'],
@@ -173,9 +193,25 @@ def test_split_rounds_and_the_nominal_stage_change_no_row(reference, monkeypatch
     cases = [problem.case(i, f'c{i}', {D_C: d}) for i, d in enumerate((0.98e-3, 1.02e-3, -1.0))]
     alone = evaluate_candidates(cases)
     assert alone[2]['error'] and not alone[0]['error'] and alone[0]['samples'] == 8
-    staged = robust_yield.nominal_stage(evaluate_candidates, cases, SerialBackend())
+    two = Recording()
+    staged = robust_yield.nominal_stage(evaluate_candidates, cases, two)
+    assert [[case['index'] for case in batch] for batch in two.batches] == [[0, 1, 2]]
+    from valve_sim.core.batch import LANES
+
+    assert robust_yield.NOMINAL_GROUP == LANES
+    monkeypatch.setattr(robust_yield, 'NOMINAL_GROUP', 2)  # 3 valves: two batches of 2 and 1
+    two.batches = []
+    staged = robust_yield.nominal_stage(evaluate_candidates, cases, two)
+    assert [[case['index'] for case in batch] for batch in two.batches] == [[0, 1], [2]]
     assert sorted(staged.keywords['nominals']) == [0, 1]  # no nominal valve for the third
     assert json.dumps(staged(cases)) == json.dumps(alone)
+    # longest first: a nominal valve further inside its limit (here: a lower P_1), then
+    # the nearer one, the one without samples last; only the order changes
+    two.batches = []
+    assert list(longest_first(two, staged).run(len, [[case] for case in cases])) == [1, 1, 1]
+    lower_p_1 = min((0, 1), key=lambda i: alone[i]['nominal']['measures']['P_1_percent'])
+    assert [batch[0]['index'] for batch in two.batches] == [lower_p_1, 1 - lower_p_1, 2]
+    assert longest_first(two, evaluate_candidates) is two
     monkeypatch.setattr(robust_yield, 'SPLIT_VALVES', 2)
     with LocalCluster(processes=False, n_workers=1, threads_per_worker=1,
                       dashboard_address=None) as cluster, Client(cluster) as client:

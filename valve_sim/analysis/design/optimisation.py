@@ -26,8 +26,9 @@ its objectives exist, and its yield is at least the required yield.
 search() runs NSGA-II (pymoo: constraint domination, so feasible designs rank first,
 infeasible ones by their violation) generation by generation, with the designs in the
 unit cube of the bounds and a Latin-hypercube first generation. Each generation's
-nominal valves run first, as one batch (robust_yield.nominal_stage); its
-candidates then go to the runner as one study, OUT/generation_NNN.jsonl, each sampled only
+nominal valves run first, a batch per worker (robust_yield.nominal_stage); its
+candidates then go to the runner as one study, the likeliest long ones first
+(sequential_yield.longest_first), OUT/generation_NNN.jsonl, each sampled only
 as far as its verdict needs (analysis.design.sequential_yield: rounds, the nominal screen, a
 stop once a feasible design before it dominates it). The optimiser is
 seeded, and the candidates of a generation follow only from the rows of the ones
@@ -56,6 +57,7 @@ from valve_sim.analysis.design.robust_yield import (
 from valve_sim.analysis.design.sequential_yield import (
     dominated,
     FIRST_ROUND,
+    longest_first,
     RunTally,
     STOP_ALPHA,
 )
@@ -342,8 +344,9 @@ def search(problem, backend, folder, population, generations, resume=False,
         path = folder / f'generation_{generation:03d}.jsonl'
         before = tally.spent
         staged = evaluate if resume else nominal_stage(evaluate, cases, backend)
-        rows, computed = _run(cases, path, tally.counting(backend), resume, batch_size,
-                              staged, progress, f'in generation {generation}')
+        ordered = tally.counting(longest_first(backend, staged))
+        rows, computed = _run(cases, path, ordered, resume, batch_size, staged, progress,
+                              f'in generation {generation}')
         tally.add(rows.values())  # those read back from file
         last = tally.spent - before
         on_file += len(cases) - computed

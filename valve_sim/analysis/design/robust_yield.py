@@ -45,10 +45,11 @@ which the other workers take up: a generation then does not wait for one worker 
 run a candidate's whole sample alone.
 
 nominal_stage(evaluate, cases, backend) runs the nominal valves of a generation's
-candidates first, together, as one batch (nominal_rows): the lanes kernel runs LANES
-valves a call, so a lone nominal valve costs about as much as a group of them. Each
-candidate then takes its nominal row from that batch (the same row it would have
-computed alone).
+candidates first, together, one batch per worker (nominal_rows; no more batches than
+groups of NOMINAL_GROUP valves): the lanes kernel runs LANES valves a call, so a lone
+nominal valve costs about as much as a group of them. Each candidate then takes its
+nominal valve and row from that stage (the same row it would have computed alone) and
+draws its samples only if it samples at all.
 
 check_candidate_row(row) checks a row read back from a results file (--resume) before
 it is used: the keys the optimisation reads, with the types evaluate_candidate gives them.
@@ -63,7 +64,13 @@ with its Clopper-Pearson interval (tolerances.yield_interval).
 from functools import partial
 import sys
 
-from valve_sim.analysis.design.sequential_yield import DECISIONS, dominated, look, rounds
+from valve_sim.analysis.design.sequential_yield import (
+    DECISIONS,
+    dominated,
+    look,
+    objective_point,
+    rounds,
+)
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.steps.measures import WINDOW
 from valve_sim.analysis.studies.cases import preset_protocol, sample_cases, StudyCase
@@ -85,6 +92,8 @@ DECAY_FAILURE = 'a mode decays too slowly'
 # Valves per task when a candidate's round is split over a Dask cluster's workers: a
 # multiple of the lanes kernel's LANES (16), large enough that a task's overhead is small.
 SPLIT_VALVES = 32
+# The lanes kernel's LANES: the nominal stage makes no more batches than groups of this many.
+NOMINAL_GROUP = 16
 
 
 def nominal_valve(case):
@@ -128,7 +137,8 @@ def evaluate_candidates(cases, nominals=None):
     """
     Return the rows of candidate cases, in their order (the work unit of a backend).
 
-    nominals: {case index: nominal row} from nominal_rows (the nominal stage), or None.
+    nominals: {case index: (nominal valve, its row)} from nominal_rows (the nominal
+    stage), or None.
     """
     nominals = nominals or {}
     return [evaluate_candidate(case, nominals.get(case['index'])) for case in cases]
@@ -136,34 +146,46 @@ def evaluate_candidates(cases, nominals=None):
 
 def nominal_stage(evaluate, cases, backend):
     """
-    Return evaluate with the nominal valves of cases run beforehand, as one batch on backend.
+    Return evaluate with the nominal valves of cases run beforehand, in one batch per worker.
 
-    Only for evaluate_candidates (another evaluate, a test's, is returned as it is).
+    No more batches than groups of NOMINAL_GROUP valves: a batch of fewer valves than
+    the lanes kernel advances at once costs a whole kernel call. Only for
+    evaluate_candidates (another evaluate, a test's, is returned as it is).
     """
     if evaluate is not evaluate_candidates or not cases:
         return evaluate
-    (nominals,) = backend.run(nominal_rows, [cases])
+    parts = max(1, min(backend.workers, -(-len(cases) // NOMINAL_GROUP)))
+    size = -(-len(cases) // parts)
+    batches = [cases[i:i + size] for i in range(0, len(cases), size)]
+    nominals = {}
+    for part in backend.run(nominal_rows, batches):
+        nominals.update(part)
     return partial(evaluate_candidates, nominals=nominals)
 
 
 def nominal_rows(cases):
     """
-    Return {case index: nominal row} of candidate cases, their nominal valves run as one batch.
+    Return {case index: (nominal valve, its row)} of candidate cases, run as one batch.
 
-    A candidate whose nominal valve cannot be set has none (it says why itself).
+    The nominal valve is nominal_valve's parameters. A candidate whose nominal valve
+    cannot be set has none (it says why itself).
     """
     valves, owners = [], []
     for case in cases:
         try:
-            valves.append(_nominal_run(case, nominal_valve(case), len(valves)))
+            nominal = nominal_valve(case)
+            valves.append(_nominal_run(case, nominal, len(valves)))
         except MODEL_ERRORS:
             continue
-        owners.append(case)
+        owners.append((case, nominal))
     rows = _batch_rows(valves)
     return {
-        case['index']: _judged(case, parse_limits(','.join(case['limits'])), valve, row)
-        | {'index': case['samples']}
-        for case, valve, row in zip(owners, valves, rows)
+        case['index']: (
+            nominal,
+            _judged(case, parse_limits(','.join(case['limits'])), valve, row)
+            | {'index': case['samples']},
+        )
+        for (case, nominal), valve, row in zip(owners, valves, rows)
     }
 
 
@@ -173,7 +195,7 @@ def _nominal_run(case, nominal, index):
     return StudyCase(index, nominal, preset, REFERENCE_FLOW_STEP, case['step_size'])
 
 
-def evaluate_candidate(case, nominal_row=None):
+def evaluate_candidate(case, nominal_run=None):
     """
     Return the row of one candidate: its nominal measures, the yield and its interval.
 
@@ -185,29 +207,29 @@ def evaluate_candidate(case, nominal_row=None):
     failures (per limit, failed runs, slow decay), percentiles of the measures over
     the valves run, and sample_rows (every sampled valve's row, with its sampled
     values) when keep_samples. Without stop_alpha every valve runs, whatever the
-    nominal valve does. nominal_row: the nominal valve's row from nominal_rows, or
-    None: it runs here.
+    nominal valve does. nominal_run: (nominal valve, its row) from nominal_rows, or
+    None: it is set and runs here.
     """
     planned = case['samples']
     row = {key: case[key] for key in ('index', 'label', 'design')}
     row.update(samples=0, planned_samples=planned, runs=0, decision='nominal')
     limits = parse_limits(','.join(case['limits']))
     try:
-        nominal = nominal_valve(case)
+        nominal, nominal_row = nominal_run or (nominal_valve(case), None)
     except MODEL_ERRORS as error:
         return {**row, 'error': str(error), 'passed': 0, 'yield': 0.0,
                 'ci95': yield_interval(0, planned), 'pass': ''}
     preset, _ = preset_protocol(case['protocol'], nominal)
     distributions = parse_variations(case['tolerances'], nominal)
     names = [d.name for d in distributions]
-    values = draw(distributions, planned, case['seed'], case['sampler'])
-    cases = sample_cases(nominal, names, values, preset, case['step_size'])
     if nominal_row is None:
         (nominal_row,) = _runs(case, limits, [_nominal_run(case, nominal, planned)])
     alpha = case.get('stop_alpha')
-    point = _objective_point(case, nominal_row)
-    sample_rows, decision = [], 'nominal'
+    point = objective_point(case, nominal_row)
+    sample_rows, decision, values = [], 'nominal', []
     if alpha is None or (nominal_row['pass'] and point is not None):
+        values = draw(distributions, planned, case['seed'], case['sampler'])
+        cases = sample_cases(nominal, names, values, preset, case['step_size'])
         counts = rounds(planned, case['first_round']) if alpha is not None else [planned]
         for number, count in enumerate(counts):
             sample_rows += _runs(case, limits, cases[len(sample_rows):count])
@@ -299,15 +321,6 @@ def _judged(case, limits, valve, row):
     )
     row['pass'] = valve_passes(row, limits, rate)
     return row
-
-
-def _objective_point(case, nominal_row):
-    """Return the nominal valve's objective values to minimise, or None if one is missing."""
-    measures = nominal_row['measures']
-    point = [measures.get(measure) for measure, _ in case['objectives']]
-    if None in point:
-        return None
-    return [v if sense == 'minimise' else -v for v, (_, sense) in zip(point, case['objectives'])]
 
 
 def check_candidate_row(row):
