@@ -30,6 +30,7 @@ from std_msgs.msg import Float64
 from valve_sim.core.catalogue import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.cdr import read_message
+from valve_sim.ros import analyser_restart
 from valve_sim.ros.analyser_node import ValveAnalyser
 
 
@@ -43,7 +44,10 @@ def flows(bag):
 
 
 def test_a_restart_closes_the_recording_and_records_anew_and_a_refused_one_changes_nothing(
-        context, node, tmp_path):
+        context, node, tmp_path, monkeypatch):
+    # a repeated request is told from a new one by time: none here is meant as a repeat
+    # but the last, however slowly a loaded machine runs the test
+    monkeypatch.setattr(analyser_restart, 'REPEAT_WINDOW', float('inf'))
     first, second = tmp_path / 'first', tmp_path / 'second'
     analyser = ValveAnalyser(context=context, parameter_overrides=[
         Parameter('output_dir', value=str(first)), Parameter('drain_period', value=0.01)])
@@ -114,6 +118,10 @@ def test_a_restart_closes_the_recording_and_records_anew_and_a_refused_one_chang
         assert analyser.bag.path.parent == first
         assert analyser.get_parameter('ambient_pressure').value == STANDARD_ATMOSPHERE
         send([7.0])
+        latest = analyser.bag.path
+        repeat = restart()  # its client asking again for a lost answer: no second bag
+        assert repeat.successful and repeat.reason == result.reason
+        assert analyser.bag.path == latest
     finally:
         analyser.close()
         executor.shutdown()

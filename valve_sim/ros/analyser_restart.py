@@ -33,8 +33,12 @@ read as the new recording's. The new file is created before anything else change
 refused request (an unknown parameter, a wrong value, a folder that cannot be made, a
 parameter only a new process can change: use_sim_time, hardware_id) leaves the current
 recording as it was. step_measures keeps one publisher (its transient-local history
-spans recordings; each message names its bag).
+spans recordings; each message names its bag). A request repeated within
+REPEAT_WINDOW of the same successful one is answered as that one was, without a new
+recording: a client that missed the answer asks again, and must not get a second bag.
 """
+
+import time
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
@@ -44,6 +48,9 @@ from valve_sim.ros.ros_parameters import value_problem
 
 
 SERVICE = '~/restart'
+# [s] a request the same as the last restart's, this soon after it, is its client asking
+# again for an answer Fast DDS dropped (lockstep_protocol.answer): answered, not redone
+REPEAT_WINDOW = 10.0
 DOUBLES = {spec.name: spec for spec in ANALYSER_DOUBLES}
 
 
@@ -112,8 +119,14 @@ def serve(node):
     """Create a ValveAnalyser's ~/restart service (rcl_interfaces/srv/SetParametersAtomically)."""
     from rcl_interfaces.srv import SetParametersAtomically
 
+    last = {}  # the last restart done: its overrides, when, its reason
+
     def on_restart(request, response):
         overrides = {p.name: Parameter.from_parameter_msg(p).value for p in request.parameters}
+        if (last.get('overrides') == overrides
+                and time.monotonic() - last['at'] < REPEAT_WINDOW):
+            response.result = SetParametersResult(successful=True, reason=last['reason'])
+            return response  # the same request again: its answer was lost, not the restart
         try:
             reason = restart(node, overrides)
         except (ParameterError, OutputFileError) as error:
@@ -122,6 +135,7 @@ def serve(node):
             node.get_logger().warn(response.result.reason)
             return response
         response.result = SetParametersResult(successful=True, reason=reason)
+        last.update(overrides=overrides, at=time.monotonic(), reason=reason)
         node.get_logger().info(reason)
         return response
 
