@@ -79,6 +79,7 @@ from valve_sim.core.model import (
     Y,
     Y_DOT,
 )
+from valve_sim.core.rosenbrock import ros2_step
 
 
 # Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
@@ -91,6 +92,9 @@ MAX_SPLITS = 1024
 # whichever is more: the physics sets the sub-step a valve needs, so a valve that integrates
 # at 10 us is not a divergence at 100 us (the catalogue's largest step).
 MIN_SUB_STEP = 1e-8
+# The stiff step (stiff_step) halves a sub-step at most this many times (0.6 ps at 10 us):
+# its sub-steps adapt, so only the few that resolve a chamber's fastest relaxation are short.
+STIFF_HALVINGS = 24
 # A sub-step is accurate when it agrees with two half sub-steps within this share of
 # burst_pressure (pressures) and of the stroke (positions): 1e-6 is 35 Pa at 35 MPa.
 ERROR_TOLERANCE = 1e-6
@@ -230,6 +234,62 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
 
 
 @jit
+def stiff_step(state, q, p_t, c, step):
+    """
+    Return (state, True) after one step of size step [s] in ROS2 sub-steps, or (state, False).
+
+    For a step RK4 cannot take in max_splits(step) sub-steps (a chamber relaxing faster
+    than nanoseconds, valve_sim.core.rosenbrock). Each sub-step is compared with two
+    half sub-steps (step doubling, within ERROR_TOLERANCE as splits_needed) and the
+    halves are kept; a sub-step that fails is halved, one that passes with a margin
+    doubles the next. A state off its stiff chamber's quasi-static pressure (RK4's
+    last sub-steps lag it) takes sub-steps of that chamber's time constant, down to a
+    nanosecond, and then grows them again: some 30 sub-steps at 10 us. False (the state
+    unchanged) if a sub-step would have to be shorter than step / 2^STIFF_HALVINGS: a
+    divergence.
+    """
+    current = as_tuple(state)
+    done, h, shortest = 0.0, step, step * 0.5**STIFF_HALVINGS
+    while step - done > 1e-6 * shortest:  # what rounding of the sum leaves is no sub-step
+        h = min(h, step - done)
+        # The sub-step, then two half sub-steps, through ONE call site of ros2_step.
+        whole = halves = current
+        for stage in range(3):
+            start, size = (current, h) if stage == 0 else (halves, 0.5 * h)
+            reached = on_stops(ros2_step(start, q, p_t, c, size), c)
+            if stage == 0:
+                whole = reached
+            else:
+                halves = reached
+        error = step_error(whole, halves, c)
+        if error > 1.0 or error != error:
+            if 0.5 * h < shortest * (1.0 - 1e-9):
+                return as_tuple(state), False
+            h *= 0.5
+            continue
+        current, done = halves, done + h
+        if error < 0.1:
+            h *= 2.0
+    return current, True
+
+
+@jit
+def split_step(state, q, p_t, c, step, splits):
+    """
+    Return (state, True) after one step of size step [s], or (state, False) if it diverged.
+
+    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than max_splits(step):
+    ROS2 sub-steps instead (stiff_step), which RK4 could not take stably.
+    """
+    if splits > max_splits(step):
+        return stiff_step(state, q, p_t, c, step)
+    h = step / splits
+    for _ in range(splits):
+        state = rk4_step(state, q, p_t, c, h)
+    return state, True
+
+
+@jit
 def choice_due(k, check_every, q, p_t, chosen_q, chosen_p_t):
     """Return whether step k chooses its split: every check_every steps, or an input moved."""
     return (
@@ -275,12 +335,10 @@ def rk4_steps(
             chosen_q, chosen_p_t = q, p_t
         else:
             splits = max(splits, stable_splits(current, c, step, p_t))
-        if splits > max_splits(step):
+        current, accurate = split_step(current, q, p_t, c, step, splits)
+        if not accurate:
             state[:] = current
             return k, STATE_DIVERGED
-        h = step / splits
-        for _ in range(splits):
-            current = rk4_step(current, q, p_t, c, h)
         verdict = state_check(current, c.burst_pressure)
         if verdict != STATE_OK:
             state[:] = current
