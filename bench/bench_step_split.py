@@ -31,9 +31,9 @@
 # beside the reference valve's: mean, 99th percentile and worst tick.
 
 import argparse
-from dataclasses import replace
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
