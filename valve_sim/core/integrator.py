@@ -39,8 +39,9 @@ stiffness bound alone: a state that needed more (a broken or weakened pilot spri
 a blocked damping orifice) was integrated unstably, and the run settled in a
 numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
 "Step splitting"). A step that needs more than max_splits() (MAX_SPLITS, or sub-steps
-of MIN_SUB_STEP at larger steps) is a divergence; step_problem() refuses a valve and step
-that would need more from the start.
+of MIN_SUB_STEP at larger steps) is taken by the stiff-stable ROS2 instead (split_step,
+stiff_step, valve_sim.core.rosenbrock): a chamber the run drives faster than RK4 can
+follow; step_problem() refuses a valve and step that would need more from the start.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -85,12 +86,12 @@ from valve_sim.core.rosenbrock import ros2_step
 # Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
 # eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
 STEP_RATE_LIMIT = 2.0
-# At most this many sub-steps per step (10 ns at the paper's 10 us): beyond it the parameters
-# make a chamber faster than any step the real-time node can afford (a divergence).
+# At most this many RK4 sub-steps per step (10 ns at the paper's 10 us): beyond it a chamber
+# is faster than RK4 can follow at a cost the real-time node affords: ROS2 takes the step.
 MAX_SPLITS = 1024
 # ... or as many as make sub-steps of MIN_SUB_STEP [s] (about the paper's 10 us / MAX_SPLITS),
-# whichever is more: the physics sets the sub-step a valve needs, so a valve that integrates
-# at 10 us is not a divergence at 100 us (the catalogue's largest step).
+# whichever is more: the physics sets the sub-step a valve needs, so a valve that RK4
+# integrates at 10 us is not handed to ROS2 at 100 us (the catalogue's largest step).
 MIN_SUB_STEP = 1e-8
 # The stiff step (stiff_step) halves a sub-step at most this many times (0.6 ps at 10 us):
 # its sub-steps adapt, so only the few that resolve a chamber's fastest relaxation are short.
@@ -210,7 +211,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     At least what keeps RK4 stable on the stiffest chamber, at least half of previous
     (the last choice), and doubled until a sub-step agrees with two half sub-steps
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
-    than max_splits(step): that + 1, which the caller takes as a divergence.
+    than max_splits(step): that + 1, which split_step takes as a step for ROS2.
     """
     splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
     limit = max_splits(step)
@@ -320,7 +321,8 @@ def rk4_steps(
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
-    holds those values) or needed more than max_splits(step) sub-steps (STATE_DIVERGED).
+    holds those values) or failed even in the stiff step's shortest sub-steps
+    (STATE_DIVERGED).
     """
     current = as_tuple(state)
     row = 0
@@ -361,9 +363,10 @@ def step_problem(c, step, state=None, tank_pressure=0.0):
     The bodies' modes (model.fastest_body_rate) do not depend on the state but for the
     flow force, bounded here at p_c - p_t = burst_pressure; the chambers' rates do, and
     are judged at the start state if given (tank_pressure [Pa, gauge] there). If keeping
-    RK4 stable on either needs more than max_splits(step), the run would diverge at
-    once: it is refused before it starts. (A chamber that the run itself makes that
-    stiff later is still a divergence.)
+    RK4 stable on either needs more than max_splits(step), it is refused before it
+    starts: its whole run would go the slower stiff path (ROS2 would damp a ringing body
+    out of the answer). A chamber that the run itself makes that stiff later takes
+    ROS2's steps (stiff_step).
     """
     bound = np.zeros(8)
     bound[P_C] = c.burst_pressure
