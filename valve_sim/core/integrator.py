@@ -93,6 +93,9 @@ MAX_SPLITS = 1024
 # whichever is more: the physics sets the sub-step a valve needs, so a valve that RK4
 # integrates at 10 us is not handed to ROS2 at 100 us (the catalogue's largest step).
 MIN_SUB_STEP = 1e-8
+# More RK4 sub-steps than this: ROS2 takes the step (stiff_step), which costs about as much
+# as 64 RK4 sub-steps where a chamber is that stiff (bench/bench_step_split.py).
+STIFF_SPLITS = 64
 # The stiff step (stiff_step) halves a sub-step at most this many times (0.6 ps at 10 us):
 # its sub-steps adapt, so only the few that resolve a chamber's fastest relaxation are short.
 STIFF_HALVINGS = 24
@@ -282,7 +285,7 @@ def split_step(state, q, p_t, c, step, splits):
     splits (splits_needed, stable_splits) equal RK4 sub-steps; more than max_splits(step):
     ROS2 sub-steps instead (stiff_step), which RK4 could not take stably.
     """
-    if splits > max_splits(step):
+    if splits > min(STIFF_SPLITS, max_splits(step)):
         return stiff_step(state, q, p_t, c, step)
     h = step / splits
     for _ in range(splits):
