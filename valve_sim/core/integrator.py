@@ -38,10 +38,11 @@ paper's operating points n is 1. Before, n was capped at 8 and judged by the
 stiffness bound alone: a state that needed more (a broken or weakened pilot spring,
 a blocked damping orifice) was integrated unstably, and the run settled in a
 numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
-"Step splitting"). A step that needs more than max_splits() (MAX_SPLITS, or sub-steps
-of MIN_SUB_STEP at larger steps) is taken by the stiff-stable ROS2 instead (split_step,
-stiff_step, valve_sim.core.rosenbrock): a chamber the run drives faster than RK4 can
-follow; step_problem() refuses a valve and step that would need more from the start.
+"Step splitting"). A step that needs more than STIFF_SPLITS RK4 sub-steps is taken by
+the stiff-stable ROS2 instead (split_step, stiff_step, valve_sim.core.rosenbrock): a
+chamber the run drives faster than RK4 can follow at that cost; step_problem() refuses a
+valve and step that would need more than max_splits() (MAX_SPLITS, or sub-steps of
+MIN_SUB_STEP at larger steps) from the start.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -242,7 +243,7 @@ def stiff_step(state, q, p_t, c, step):
     """
     Return (state, True) after one step of size step [s] in ROS2 sub-steps, or (state, False).
 
-    For a step RK4 cannot take in max_splits(step) sub-steps (a chamber relaxing faster
+    For a step RK4 cannot take in STIFF_SPLITS sub-steps (a chamber relaxing faster
     than nanoseconds, valve_sim.core.rosenbrock). Each sub-step is compared with two
     half sub-steps (step doubling, within ERROR_TOLERANCE as splits_needed) and the
     halves are kept; a sub-step that fails is halved, one that passes with a margin
@@ -282,8 +283,8 @@ def split_step(state, q, p_t, c, step, splits):
     """
     Return (state, True) after one step of size step [s], or (state, False) if it diverged.
 
-    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than max_splits(step):
-    ROS2 sub-steps instead (stiff_step), which RK4 could not take stably.
+    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than STIFF_SPLITS (or
+    max_splits(step), if less): ROS2 sub-steps instead (stiff_step), cheaper there.
     """
     if splits > min(STIFF_SPLITS, max_splits(step)):
         return stiff_step(state, q, p_t, c, step)
