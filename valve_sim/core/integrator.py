@@ -283,10 +283,14 @@ def split_step(state, q, p_t, c, step, splits):
     """
     Return (state, True) after one step of size step [s], or (state, False) if it diverged.
 
-    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than STIFF_SPLITS (or
-    max_splits(step), if less): ROS2 sub-steps instead (stiff_step), cheaper there.
+    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than STIFF_SPLITS for a
+    stiff chamber (the bodies' own modes would need fewer), or more than max_splits(step):
+    ROS2 sub-steps instead (stiff_step), cheaper there.
     """
-    if splits > min(STIFF_SPLITS, max_splits(step)):
+    if splits > max_splits(step) or (
+        splits > STIFF_SPLITS
+        and step * fastest_body_rate(state, c, p_t) < STIFF_SPLITS * STEP_RATE_LIMIT
+    ):  # ... but a body ringing that fast stays RK4's: ROS2 would damp its ring away
         return stiff_step(state, q, p_t, c, step)
     h = step / splits
     for _ in range(splits):
