@@ -20,8 +20,7 @@ unstable 20 L/min equilibrium; as the poppet nears its seat the chamber relaxes 
 4.6e8 1/s, beyond RK4 at 10 ns sub-steps: on main the run diverged at 0.67 s. Each
 answer is judged independently of the integrator: the flow balance over whole hunting
 cycles (relief = inlet flow), a stiff step against thousands of RK4 sub-steps. The same
-hunt at half the step agreed in the cycle's mean (1e-3) and amplitude (5 %) of p_s and
-p_c, but costs 29 s: checked once, not in the suite (the note of issue 40, stop 51).
+hunt at finer steps converges (docs/model.md, "Step splitting"): checked once, not here.
 """
 
 import numpy as np
