@@ -19,8 +19,10 @@ import pytest
 from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.invariants import Monitor, run_alarms, WINDOW_SAMPLES
-from valve_sim.core.model import Y
+from valve_sim.core.invariants import (
+    CAVITATION_PRESSURE, INVARIANTS, Monitor, run_alarms, WINDOW_SAMPLES,
+)
+from valve_sim.core.model import P_M, Y
 from valve_sim.core.parameters import load_parameters
 from valve_sim.core.simulation import LITRE_PER_MINUTE as L, simulate, simulate_alarms
 from valve_sim.core.steady_state import steady_state
@@ -92,3 +94,23 @@ def test_correct_runs_found_by_the_campaign_raise_no_alarm(params, faults, input
     # 9.6 %), a window starting at an input step (balance 17 %), inner chambers still
     # moving under friction (balance 3 %). A quarter step agreed in each.
     assert property_findings(params, faults, *inputs) == []
+
+
+def test_a_chamber_below_the_vapour_pressure_is_a_cavitation_alarm(params):
+    """The campaign's chamber pulled below vacuum: the model leaves its validity, and says so."""
+    time, states = steady_samples(params, 5 * L)
+    states[150:, P_M] = -150e3  # gauge: below vacuum, as the poppet chamber held it for seconds
+    c = coefficients(params)
+    alarms = run_alarms(time, states, np.full(len(time), 5 * L), None, [(0.0, c)])
+    alarm = next(a for a in alarms if a.invariant == 'cavitation')
+    assert alarm.time == time[150]
+    assert 'intermediate chamber at -4.868e+04 Pa absolute' in str(alarm)
+    assert 'below the vapour pressure 2339 Pa' in str(alarm)
+    monitor = Monitor()
+    for t, s in zip(time, states):
+        monitor.observe(t, s, 5 * L, 0.0, c)
+    assert monitor.alarms['cavitation'] == len(time) - 150  # every sample below counts
+    assert monitor.last.invariant in INVARIANTS
+    states[150:, P_M] = CAVITATION_PRESSURE + 1.0  # just above it: no alarm
+    alarms = run_alarms(time, states, np.full(len(time), 5 * L), None, [(0.0, c)])
+    assert 'cavitation' not in {a.invariant for a in alarms}

@@ -38,9 +38,11 @@ paper's operating points n is 1. Before, n was capped at 8 and judged by the
 stiffness bound alone: a state that needed more (a broken or weakened pilot spring,
 a blocked damping orifice) was integrated unstably, and the run settled in a
 numerical limit cycle whose own stiffness the bound found acceptable (docs/model.md,
-"Step splitting"). A step that needs more than max_splits() (MAX_SPLITS, or sub-steps
-of MIN_SUB_STEP at larger steps) is a divergence; step_problem() refuses a valve and step
-that would need more from the start.
+"Step splitting"). A step that needs more than STIFF_SPLITS RK4 sub-steps is taken by
+the stiff-stable ROS2 instead (split_step, stiff_step, valve_sim.core.rosenbrock): a
+chamber the run drives faster than RK4 can follow at that cost; step_problem() refuses a
+valve and step that would need more than max_splits() (MAX_SPLITS, or sub-steps of
+MIN_SUB_STEP at larger steps) from the start.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -79,18 +81,25 @@ from valve_sim.core.model import (
     Y,
     Y_DOT,
 )
+from valve_sim.core.rosenbrock import ros2_step
 
 
 # Largest step * chamber rate taken in one RK4 step; RK4's stability limit on a real
 # eigenvalue is 2.785, and the margin covers the coupling the diagonal rate leaves out.
 STEP_RATE_LIMIT = 2.0
-# At most this many sub-steps per step (10 ns at the paper's 10 us): beyond it the parameters
-# make a chamber faster than any step the real-time node can afford (a divergence).
+# At most this many RK4 sub-steps per step (10 ns at the paper's 10 us): beyond it a chamber
+# is faster than RK4 can follow at a cost the real-time node affords: ROS2 takes the step.
 MAX_SPLITS = 1024
 # ... or as many as make sub-steps of MIN_SUB_STEP [s] (about the paper's 10 us / MAX_SPLITS),
-# whichever is more: the physics sets the sub-step a valve needs, so a valve that integrates
-# at 10 us is not a divergence at 100 us (the catalogue's largest step).
+# whichever is more: the physics sets the sub-step a valve needs, so a valve that RK4
+# integrates at 10 us is not handed to ROS2 at 100 us (the catalogue's largest step).
 MIN_SUB_STEP = 1e-8
+# More RK4 sub-steps than this: ROS2 takes the step (stiff_step), which costs about as much
+# as 64 RK4 sub-steps where a chamber is that stiff (bench/bench_step_split.py).
+STIFF_SPLITS = 64
+# The stiff step (stiff_step) halves a sub-step at most this many times (0.6 ps at 10 us):
+# its sub-steps adapt, so only the few that resolve a chamber's fastest relaxation are short.
+STIFF_HALVINGS = 24
 # A sub-step is accurate when it agrees with two half sub-steps within this share of
 # burst_pressure (pressures) and of the stroke (positions): 1e-6 is 35 Pa at 35 MPa.
 ERROR_TOLERANCE = 1e-6
@@ -206,7 +215,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     At least what keeps RK4 stable on the stiffest chamber, at least half of previous
     (the last choice), and doubled until a sub-step agrees with two half sub-steps
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
-    than max_splits(step): that + 1, which the caller takes as a divergence.
+    than max_splits(step): that + 1, which split_step takes as a step for ROS2.
     """
     splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
     limit = max_splits(step)
@@ -227,6 +236,66 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
             return splits
         splits *= 2
     return limit + 1
+
+
+@jit
+def stiff_step(state, q, p_t, c, step):
+    """
+    Return (state, True) after one step of size step [s] in ROS2 sub-steps, or (state, False).
+
+    For a step RK4 cannot take in STIFF_SPLITS sub-steps (a chamber relaxing faster
+    than nanoseconds, valve_sim.core.rosenbrock). Each sub-step is compared with two
+    half sub-steps (step doubling, within ERROR_TOLERANCE as splits_needed) and the
+    halves are kept; a sub-step that fails is halved, one that passes with a margin
+    doubles the next. A state off its stiff chamber's quasi-static pressure (RK4's
+    last sub-steps lag it) takes sub-steps of that chamber's time constant, down to a
+    nanosecond, and then grows them again: some 30 sub-steps at 10 us. False (the state
+    unchanged) if a sub-step would have to be shorter than step / 2^STIFF_HALVINGS: a
+    divergence.
+    """
+    current = as_tuple(state)
+    done, h, shortest = 0.0, step, step * 0.5**STIFF_HALVINGS
+    while step - done > 1e-6 * shortest:  # what rounding of the sum leaves is no sub-step
+        h = min(h, step - done)
+        # The sub-step, then two half sub-steps, through ONE call site of ros2_step.
+        whole = halves = current
+        for stage in range(3):
+            start, size = (current, h) if stage == 0 else (halves, 0.5 * h)
+            reached = on_stops(ros2_step(start, q, p_t, c, size), c)
+            if stage == 0:
+                whole = reached
+            else:
+                halves = reached
+        error = step_error(whole, halves, c)
+        if error > 1.0 or error != error:
+            if 0.5 * h < shortest * (1.0 - 1e-9):
+                return as_tuple(state), False
+            h *= 0.5
+            continue
+        current, done = halves, done + h
+        if error < 0.1:
+            h *= 2.0
+    return current, True
+
+
+@jit
+def split_step(state, q, p_t, c, step, splits):
+    """
+    Return (state, True) after one step of size step [s], or (state, False) if it diverged.
+
+    splits (splits_needed, stable_splits) equal RK4 sub-steps; more than STIFF_SPLITS for a
+    stiff chamber (the bodies' own modes would need fewer), or more than max_splits(step):
+    ROS2 sub-steps instead (stiff_step), cheaper there.
+    """
+    if splits > max_splits(step) or (
+        splits > STIFF_SPLITS
+        and step * fastest_body_rate(state, c, p_t) < STIFF_SPLITS * STEP_RATE_LIMIT
+    ):  # ... but a body ringing that fast stays RK4's: ROS2 would damp its ring away
+        return stiff_step(state, q, p_t, c, step)
+    h = step / splits
+    for _ in range(splits):
+        state = rk4_step(state, q, p_t, c, h)
+    return state, True
 
 
 @jit
@@ -260,7 +329,8 @@ def rk4_steps(
     record_every steps the state is copied into the next row of record. Returns
     (steps completed, limits verdict): fewer than len(inlet_flows) steps means the
     state left the limits (verdict STATE_OVERPRESSURE or STATE_DIVERGED; state
-    holds those values) or needed more than max_splits(step) sub-steps (STATE_DIVERGED).
+    holds those values) or failed even in the stiff step's shortest sub-steps
+    (STATE_DIVERGED).
     """
     current = as_tuple(state)
     row = 0
@@ -275,12 +345,10 @@ def rk4_steps(
             chosen_q, chosen_p_t = q, p_t
         else:
             splits = max(splits, stable_splits(current, c, step, p_t))
-        if splits > max_splits(step):
+        current, accurate = split_step(current, q, p_t, c, step, splits)
+        if not accurate:
             state[:] = current
             return k, STATE_DIVERGED
-        h = step / splits
-        for _ in range(splits):
-            current = rk4_step(current, q, p_t, c, h)
         verdict = state_check(current, c.burst_pressure)
         if verdict != STATE_OK:
             state[:] = current
@@ -303,9 +371,10 @@ def step_problem(c, step, state=None, tank_pressure=0.0):
     The bodies' modes (model.fastest_body_rate) do not depend on the state but for the
     flow force, bounded here at p_c - p_t = burst_pressure; the chambers' rates do, and
     are judged at the start state if given (tank_pressure [Pa, gauge] there). If keeping
-    RK4 stable on either needs more than max_splits(step), the run would diverge at
-    once: it is refused before it starts. (A chamber that the run itself makes that
-    stiff later is still a divergence.)
+    RK4 stable on either needs more than max_splits(step), it is refused before it
+    starts: its whole run would go the slower stiff path (ROS2 would damp a ringing body
+    out of the answer). A chamber that the run itself makes that stiff later takes
+    ROS2's steps (stiff_step).
     """
     bound = np.zeros(8)
     bound[P_C] = c.burst_pressure

@@ -25,7 +25,10 @@ independently of how the integrator got them:
   (Eqs. 1-4 integrated);
 - flow balance: over a window in a steady state (inputs held, p_s steady) the valve
   relieves its inlet flow: integral(q_in - q_relief) = Delta(stored volume), the
-  relief with the seat leakage.
+  relief with the seat leakage;
+- cavitation: no chamber's absolute pressure below the water's vapour pressure
+  (CAVITATION_PRESSURE, gauge): the model (a constant bulk modulus, no vapour) leaves
+  its validity there, so the numbers that follow are not the real valve's.
 
 Continuity and the balance are judged on quasi-steady windows (inputs held, p_s
 within STEADY_SPAN of burst_pressure): there a correctly integrated run meets them
@@ -38,6 +41,7 @@ run; Monitor checks a live one sample by sample (valve_node, the FMU).
 from dataclasses import dataclass
 
 import numpy as np
+from valve_sim.core.catalogue import STANDARD_ATMOSPHERE
 from valve_sim.core.faults import at_supply_limit
 from valve_sim.core.limits import PRESSURE_FLOOR
 from valve_sim.core.model import (
@@ -52,7 +56,12 @@ STEADY_SPAN = 1e-3
 TOLERANCE = 0.02
 # Below this flow [m^3/s] (0.006 L/min) a window's throughput is taken as this.
 FLOW_FLOOR = 1e-7
-INVARIANTS = ('bounds', 'continuity', 'flow balance')
+# [Pa, absolute] water's vapour pressure at 20 degC (IAPWS-IF97 saturation line: 2.339 kPa).
+VAPOUR_PRESSURE = 2339.0
+# [Pa, gauge] a chamber below it is below the vapour pressure (the standard atmosphere the
+# gauge zero: the gauge pressures are the model's, relative to the ambient pressure).
+CAVITATION_PRESSURE = VAPOUR_PRESSURE - STANDARD_ATMOSPHERE
+INVARIANTS = ('bounds', 'continuity', 'flow balance', 'cavitation')
 CHAMBERS = ('supply', 'intermediate', 'pilot', 'poppet')
 
 
@@ -91,6 +100,20 @@ def bounds_alarm(time, state, c):
     if size > 0.0:
         return Alarm('bounds', float(size), time, 'a pressure or a valve beyond its limits')
     return None
+
+
+def cavitation_alarm(time, state):
+    """Return the Alarm of a chamber below the vapour pressure, or None."""
+    pressures = np.asarray(state, dtype=float)[P_S:P_C + 1]
+    lowest = int(np.argmin(pressures))
+    if not pressures[lowest] < CAVITATION_PRESSURE:  # a NaN is the bounds' alarm
+        return None
+    absolute = pressures[lowest] + STANDARD_ATMOSPHERE
+    return Alarm(
+        'cavitation', float((CAVITATION_PRESSURE - pressures[lowest]) / STANDARD_ATMOSPHERE),
+        time, f'{CHAMBERS[lowest]} chamber at {absolute:.4g} Pa absolute, below the vapour '
+        f'pressure {VAPOUR_PRESSURE:g} Pa: beyond the model (no cavitation)',
+    )
 
 
 def stored_volumes(state, c):
@@ -200,6 +223,10 @@ def run_alarms(time, states, inlet_flows, tank_pressures, segments, window=WINDO
             i = int(np.argmax(beyond))
             alarms.append(bounds_alarm(float(time[i]), states[i], c))
             seen.add('bounds')
+    below = np.min(states[:, P_S:P_C + 1], axis=1) < CAVITATION_PRESSURE
+    if np.any(below):
+        i = int(np.argmax(below))
+        alarms.append(cavitation_alarm(float(time[i]), states[i]))
     steady_span = STEADY_SPAN * min(c.burst_pressure for _, c in segments)
     for first in range(0, len(time) - window, window):
         part = slice(first, first + window + 1)
@@ -247,9 +274,9 @@ class Monitor:
         window a few sums.
         """
         found = []
-        alarm = bounds_alarm(time, state, c)
-        if alarm:
-            found.append(alarm)
+        for alarm in (bounds_alarm(time, state, c), cavitation_alarm(time, state)):
+            if alarm:
+                found.append(alarm)
         previous = self.samples[-1] if self.samples else None
         if previous and (
             previous[2] != inlet_flow or previous[4] != tank_pressure or previous[5] is not c
