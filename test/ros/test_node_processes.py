@@ -175,3 +175,46 @@ def test_an_analyser_recording_outside_the_run_s_folder_is_another_run_s(tmp_pat
     node.callback(status('/tmp/elsewhere/valve_2.mcap'))
     with pytest.raises(IncompleteRunError, match='another analyser_node .* /tmp/elsewhere/'):
         analyser.recording([])
+
+
+def test_the_valve_waits_for_an_analyser_more_than_max_ahead_ticks_behind(tmp_path):
+    """Stepping waits while the recording lags more than MAX_AHEAD ticks (states would drop)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from valve_sim.recording.valve_topics import TICK_TOPICS
+    from valve_sim.ros.scenario_runner import AnalyserStatus, MAX_AHEAD
+    from valve_sim.ros.valve_outputs import STATE_QUEUE_DEPTH
+
+    class Node:
+
+        def create_subscription(self, *args):
+            self.callback = args[2]
+
+        def resolve_topic_name(self, topic):
+            return '/' + topic
+
+    def status(count):
+        return DiagnosticArray(status=[DiagnosticStatus(
+            name='valve_analyser: recording', values=[KeyValue(key='file', value=file)] + [
+                KeyValue(key=f'messages /{topic}', value=str(count)) for topic in TICK_TOPICS])])
+
+    class Driver:
+        """Records its waits; each spin brings the status of an analyser 100 states further."""
+
+        node, waits, recorded = Node(), [], 0
+
+        def spin_until(self, condition, what, timeout):
+            self.waits.append(what)
+            while not condition():
+                self.recorded += 100
+                self.node.callback(status(self.recorded))
+
+    file = str(tmp_path / 'valve_1.mcap')
+    driver = Driver()
+    analyser = AnalyserStatus(driver.node, tmp_path)
+    assert 0 < MAX_AHEAD < STATE_QUEUE_DEPTH
+    analyser.keep_up(driver, MAX_AHEAD)  # nothing recorded yet, but not too far ahead
+    assert driver.waits == []
+    analyser.keep_up(driver, MAX_AHEAD + 250)
+    assert len(driver.waits) == 1 and driver.recorded == 300  # waited until 250 recorded
+    analyser.keep_up(driver, MAX_AHEAD + 300)
+    assert len(driver.waits) == 1  # already there

@@ -52,6 +52,7 @@ from valve_sim.ros.node_processes import start_valve_and_analyser
 from valve_sim.ros.scenario_stepper import input_values, ScenarioStepper
 from valve_sim.ros.start_parameters import STATUS_KEY as START_PARAMETERS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
+from valve_sim.ros.valve_outputs import STATE_QUEUE_DEPTH
 
 
 # what the analyser must record before the first tick
@@ -62,6 +63,9 @@ READY_TIMEOUT = 180.0  # [s] start-up (a cold kernel compile on a loaded machine
 ANALYSER_QUEUE_DEPTH = 100_000
 PROGRESS_INTERVAL = 2.0  # [s] of wall time between progress lines
 DRAIN_TIMEOUT = 120.0  # [s] for analyser_node to record the states still on their way
+# [ticks] how far the valve may run ahead of the analyser's recording: half of what valve_node
+# keeps for a slow reader, the other half the margin for the status's age (STATUS_PERIOD)
+MAX_AHEAD = STATE_QUEUE_DEPTH // 2
 # [s] analyser_node's recording status, which the run waits on before its first tick and
 # after its last (the default, 1 s, would add up to a second to each)
 STATUS_PERIOD = 0.05
@@ -180,14 +184,30 @@ class AnalyserStatus:
         self.check()
         return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
+    def keep_up(self, driver, tick):
+        """
+        Spin driver while the analyser has recorded fewer states than tick - MAX_AHEAD.
+
+        valve_node's tick publishers keep STATE_QUEUE_DEPTH messages that a reader has not
+        acknowledged (a reliable keep-last writer drops the oldest beyond): a valve further
+        ahead of a starved analyser would lose states, and the run could never complete.
+        """
+        topics = [driver.node.resolve_topic_name(topic) for topic in TICK_TOPICS]
+        if not self.recorded(topics, tick - MAX_AHEAD):
+            driver.spin_until(lambda: self.recorded(topics, tick - MAX_AHEAD),
+                              f'analyser_node recording the states up to tick '
+                              f'{tick - MAX_AHEAD}', DRAIN_TIMEOUT)
+
 
 def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=None,
-          flow_reply=None):
+          flow_reply=None, keep_up=None):
     """
     Run the scenario's ticks on a connected Lockstep (ScenarioStepper); returns the wall time [s].
 
     record: a RunRecord whose wall_s follows the run (for a run that fails midway);
-    flow_reply: the wait topic whose controller supplies the flow (ScenarioStepper).
+    flow_reply: the wait topic whose controller supplies the flow (ScenarioStepper);
+    keep_up(tick): called before each /clock, waits while the recording lags too far
+    behind tick (AnalyserStatus.keep_up).
     """
     stepper = ScenarioStepper(scenario, driver, ticks_per_clock, flow_reply)
     if record is not None:
@@ -195,6 +215,8 @@ def drive(scenario, driver, progress, ticks_per_clock=TICKS_PER_CLOCK, record=No
     stepper.start()
     started = last_report = time.monotonic()
     while stepper.tick < scenario.ticks:
+        if keep_up is not None:
+            keep_up(stepper.tick)
         stepper.batch(scenario.ticks)
         if record is not None:
             record.wall_s = time.monotonic() - started
@@ -287,7 +309,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
         progress(f'running {scenario.duration:g} s of model time in lockstep'
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
-            1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic))
+            1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic),
+            keep_up=lambda tick: status.keep_up(driver, tick))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (each STATUS_PERIOD) says when it has
         # all.
