@@ -272,6 +272,8 @@ class Recorder:
             recorded.take(recorded.subscription)
             if recorded.lost > lost:
                 self._warn_lost(topic, recorded.lost)
+        if self.start_parameters.pending:  # an answer acted on at once, not at discovery
+            self.start_parameters.advance()
         if time.monotonic() - self.last_flush >= self.flush_interval:
             self.bag.flush()
             self.last_flush = time.monotonic()

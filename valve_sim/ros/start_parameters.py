@@ -62,8 +62,10 @@ class StartParameters:
     name; write(data, received_ns): writes a serialized ParameterEvent as received on
     /parameter_events; clients: {node full name: (list client, get client)}, the
     node's, kept across its recordings (a new client waits for discovery again). poll()
-    advances each read a step (from the discovery timer: no callback, no blocking);
-    read: {node full name: number of parameters written}.
+    starts a read of each new publisher and advances each a step (from the discovery
+    timer), advance() the reads under way only (from every drain, so an answer is acted
+    on within a drain period); no callback, no blocking; read: {node full name: number
+    of parameters written}.
     """
 
     def __init__(self, node, supply_topic, write, clients):
@@ -84,8 +86,13 @@ class StartParameters:
                         self.node.create_client(ListParameters, f'{name}/list_parameters'),
                         self.node.create_client(GetParameters, f'{name}/get_parameters'))
                 self.pending[name] = Read(self.clients[name])
+        self.advance()
+
+    def advance(self):
+        """Advance each read under way a step (no graph query: cheap at every drain)."""
         for name, read in list(self.pending.items()):
-            self._advance(name, read)
+            if name in self.pending:  # not finished meanwhile by a write's drain
+                self._advance(name, read)
 
     def _advance(self, name, read):
         """Send the next request of a read whose last one was answered; write the values."""
@@ -106,9 +113,9 @@ class StartParameters:
                 Parameter(name=parameter, value=value)
                 for parameter, value in zip(read.names, values)])
             event.stamp.sec, event.stamp.nanosec = divmod(read.stamp_ns, 1_000_000_000)
-            self.write(serialize_message(event), time.time_ns())
+            del self.pending[name]  # first: the write drains, which advances the others
             self.read[name] = len(values)
-            del self.pending[name]
+            self.write(serialize_message(event), time.time_ns())
 
     def status(self):
         """Return the status value: whose parameters were read ('' while none)."""
