@@ -155,3 +155,44 @@ def test_read_message_gives_the_fields_rclpy_deserialises(message):
     assert read_message(type_name, b'\x00\x00' + data[2:]) is None, 'big-endian: rclpy reads it'
     with pytest.raises((struct.error, ValueError)):  # too short: the analyser asks rclpy
         read_message(type_name, data[:len(data) // 2] if len(data) > 24 else data[:6])
+
+
+def test_a_bag_of_ticks_reads_the_same_by_columns_as_message_by_message(tmp_path):
+    """tick_series' numpy read (a layout a topic) equals the row-by-row read, or declines."""
+    from valve_sim.recording import tick_bags
+    from valve_sim.recording.bag import BagWriter
+
+    def write(path, frame_prefix=''):
+        rng = np.random.default_rng(7)
+        bag = BagWriter(path)
+        channels = {topic: bag.add_topic('/' + topic, TOPIC_TYPES[topic]) for topic in TICK_TOPICS}
+        for k in range(50):
+            messages = TickMessages(frame_prefix if k < 25 else '').fill(
+                1_000_000_000 + k * 1_000_000, rng.normal(1e6, 1e5, len(STATE_NAMES)),
+                1e-4 * k, AMBIENT, tank_pressure=1e3 * k, relief=(1e-4, 8e-5, 2e-5, 1e-6))
+            for topic, data in messages:
+                if not (topic == 'pilot_pressure' and k == 7):  # a tick without it: NaN there
+                    bag.write(channels[topic], data, k, k)
+        bag.close()
+        return path
+
+    for path in (write(tmp_path / 'one.mcap'), write(tmp_path / 'two.mcap', 'rig/')):
+        fast = tick_bags.tick_series(path, ambient_pressure=AMBIENT)
+        original = tick_bags._fixed_layout_series
+        tick_bags._fixed_layout_series = lambda *args: None  # the row-by-row read alone
+        try:
+            rows = tick_bags.tick_series(path, ambient_pressure=AMBIENT)
+        finally:
+            tick_bags._fixed_layout_series = original
+        assert len(fast) == len(rows) == 50
+        assert np.array_equal(fast.stamps_ns, rows.stamps_ns)
+        assert np.array_equal(fast.time, rows.time)
+        assert set(fast.columns) == set(rows.columns)
+        for name in rows.columns:
+            assert np.array_equal(fast[name], rows[name], equal_nan=True), name
+        assert np.isnan(fast['pilot_pressure'][7]) and not np.isnan(fast['pilot_pressure'][6])
+    # two frame_ids in one topic: not one layout, so the columns read declines
+    assert tick_bags._fixed_layout_series(
+        tmp_path / 'two.mcap', {f'/{t}': t for t in TICK_TOPICS}, None, AMBIENT) is None
+    assert tick_bags._fixed_layout_series(
+        tmp_path / 'one.mcap', {f'/{t}': t for t in TICK_TOPICS}, None, AMBIENT) is not None

@@ -155,6 +155,33 @@ class _Fields:
         self.__dict__.update(fields)
 
 
+def float_offsets(type_name, data):
+    """
+    Return ({field: [offset of each float64]}, joint names or None) of one message, or None.
+
+    For sensor_msgs/FluidPressure (fluid_pressure) and sensor_msgs/JointState (position,
+    velocity, effort); the layout of every message of a topic whose bytes other than
+    these and the stamp (STAMP_OFFSET) are the same: its frame_id and joints.
+    """
+    fields = CdrFields(data)
+    fields.header()
+    if type_name == 'sensor_msgs/msg/FluidPressure':
+        fields._align(FLOAT64.size)
+        return {'fluid_pressure': [fields.offset]}, None
+    if type_name != 'sensor_msgs/msg/JointState':
+        return None
+    names, offsets = fields.strings(), {}
+    for field in ('position', 'velocity', 'effort'):
+        fields._align(COUNT.size)
+        (count,) = COUNT.unpack_from(data, fields.offset)
+        fields.offset += COUNT.size
+        if count:
+            fields._align(FLOAT64.size)
+        offsets[field] = [fields.offset + FLOAT64.size * k for k in range(count)]
+        fields.offset += FLOAT64.size * count
+    return offsets, names
+
+
 def read_message(type_name, data):
     """
     Return the fields of a message of type_name ('pkg/msg/Type') from its CDR bytes.
