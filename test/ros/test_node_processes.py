@@ -211,10 +211,11 @@ def test_the_valve_waits_for_an_analyser_more_than_max_ahead_ticks_behind(tmp_pa
     file = str(tmp_path / 'valve_1.mcap')
     driver = Driver()
     analyser = AnalyserStatus(driver.node, tmp_path)
+    topics = [driver.node.resolve_topic_name(topic) for topic in TICK_TOPICS]
     assert 0 < MAX_AHEAD < STATE_QUEUE_DEPTH
-    analyser.keep_up(driver, MAX_AHEAD)  # nothing recorded yet, but not too far ahead
+    analyser.keep_up(driver, topics, MAX_AHEAD)  # nothing recorded yet, but not too far ahead
     assert driver.waits == []
-    analyser.keep_up(driver, MAX_AHEAD + 250)
+    analyser.keep_up(driver, topics, MAX_AHEAD + 250)
     assert len(driver.waits) == 1 and driver.recorded == 300  # waited until 250 recorded
-    analyser.keep_up(driver, MAX_AHEAD + 300)
+    analyser.keep_up(driver, topics, MAX_AHEAD + 300)
     assert len(driver.waits) == 1  # already there

@@ -184,15 +184,16 @@ class AnalyserStatus:
         self.check()
         return all(int(self.values.get(f'messages {topic}', 0)) >= count for topic in topics)
 
-    def keep_up(self, driver, tick):
+    def keep_up(self, driver, topics, tick):
         """
         Spin driver while the analyser has recorded fewer states than tick - MAX_AHEAD.
+
+        topics: the tick topics' full names.
 
         valve_node's tick publishers keep STATE_QUEUE_DEPTH messages that a reader has not
         acknowledged (a reliable keep-last writer drops the oldest beyond): a valve further
         ahead of a starved analyser would lose states, and the run could never complete.
         """
-        topics = [driver.node.resolve_topic_name(topic) for topic in TICK_TOPICS]
         if not self.recorded(topics, tick - MAX_AHEAD):
             driver.spin_until(lambda: self.recorded(topics, tick - MAX_AHEAD),
                               f'analyser_node recording the states up to tick '
@@ -303,6 +304,7 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
                           "analyser_node recording every topic and valve_node's parameters",
                           READY_TIMEOUT)
         inputs = driver.input_publishers()  # matched by both nodes: none sent is lost
+        tick_topics = [driver.node.resolve_topic_name(topic) for topic in TICK_TOPICS]
         driver.spin_until(lambda: all(publisher.get_subscription_count() >= 2
                                       for publisher, _ in inputs.values()),
                           'analyser_node subscribed to the inputs', READY_TIMEOUT)
@@ -310,13 +312,12 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
                  + (f' at {rate:g}x real time at most' if rate else ' as fast as it goes'))
         record.wall_s = drive(scenario, driver, progress, ticks_per_clock or (
             1 if wait_topics else TICKS_PER_CLOCK), record, driver.flow_reply(flow_topic),
-            keep_up=lambda tick: status.keep_up(driver, tick))
+            keep_up=lambda tick: status.keep_up(driver, tick_topics, tick))
         # In lockstep the valve runs ahead of the analyser's drain: stopping it now would
         # lose the states still on their way. Its status (each STATUS_PERIOD) says when it has
         # all.
         progress('waiting for analyser_node to record every state')
-        driver.spin_until(lambda: status.recorded(map(driver.node.resolve_topic_name,
-                                                      TICK_TOPICS), scenario.ticks + 1)
+        driver.spin_until(lambda: status.recorded(tick_topics, scenario.ticks + 1)
                           and all(status.recorded([topic], sent.count)
                                   for topic, (_, sent) in inputs.items()),
                           f'analyser_node recording all {scenario.ticks + 1} states and '
