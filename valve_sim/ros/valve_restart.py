@@ -177,15 +177,3 @@ def serve(node):
         return response
 
     return node.create_service(SetParametersAtomically, SERVICE, on_restart)
-
-
-def request_restart(driver, valve_name, overrides=None, timeout=60.0):
-    """
-    Call the ~/restart of valve_name (its full name) from a Lockstep driver; returns the reason.
-
-    overrides: {name: value} over its start-up parameters. Raises ParameterError with
-    the node's reason if it refuses (it is then unchanged). The driver keeps the client
-    (Lockstep.request_restart); Lockstep.restart restarts the driver's valve and the
-    driver with it.
-    """
-    return driver.request_restart(valve_name, overrides, timeout)
