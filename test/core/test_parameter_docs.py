@@ -50,12 +50,13 @@ COLUMNS = {  # header: what the column holds
 }
 # The nodes' string, list and integer parameters declared outside the catalogue: analyser
 # PLAIN_PARAMETERS (valve_sim.ros.analyser_node), the statuses' hardware_id
-# (valve_sim.ros.diagnostics), valve_node's frame_prefix and inlet_flow_reliability.
+# and diagnostic_updater.period (valve_sim.ros.diagnostics), valve_node's frame_prefix and
+# inlet_flow_reliability.
 OUTSIDE = {
     'topics', 'output_dir', 'bag_folder', 'queue_depth', 'supply_pressure_topic',
     'main_valve_topic', 'main_valve_joint', 'inlet_flow_topic', 'inlet_flow_joint',
     'tank_pressure_topic', 'hardware_id', 'frame_prefix', 'inlet_flow_reliability',
-    'lockstep_inputs',
+    'lockstep_inputs', 'diagnostic_updater.period',
 }
 GREEK = {'ρ': 'rho', 'μ': 'mu', 'β': 'beta', 'δ': 'delta', 'θ': 'theta', 'Δ': 'd'}
 

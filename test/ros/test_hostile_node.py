@@ -72,15 +72,17 @@ BAD_SCHEDULES = {
     'not a schedule': '- just\n- a list\n',
 }
 
+# The counts these tests wait on, five times a second (valve_node's default: once a second).
+FAST_DIAGNOSTICS = ('-p', 'diagnostic_updater.period:=0.2')
+
 
 @pytest.fixture(scope='module')
 def wall(context, tmp_path_factory):
     """Yield the wall-clock node and its probe: (process, probe, folder)."""
     folder = tmp_path_factory.mktemp('hostile')
-    with running_valve(context, folder / 'valve_node.log', namespace='/hostile') as (
-        process,
-        probe,
-    ):
+    with running_valve(
+        context, folder / 'valve_node.log', *FAST_DIAGNOSTICS, namespace='/hostile'
+    ) as (process, probe):
         yield process, probe, folder
 
 
@@ -230,6 +232,7 @@ def sim(context, tmp_path_factory):
         log,
         '--params-file',
         str(config_path('reference.yaml')),
+        *FAST_DIAGNOSTICS,
         namespace='/hostile_sim',
         use_sim_time=True,
     ) as (process, probe):
@@ -306,7 +309,7 @@ def change_and_overpressure(probe, **change):
 
 
 def take_flow(probe, flow):
-    """Send flow while the clock is paused; return once the node holds it (1 Hz housekeeping)."""
+    """Send flow while the clock is paused; return once the node holds it (its housekeeping)."""
     accepted = int(probe.wait_for_diagnostics()['accepted_inputs'])
     probe.send_flow(flow)
     probe.wait_for_diagnostics(
@@ -334,7 +337,7 @@ def overpressure(probe, tick=None):
     """
     Let the node take ABSURD_FLOW while its clock is paused, then tick: it fails in that tick.
 
-    Without ticks the node's 1 Hz housekeeping takes the waiting input, so the flow is
+    Without ticks the node's housekeeping takes the waiting input, so the flow is
     in use before the next tick, whatever the machine's load.
     """
     take_flow(probe, ABSURD_FLOW)

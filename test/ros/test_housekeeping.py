@@ -53,7 +53,7 @@ class Publishers:
 class Parts:
     """A Housekeeping with what it needs, and a record of what it did."""
 
-    def __init__(self, monkeypatch):
+    def __init__(self, monkeypatch, **period):
         self.steady_ns = 10**12
         monkeypatch.setattr(housekeeping_module.time, 'monotonic_ns', lambda: self.steady_ns)
         self.counters = Counters()
@@ -74,6 +74,7 @@ class Parts:
             (lambda: self.done.append('receive threads'), lambda: self.done.append('report')),
             self.logger,
             lambda period, callback, clock: self.timers.append((period, callback, clock)),
+            **period,
         )
 
     def timer(self, after_s=1.0):
@@ -156,4 +157,15 @@ def test_timer_calls_queued_back_to_back_count_once(parts):
     parts.timer(after_s=0.1)  # a busy executor's backlog
     assert parts.done.count('report') == 1
     parts.timer(after_s=0.5)
+    assert parts.done.count('report') == 2
+
+
+def test_a_shorter_period_times_the_timer_and_its_backlog_rule(monkeypatch):
+    """diagnostic_updater.period 0.2 s: a 0.2 s timer; calls closer than 0.1 s count once."""
+    parts = Parts(monkeypatch, period=0.2)
+    assert parts.timers[0][0] == 0.2
+    parts.timer(after_s=0.2)
+    parts.timer(after_s=0.05)  # a busy executor's backlog
+    assert parts.done.count('report') == 1
+    parts.timer(after_s=0.1)
     assert parts.done.count('report') == 2

@@ -22,12 +22,16 @@ parameter hardware_id, by default its fully qualified name (/ns/name): the same
 every run, different for two nodes; a bench sets it to the device the node stands
 for. Levels: DiagnosticStatus OK (0), WARN (1) and ERROR (2); what puts each node
 in which is documented with the node (docs/valve_node.md, docs/analyser.md).
+Period: valve_node's read-only parameter diagnostic_updater.period, the name and
+default (1 s) of diagnostic_updater's own.
 """
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
 
 
 HARDWARE_ID = 'hardware_id'
+PERIOD = 'diagnostic_updater.period'
+PERIOD_RANGE = (0.05, 60.0)  # [s] faster than 20 Hz would cost ticks their time
 
 
 def status_name(node, task):
@@ -48,3 +52,19 @@ def declare_hardware_id(node):
     return node.declare_parameter(
         HARDWARE_ID, node.get_fully_qualified_name(), descriptor
     ).value
+
+
+def declare_period(node):
+    """Declare the read-only double parameter diagnostic_updater.period [s]; return its value."""
+    low, high = PERIOD_RANGE
+    descriptor = ParameterDescriptor(
+        name=PERIOD,
+        type=ParameterType.PARAMETER_DOUBLE,
+        description=(
+            'period of the /diagnostics report and of the housekeeping that counts the '
+            'inputs, on the steady clock [s] (diagnostic_updater\'s parameter and default)'
+        ),
+        read_only=True,
+        floating_point_range=[FloatingPointRange(from_value=low, to_value=high)],
+    )
+    return node.declare_parameter(PERIOD, 1.0, descriptor).value

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-valve_node's housekeeping, once a second on the steady clock, between ticks.
+valve_node's housekeeping, once a period (1 s) on the steady clock, between ticks.
 
 Housekeeping copies the inputs' counts to the diagnostics counters, warns of rejected
 input messages (at most once a second per input), runs the node's chores (new
@@ -31,7 +31,6 @@ from valve_sim.ros.node_status import Throttle
 
 
 WARNING_INTERVAL_NS = 1_000_000_000  # rate-limited warnings: at most one a second per kind
-INTERVAL_NS = 500_000_000  # calls of the 1 Hz timer closer than this: a backlog
 YOUNG_GENERATIONS = (
     1  # gc.collect() generation of the housekeeping: 0 and 1, well under a millisecond
 )
@@ -48,36 +47,38 @@ class WatchedInput(NamedTuple):
 
 class Housekeeping:
     """
-    The 1 Hz housekeeping of a ReliefValveNode: it runs right after the next tick.
+    The housekeeping of a ReliefValveNode, every period: it runs right after the next tick.
 
     Run from its timer's callback it could delay a tick: it takes up to about a
     millisecond. The tick calls after_tick(); the timer marks it due, or runs it at
     once without ticks (none since the last housekeeping, or none for a second to
     run pending housekeeping: none yet, or a paused /clock), and then takes the
-    inputs no tick took. Calls that a busy executor queued back to back count once
-    (the steady clock decides).
+    inputs no tick took. Calls that a busy executor queued closer than half a period
+    count once (the steady clock decides).
 
     Given what it needs, no node: counters (node_status.Counters: ticks read, the
     inlet input's counts and refused /clock messages written), inputs (WatchedInput,
     the inlet flow's first: its counts are the counters'), clock_guard (its refused
     count), take_inputs() (takes the inputs no tick took), chores (callables run at
     each run after the counts and warnings, in order: e.g. the receive threads, the
-    /diagnostics report), logger, and create_timer (rclpy's Node.create_timer).
+    /diagnostics report), logger, create_timer (rclpy's Node.create_timer) and period
+    [s] (the node's diagnostic_updater.period).
     """
 
-    def __init__(self, counters, inputs, clock_guard, take_inputs, chores, logger, create_timer):
+    def __init__(self, counters, inputs, clock_guard, take_inputs, chores, logger, create_timer,
+                 period=1.0):
         self._counters = counters
         self._inputs = inputs
         self._clock_guard = clock_guard
         self._take_inputs = take_inputs
         self._chores = chores
         self._logger = logger
-        self._calls = Throttle(INTERVAL_NS)
+        self._calls = Throttle(int(period * 1e9) // 2)
         self._rejection_warnings = {watched.topic: Throttle(WARNING_INTERVAL_NS)
                                     for watched in inputs}
         self._due = False
         self._ticks_at_last = 0
-        create_timer(1.0, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        create_timer(period, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def after_tick(self):
         """Run the housekeeping if the timer asked for it since the last tick."""

@@ -158,6 +158,7 @@ class ReliefValveNode(Node):
             self.clock_guard, self.take_inputs,
             chores=(self._update_receive_threads, self.diagnostics.publish),
             logger=self.get_logger(), create_timer=self.create_timer,
+            period=diagnostics.declare_period(self),
         )
         self._tick_timer = self._create_tick_timer()
         self.parameters = ValveParameters(
