@@ -62,7 +62,7 @@ def declare_period(node):
         type=ParameterType.PARAMETER_DOUBLE,
         description=(
             'period of the /diagnostics report and of the housekeeping that counts the '
-            'inputs, on the steady clock [s] (diagnostic_updater\'s parameter and default)'
+            "inputs, on the steady clock [s] (diagnostic_updater's parameter and default)"
         ),
         read_only=True,
         floating_point_range=[FloatingPointRange(from_value=low, to_value=high)],
