@@ -191,6 +191,16 @@ def test_a_bad_schedule_at_start_is_one_fatal_line(tmp_path, content):
     assert len(lines) == 1 and '[FATAL]' in lines[0] and str(path) in lines[0], lines
 
 
+
+@pytest.mark.parametrize('period', ['0.0', '100.0'])
+def test_a_diagnostics_period_out_of_its_range_is_one_fatal_line(tmp_path, period):
+    """diagnostic_updater.period outside 0.05 ... 60 s at start: one FATAL line, exit code 1."""
+    log = tmp_path / 'valve_node.log'
+    process = start_node(log, '-p', f'diagnostic_updater.period:={period}')
+    assert process.wait(timeout=TIMEOUT * 5) == 1
+    lines = log.read_text().strip().splitlines()
+    assert len(lines) == 1 and '[FATAL]' in lines[0] and 'diagnostic_updater.period' in lines[0]
+
 def test_a_scheduled_event_refused_after_one_applied_keeps_the_node_running(context, tmp_path):
     """
     A schedule whose first event is applied and whose second is refused (range_min > range_max).
