@@ -199,10 +199,11 @@ def max_splits(step):
 
 
 @jit
-def stable_splits(state, c, step, tank_pressure=0.0):
+def stable_splits(state, c, step, tank_pressure=0.0, inlet_flow=0.0):
     """Return the sub-steps keeping RK4 stable on the fastest chamber or body (<= max_splits+1)."""
     rate = max(
-        fastest_chamber_rate(state, c, tank_pressure), fastest_body_rate(state, c, tank_pressure)
+        fastest_chamber_rate(state, c, tank_pressure, inlet_flow),
+        fastest_body_rate(state, c, tank_pressure),
     )
     return min(int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step) + 1)
 
@@ -217,7 +218,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
     than max_splits(step): that + 1, which split_step takes as a step for ROS2.
     """
-    splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
+    splits = max(stable_splits(state, c, step, tank_pressure, inlet_flow), previous // 2)
     limit = max_splits(step)
     while splits <= limit:
         h = step / splits
@@ -344,7 +345,7 @@ def rk4_steps(
             splits = splits_needed(current, c, step, p_t, q, splits)
             chosen_q, chosen_p_t = q, p_t
         else:
-            splits = max(splits, stable_splits(current, c, step, p_t))
+            splits = max(splits, stable_splits(current, c, step, p_t, q))
         current, accurate = split_step(current, q, p_t, c, step, splits)
         if not accurate:
             state[:] = current

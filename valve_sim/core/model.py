@@ -134,12 +134,22 @@ Coefficients = namedtuple(
         'transition_pressure',  # dp_tr                   [Pa]
         'burst_pressure',  # p_burst, a physical limit  [Pa]
         'supply_pressure_limit',  # p_s,max (inf: none)     [Pa]
+        'cavitation_pressure',  # p_v - p_amb: the vapour pressure, gauge  [Pa]
         'coulomb_friction',  # F_c, fault               [N]
         'static_friction',  # max(F_st, F_c), fault    [N]
         'seat_leakage_gain',  # K_l, fault             [m^3/s/sqrt(Pa)]
         'main_valve_free',  # 0.0 if stuck (fault), else 1.0
     ),
 )
+
+# [Pa, absolute] water's vapour pressure p_v at 20 degC (IAPWS-IF97 saturation line: 2.339
+# kPa). Below it a chamber's liquid gives way to a vapour cavity (cavitation_share).
+VAPOUR_PRESSURE = 2339.0
+# [Pa] Delta: the width over which a cavity's pressure falls below p_v as it grows, the
+# effective bulk modulus beta exp((p - p_v) / Delta) (docs/model.md, "Cavitation"). Small
+# against p_v: a cavity as large as its chamber holds the pressure at p_v - Delta
+# ln(1 + beta / Delta), 1.7 kPa below p_v at beta = 2.2 GPa, above absolute zero.
+CAVITATION_WIDTH = 100.0
 
 # The fault terms of Coefficients (coefficients.with_faults) and their values in a healthy valve.
 HEALTHY_TERMS = {
@@ -195,11 +205,63 @@ def bearing_upstream(p_s, p_p, tank_pressure, transition):
 
 
 @jit
-def fastest_chamber_rate(state, c, tank_pressure=0.0):
+def cavitation_share(pressure, c):
+    """
+    Return beta_eff / beta of a chamber at pressure [Pa, gauge]: 1 at and above p_v.
+
+    Below the vapour pressure (c.cavitation_pressure, gauge) the chamber's liquid is at
+    p_v and a vapour cavity takes the volume the chamber gives up: beta_eff = beta exp((p -
+    p_v) / Delta) (CAVITATION_WIDTH), so that the pressure stays just below p_v however
+    large the cavity, and the cavity collapses when the chamber fills again. Exactly 1
+    above p_v: a run that stays there is computed as without it.
+    """
+    if pressure < c.cavitation_pressure:
+        return math.exp((pressure - c.cavitation_pressure) * (1.0 / CAVITATION_WIDTH))
+    return 1.0
+
+
+def cavity_volumes(pressures, compliances_inv, cavitation_pressure):
+    """
+    Return each chamber's vapour cavity [m^3] at pressures [Pa, gauge] (arrays alike).
+
+    D = (V Delta / beta) (exp((p_v - p) / Delta) - 1) below p_v (compliances_inv: beta / V),
+    0 above: the volume the chamber has given up below p_v, by which cavitation_share
+    keeps the volume balance (invariants.stored_volumes).
+    """
+    below = np.minimum(np.asarray(pressures, dtype=float) - cavitation_pressure, 0.0)
+    exponent = np.minimum(-below / CAVITATION_WIDTH, 700.0)  # a diverged state: no overflow
+    return CAVITATION_WIDTH / np.asarray(compliances_inv) * np.expm1(exponent)
+
+
+@jit
+def chamber_inflows(state, inlet_flow, c, tank_pressure=0.0):
+    """
+    Return the net inflows [m^3/s] of the four chambers (s, m, p, c), Eqs. (1)-(4), and q_l.
+
+    Flows in less flows out less the rate the valves sweep the chamber's volume; its
+    pressure rises at beta_eff / V times it. The supply's is without the seat leakage
+    q_l [m^3/s] (fault; 0 without), returned fifth: derivatives() subtracts its own rate.
+    The supply's own relief (supply_pressure_limit) is applied in derivatives().
+    """
+    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c, tank_pressure)
+    x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
+    q_l = seat_leakage_flow(state[P_S], c, tank_pressure) if c.seat_leakage_gain > 0.0 else 0.0
+    return (
+        inlet_flow - q_m1 - q_n - q_s - c.supply_force_area * x_dot - c.rod_area * y_dot,  # (1)
+        q_m1 - q_m2 - c.intermediate_force_area * x_dot,  # (2) with its swept term
+        q_n - q_c + c.back_area * x_dot,  # (3)
+        q_c + q_s - q_p - c.poppet_chamber_area * y_dot,  # (4) with its swept term
+        q_l,
+    )
+
+
+@jit
+def fastest_chamber_rate(state, c, tank_pressure=0.0, inlet_flow=0.0):
     """
     Return a bound [1/s] on the fastest decay rate of the four chamber pressures.
 
-    tank_pressure: p_t [Pa, gauge], where the flows to tank go.
+    tank_pressure: p_t [Pa, gauge], where the flows to tank go; inlet_flow [m^3/s]: the
+    supply's inflow, asked only for a chamber below the vapour pressure.
 
     Near the state the pressures relax as d p / dt = -C G p, C = beta / V of each
     chamber, G the orifices' conductances |dq / dp|. C G is similar to the symmetric
@@ -210,7 +272,10 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
     relax 1.8 times faster than either alone. A chamber between two wide orifices
     with small drops (the one between the main throttles at a low preset and a
     large flow) is stiff too. Fixed-step RK4 needs step * rate below 2.79
-    (integrator.rk4_steps).
+    (integrator.rk4_steps). A chamber below the vapour pressure has beta_eff / V for C,
+    and its cavity a rate of its own: d(beta_eff)/dp = beta_eff / Delta, so its pressure
+    moves at |dp/dt| / Delta (cavitation_share), the fastest term where a cavity opens
+    or collapses.
     """
     p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
     x = min(max(state[X], 0.0), c.main_valve_stroke)
@@ -231,6 +296,17 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
     seat = c.seat_leakage_gain * orifice_root_slope(p_s - tank_pressure, tr)  # worn seat (fault)
     c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
     c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
+    cavity = 0.0
+    if min(p_s, p_m, p_p, p_c) < c.cavitation_pressure:
+        c_s, c_m = c_s * cavitation_share(p_s, c), c_m * cavitation_share(p_m, c)
+        c_p, c_c = c_p * cavitation_share(p_p, c), c_c * cavitation_share(p_c, c)
+        inflow_s, inflow_m, inflow_p, inflow_c, q_l = chamber_inflows(
+            state, inlet_flow, c, tank_pressure
+        )
+        for pressure, rate in ((p_s, c_s * (inflow_s - q_l)), (p_m, c_m * inflow_m),
+                               (p_p, c_p * inflow_p), (p_c, c_c * inflow_c)):
+            if pressure < c.cavitation_pressure:
+                cavity = max(cavity, abs(rate) * (1.0 / CAVITATION_WIDTH))
     k_sm, k_sp = math.sqrt(c_s * c_m), math.sqrt(c_s * c_p)  # couplings sqrt(C_i C_j)
     k_sc, k_pc = math.sqrt(c_s * c_c), math.sqrt(c_p * c_c)
     return max(
@@ -239,6 +315,7 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
         c_m * (throttle_1 + throttle_2) + k_sm * throttle_1,
         c_p * (bearing + orifice) + k_sp * bearing + k_pc * orifice,
         c_c * (orifice + leak + poppet) + k_pc * orifice + k_sc * leak,
+        cavity,
     )
 
 
@@ -404,22 +481,24 @@ def derivatives(state, inlet_flow, c, tank_pressure=0.0):
     second input. A pure function of scalars, so that the integrator can evaluate it
     for many valves at once in vector registers.
     """
-    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c, tank_pressure)
-    x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
-    supply = c.supply_compliance_inv * (
-        inlet_flow - q_m1 - q_n - q_s - c.supply_force_area * x_dot - c.rod_area * y_dot
-    )  # (1), A_m1 = alpha_s
+    inflow_s, inflow_m, inflow_p, inflow_c, q_l = chamber_inflows(
+        state, inlet_flow, c, tank_pressure
+    )
+    # beta_eff / V of each chamber: beta / V (a factor exactly 1) above the vapour pressure.
+    c_s = c.supply_compliance_inv * cavitation_share(state[P_S], c)
+    supply = c_s * inflow_s  # (1), A_m1 = alpha_s
     if c.seat_leakage_gain > 0.0:
-        supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c, tank_pressure)
+        supply -= c_s * q_l
     if state[P_S] >= c.supply_pressure_limit and supply > 0.0:
         supply = 0.0  # the supply's relief takes the rest of the inflow
-    intermediate = c.intermediate_compliance_inv * (
-        q_m1 - q_m2 - c.intermediate_force_area * x_dot
+    intermediate = (
+        c.intermediate_compliance_inv * cavitation_share(state[P_M], c) * inflow_m
     )  # (2) with its swept term
-    pilot = c.pilot_compliance_inv * (q_n - q_c + c.back_area * x_dot)  # (3)
-    poppet_chamber = c.poppet_chamber_compliance_inv * (
-        q_c + q_s - q_p - c.poppet_chamber_area * y_dot
+    pilot = c.pilot_compliance_inv * cavitation_share(state[P_P], c) * inflow_p  # (3)
+    poppet_chamber = (
+        c.poppet_chamber_compliance_inv * cavitation_share(state[P_C], c) * inflow_c
     )  # (4) with its swept term
+    x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
     force_x, force_y = net_forces(state, c, tank_pressure)
     if c.static_friction > 0.0:
         force_x += bearing_friction(x_dot, force_x, c)
