@@ -71,10 +71,12 @@ from valve_sim.core.model import (
     derivatives,
     fastest_body_rate,
     fastest_chamber_rate,
+    liquid_state,
     P_C,
     P_M,
     P_P,
     P_S,
+    pressure_state,
     STATE_NAMES,
     X,
     X_DOT,
@@ -199,11 +201,10 @@ def max_splits(step):
 
 
 @jit
-def stable_splits(state, c, step, tank_pressure=0.0, inlet_flow=0.0):
+def stable_splits(state, c, step, tank_pressure=0.0):
     """Return the sub-steps keeping RK4 stable on the fastest chamber or body (<= max_splits+1)."""
     rate = max(
-        fastest_chamber_rate(state, c, tank_pressure, inlet_flow),
-        fastest_body_rate(state, c, tank_pressure),
+        fastest_chamber_rate(state, c, tank_pressure), fastest_body_rate(state, c, tank_pressure)
     )
     return min(int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step) + 1)
 
@@ -218,7 +219,7 @@ def splits_needed(state, c, step, tank_pressure=0.0, inlet_flow=0.0, previous=1)
     within ERROR_TOLERANCE (inlet_flow [m^3/s] and tank_pressure [Pa] held). More
     than max_splits(step): that + 1, which split_step takes as a step for ROS2.
     """
-    splits = max(stable_splits(state, c, step, tank_pressure, inlet_flow), previous // 2)
+    splits = max(stable_splits(state, c, step, tank_pressure), previous // 2)
     limit = max_splits(step)
     while splits <= limit:
         h = step / splits
@@ -333,7 +334,7 @@ def rk4_steps(
     holds those values) or failed even in the stiff step's shortest sub-steps
     (STATE_DIVERGED).
     """
-    current = as_tuple(state)
+    current = liquid_state(as_tuple(state), c)  # each chamber's liquid pressure p*
     row = 0
     until_record = record_every
     splits, chosen_q, chosen_p_t = 1, 0.0, 0.0
@@ -345,23 +346,24 @@ def rk4_steps(
             splits = splits_needed(current, c, step, p_t, q, splits)
             chosen_q, chosen_p_t = q, p_t
         else:
-            splits = max(splits, stable_splits(current, c, step, p_t, q))
+            splits = max(splits, stable_splits(current, c, step, p_t))
         current, accurate = split_step(current, q, p_t, c, step, splits)
+        reached = pressure_state(current, c)
         if not accurate:
-            state[:] = current
+            state[:] = reached
             return k, STATE_DIVERGED
-        verdict = state_check(current, c.burst_pressure)
+        verdict = state_check(reached, c.burst_pressure)
         if verdict != STATE_OK:
-            state[:] = current
+            state[:] = reached
             return k, verdict
         until_record -= 1
         if until_record == 0:
             until_record = record_every
             if row < record.shape[0]:
                 for i in range(8):
-                    record[row, i] = current[i]
+                    record[row, i] = reached[i]
                 row += 1
-    state[:] = current
+    state[:] = pressure_state(current, c)
     return inlet_flows.shape[0], STATE_OK
 
 

@@ -39,7 +39,7 @@ from valve_sim.core.integrator import (
 )
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import state_check, STATE_DIVERGED, STATE_OK
-from valve_sim.core.model import Coefficients, HEALTHY_TERMS
+from valve_sim.core.model import Coefficients, HEALTHY_TERMS, liquid_state, pressure_state
 from valve_sim.core.model import P_C, P_M, P_P, P_S, X, X_DOT, Y, Y_DOT  # the state's indices
 
 
@@ -132,6 +132,8 @@ def rk4_lanes(
     for j in range(LANES):
         completed[j] = steps
         verdicts[j] = STATE_OK
+        # Each chamber as its liquid pressure p* (model.liquid_state) while stepping.
+        set_lane_state(states, j, liquid_state(lane_state(states, j), lane_coefficients(table, j)))
     row = 0
     until_record = record_every
     chosen_q, chosen_p_t = 0.0, 0.0
@@ -150,7 +152,7 @@ def rk4_lanes(
             for j in range(LANES):
                 if completed[j] == steps:
                     state, c = lane_state(states, j), lane_coefficients(table, j)
-                    splits[j] = max(splits[j], stable_splits(state, c, step, p_t, q))
+                    splits[j] = max(splits[j], stable_splits(state, c, step, p_t))
                     alone[j] = (
                         faulty[j] or splits[j] > 1 or below_vapour(state, c.cavitation_pressure)
                     )
@@ -169,7 +171,10 @@ def rk4_lanes(
                 c = lane_coefficients(table, j)
                 state, accurate = split_step(lane_state(states, j), q, p_t, c, step, splits[j])
                 set_lane_state(states, j, state)
-                checked[j] = state_check(state, c.burst_pressure) if accurate else STATE_DIVERGED
+                checked[j] = (
+                    state_check(pressure_state(state, c), c.burst_pressure) if accurate
+                    else STATE_DIVERGED
+                )
             if checked[j] != STATE_OK:
                 completed[j] = k
                 verdicts[j] = checked[j]
@@ -179,9 +184,12 @@ def rk4_lanes(
             until_record = record_every
             if row < records.shape[1]:
                 for j in range(LANES):
+                    reached = pressure_state(lane_state(states, j), lane_coefficients(table, j))
                     for i in range(8):
-                        records[j, row, i] = states[i * LANES + j]
+                        records[j, row, i] = reached[i]
                 row += 1
+    for j in range(LANES):
+        set_lane_state(states, j, pressure_state(lane_state(states, j), lane_coefficients(table, j)))
 
 
 def advance_lanes(
