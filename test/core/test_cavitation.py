@@ -25,6 +25,7 @@ step, the lanes kernel against the scalar one.
 
 import numpy as np
 import pytest
+from test_properties import CORNER
 from valve_sim.analysis.steps.envelope import property_report
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
@@ -36,8 +37,6 @@ from valve_sim.core.parameters import load_parameters, STANDARD_ATMOSPHERE, vali
 from valve_sim.core.realtime_model import RealTimeModel
 from valve_sim.core.simulation import LITRE_PER_MINUTE as L, run_flows
 from valve_sim.core.steady_state import steady_state
-
-from test_properties import CORNER
 
 
 def balance(states, step, inflow, c):
@@ -70,7 +69,7 @@ def test_the_cavity_keeps_the_volume_balance():
 
 @pytest.fixture(scope='module')
 def slammed():
-    """The reference valve at 20 L/min, its main valve slammed shut at 20 m/s."""
+    """Return the reference valve at 20 L/min, its main valve slammed shut at 20 m/s."""
     params = load_parameters().params
     state = steady_state(params, 20 * L)
     state[X_DOT] = -20.0

@@ -50,6 +50,10 @@ Its two inputs, the inlet flow and the tank pressure, are held over a step; the
 kernels take both as arrays with one value per step. rk4_steps takes it for one
 valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
 
+Inside a kernel each chamber is carried as its liquid pressure p* (model.liquid_state: the
+pressure itself at and above the vapour pressure, a cavity's volume below it, docs/model.md
+"Cavitation"); what leaves it, the records and the state advance() returns, are pressures.
+
 Over 400 lines on purpose: the RK4 step, the choice of its sub-steps and the checks of
 a step's end are inlined together into every kernel, and are read side by side.
 """

@@ -46,7 +46,7 @@ import numpy as np
 from valve_sim.core.faults import at_supply_limit
 from valve_sim.core.limits import PRESSURE_FLOOR
 from valve_sim.core.model import (
-    cavity_volumes, flows, P_C, P_M, P_P, P_S, relief_flows, seat_leakage_flow,
+    cavity_volumes, flows, P_C, P_S, relief_flows, seat_leakage_flow,
     VAPOUR_PRESSURE, X, Y,
 )
 

@@ -188,8 +188,9 @@ def rk4_lanes(
                     for i in range(8):
                         records[j, row, i] = reached[i]
                 row += 1
-    for j in range(LANES):
-        set_lane_state(states, j, pressure_state(lane_state(states, j), lane_coefficients(table, j)))
+    for j in range(LANES):  # back to each chamber's pressure
+        state, c = lane_state(states, j), lane_coefficients(table, j)
+        set_lane_state(states, j, pressure_state(state, c))
 
 
 def advance_lanes(
