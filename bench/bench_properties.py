@@ -59,8 +59,8 @@ MAX_CASE_STEPS = 200_000
 def refusal(params, faults, step, initial_flow, initial_tank):
     """Return why a case is refused before its run (its first words, no numbers), or None."""
     try:
-        state = steady_state(params, initial_flow, faults, initial_tank, stable=False)
-        check_integrable(params, step, state, faults, initial_tank)
+        steady_state(params, initial_flow, faults, initial_tank, stable=False)
+        check_integrable(params, step, faults)
     except (ParameterError, SteadyStateError) as error:
         words = str(error).split(':')[0].split()
         return ' '.join(word for word in words if not any(ch.isdigit() for ch in word))

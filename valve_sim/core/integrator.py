@@ -41,8 +41,8 @@ numerical limit cycle whose own stiffness the bound found acceptable (docs/model
 "Step splitting"). A step that needs more than STIFF_SPLITS RK4 sub-steps is taken by
 the stiff-stable ROS2 instead (split_step, stiff_step, valve_sim.core.rosenbrock): a
 chamber the run drives faster than RK4 can follow at that cost; step_problem() refuses a
-valve and step that would need more than max_splits() (MAX_SPLITS, or sub-steps of
-MIN_SUB_STEP at larger steps) from the start.
+valve and step whose bodies ring faster than max_splits() (MAX_SPLITS, or sub-steps of
+MIN_SUB_STEP at larger steps) follow.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
@@ -371,35 +371,27 @@ def rk4_steps(
     return inlet_flows.shape[0], STATE_OK
 
 
-def step_problem(c, step, state=None, tank_pressure=0.0):
+def step_problem(c, step):
     """
     Return why step [s] cannot integrate the valve of Coefficients c, or None if it can.
 
-    The bodies' modes (model.fastest_body_rate) do not depend on the state but for the
-    flow force, bounded here at p_c - p_t = burst_pressure; the chambers' rates do, and
-    are judged at the start state if given (tank_pressure [Pa, gauge] there). If keeping
-    RK4 stable on either needs more than max_splits(step), it is refused before it
-    starts: its whole run would go the slower stiff path (ROS2 would damp a ringing body
-    out of the answer). A chamber that the run itself makes that stiff later takes
-    ROS2's steps (stiff_step).
+    Its bodies' modes (model.fastest_body_rate) do not depend on the state but for the
+    flow force, bounded here at p_c - p_t = burst_pressure. If keeping RK4 stable on them
+    needs more than max_splits(step), the valve is refused before it starts: the stiff
+    step would damp a ringing body out of the answer. Chambers are not judged: one that
+    is (or the run makes) too stiff for RK4 takes ROS2's steps (stiff_step).
     """
     bound = np.zeros(8)
     bound[P_C] = c.burst_pressure
     body = fastest_body_rate(bound, c, 0.0)
-    chamber = 0.0 if state is None else fastest_chamber_rate(state, c, tank_pressure)
-    rate = max(body, chamber)
-    needed, limit = int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step)
+    needed, limit = int(step * body / STEP_RATE_LIMIT) + 1, max_splits(step)
     if needed <= limit:
         return None
-    what = (
-        'its main valve and pilot poppet on their fluid springs ring at up to '
-        f'{body / (2.0 * np.pi):.4g} Hz' if body >= chamber else
-        f'a chamber relaxes at {chamber:.4g} 1/s at the start state'
-    )
     return (
-        f'this valve cannot be integrated at step size {step:g} s: {what}, which needs '
-        f'{needed} sub-steps of RK4 per step, more than the {limit} allowed (sub-steps of '
-        f'{step / limit:.3g} s); use heavier bodies or larger chambers'
+        f'this valve cannot be integrated at step size {step:g} s: its main valve and pilot '
+        f'poppet on their fluid springs ring at up to {body / (2.0 * np.pi):.4g} Hz, which '
+        f'needs {needed} sub-steps of RK4 per step, more than the {limit} allowed (sub-steps '
+        f'of {step / limit:.3g} s); use heavier bodies, larger chambers or a smaller step'
     )
 
 

@@ -124,7 +124,7 @@ class RealTimeModel:
                  ambient_pressure=STANDARD_ATMOSPHERE):
         params = validate(params)  # ParameterError naming what is wrong or missing
         self.state = steady_state(params, inlet_flow, faults, tank_pressure, stable=False)
-        check_integrable(params, step_size, self.state, faults, tank_pressure)
+        check_integrable(params, step_size, faults)
         self.tank_pressure = tank_pressure
         self.ambient_pressure = ambient_pressure
         self.time_ns = None
@@ -260,7 +260,7 @@ class RealTimeModel:
         state = self.state.copy()
         faults = self.faults if faults is None else apply_faults(state, self.faults, faults)
         tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
-        check_integrable(params, step_ns(step_size) / NS_PER_S, state, faults, tank_pressure)
+        check_integrable(params, step_ns(step_size) / NS_PER_S, faults)
         advance(
             state,
             np.full(TRIAL_STEPS, float(inlet_flow)),
