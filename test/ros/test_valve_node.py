@@ -351,7 +351,8 @@ def test_invalid_parameter_changes_are_rejected_with_their_reason(valve, referen
     before = valve.get_parameters(*names)
     refused_before = int(valve.wait_for_diagnostics()['rejected_parameter_changes'])
     for change, words in changes:
-        (result,) = valve.set_parameters(**change)
+        (result,) = (valve.set_parameters(**change) if len(change) == 1
+                     else [valve.set_parameters_atomically(**change)])
         assert not result.successful, change
         for word in words:
             assert word in result.reason, (change, result.reason)
