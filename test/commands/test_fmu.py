@@ -484,9 +484,12 @@ def test_an_overpressure_halts_the_valve_with_ok_and_a_warning(unzipped, referen
 
 
 def test_a_valve_the_step_cannot_integrate_does_not_start_and_can_be_reset(unzipped, reference):
-    # A 1 mm^3 intermediate chamber cannot pass max_inlet_flow at any sub-step allowed: the
-    # FMU does not start it (core/step_check.py): fmi2Error with the reason, then a reset.
-    valve = Valve(unzipped, 'refused', {'intermediate_volume': 1e-9})
+    # A 0.1 g main valve on a 1 mm^3 pilot chamber of stiff water rings beyond the sub-steps
+    # allowed at 100 us: the FMU does not start it (core/step_check.py): fmi2Error with the
+    # reason, then a reset.
+    valve = Valve(unzipped, 'refused', {'main_valve_mass': 1e-4, 'main_valve_damping': 1e4,
+                                        'pilot_volume': 1e-9, 'bulk_modulus': 1e10,
+                                        'step_size': 1e-4})
     with pytest.raises(FMICallException) as refusal:
         valve.initialise()
     assert refusal.value.status == fmi2Error
@@ -494,7 +497,8 @@ def test_a_valve_the_step_cannot_integrate_does_not_start_and_can_be_reset(unzip
     valve.fmu.reset()
     valve.fmu.setupExperiment(startTime=0.0)
     valve.fmu.enterInitializationMode()
-    valve.set_values(intermediate_volume=reference['intermediate_volume'])
+    valve.set_values(**{name: reference[name] for name in (
+        'main_valve_mass', 'main_valve_damping', 'pilot_volume', 'bulk_modulus')})
     valve.initialise()
     assert np.all(np.isfinite(trace(valve, 10)))
     assert valve.fmu.getBoolean([valve.refs['halted']]) == [False]

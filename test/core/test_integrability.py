@@ -23,7 +23,7 @@ pass its own max_inlet_flow accepted.
 import numpy as np
 import pytest
 from valve_sim.core.coefficients import coefficients
-from valve_sim.core.errors import OverpressureError, ParameterError, SteadyStateError
+from valve_sim.core.errors import OverpressureError, SteadyStateError
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import step_problem
 from valve_sim.core.model import P_P, P_S
@@ -31,7 +31,7 @@ from valve_sim.core.parameters import load_parameters
 from valve_sim.core.realtime_model import RealTimeModel, Status
 from valve_sim.core.simulation import FlowStep, LITRE_PER_MINUTE as L, simulate, TankPressure
 from valve_sim.core.steady_state import steady_state
-from valve_sim.core.step_check import check_integrable, max_flow_problem
+from valve_sim.core.step_check import check_integrable
 
 
 @pytest.fixture(scope='module')
@@ -96,14 +96,17 @@ def test_a_valve_beyond_the_smallest_sub_step_is_refused_before_the_run(referenc
     assert step_problem(coefficients(reference), 1e-4) is None
 
 
-def test_a_valve_that_cannot_pass_its_max_inlet_flow_is_refused_before_the_run(reference):
-    # A 1 mm^3 intermediate chamber, bearing orifices half blocked: 5 L/min is fine, but at
-    # max_inlet_flow the chamber between the wide-open throttles needs 2 ns sub-steps.
+def test_a_valve_too_stiff_for_rk4_at_max_inlet_flow_is_accepted_and_runs(reference):
+    # A 1 mm^3 intermediate chamber, bearing orifices half blocked: at max_inlet_flow the
+    # chamber between the wide-open throttles would need 2 ns RK4 sub-steps. Refused before
+    # stop 52; the stiff step (ROS2) integrates it (test_stiff_chambers.py checks how well),
+    # so only a body that rings too fast is refused now (docs/model.md, "Step splitting").
     tiny = {**reference, 'intermediate_volume': 1e-9}
     faults = HEALTHY.changed({'bearing_orifice_blockage': 0.5})
-    assert max_flow_problem(reference, faults, 1e-5) is None
-    with pytest.raises(ParameterError, match='up to max_inlet_flow = .* lower max_inlet_flow'):
-        check_integrable(tiny, 1e-5, steady_state(tiny, 1 * L, faults), faults)
-    with pytest.raises(ParameterError, match='cannot be integrated'):
-        RealTimeModel(tiny, 1e-5, 1 * L, faults)
-    assert np.isfinite(steady_state(tiny, 1 * L, faults)).all()
+    check_integrable(tiny, 1e-5, faults)
+    model = RealTimeModel(tiny, 1e-5, 1 * L, faults)
+    model.start(0)
+    for tick in range(1, 6):
+        outcome = model.update(tick * 1_000_000, tiny['max_inlet_flow'], 10**9)
+        assert outcome.status is Status.PROGRESS, outcome.error
+    assert np.isfinite(model.state).all()

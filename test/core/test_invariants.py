@@ -14,13 +14,15 @@
 
 """The invariant monitors: silent on healthy and correctly integrated faulty runs, loud else."""
 
+import math
+
 import numpy as np
 import pytest
 from valve_sim.analysis.steps.envelope import property_findings
 from valve_sim.core.coefficients import coefficients
 from valve_sim.core.faults import HEALTHY
 from valve_sim.core.invariants import (
-    CAVITATION_PRESSURE, INVARIANTS, Monitor, run_alarms, WINDOW_SAMPLES,
+    INVARIANTS, Monitor, run_alarms, WINDOW_SAMPLES,
 )
 from valve_sim.core.model import P_M, Y
 from valve_sim.core.parameters import load_parameters
@@ -97,20 +99,29 @@ def test_correct_runs_found_by_the_campaign_raise_no_alarm(params, faults, input
 
 
 def test_a_chamber_below_the_vapour_pressure_is_a_cavitation_alarm(params):
-    """The campaign's chamber pulled below vacuum: the model leaves its validity, and says so."""
+    """A chamber below the vapour pressure: the model's cavity in use, and the alarm says so."""
     time, states = steady_samples(params, 5 * L)
-    states[150:, P_M] = -150e3  # gauge: below vacuum, as the poppet chamber held it for seconds
     c = coefficients(params)
+    states[150:, P_M] = c.cavitation_pressure - 1e3  # gauge: 1 kPa below p_v
     alarms = run_alarms(time, states, np.full(len(time), 5 * L), None, [(0.0, c)])
     alarm = next(a for a in alarms if a.invariant == 'cavitation')
     assert alarm.time == time[150]
-    assert 'intermediate chamber at -4.868e+04 Pa absolute' in str(alarm)
-    assert 'below the vapour pressure 2339 Pa' in str(alarm)
+    cavity = 100.0 / c.intermediate_compliance_inv * math.expm1(1e3 / 100.0)  # V Delta / beta
+    assert ('intermediate chamber at 1339 Pa absolute, 1e+03 Pa below the vapour pressure '
+            f'2339 Pa: a vapour cavity of {cavity:.3g} m^3') in str(alarm)
     monitor = Monitor()
     for t, s in zip(time, states):
         monitor.observe(t, s, 5 * L, 0.0, c)
     assert monitor.alarms['cavitation'] == len(time) - 150  # every sample below counts
     assert monitor.last.invariant in INVARIANTS
-    states[150:, P_M] = CAVITATION_PRESSURE + 1.0  # just above it: no alarm
+    states[150:, P_M] = c.cavitation_pressure + 1.0  # just above it: no alarm
     alarms = run_alarms(time, states, np.full(len(time), 5 * L), None, [(0.0, c)])
     assert 'cavitation' not in {a.invariant for a in alarms}
+    # The gauge zero is the ambient pressure: at 80 kPa (altitude) -79 kPa gauge cavitates.
+    states[150:, P_M] = -79e3
+    assert 'cavitation' not in {a.invariant for a in run_alarms(
+        time, states, np.full(len(time), 5 * L), None, [(0.0, c)])}
+    high = coefficients(params, ambient_pressure=80e3)
+    alarm = next(a for a in run_alarms(time, states, np.full(len(time), 5 * L), None,
+                                       [(0.0, high)]) if a.invariant == 'cavitation')
+    assert 'intermediate chamber at 1000 Pa absolute' in str(alarm)

@@ -117,7 +117,7 @@ def simulate_batch(
     for index, params in enumerate(params_list):
         try:
             state = steady_state(params, flow_step.initial_flow, stable=False)
-            check_integrable(params, step_size, state)
+            check_integrable(params, step_size)
             check_schedule(params, flows)
         except (ParameterError, SteadyStateError) as error:
             results[index] = RunResult(error=error)

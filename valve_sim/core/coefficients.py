@@ -24,8 +24,9 @@ model.py, beside the equations that read it (numba's kernel cache records it the
 
 import math
 
+from valve_sim.core.catalogue import STANDARD_ATMOSPHERE
 from valve_sim.core.faults import HEALTHY
-from valve_sim.core.model import Coefficients, HEALTHY_TERMS, MECHANICS
+from valve_sim.core.model import Coefficients, HEALTHY_TERMS, MECHANICS, VAPOUR_PRESSURE
 
 
 def land_pressure_term(outer, inner):
@@ -33,11 +34,13 @@ def land_pressure_term(outer, inner):
     return (outer**2 - inner**2) / math.log(outer / inner)
 
 
-def coefficients(p, faults=HEALTHY):
+def coefficients(p, faults=HEALTHY, ambient_pressure=STANDARD_ATMOSPHERE):
     """
     Derive the Coefficients from a validated parameter dict and a FaultSet.
 
-    p: see valve_sim.core.parameters; faults: valve_sim.core.faults.FaultSet.
+    p: see valve_sim.core.parameters; faults: valve_sim.core.faults.FaultSet;
+    ambient_pressure [Pa, absolute]: the gauge pressures' zero, from which the vapour
+    pressure's gauge value (cavitation_pressure) is taken.
     """
     root = math.sqrt(2.0 / p['fluid_density'])
     land_1 = land_pressure_term(
@@ -91,6 +94,7 @@ def coefficients(p, faults=HEALTHY):
         transition_pressure=p['orifice_transition_pressure'],
         burst_pressure=p['burst_pressure'],
         supply_pressure_limit=p['supply_pressure_limit'] or math.inf,
+        cavitation_pressure=VAPOUR_PRESSURE - ambient_pressure,
         **HEALTHY_TERMS,
     )
     return with_faults(c, faults, p) if faults != HEALTHY else c

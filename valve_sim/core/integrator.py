@@ -41,14 +41,18 @@ numerical limit cycle whose own stiffness the bound found acceptable (docs/model
 "Step splitting"). A step that needs more than STIFF_SPLITS RK4 sub-steps is taken by
 the stiff-stable ROS2 instead (split_step, stiff_step, valve_sim.core.rosenbrock): a
 chamber the run drives faster than RK4 can follow at that cost; step_problem() refuses a
-valve and step that would need more than max_splits() (MAX_SPLITS, or sub-steps of
-MIN_SUB_STEP at larger steps) from the start.
+valve and step whose bodies ring faster than max_splits() (MAX_SPLITS, or sub-steps of
+MIN_SUB_STEP at larger steps) follow.
 
 One RK4 step is rk4_step(), a pure function of the state as an 8-tuple (the
 model's derivatives() likewise), so that the compiler keeps a state in registers.
 Its two inputs, the inlet flow and the tank pressure, are held over a step; the
 kernels take both as arrays with one value per step. rk4_steps takes it for one
 valve; valve_sim.core.lanes takes it for many valves at once, bit-identically.
+
+Inside a kernel each chamber is carried as its liquid pressure p* (model.liquid_state: the
+pressure itself at and above the vapour pressure, a cavity's volume below it, docs/model.md
+"Cavitation"); what leaves it, the records and the state advance() returns, are pressures.
 
 Over 400 lines on purpose: the RK4 step, the choice of its sub-steps and the checks of
 a step's end are inlined together into every kernel, and are read side by side.
@@ -71,10 +75,12 @@ from valve_sim.core.model import (
     derivatives,
     fastest_body_rate,
     fastest_chamber_rate,
+    liquid_state,
     P_C,
     P_M,
     P_P,
     P_S,
+    pressure_state,
     STATE_NAMES,
     X,
     X_DOT,
@@ -332,7 +338,7 @@ def rk4_steps(
     holds those values) or failed even in the stiff step's shortest sub-steps
     (STATE_DIVERGED).
     """
-    current = as_tuple(state)
+    current = liquid_state(as_tuple(state), c)  # each chamber's liquid pressure p*
     row = 0
     until_record = record_every
     splits, chosen_q, chosen_p_t = 1, 0.0, 0.0
@@ -346,53 +352,46 @@ def rk4_steps(
         else:
             splits = max(splits, stable_splits(current, c, step, p_t))
         current, accurate = split_step(current, q, p_t, c, step, splits)
+        reached = pressure_state(current, c)
         if not accurate:
-            state[:] = current
+            state[:] = reached
             return k, STATE_DIVERGED
-        verdict = state_check(current, c.burst_pressure)
+        verdict = state_check(reached, c.burst_pressure)
         if verdict != STATE_OK:
-            state[:] = current
+            state[:] = reached
             return k, verdict
         until_record -= 1
         if until_record == 0:
             until_record = record_every
             if row < record.shape[0]:
                 for i in range(8):
-                    record[row, i] = current[i]
+                    record[row, i] = reached[i]
                 row += 1
-    state[:] = current
+    state[:] = pressure_state(current, c)
     return inlet_flows.shape[0], STATE_OK
 
 
-def step_problem(c, step, state=None, tank_pressure=0.0):
+def step_problem(c, step):
     """
     Return why step [s] cannot integrate the valve of Coefficients c, or None if it can.
 
-    The bodies' modes (model.fastest_body_rate) do not depend on the state but for the
-    flow force, bounded here at p_c - p_t = burst_pressure; the chambers' rates do, and
-    are judged at the start state if given (tank_pressure [Pa, gauge] there). If keeping
-    RK4 stable on either needs more than max_splits(step), it is refused before it
-    starts: its whole run would go the slower stiff path (ROS2 would damp a ringing body
-    out of the answer). A chamber that the run itself makes that stiff later takes
-    ROS2's steps (stiff_step).
+    Its bodies' modes (model.fastest_body_rate) do not depend on the state but for the
+    flow force, bounded here at p_c - p_t = burst_pressure. If keeping RK4 stable on them
+    needs more than max_splits(step), the valve is refused before it starts: the stiff
+    step would damp a ringing body out of the answer. Chambers are not judged: one that
+    is (or the run makes) too stiff for RK4 takes ROS2's steps (stiff_step).
     """
     bound = np.zeros(8)
     bound[P_C] = c.burst_pressure
     body = fastest_body_rate(bound, c, 0.0)
-    chamber = 0.0 if state is None else fastest_chamber_rate(state, c, tank_pressure)
-    rate = max(body, chamber)
-    needed, limit = int(step * rate / STEP_RATE_LIMIT) + 1, max_splits(step)
+    needed, limit = int(step * body / STEP_RATE_LIMIT) + 1, max_splits(step)
     if needed <= limit:
         return None
-    what = (
-        'its main valve and pilot poppet on their fluid springs ring at up to '
-        f'{body / (2.0 * np.pi):.4g} Hz' if body >= chamber else
-        f'a chamber relaxes at {chamber:.4g} 1/s at the start state'
-    )
     return (
-        f'this valve cannot be integrated at step size {step:g} s: {what}, which needs '
-        f'{needed} sub-steps of RK4 per step, more than the {limit} allowed (sub-steps of '
-        f'{step / limit:.3g} s); use heavier bodies or larger chambers'
+        f'this valve cannot be integrated at step size {step:g} s: its main valve and pilot '
+        f'poppet on their fluid springs ring at up to {body / (2.0 * np.pi):.4g} Hz, which '
+        f'needs {needed} sub-steps of RK4 per step, more than the {limit} allowed (sub-steps '
+        f'of {step / limit:.3g} s); use heavier bodies, larger chambers or a smaller step'
     )
 
 

@@ -15,7 +15,7 @@
 """
 What must hold in every run whatever its inputs, checked on the sampled states.
 
-Three invariants (docs/model.md, "Invariants"), each judged from the samples alone,
+Four invariants (docs/model.md, "Invariants"), each judged from the samples alone,
 independently of how the integrator got them:
 
 - bounds: every state finite, every pressure within [PRESSURE_FLOOR, burst_pressure],
@@ -27,8 +27,10 @@ independently of how the integrator got them:
   relieves its inlet flow: integral(q_in - q_relief) = Delta(stored volume), the
   relief with the seat leakage;
 - cavitation: no chamber's absolute pressure below the water's vapour pressure
-  (CAVITATION_PRESSURE, gauge): the model (a constant bulk modulus, no vapour) leaves
-  its validity there, so the numbers that follow are not the real valve's.
+  (model.VAPOUR_PRESSURE; Coefficients.cavitation_pressure, gauge): there the model
+  holds the chamber near p_v with a vapour cavity (model.cavitation_share), an
+  approximation beyond Eqs. 1-16, so the numbers that follow are the model's, not
+  necessarily the real valve's.
 
 Continuity and the balance are judged on quasi-steady windows (inputs held, p_s
 within STEADY_SPAN of burst_pressure): there a correctly integrated run meets them
@@ -41,11 +43,11 @@ run; Monitor checks a live one sample by sample (valve_node, the FMU).
 from dataclasses import dataclass
 
 import numpy as np
-from valve_sim.core.catalogue import STANDARD_ATMOSPHERE
 from valve_sim.core.faults import at_supply_limit
 from valve_sim.core.limits import PRESSURE_FLOOR
 from valve_sim.core.model import (
-    flows, P_C, P_M, P_P, P_S, relief_flows, seat_leakage_flow, X, Y,
+    cavity_volumes, flows, P_C, P_S, relief_flows, seat_leakage_flow,
+    VAPOUR_PRESSURE, X, Y,
 )
 
 # A window: this many samples (10 ms at the default 0.1 ms record interval).
@@ -56,11 +58,6 @@ STEADY_SPAN = 1e-3
 TOLERANCE = 0.02
 # Below this flow [m^3/s] (0.006 L/min) a window's throughput is taken as this.
 FLOW_FLOOR = 1e-7
-# [Pa, absolute] water's vapour pressure at 20 degC (IAPWS-IF97 saturation line: 2.339 kPa).
-VAPOUR_PRESSURE = 2339.0
-# [Pa, gauge] a chamber below it is below the vapour pressure (the standard atmosphere the
-# gauge zero: the gauge pressures are the model's, relative to the ambient pressure).
-CAVITATION_PRESSURE = VAPOUR_PRESSURE - STANDARD_ATMOSPHERE
 INVARIANTS = ('bounds', 'continuity', 'flow balance', 'cavitation')
 CHAMBERS = ('supply', 'intermediate', 'pilot', 'poppet')
 
@@ -102,29 +99,46 @@ def bounds_alarm(time, state, c):
     return None
 
 
-def cavitation_alarm(time, state):
-    """Return the Alarm of a chamber below the vapour pressure, or None."""
+def cavitation_alarm(time, state, c):
+    """Return the Alarm of a chamber below the vapour pressure, or None (Coefficients c)."""
     pressures = np.asarray(state, dtype=float)[P_S:P_C + 1]
     lowest = int(np.argmin(pressures))
-    if not pressures[lowest] < CAVITATION_PRESSURE:  # a NaN is the bounds' alarm
+    below = c.cavitation_pressure - pressures[lowest]
+    if not below > 0.0:  # a NaN is the bounds' alarm
         return None
-    absolute = pressures[lowest] + STANDARD_ATMOSPHERE
+    ambient = VAPOUR_PRESSURE - c.cavitation_pressure
+    cavity = float(cavity_volumes(pressures, compliances(c), c.cavitation_pressure)[lowest])
     return Alarm(
-        'cavitation', float((CAVITATION_PRESSURE - pressures[lowest]) / STANDARD_ATMOSPHERE),
-        time, f'{CHAMBERS[lowest]} chamber at {absolute:.4g} Pa absolute, below the vapour '
-        f'pressure {VAPOUR_PRESSURE:g} Pa: beyond the model (no cavitation)',
+        'cavitation', float(below / ambient), time,
+        f'{CHAMBERS[lowest]} chamber at {pressures[lowest] + ambient:.4g} Pa absolute, '
+        f'{below:.3g} Pa below the vapour pressure {VAPOUR_PRESSURE:g} Pa: a vapour cavity '
+        f'of {cavity:.3g} m^3 (modelled: an approximation beyond Eqs. 1-16)',
     )
 
 
+def compliances(c):
+    """Return beta / V of the four chambers (s, m, p, c) [Pa/m^3] as an array."""
+    return np.array([c.supply_compliance_inv, c.intermediate_compliance_inv,
+                     c.pilot_compliance_inv, c.poppet_chamber_compliance_inv])
+
+
 def stored_volumes(state, c):
-    """Volume [m^3] each chamber holds, compressed and swept, up to a constant (Eqs. 1-4)."""
-    p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
+    """
+    Volume [m^3] each chamber holds, compressed and swept, up to a constant (Eqs. 1-4).
+
+    The liquid's compression p V / beta (at most p_v's) less a vapour cavity
+    (model.cavity_volumes): what the chamber stores with beta_eff, cavity and all.
+    """
+    pressures = np.asarray(state, dtype=float)[P_S:P_C + 1]
+    inverse = compliances(c)
+    liquid = np.maximum(pressures, c.cavitation_pressure) / inverse - cavity_volumes(
+        pressures, inverse, c.cavitation_pressure)
     x, y = state[X], state[Y]
     return np.array([
-        p_s / c.supply_compliance_inv + c.supply_force_area * x + c.rod_area * y,
-        p_m / c.intermediate_compliance_inv + c.intermediate_force_area * x,
-        p_p / c.pilot_compliance_inv - c.back_area * x,
-        p_c / c.poppet_chamber_compliance_inv + c.poppet_chamber_area * y,
+        liquid[0] + c.supply_force_area * x + c.rod_area * y,
+        liquid[1] + c.intermediate_force_area * x,
+        liquid[2] - c.back_area * x,
+        liquid[3] + c.poppet_chamber_area * y,
     ])
 
 
@@ -223,10 +237,11 @@ def run_alarms(time, states, inlet_flows, tank_pressures, segments, window=WINDO
             i = int(np.argmax(beyond))
             alarms.append(bounds_alarm(float(time[i]), states[i], c))
             seen.add('bounds')
-    below = np.min(states[:, P_S:P_C + 1], axis=1) < CAVITATION_PRESSURE
+    c = segments[0][1]  # one ambient pressure, so one vapour pressure, for the whole run
+    below = np.min(states[:, P_S:P_C + 1], axis=1) < c.cavitation_pressure
     if np.any(below):
         i = int(np.argmax(below))
-        alarms.append(cavitation_alarm(float(time[i]), states[i]))
+        alarms.append(cavitation_alarm(float(time[i]), states[i], c))
     steady_span = STEADY_SPAN * min(c.burst_pressure for _, c in segments)
     for first in range(0, len(time) - window, window):
         part = slice(first, first + window + 1)
@@ -274,7 +289,7 @@ class Monitor:
         window a few sums.
         """
         found = []
-        for alarm in (bounds_alarm(time, state, c), cavitation_alarm(time, state)):
+        for alarm in (bounds_alarm(time, state, c), cavitation_alarm(time, state, c)):
             if alarm:
                 found.append(alarm)
         previous = self.samples[-1] if self.samples else None

@@ -24,6 +24,8 @@ docs/speed.md. advance_lanes lays the valves out in lanes and reports each one's
 result as integrator.advance would.
 """
 
+import math
+
 import numpy as np
 from valve_sim.core.integrator import (
     CHECK_EVERY,
@@ -37,7 +39,7 @@ from valve_sim.core.integrator import (
 )
 from valve_sim.core.jit import jit
 from valve_sim.core.limits import state_check, STATE_DIVERGED, STATE_OK
-from valve_sim.core.model import Coefficients, HEALTHY_TERMS
+from valve_sim.core.model import Coefficients, HEALTHY_TERMS, liquid_state, pressure_state
 from valve_sim.core.model import P_C, P_M, P_P, P_S, X, X_DOT, Y, Y_DOT  # the state's indices
 
 
@@ -54,17 +56,30 @@ def _lane_coefficients_function(fixed):
     namedtuple cannot be built from an array column any other way in numba.
     """
     arguments = ', '.join(
-        repr(fixed[name]) if name in fixed else f'table[{i} * LANES + lane]'
+        f'FIXED_{name}' if name in fixed else f'table[{i} * LANES + lane]'
         for i, name in enumerate(Coefficients._fields)
     )
-    namespace = {'Coefficients': Coefficients, 'LANES': LANES}
+    namespace = {'Coefficients': Coefficients, 'LANES': LANES,
+                 **{f'FIXED_{name}': value for name, value in fixed.items()}}
     exec(f'def lane_coefficients(table, lane):\n    return Coefficients({arguments})\n', namespace)
     return jit(namespace['lane_coefficients'], cache=False)
 
 
 lane_coefficients = _lane_coefficients_function({})
-# The same for lanes without a fault: the compiler then leaves the fault terms out.
-healthy_lane_coefficients = _lane_coefficients_function(HEALTHY_TERMS)
+# The same for lanes without a fault and above the vapour pressure: the compiler then
+# leaves the fault and cavitation terms out (a lane that is below it, or gets there in the
+# step, takes its step alone).
+healthy_lane_coefficients = _lane_coefficients_function(
+    {**HEALTHY_TERMS, 'cavitation_pressure': -math.inf}
+)
+# The row of the table holding each lane's vapour pressure (gauge).
+CAVITATION_ROW = Coefficients._fields.index('cavitation_pressure')
+
+
+@jit
+def below_vapour(state, cavitation_pressure):
+    """Return whether a chamber of state is below the vapour pressure (gauge, model.py)."""
+    return min(state[P_S], state[P_M], state[P_P], state[P_C]) < cavitation_pressure
 
 
 @jit
@@ -101,9 +116,10 @@ def rk4_lanes(
     arrays in rows: a state or coefficient of every lane side by side, so that the
     loop over lanes reads and writes contiguous memory at offsets the compiler
     knows, and vectorises. Each lane takes rk4_step exactly as rk4_steps does. The
-    vectorised loop leaves the fault terms out; a lane with a fault (faulty[lane]:
-    a fault term differs from model.HEALTHY_TERMS) or whose step must be split
-    (splits_needed) takes its step alone after it. Every record_every steps the
+    vectorised loop leaves the fault and cavitation terms out; a lane with a fault
+    (faulty[lane]: a fault term differs from model.HEALTHY_TERMS), whose step must be
+    split (splits_needed) or that starts or ends the step below the vapour pressure
+    takes its step alone after it. Every record_every steps the
     states go into records[lane, row]. completed[lane] is set to the number of
     steps the lane completed: fewer than len(inlet_flows) means its state left the
     limits; the lane then stops with that state in states, and verdicts[lane] says
@@ -116,6 +132,8 @@ def rk4_lanes(
     for j in range(LANES):
         completed[j] = steps
         verdicts[j] = STATE_OK
+        # Each chamber as its liquid pressure p* (model.liquid_state) while stepping.
+        set_lane_state(states, j, liquid_state(lane_state(states, j), lane_coefficients(table, j)))
     row = 0
     until_record = record_every
     chosen_q, chosen_p_t = 0.0, 0.0
@@ -127,18 +145,23 @@ def rk4_lanes(
                 if completed[j] == steps:
                     state, c = lane_state(states, j), lane_coefficients(table, j)
                     splits[j] = splits_needed(state, c, step, p_t, q, splits[j])
-                    alone[j] = faulty[j] or splits[j] > 1
+                    alone[j] = (
+                        faulty[j] or splits[j] > 1 or below_vapour(state, c.cavitation_pressure)
+                    )
         else:
             for j in range(LANES):
                 if completed[j] == steps:
                     state, c = lane_state(states, j), lane_coefficients(table, j)
                     splits[j] = max(splits[j], stable_splits(state, c, step, p_t))
-                    alone[j] = faulty[j] or splits[j] > 1
+                    alone[j] = (
+                        faulty[j] or splits[j] > 1 or below_vapour(state, c.cavitation_pressure)
+                    )
         # One step of every healthy lane at once: pure arithmetic over contiguous rows.
         for j in range(LANES):
             c = healthy_lane_coefficients(table, j)
             state = lane_state(states, j)
             stepped = rk4_step(state, q, p_t, c, step)
+            alone[j] = alone[j] or below_vapour(stepped, table[CAVITATION_ROW * LANES + j])
             set_lane_state(states, j, state if alone[j] else stepped)
             checked[j] = state_check(stepped, c.burst_pressure)
         for j in range(LANES):
@@ -148,7 +171,10 @@ def rk4_lanes(
                 c = lane_coefficients(table, j)
                 state, accurate = split_step(lane_state(states, j), q, p_t, c, step, splits[j])
                 set_lane_state(states, j, state)
-                checked[j] = state_check(state, c.burst_pressure) if accurate else STATE_DIVERGED
+                checked[j] = (
+                    state_check(pressure_state(state, c), c.burst_pressure) if accurate
+                    else STATE_DIVERGED
+                )
             if checked[j] != STATE_OK:
                 completed[j] = k
                 verdicts[j] = checked[j]
@@ -158,9 +184,13 @@ def rk4_lanes(
             until_record = record_every
             if row < records.shape[1]:
                 for j in range(LANES):
+                    reached = pressure_state(lane_state(states, j), lane_coefficients(table, j))
                     for i in range(8):
-                        records[j, row, i] = states[i * LANES + j]
+                        records[j, row, i] = reached[i]
                 row += 1
+    for j in range(LANES):  # back to each chamber's pressure
+        state, c = lane_state(states, j), lane_coefficients(table, j)
+        set_lane_state(states, j, pressure_state(state, c))
 
 
 def advance_lanes(

@@ -134,12 +134,22 @@ Coefficients = namedtuple(
         'transition_pressure',  # dp_tr                   [Pa]
         'burst_pressure',  # p_burst, a physical limit  [Pa]
         'supply_pressure_limit',  # p_s,max (inf: none)     [Pa]
+        'cavitation_pressure',  # p_v - p_amb: the vapour pressure, gauge  [Pa]
         'coulomb_friction',  # F_c, fault               [N]
         'static_friction',  # max(F_st, F_c), fault    [N]
         'seat_leakage_gain',  # K_l, fault             [m^3/s/sqrt(Pa)]
         'main_valve_free',  # 0.0 if stuck (fault), else 1.0
     ),
 )
+
+# [Pa, absolute] water's vapour pressure p_v at 20 degC (IAPWS-IF97 saturation line: 2.339
+# kPa). Below it a chamber's liquid gives way to a vapour cavity (cavitation_share).
+VAPOUR_PRESSURE = 2339.0
+# [Pa] Delta: the width over which a cavity's pressure falls below p_v as it grows, the
+# effective bulk modulus beta exp((p - p_v) / Delta) (docs/model.md, "Cavitation"). Small
+# against p_v: a cavity as large as its chamber holds the pressure at p_v - Delta
+# ln(1 + beta / Delta), 1.7 kPa below p_v at beta = 2.2 GPa, above absolute zero.
+CAVITATION_WIDTH = 100.0
 
 # The fault terms of Coefficients (coefficients.with_faults) and their values in a healthy valve.
 HEALTHY_TERMS = {
@@ -195,11 +205,90 @@ def bearing_upstream(p_s, p_p, tank_pressure, transition):
 
 
 @jit
+def cavitation_share(pressure, c):
+    """
+    Return beta_eff / beta of a chamber at pressure [Pa, gauge]: 1 at and above p_v.
+
+    Below the vapour pressure (c.cavitation_pressure, gauge) the chamber's liquid is at
+    p_v and a vapour cavity takes the volume the chamber gives up: beta_eff = beta exp((p -
+    p_v) / Delta) (CAVITATION_WIDTH), so that the pressure stays just below p_v however
+    large the cavity, and the cavity collapses when the chamber fills again. Exactly 1
+    above p_v: a run that stays there is computed as without it. It is dp / dp*
+    (chamber_pressure).
+    """
+    if pressure < c.cavitation_pressure:
+        return math.exp((pressure - c.cavitation_pressure) * (1.0 / CAVITATION_WIDTH))
+    return 1.0
+
+
+def cavity_volumes(pressures, compliances_inv, cavitation_pressure):
+    """
+    Return each chamber's vapour cavity [m^3] at pressures [Pa, gauge] (arrays alike).
+
+    D = (V Delta / beta) (exp((p_v - p) / Delta) - 1) below p_v (compliances_inv: beta / V),
+    0 above: the volume the chamber has given up below p_v (chamber_pressure), which
+    the volume balance counts (invariants.stored_volumes).
+    """
+    below = np.minimum(np.asarray(pressures, dtype=float) - cavitation_pressure, 0.0)
+    exponent = np.minimum(-below / CAVITATION_WIDTH, 700.0)  # a diverged state: no overflow
+    return CAVITATION_WIDTH / np.asarray(compliances_inv) * np.expm1(exponent)
+
+
+@jit
+def chamber_pressure(liquid, c):
+    """
+    Return a chamber's pressure [Pa, gauge] from its liquid pressure p* [Pa, gauge].
+
+    p* is the pressure the chamber's liquid would have at the constant beta: p* = p_v -
+    beta D / V with a cavity D (cavity_volumes), and the pressure p = p_v - Delta ln(1 +
+    (p_v - p*) / Delta) below p_v (c.cavitation_pressure, gauge), p* itself above it: the
+    effective bulk modulus beta exp((p - p_v) / Delta) integrated. The integrator moves
+    p*, linear in the chamber's stored volume, where p would freeze: a step that
+    overshoots below p_v in p is a cavity of exp(overshoot / Delta) its true size.
+    """
+    if liquid < c.cavitation_pressure:
+        return c.cavitation_pressure - CAVITATION_WIDTH * math.log1p(
+            (c.cavitation_pressure - liquid) * (1.0 / CAVITATION_WIDTH)
+        )
+    return liquid
+
+
+@jit
+def liquid_pressure(pressure, c):
+    """Return a chamber's liquid pressure p* [Pa, gauge] at pressure [Pa, gauge] (its inverse)."""
+    if pressure < c.cavitation_pressure:
+        depth = min((c.cavitation_pressure - pressure) * (1.0 / CAVITATION_WIDTH), 700.0)
+        return c.cavitation_pressure - CAVITATION_WIDTH * math.expm1(depth)
+    return pressure
+
+
+@jit
+def pressure_state(state, c):
+    """Return the 8-tuple state with each chamber's pressure for its liquid pressure p*."""
+    return (
+        chamber_pressure(state[P_S], c), chamber_pressure(state[P_M], c),
+        chamber_pressure(state[P_P], c), chamber_pressure(state[P_C], c),
+        state[X], state[X_DOT], state[Y], state[Y_DOT],
+    )
+
+
+@jit
+def liquid_state(state, c):
+    """Return the 8-tuple state with each chamber's liquid pressure p* for its pressure."""
+    return (
+        liquid_pressure(state[P_S], c), liquid_pressure(state[P_M], c),
+        liquid_pressure(state[P_P], c), liquid_pressure(state[P_C], c),
+        state[X], state[X_DOT], state[Y], state[Y_DOT],
+    )
+
+
+@jit
 def fastest_chamber_rate(state, c, tank_pressure=0.0):
     """
     Return a bound [1/s] on the fastest decay rate of the four chamber pressures.
 
-    tank_pressure: p_t [Pa, gauge], where the flows to tank go.
+    state: as derivatives() takes it (liquid pressures p*); tank_pressure: p_t [Pa,
+    gauge], where the flows to tank go.
 
     Near the state the pressures relax as d p / dt = -C G p, C = beta / V of each
     chamber, G the orifices' conductances |dq / dp|. C G is similar to the symmetric
@@ -210,11 +299,14 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
     relax 1.8 times faster than either alone. A chamber between two wide orifices
     with small drops (the one between the main throttles at a low preset and a
     large flow) is stiff too. Fixed-step RK4 needs step * rate below 2.79
-    (integrator.rk4_steps).
+    (integrator.rk4_steps). A chamber below the vapour pressure has beta_eff / V for C
+    (dp/dp* = cavitation_share): its p* moves at beta / V times its inflow, whose
+    conductances see p: a cavity itself adds no stiffness in p*.
     """
-    p_s, p_m, p_p, p_c = state[P_S], state[P_M], state[P_P], state[P_C]
-    x = min(max(state[X], 0.0), c.main_valve_stroke)
-    y = min(max(state[Y], 0.0), c.poppet_stroke)
+    real = pressure_state(state, c)
+    p_s, p_m, p_p, p_c = real[P_S], real[P_M], real[P_P], real[P_C]
+    x = min(max(real[X], 0.0), c.main_valve_stroke)
+    y = min(max(real[Y], 0.0), c.poppet_stroke)
     tr = c.transition_pressure
     throttle_1 = c.first_throttle_gain * (x + c.first_throttle_clearance) * orifice_root_slope(
         p_s - p_m, tr
@@ -231,6 +323,9 @@ def fastest_chamber_rate(state, c, tank_pressure=0.0):
     seat = c.seat_leakage_gain * orifice_root_slope(p_s - tank_pressure, tr)  # worn seat (fault)
     c_s, c_m = c.supply_compliance_inv, c.intermediate_compliance_inv
     c_p, c_c = c.pilot_compliance_inv, c.poppet_chamber_compliance_inv
+    if min(p_s, p_m, p_p, p_c) < c.cavitation_pressure:
+        c_s, c_m = c_s * cavitation_share(p_s, c), c_m * cavitation_share(p_m, c)
+        c_p, c_c = c_p * cavitation_share(p_p, c), c_c * cavitation_share(p_c, c)
     k_sm, k_sp = math.sqrt(c_s * c_m), math.sqrt(c_s * c_p)  # couplings sqrt(C_i C_j)
     k_sc, k_pc = math.sqrt(c_s * c_c), math.sqrt(c_p * c_c)
     return max(
@@ -269,7 +364,7 @@ def fastest_body_rate(state, c, tank_pressure=0.0):
         c.rod_area * c.rod_area * c_s
         + c.poppet_chamber_area * c.poppet_chamber_area * c_c
         + c.pilot_spring_stiffness
-        + c.flow_force_gain * abs(state[P_C] - tank_pressure)
+        + c.flow_force_gain * abs(chamber_pressure(state[P_C], c) - tank_pressure)
     )
     poppet = (
         math.sqrt(poppet_springs / c.pilot_poppet_mass)
@@ -400,18 +495,22 @@ def derivatives(state, inlet_flow, c, tank_pressure=0.0):
     """
     Return d(state)/dt (an 8-tuple, SI) at inlet flow q_in [m^3/s], Eqs. (1)-(7).
 
-    state: the 8 states as a tuple or an array; tank_pressure: p_t [Pa, gauge], the
-    second input. A pure function of scalars, so that the integrator can evaluate it
-    for many valves at once in vector registers.
+    state: the 8 states as a tuple or an array, each chamber's as its liquid pressure p*
+    (liquid_state: the pressure itself at and above the vapour pressure); tank_pressure:
+    p_t [Pa, gauge], the second input. A chamber's p* moves at beta / V times its net
+    inflow, a cavity or not: its pressure is chamber_pressure(p*). A pure function of
+    scalars, so that the integrator can evaluate it for many valves at once in vector
+    registers.
     """
-    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(state, c, tank_pressure)
-    x_dot, y_dot = state[X_DOT] * c.main_valve_free, state[Y_DOT]
+    real = pressure_state(state, c)  # the very state above the vapour pressure
+    q_m1, q_m2, q_n, q_c, q_s, q_p = flows(real, c, tank_pressure)
+    x_dot, y_dot = real[X_DOT] * c.main_valve_free, real[Y_DOT]
     supply = c.supply_compliance_inv * (
         inlet_flow - q_m1 - q_n - q_s - c.supply_force_area * x_dot - c.rod_area * y_dot
     )  # (1), A_m1 = alpha_s
     if c.seat_leakage_gain > 0.0:
-        supply -= c.supply_compliance_inv * seat_leakage_flow(state[P_S], c, tank_pressure)
-    if state[P_S] >= c.supply_pressure_limit and supply > 0.0:
+        supply -= c.supply_compliance_inv * seat_leakage_flow(real[P_S], c, tank_pressure)
+    if real[P_S] >= c.supply_pressure_limit and supply > 0.0:
         supply = 0.0  # the supply's relief takes the rest of the inflow
     intermediate = c.intermediate_compliance_inv * (
         q_m1 - q_m2 - c.intermediate_force_area * x_dot
@@ -420,15 +519,15 @@ def derivatives(state, inlet_flow, c, tank_pressure=0.0):
     poppet_chamber = c.poppet_chamber_compliance_inv * (
         q_c + q_s - q_p - c.poppet_chamber_area * y_dot
     )  # (4) with its swept term
-    force_x, force_y = net_forces(state, c, tank_pressure)
+    force_x, force_y = net_forces(real, c, tank_pressure)
     if c.static_friction > 0.0:
         force_x += bearing_friction(x_dot, force_x, c)
     main_valve = (
-        stop_acceleration(state[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke)
+        stop_acceleration(real[X], x_dot, force_x, c.main_valve_mass, c.main_valve_stroke)
         * c.main_valve_free
     )  # (6)
     poppet = stop_acceleration(
-        state[Y], y_dot, force_y, c.pilot_poppet_mass, c.poppet_stroke
+        real[Y], y_dot, force_y, c.pilot_poppet_mass, c.poppet_stroke
     )  # (7)
     return supply, intermediate, pilot, poppet_chamber, x_dot, main_valve, y_dot, poppet
 

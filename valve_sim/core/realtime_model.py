@@ -50,7 +50,7 @@ from valve_sim.core.faults import HEALTHY
 from valve_sim.core.integrator import advance
 from valve_sim.core.invariants import Monitor
 from valve_sim.core.model import relief_flows, STATE_NAMES
-from valve_sim.core.parameters import validate
+from valve_sim.core.parameters import STANDARD_ATMOSPHERE, validate
 from valve_sim.core.simulation import apply_faults
 from valve_sim.core.steady_state import steady_state
 from valve_sim.core.step_check import check_integrable
@@ -116,13 +116,17 @@ class RealTimeModel:
     tank_pressure [Pa, gauge]: the inputs whose exact steady state is the initial
     state; faults: the FaultSet in effect. The model time is None until start()
     anchors it to the clock. tank_pressure: the tank pressure applied last.
+    ambient_pressure [Pa, absolute]: the gauge pressures' zero (the vapour pressure's
+    gauge value follows it: use_ambient()).
     """
 
-    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0):
+    def __init__(self, params, step_size, inlet_flow, faults=HEALTHY, tank_pressure=0.0,
+                 ambient_pressure=STANDARD_ATMOSPHERE):
         params = validate(params)  # ParameterError naming what is wrong or missing
         self.state = steady_state(params, inlet_flow, faults, tank_pressure, stable=False)
-        check_integrable(params, step_size, self.state, faults, tank_pressure)
+        check_integrable(params, step_size, faults)
         self.tank_pressure = tank_pressure
+        self.ambient_pressure = ambient_pressure
         self.time_ns = None
         self._use(params, step_size, faults)
         self._previous = None  # (params, step_size, faults) before the last retune
@@ -137,8 +141,14 @@ class RealTimeModel:
         self.params = params
         self.step_size = step_size
         self.faults = faults
-        self._coefficients = coefficients(params, faults)
+        self._coefficients = coefficients(params, faults, self.ambient_pressure)
         self._step_ns = step_ns(step_size)
+
+    def use_ambient(self, ambient_pressure):
+        """Take ambient_pressure [Pa, absolute] as the gauge zero from the next step on."""
+        if ambient_pressure != self.ambient_pressure:
+            self.ambient_pressure = ambient_pressure
+            self._use(self.params, self.step_size, self.faults)
 
     def start(self, now_ns):
         """
@@ -250,11 +260,11 @@ class RealTimeModel:
         state = self.state.copy()
         faults = self.faults if faults is None else apply_faults(state, self.faults, faults)
         tank_pressure = self.tank_pressure if tank_pressure is None else tank_pressure
-        check_integrable(params, step_ns(step_size) / NS_PER_S, state, faults, tank_pressure)
+        check_integrable(params, step_ns(step_size) / NS_PER_S, faults)
         advance(
             state,
             np.full(TRIAL_STEPS, float(inlet_flow)),
-            coefficients(params, faults),
+            coefficients(params, faults, self.ambient_pressure),
             step_ns(step_size) / NS_PER_S,
             tank_pressures=tank_pressure,
         )

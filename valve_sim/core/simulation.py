@@ -283,7 +283,7 @@ def run_flows(
     if initial_tank_pressure is None:
         initial_tank_pressure = float(tanks[0]) if len(tanks) else float(tank_pressures)
     state = steady_state(params, initial_flow, faults, initial_tank_pressure, stable=False)
-    check_integrable(params, step_size, state, faults, initial_tank_pressure)
+    check_integrable(params, step_size, faults)
     check_schedule(params, flows, tanks)
     initial = state.copy()
     records, events, start, halted = [], [], 0, None

@@ -255,7 +255,8 @@ class ReliefValve(Fmi2Slave):
             step_size = check_value('step_size', self.step_size)
             inlet_flow, tank_pressure = self._inputs(params)
             start_flow = inlet_flow if self.initial_state == 'steady' else 0.0
-            model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure)
+            model = RealTimeModel(params, step_size, start_flow, tank_pressure=tank_pressure,
+                                  ambient_pressure=self._ambient)
         except REFUSED as error:
             self._failed = f'the FMU could not start: {error}'
             return False

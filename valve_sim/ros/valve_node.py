@@ -118,7 +118,7 @@ class ReliefValveNode(Node):
             raise ParameterError(f"parameter 'tank_pressure' (p_t): {problem}")
         self.model = RealTimeModel(
             params, self.settings['step_size'], self.settings['initial_inlet_flow'], faults,
-            self.tank_pressure,
+            self.tank_pressure, self.ambient_pressure,
         )
         # Compile (or load from numba's cache) the integration kernel before the tick timer
         # exists: compiled in the first tick, it would stall the clock for seconds.
@@ -229,6 +229,7 @@ class ReliefValveNode(Node):
         """Use the run-time settings; a new publish_rate recreates the tick timer."""
         rate_changed = settings['publish_rate'] != self.settings['publish_rate']
         self.settings = settings
+        self.model.use_ambient(settings['ambient_pressure'])  # the vapour pressure's gauge zero
         if rate_changed:
             self.destroy_timer(self._tick_timer)
             self._tick_timer = self._create_tick_timer()

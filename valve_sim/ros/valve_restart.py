@@ -117,7 +117,7 @@ class Restart:
             raise ParameterError(f"parameter 'tank_pressure' (p_t): {problem}")
         self.model = RealTimeModel(self.params, self.settings['step_size'],
                                    self.settings['initial_inlet_flow'], faults,
-                                   self.settings['tank_pressure'])
+                                   self.settings['tank_pressure'], ambient)
 
 
 def restart(node, overrides):
