@@ -65,10 +65,10 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    announcing, answer, clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states, LAST_TOPIC,
-    LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients, SentInput,
-    SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT,
-    WaitTopic)
+    announcing, answer, clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states,
+    LAST_TOPIC, LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients,
+    SentInput, SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE,
+    TIMEOUT, WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -287,15 +287,14 @@ class Lockstep:
         message.header.stamp = Time(sec=stamp_ns // NS_PER_S, nanosec=stamp_ns % NS_PER_S)
         self.tank_publisher.publish(message)
 
-    def tick(self, count=1, ahead=None):
+    def tick(self, count=1):
         """
         Advance the valve by count tick periods in one /clock; returns the last state's stamp.
 
         valve_node ticks a jump of up to clock_jumps.MAX_TICKS_PER_CLOCK periods period
         by period, a state each; this waits for the last. Each tick applies the input
         values stamped last at or before its start; the wait topics must have a message
-        of the last. ahead(): called after the /clock, before the wait (to send the next
-        step's inputs while the valve ticks this one).
+        of the last.
         """
         time_ns = self.clock_ns + count * self.period_ns
         last_start = time_ns - self.period_ns
@@ -309,8 +308,6 @@ class Lockstep:
         for topic in self.wait_topics:
             topic.mark()
         self._publish_clock(time_ns)
-        if ahead is not None:
-            ahead()
         self._wait_for(time_ns, f'the state of valve_node at {time_ns / NS_PER_S:.6f} s',
                        self.wait_topics)
         flow = self.flows.at(last_start)

@@ -281,11 +281,19 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     if flow_topic is not None and flow_topic not in wait_topics:
         wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
     driver, status, failed = None, None, True  # failed until the run gets through
-    if valve is None:
+    if valve is None:  # the driver first: the nodes' participants then hear of it at once
         context = rclpy.Context()
         rclpy.init(context=context)
-        driver = Lockstep(context, rate=rate, tank='tank_pressure' in scenario.inputs)
-    processes = start_nodes(scenario, folder) if valve is None else valve.start(scenario, folder)
+        try:
+            driver = Lockstep(context, rate=rate, tank='tank_pressure' in scenario.inputs)
+            processes = start_nodes(scenario, folder)
+        except BaseException:
+            if driver is not None:
+                driver.close()
+            context.try_shutdown()
+            raise
+    else:
+        processes = valve.start(scenario, folder)
     try:
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')

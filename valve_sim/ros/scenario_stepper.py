@@ -87,7 +87,6 @@ class ScenarioStepper:
         self.bounds = sorted({*batch_starts(scenario.ticks, self.events, ticks_per_clock),
                               scenario.ticks, *self.events})
         self.tick = 0  # ticks done: the state at tick is the latest
-        self.sent_to = 0  # the inputs of the ticks before it have been sent
 
     @property
     def time_ns(self):
@@ -110,43 +109,22 @@ class ScenarioStepper:
         return self.time_ns
 
     def batch(self, end):
-        """
-        Advance one /clock step towards tick end: its inputs, the step, an event after it.
-
-        The next step's inputs go out after this step's /clock, while the valve ticks
-        this one (unless an event or the flow's controller comes between): the
-        valve holds each value until its stamp (ros.lockstep_inputs), so it has them when
-        the next step begins, and every input topic carries the same messages in the same
-        order as when each step sends its own.
-        """
-        tick, driver = self.tick, self.driver
-        stop = self._stop(tick, end)
-        if self.sent_to < stop:
-            self._send(tick, stop)
+        """Advance one /clock step towards tick end: its inputs, the step, an event after it."""
+        tick, scenario, driver = self.tick, self.scenario, self.driver
+        bound = next((b for b in self.bounds if b > tick), float('inf'))
+        stop = min(end, bound, tick + self.ticks_per_clock)
+        for change in sorted(self.changes.intersection(range(tick, stop))):
+            stamp = START_NS + change * scenario.period_ns
+            if self.flow_reply is None:
+                driver.set_flow(self.flows[change], stamp)
+            if self.tanks is not None:
+                driver.set_tank_pressure(self.tanks[change], stamp)
         if self.flow_reply is not None and tick > 0:
             self.flows[tick] = self.flow_reply.reply(self.time_ns)
             driver.set_flow(self.flows[tick], self.time_ns)
-        ahead = None
-        if stop < end and self.flow_reply is None and stop not in self.events:
-            ahead = lambda: self._send(stop, self._stop(stop, end))  # noqa: E731
-        driver.tick(stop - tick, ahead)
+        driver.tick(stop - tick)
         self.tick = stop
         self._after()
-
-    def _stop(self, tick, end):
-        """Return where the /clock step from tick towards end ends."""
-        bound = next((b for b in self.bounds if b > tick), float('inf'))
-        return min(end, bound, tick + self.ticks_per_clock)
-
-    def _send(self, start, stop):
-        """Send the inputs of the ticks from start to stop that change, each at its start."""
-        for change in sorted(self.changes.intersection(range(start, stop))):
-            stamp = START_NS + change * self.scenario.period_ns
-            if self.flow_reply is None:
-                self.driver.set_flow(self.flows[change], stamp)
-            if self.tanks is not None:
-                self.driver.set_tank_pressure(self.tanks[change], stamp)
-        self.sent_to = stop
 
     def _after(self):
         """Apply the event of the tick just reached, if any (after its state)."""
