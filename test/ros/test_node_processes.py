@@ -219,3 +219,37 @@ def test_the_valve_waits_for_an_analyser_more_than_max_ahead_ticks_behind(tmp_pa
     assert len(driver.waits) == 1 and driver.recorded == 300  # waited until 250 recorded
     analyser.keep_up(driver, topics, MAX_AHEAD + 300)
     assert len(driver.waits) == 1  # already there
+
+
+def test_a_driver_announces_itself_often_at_first_and_leaves_a_users_profile(monkeypatch):
+    """
+    lockstep_protocol.announcing: the driver's participant, up before the nodes it starts.
+
+    Within it both Fast DDS profile variables name a file holding ANNOUNCING_PROFILE,
+    gone after (the nodes it starts then do not inherit them); a user's own profile
+    stays as it is; a participant created within it reads the profile without error
+    (Fast DDS prints XMLPARSER errors for a profile it cannot read).
+    """
+    from valve_sim.ros.lockstep_protocol import announcing, ANNOUNCING_PROFILE, PROFILE_VARIABLES
+
+    for name in PROFILE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    with announcing():
+        paths = {os.environ[name] for name in PROFILE_VARIABLES}
+        assert len(paths) == 1 and Path(paths.pop()).read_text() == ANNOUNCING_PROFILE
+    assert not any(name in os.environ for name in PROFILE_VARIABLES)
+    monkeypatch.setenv(PROFILE_VARIABLES[0], '/the/users/profile.xml')
+    with announcing():
+        assert os.environ[PROFILE_VARIABLES[0]] == '/the/users/profile.xml'
+        assert PROFILE_VARIABLES[1] not in os.environ
+    assert os.environ[PROFILE_VARIABLES[0]] == '/the/users/profile.xml'
+    monkeypatch.delenv(PROFILE_VARIABLES[0])
+    participant = subprocess.run(
+        [sys.executable, '-c', 'import rclpy\n'
+         'from valve_sim.ros.lockstep_protocol import announcing\n'
+         'context = rclpy.Context()\nrclpy.init(context=context)\n'
+         "with announcing():\n    node = rclpy.create_node('driver', context=context)\n"
+         'node.destroy_node()\ncontext.try_shutdown()\n'],
+        capture_output=True, text=True, timeout=120)
+    assert participant.returncode == 0, participant.stderr
+    assert 'XMLPARSER' not in participant.stderr and 'Error' not in participant.stderr
