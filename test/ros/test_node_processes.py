@@ -115,6 +115,7 @@ def test_the_run_s_own_error_is_not_replaced_by_the_stop_s(tmp_path, monkeypatch
             raise NodeExitError('valve_node was still starting when stopped')
 
     class NoValve:  # the driver is up before the nodes start; its connect times out
+
         def __init__(self, *args, **kwargs):
             self.closed = False
 
@@ -142,6 +143,7 @@ def test_a_start_that_fails_closes_the_driver_made_before_it(tmp_path, monkeypat
     drivers = []
 
     class Driver:
+
         def __init__(self, *args, **kwargs):
             self.closed = False
             drivers.append(self)
