@@ -18,7 +18,7 @@
 #
 #     flock /tmp/valve_sim_bench.lock python bench/bench_scenario.py [--repeats 3] [--json F]
 #         [--baseline DIR]
-#     python bench/bench_scenario.py --every-input [--repeats 3] [--json F]
+#     python bench/bench_scenario.py --every-input [--repeats 3] [--json F] [--baseline DIR]
 #
 # In one run, on a ROS domain of its own (localhost only), each --repeats times, in turn,
 # each in a fresh process:
@@ -78,7 +78,9 @@ RAMP_SCENARIO = (
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
 # --every-input: 60 s of model time with every input kind the format has (issue 46): the
 # inlet flow's step, ramp, sine and a recorded series (CSV), a tank pressure profile
-# (step, ramp, sine) and events setting a fault, a sensor and a live parameter
+# (step, ramp, sine) and events setting a fault, a sensor and a live parameter; with
+# --baseline DIR the other checkout's command alternately (run in DIR: -m puts it first), and
+# each run's digest of its bag's tick topics and inputs (lockstep_messages) compared
 EVERY_INPUT = """scenario: every_input_60s
 description: every input kind for 60 s
 duration: 60
