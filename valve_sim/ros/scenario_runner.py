@@ -35,7 +35,9 @@ what was measured up to the failure, each expectation judged on its own.
 """
 
 from dataclasses import dataclass, field
+import importlib
 from pathlib import Path
+import threading
 import time
 
 import numpy as np
@@ -69,6 +71,7 @@ MAX_AHEAD = STATE_QUEUE_DEPTH // 2
 # [s] analyser_node's recording status, which the run waits on before its first tick and
 # after its last (the default, 1 s, would add up to a second to each)
 STATUS_PERIOD = 0.05
+PLOTTING = 'valve_sim.analysis.plotting'  # matplotlib: 0.2 s to import
 
 
 @dataclass
@@ -345,6 +348,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
             context.try_shutdown()
         progress('stopping both nodes (SIGINT)' if valve is None
                  else "closing the scenario's recording (analyser_node restarts)")
+        # the figure's library imported while the nodes stop (the report draws it next)
+        threading.Thread(target=importlib.import_module, args=(PLOTTING,), daemon=True).start()
         try:
             processes.stop()
         except NodeExitError as error:
