@@ -95,6 +95,8 @@ def _read(file, topics):
         for channel_id, offset in index.message_index_offsets.items():
             if channel_id in wanted:
                 start = offset - index.chunk_start_offset
+                if not index.chunk_length <= start < len(raw):
+                    return None  # not among the message indexes after the chunk
                 rows = _channel_rows(data, raw[start:], channel_id)
                 if rows is None:
                     return None
