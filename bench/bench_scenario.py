@@ -18,7 +18,7 @@
 #
 #     flock /tmp/valve_sim_bench.lock python bench/bench_scenario.py [--repeats 3] [--json F]
 #         [--baseline DIR]
-#     python bench/bench_scenario.py --every-input [--repeats 3] [--json F]
+#     python bench/bench_scenario.py --every-input [--repeats 3] [--json F] [--baseline DIR]
 #
 # In one run, on a ROS domain of its own (localhost only), each --repeats times, in turn,
 # each in a fresh process:
@@ -78,7 +78,9 @@ RAMP_SCENARIO = (
     '      - {at: 0.75, sine: {amplitude: 3 L/min, frequency: 8}}\nexpect:\n  - no_alarm: {}\n')
 # --every-input: 60 s of model time with every input kind the format has (issue 46): the
 # inlet flow's step, ramp, sine and a recorded series (CSV), a tank pressure profile
-# (step, ramp, sine) and events setting a fault, a sensor and a live parameter
+# (step, ramp, sine) and events setting a fault, a sensor and a live parameter; with
+# --baseline DIR the other checkout's command alternately (run in DIR: -m puts it first), and
+# each run's digest of its bag's tick topics and inputs (lockstep_messages) compared
 EVERY_INPUT = """scenario: every_input_60s
 description: every input kind for 60 s
 duration: 60
@@ -378,16 +380,17 @@ def report(label, results):
             f'{name} {value:.3f}' for name, value in parts.items()))
 
 
-def every_input(folder, repeats):
+def every_input(folder, repeats, checkouts=None):
     """
     `valve-sim scenario run` of EVERY_INPUT as a command, repeats times; print the figures.
 
     Each run: the whole command's wall (real-time factor), the stepping's (report.json
     run.wall_s), the wall of each phase (from the command's progress lines, read as
     they come) and the CPU of the command with its nodes (getrusage of the children).
+    checkouts: {label: checkout folder or None (this one)}, run alternately in each
+    repeat (another's on PYTHONPATH); returns {label: [runs]}.
     """
     import math
-    import resource
 
     folder.mkdir(parents=True, exist_ok=True)
     (folder / 'flow.csv').write_text('t,q\n' + ''.join(
@@ -395,42 +398,70 @@ def every_input(folder, repeats):
         for k in range(81)))  # 8 s at 10 Hz, a sine and a square wave [L/min]
     path = folder / 'every_input.yaml'
     path.write_text(EVERY_INPUT)
-    runs = []
+    checkouts = checkouts or {'this checkout': None}
+    runs = {label: [] for label in checkouts}
     for repeat in range(repeats):
-        out = folder / f'run_{repeat}'
-        cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
-        started = time.monotonic()
-        command = subprocess.Popen(
-            [sys.executable, '-m', 'valve_sim.commands.cli', 'scenario', 'run', str(path),
-             '--out', str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        marks, phase, lines = {}, 0, []
-        for line in command.stdout:
-            lines.append(line)
-            while PHASES[phase][1] and line.startswith(PHASES[phase][1]):
-                marks[PHASES[phase][0]] = time.monotonic() - started
-                phase += 1
-        whole = time.monotonic() - started
-        failed = command.wait() != 0  # then the error, and the phases up to it
-        marks[PHASES[-1][0]] = whole
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        ends = [marks[name] for name, _ in PHASES if name in marks]
-        reports = list(out.rglob('report.json'))
-        stepping = (json.loads(reports[0].read_text())['run']['wall_s'] if reports else
-                    marks.get(PHASES[1][0], whole) - marks.get(PHASES[0][0], 0.0))
-        runs.append({'whole_s': whole, 'stepping_s': stepping,
-                     'error': lines[-1].strip() if failed else None,
-                     'cpu_s': after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime,
-                     'phases_s': dict(zip([name for name, _ in PHASES if name in marks],
-                                          [ends[0]] + [b - a for a, b in zip(ends, ends[1:])]))})
-        run = runs[-1]
-        print(f'every input, run {repeat + 1}: whole command {run["whole_s"]:.1f} s = '
-              f'{60 / run["whole_s"]:.2f}x real time (target >= 3); stepping '
-              f'{stepping:.1f} s = {60 / stepping:.2f}x (target >= 4); CPU of the command '
-              f'and its nodes {run["cpu_s"]:.1f} s ({run["cpu_s"] / whole:.2f} cores); '
-              'phases: ' + ', '.join(f'{name} {value:.1f} s'
-                                     for name, value in run['phases_s'].items())
-              + (f'; FAILED: {run["error"]}' if failed else ''), flush=True)
+        for label, checkout in checkouts.items():
+            out = folder / f'run_{repeat}_{label.replace(" ", "_")}'
+            runs[label].append(every_input_run(path, out, checkout))
+            run = runs[label][-1]
+            print(f'every input, run {repeat + 1}, {label}: whole command '
+                  f'{run["whole_s"]:.1f} s = {60 / run["whole_s"]:.2f}x real time (target >= 3); '
+                  f'stepping {run["stepping_s"]:.1f} s = {60 / run["stepping_s"]:.2f}x (target '
+                  f'>= 4); CPU of the command and its nodes {run["cpu_s"]:.1f} s '
+                  f'({run["cpu_s"] / run["whole_s"]:.2f} cores); tick topics and inputs '
+                  f'{run["digest"]}; phases: ' + ', '.join(
+                      f'{name} {value:.1f} s' for name, value in run['phases_s'].items())
+                  + (f'; FAILED: {run["error"]}' if run['error'] else ''), flush=True)
+    digests = {run['digest'] for label in runs for run in runs[label]}
+    count = sum(map(len, runs.values()))
+    print(f"every input: the bags' tick topics and inputs alike in all {count} runs: "
+          f'{len(digests) == 1}', flush=True)
     return runs
+
+
+def every_input_run(path, out, checkout=None):
+    """One `scenario run` of path into out (checkout: another valve_sim on PYTHONPATH)."""
+    import resource
+
+    environment = dict(os.environ, **({'PYTHONPATH': str(checkout)} if checkout else {}))
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.monotonic()
+    command = subprocess.Popen(
+        [sys.executable, '-m', 'valve_sim.commands.cli', 'scenario', 'run', str(path),
+         '--out', str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env=environment, cwd=checkout or REPO)  # -m puts the folder it runs in first
+    marks, phase, lines = {}, 0, []
+    for line in command.stdout:
+        lines.append(line)
+        while PHASES[phase][1] and line.startswith(PHASES[phase][1]):
+            marks[PHASES[phase][0]] = time.monotonic() - started
+            phase += 1
+    whole = time.monotonic() - started
+    failed = command.wait() != 0  # then the error, and the phases up to it
+    marks[PHASES[-1][0]] = whole
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    ends = [marks[name] for name, _ in PHASES if name in marks]
+    reports = list(out.rglob('report.json'))
+    stepping = (json.loads(reports[0].read_text())['run']['wall_s'] if reports else
+                marks.get(PHASES[1][0], whole) - marks.get(PHASES[0][0], 0.0))
+    bags = sorted(out.glob('*.mcap'))
+    return {'whole_s': whole, 'stepping_s': stepping,
+            'error': lines[-1].strip() if failed else None,
+            'digest': digest(bags[0]) if bags else None,
+            'cpu_s': after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime,
+            'phases_s': dict(zip([name for name, _ in PHASES if name in marks],
+                                 [ends[0]] + [b - a for a, b in zip(ends, ends[1:])]))}
+
+
+def digest(bag):
+    """Return a short digest of a bag's tick topics and inputs (lockstep_messages), times too."""
+    import hashlib
+
+    from valve_sim.ros.scenario_runner import lockstep_messages
+
+    messages = sorted(lockstep_messages(bag).items())
+    return hashlib.sha256(repr(messages).encode()).hexdigest()[:16]
 
 
 def main():
@@ -453,8 +484,17 @@ def main():
     claim_domain(keep_existing=False)  # the measuring processes inherit the domain
     if args.every_input:
         print(f'load average at start: {os.getloadavg()}', flush=True)
+        checkouts = {'this checkout': None}
+        if args.baseline:
+            checkouts['baseline'] = args.baseline.resolve()
         with tempfile.TemporaryDirectory() as temporary:
-            runs = every_input(Path(temporary), args.repeats)
+            runs = every_input(Path(temporary), args.repeats, checkouts)
+        for label, values in runs.items():
+            done = [run for run in values if not run['error']]
+            if done:
+                print(f'every input, {label}, median of {len(done)}: whole command '
+                      f'{60 / statistics.median(r["whole_s"] for r in done):.2f}x, stepping '
+                      f'{60 / statistics.median(r["stepping_s"] for r in done):.2f}x real time')
         print(f'load average at end: {os.getloadavg()}')
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -114,17 +114,53 @@ def test_the_run_s_own_error_is_not_replaced_by_the_stop_s(tmp_path, monkeypatch
         def stop(self):
             raise NodeExitError('valve_node was still starting when stopped')
 
-    def no_driver(*args, **kwargs):
-        raise WaitTimeoutError('no valve_node subscribing /clock within 180 s')
+    class NoValve:  # the driver is up before the nodes start; its connect times out
+
+        def __init__(self, *args, **kwargs):
+            self.closed = False
+
+        def connect(self, *args):
+            raise WaitTimeoutError('no valve_node subscribing /clock within 180 s')
+
+        def close(self):
+            self.closed = True
 
     monkeypatch.setattr(scenario_runner, 'start_nodes', lambda *args: Stopped())
-    monkeypatch.setattr(scenario_runner, 'Lockstep', no_driver)
+    monkeypatch.setattr(scenario_runner, 'Lockstep', NoValve)
     scenario = load_scenario(Path(__file__).parents[2] / 'scenarios' / 'paper_step.yaml',
                              bag_column)
     lines = []
     with pytest.raises(WaitTimeoutError):
         scenario_runner.run_scenario(scenario, tmp_path, progress=lines.append)
     assert any('still starting' in line for line in lines)
+
+
+def test_a_start_that_fails_closes_the_driver_made_before_it(tmp_path, monkeypatch):
+    from valve_sim.analysis.scenarios.bench_scenario import load_scenario
+    from valve_sim.recording.tick_bags import bag_column
+    from valve_sim.ros import scenario_runner
+
+    drivers = []
+
+    class Driver:
+
+        def __init__(self, *args, **kwargs):
+            self.closed = False
+            drivers.append(self)
+
+        def close(self):
+            self.closed = True
+
+    def no_start(*args):
+        raise OSError('cannot start valve_node')
+
+    monkeypatch.setattr(scenario_runner, 'start_nodes', no_start)
+    monkeypatch.setattr(scenario_runner, 'Lockstep', Driver)
+    scenario = load_scenario(Path(__file__).parents[2] / 'scenarios' / 'paper_step.yaml',
+                             bag_column)
+    with pytest.raises(OSError, match='cannot start'):
+        scenario_runner.run_scenario(scenario, tmp_path)
+    assert [driver.closed for driver in drivers] == [True]
 
 
 def test_a_run_refuses_a_valve_node_another_run_left_in_its_domain(tmp_path):
@@ -219,3 +255,37 @@ def test_the_valve_waits_for_an_analyser_more_than_max_ahead_ticks_behind(tmp_pa
     assert len(driver.waits) == 1 and driver.recorded == 300  # waited until 250 recorded
     analyser.keep_up(driver, topics, MAX_AHEAD + 300)
     assert len(driver.waits) == 1  # already there
+
+
+def test_a_driver_announces_itself_often_at_first_and_leaves_a_users_profile(monkeypatch):
+    """
+    lockstep_protocol.announcing: the driver's participant, up before the nodes it starts.
+
+    Within it both Fast DDS profile variables name a file holding ANNOUNCING_PROFILE,
+    gone after (the nodes it starts then do not inherit them); a user's own profile
+    stays as it is; a participant created within it reads the profile without error
+    (Fast DDS prints XMLPARSER errors for a profile it cannot read).
+    """
+    from valve_sim.ros.lockstep_protocol import announcing, ANNOUNCING_PROFILE, PROFILE_VARIABLES
+
+    for name in PROFILE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    with announcing():
+        paths = {os.environ[name] for name in PROFILE_VARIABLES}
+        assert len(paths) == 1 and Path(paths.pop()).read_text() == ANNOUNCING_PROFILE
+    assert not any(name in os.environ for name in PROFILE_VARIABLES)
+    monkeypatch.setenv(PROFILE_VARIABLES[0], '/the/users/profile.xml')
+    with announcing():
+        assert os.environ[PROFILE_VARIABLES[0]] == '/the/users/profile.xml'
+        assert PROFILE_VARIABLES[1] not in os.environ
+    assert os.environ[PROFILE_VARIABLES[0]] == '/the/users/profile.xml'
+    monkeypatch.delenv(PROFILE_VARIABLES[0])
+    participant = subprocess.run(
+        [sys.executable, '-c', 'import rclpy\n'
+         'from valve_sim.ros.lockstep_protocol import announcing\n'
+         'context = rclpy.Context()\nrclpy.init(context=context)\n'
+         "with announcing():\n    node = rclpy.create_node('driver', context=context)\n"
+         'node.destroy_node()\ncontext.try_shutdown()\n'],
+        capture_output=True, text=True, timeout=120)
+    assert participant.returncode == 0, participant.stderr
+    assert 'XMLPARSER' not in participant.stderr and 'Error' not in participant.stderr

@@ -16,8 +16,9 @@
 Bag I/O: MCAP as rosbag2 writes it, the tick messages as CDR bytes, a bag's signals.
 
 Lives here: the MCAP writer and reader, rosbag2 metadata, a damaged file read record
-by record (mcap_scan) and repaired (recovery), the CDR message layout, valve_node's
-topic layout and the offline bag writers, a bag read into signals (signal_reader:
+by record (mcap_scan) and repaired (recovery), a few topics read through the indexes
+(mcap_index), the CDR message layout, valve_node's topic layout and the offline bag
+writers, a bag read into signals (signal_reader:
 read_recording, decoders injected as the mcap library's decoder factories), the
 scenario runner's tick bags.
 May import: valve_sim.core, valve_sim.analysis, message packages, mcap. No rclpy:

@@ -31,6 +31,7 @@ from valve_sim.core.errors import InputFileError
 from valve_sim.core.parameters import STANDARD_ATMOSPHERE
 from valve_sim.recording.bag import BagReader
 from valve_sim.recording.cdr import float_offsets, read_message, STAMP, STAMP_OFFSET
+from valve_sim.recording.mcap_index import fixed_rows
 from valve_sim.recording.rosbag2_metadata import bag_files
 from valve_sim.recording.valve_topics import JOINT_NAMES, PRESSURE_TOPICS, TICK_TOPICS
 
@@ -121,19 +122,24 @@ def _fixed_layout_series(path, topics, start_ns, ambient_pressure):
     valve_node's messages of one topic differ only in their stamp and numbers (the same
     frame_id and joints: the same layout), so each topic's fields are columns at fixed
     offsets (cdr.float_offsets) of its messages' bytes: the same values as the
-    row-by-row read, in a fraction of its time on a long lockstep run. None where that
-    does not hold (a topic of another type or layout, a stamp twice): the row-by-row
-    read then decides.
+    row-by-row read, in a fraction of its time on a long lockstep run. Each file's
+    messages come through its indexes (mcap_index.fixed_rows), else record by record.
+    None where that does not hold (a topic of another type or layout, a stamp twice):
+    the row-by-row read then decides.
     """
     data, types = {}, {}
     for file in bag_files(path):
-        for channel, schema, message in BagReader(file).messages(set(topics)):
-            if schema is None or channel.message_encoding != 'cdr':
-                return None
-            data.setdefault(channel.topic, []).append(message.data)
-            types[channel.topic] = schema.name
-    parts = [_topic_columns(topics[topic], types[topic], messages, ambient_pressure)
-             for topic, messages in data.items()]
+        found = _file_rows(file, topics)
+        if found is None:
+            return None
+        for topic, (type_name, rows) in found.items():
+            data.setdefault(topic, []).append(rows)
+            types[topic] = type_name
+    if any(len({rows.shape[1] for rows in parts}) > 1 for parts in data.values()):
+        return None  # messages of another length in another file
+    parts = [_topic_columns(topics[topic], types[topic], np.concatenate(parts),
+                            ambient_pressure)
+             for topic, parts in data.items()]
     if not parts or any(part is None for part in parts):
         return None
     stamps = np.unique(np.concatenate([part[0] for part in parts]))
@@ -146,16 +152,38 @@ def _fixed_layout_series(path, topics, start_ns, ambient_pressure):
     return TickSeries((stamps - start_ns) / 1e9, stamps, columns)
 
 
-def _topic_columns(name, type_name, messages, ambient_pressure):
-    """Return (stamps [ns], {signal: values}) of one tick topic's messages, or None."""
+def _file_rows(file, topics):
+    """
+    Return {topic: (type name, uint8 rows of its messages)} of one MCAP file, or None.
+
+    Through the file's indexes where it has them (mcap_index), else record by record;
+    None for a topic not CDR or without schema, or whose messages differ in length.
+    """
+    indexed = fixed_rows(file, topics)
+    if indexed is not None:
+        return {topic: (rows.schema.name, rows.data) for topic, rows in indexed.items()}
+    data, types = {}, {}
+    for channel, schema, message in BagReader(file).messages(set(topics)):
+        if schema is None or channel.message_encoding != 'cdr':
+            return None
+        data.setdefault(channel.topic, []).append(message.data)
+        types[channel.topic] = schema.name
+    if any(len(message) != len(messages[0]) for messages in data.values()
+           for message in messages):
+        return None
+    return {topic: (types[topic], np.frombuffer(b''.join(messages), np.uint8).reshape(
+        len(messages), -1)) for topic, messages in data.items()}
+
+
+def _topic_columns(name, type_name, rows, ambient_pressure):
+    """Return (stamps [ns], {signal: values}) of a tick topic's messages (uint8 rows), or None."""
     try:
-        layout = float_offsets(type_name, messages[0])
+        layout = float_offsets(type_name, rows[0].tobytes())
     except (struct.error, ValueError):
         return None
-    if layout is None or any(len(message) != len(messages[0]) for message in messages):
+    if layout is None:
         return None
     offsets, names = layout
-    rows = np.frombuffer(b''.join(messages), np.uint8).reshape(len(messages), -1)
     numbers = np.zeros(rows.shape[1], bool)
     numbers[STAMP_OFFSET:STAMP_OFFSET + STAMP.size] = True
     for offset in (offset for field in offsets.values() for offset in field):

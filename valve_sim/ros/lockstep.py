@@ -65,10 +65,10 @@ from valve_sim.recording.cdr import CdrMessage
 from valve_sim.recording.valve_topics import message_class, TOPIC_TYPES
 from valve_sim.ros.lockstep_inputs import PARAMETER as LOCKSTEP_INPUTS, QOS as INPUT_QOS
 from valve_sim.ros.lockstep_protocol import (
-    answer, clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states, LAST_TOPIC,
-    LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients, SentInput,
-    SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE, TIMEOUT,
-    WaitTopic)
+    announcing, answer, clock_message, FLOW_AT_END, FLOW_REPLY_TYPE, HANDSHAKE, hears_states,
+    LAST_TOPIC, LateInputError, NS_PER_S, own_valve, RELIABLE, RESEND, RestartClients,
+    SentInput, SPIN_SLICE, stamp_ns, START_NS, TANK_AT_END, TANK_HANDSHAKE, TANK_TOLERANCE,
+    TIMEOUT, WaitTopic)
 from valve_sim.ros.node_processes import spin_until
 from valve_sim.ros.spinning import DEFAULT_EXECUTOR, EXECUTORS
 from valve_sim.ros.valve_inputs import STAMPED_FLOW_TOPIC
@@ -94,8 +94,9 @@ class Lockstep:
                  record_topics=(), tank=False):
         import rclpy
 
-        self.node = rclpy.create_node('valve_lockstep', namespace=namespace or '/',
-                                      context=context)
+        with announcing():  # the nodes it starts hear of it at once (lockstep_protocol)
+            self.node = rclpy.create_node('valve_lockstep', namespace=namespace or '/',
+                                          context=context)
         self.executor = EXECUTORS[DEFAULT_EXECUTOR](context=context)
         self.executor.add_node(self.node)
         self.processes, self.rate = processes, rate

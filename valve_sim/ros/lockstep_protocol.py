@@ -25,7 +25,12 @@ controller's flow reply, stamped with the tick it answers). The valve's side of 
 same protocol: ros.lockstep_inputs.
 """
 
+import contextlib
+import hashlib
+import os
+from pathlib import Path
 import struct
+import tempfile
 import time
 
 from rclpy.parameter import Parameter
@@ -55,6 +60,47 @@ RELIABLE = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 FAST_DDS_VENDOR = b'\x01\x0f'  # an endpoint GID's first bytes under Fast DDS (eProsima)
 # a controller's flow reply: valve_node's own stamped-flow layout, velocity[0] [m^3/s]
 FLOW_REPLY_TYPE = 'sensor_msgs/msg/JointState'
+# Fast DDS announces a new participant a few times at its start, then every 3 s. A driver's
+# participant is up before the nodes it starts: theirs miss its first announcements and learn
+# of it at its next (3 of 5 scenario starts waited ~3 s for discovery, none of 5 with this),
+# so a driver's participant announces itself every 50 ms over its first 5 s.
+ANNOUNCING_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <participant profile_name="valve_sim_driver" is_default_profile="true">
+    <rtps><builtin><discovery_config><initialAnnouncements>
+      <count>100</count><period><sec>0</sec><nanosec>50000000</nanosec></period>
+    </initialAnnouncements></discovery_config></builtin></rtps>
+  </participant>
+</profiles>
+"""
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+
+
+@contextlib.contextmanager
+def announcing():
+    """
+    Within it, a Fast DDS participant announces itself often at first (ANNOUNCING_PROFILE).
+
+    Fast DDS reads its profile file when a process creates its first participant (here
+    a driver's, at its node): a process that created one before keeps its settings, and
+    so does a user's own profile file (either variable set). The nodes a driver starts
+    after it do not inherit the variables.
+    """
+    if any(os.environ.get(name) for name in PROFILE_VARIABLES):
+        yield
+        return
+    digest = hashlib.sha256(ANNOUNCING_PROFILE.encode()).hexdigest()[:12]
+    path = Path(tempfile.gettempdir()) / f'valve_sim_announcing_{digest}.xml'
+    if not path.is_file():  # written whole, then renamed: another process may read it
+        partial = path.with_name(f'{path.name}.{os.getpid()}')
+        partial.write_text(ANNOUNCING_PROFILE)
+        os.replace(partial, path)
+    os.environ.update(dict.fromkeys(PROFILE_VARIABLES, str(path)))
+    try:
+        yield
+    finally:
+        for name in PROFILE_VARIABLES:
+            os.environ.pop(name, None)
 
 
 class LateInputError(IncompleteRunError):

@@ -35,7 +35,9 @@ what was measured up to the failure, each expectation judged on its own.
 """
 
 from dataclasses import dataclass, field
+import importlib
 from pathlib import Path
+import threading
 import time
 
 import numpy as np
@@ -69,6 +71,7 @@ MAX_AHEAD = STATE_QUEUE_DEPTH // 2
 # [s] analyser_node's recording status, which the run waits on before its first tick and
 # after its last (the default, 1 s, would add up to a second to each)
 STATUS_PERIOD = 0.05
+PLOTTING = 'valve_sim.analysis.plotting'  # matplotlib: 0.2 s to import
 
 
 @dataclass
@@ -280,17 +283,25 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     record = record or RunRecord(scenario, folder)
     if flow_topic is not None and flow_topic not in wait_topics:
         wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
-    processes = start_nodes(scenario, folder) if valve is None else valve.start(scenario, folder)
-    if valve is None:
+    driver, status, failed = None, None, True  # failed until the run gets through
+    if valve is None:  # the driver first: the nodes' participants then hear of it at once
         context = rclpy.Context()
         rclpy.init(context=context)
-    driver, status, failed = None, None, True  # failed until the run gets through
+        try:
+            driver = Lockstep(context, rate=rate, tank='tank_pressure' in scenario.inputs)
+            processes = start_nodes(scenario, folder)
+        except BaseException:
+            if driver is not None:
+                driver.close()
+            context.try_shutdown()
+            raise
+    else:
+        processes = valve.start(scenario, folder)
     try:
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         if valve is None:
-            driver = Lockstep(context, processes=processes, rate=rate,
-                              tank='tank_pressure' in scenario.inputs)
+            driver.processes = processes
             driver.connect(wait_topics, READY_TIMEOUT)
         else:  # the suite's driver, connected once; both nodes at the scenario's start
             driver = valve.connect()
@@ -337,6 +348,8 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
             context.try_shutdown()
         progress('stopping both nodes (SIGINT)' if valve is None
                  else "closing the scenario's recording (analyser_node restarts)")
+        # the figure's library imported while the nodes stop (the report draws it next)
+        threading.Thread(target=importlib.import_module, args=(PLOTTING,), daemon=True).start()
         try:
             processes.stop()
         except NodeExitError as error:
