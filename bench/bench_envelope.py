@@ -101,6 +101,8 @@ def faulty_envelope(params, only=''):
         f'faulty envelope: {len(runs)} runs in {time.perf_counter() - began:.0f} s: '
         + ', '.join(f'{verdict} {counts[verdict]}' for verdict in ('correct', 'refused', 'wrong'))
     )
+    for run in (run for run in runs if run.ran_on):
+        print(f'judged at {run.ran_on:g} s: {run.case}: {run.verdict}: {run.reason}')
     return runs
 
 

@@ -65,3 +65,30 @@ def test_faulty_runs_are_correct_or_refused_judged_independently(reference, case
         end_time=0.6,
     )
     assert run.verdict in ('correct', 'refused'), (run.case, run.reason)
+
+
+def test_a_run_still_moving_at_its_end_is_run_on_and_judged_over_whole_cycles(reference):
+    """
+    A cavitating, chattering stretch is judged where it settles: run on to 2 s.
+
+    Bearing orifices 90 % blocked, the tank stepped 10 -> 0 MPa: the pilot stage cavitates
+    and the main valve chatters for 0.5 s, and at 1 s the refill is under way (its timing
+    differs with the step); by 2 s the valve hunts in a 42.5 ms limit cycle. Judged over
+    whole cycles it agrees with its quarter step and keeps the flow balance.
+    """
+    run = judged_run(reference, HEALTHY.changed({'fault.bearing_orifice_blockage': 0.9}),
+                     5 * LPM, 5 * LPM, 10e6, 0.0)
+    assert (run.verdict, run.ran_on) == ('correct', 2.0), run.reason
+    assert 'flow balance holds' in run.reason
+
+
+def test_whole_cycles_weigh_a_limit_cycle_evenly():
+    """A window of 1.2 periods biases the mean of a sine; whole cycles do not."""
+    import numpy as np
+    from valve_sim.analysis.steps.envelope import _whole_cycles
+
+    time = np.arange(0.0, 2.0, 1e-4)
+    p_s = 6.5e6 + 2e5 * np.sin(2 * np.pi * time / 0.0425 + 0.3)
+    cut = time >= time[-1] - 0.05
+    assert abs(np.mean(p_s[cut]) - 6.5e6) > 2e3
+    assert np.mean(p_s[_whole_cycles(time, p_s, 0.5)]) == pytest.approx(6.5e6, abs=2e2)

@@ -191,7 +191,6 @@ def test_a_bad_schedule_at_start_is_one_fatal_line(tmp_path, content):
     assert len(lines) == 1 and '[FATAL]' in lines[0] and str(path) in lines[0], lines
 
 
-
 @pytest.mark.parametrize('period', ['0.0', '100.0'])
 def test_a_diagnostics_period_out_of_its_range_is_one_fatal_line(tmp_path, period):
     """diagnostic_updater.period outside 0.05 ... 60 s at start: one FATAL line, exit code 1."""
@@ -200,6 +199,7 @@ def test_a_diagnostics_period_out_of_its_range_is_one_fatal_line(tmp_path, perio
     assert process.wait(timeout=TIMEOUT * 5) == 1
     lines = log.read_text().strip().splitlines()
     assert len(lines) == 1 and '[FATAL]' in lines[0] and 'diagnostic_updater.period' in lines[0]
+
 
 def test_a_scheduled_event_refused_after_one_applied_keeps_the_node_running(context, tmp_path):
     """
