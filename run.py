@@ -69,7 +69,7 @@ def ensure_environment():
 
 def compile_kernels():
     """Compile the kernels into numba's cache (beside the sources); a failure only warns."""
-    print('run.py: compiling the model kernels (about 30 s when not cached)', flush=True)
+    print('run.py: compiling the model kernels (about a minute when not cached)', flush=True)
     if subprocess.call([str(BIN / 'python'), '-m', 'valve_sim.core.precompile']) != 0:
         print('run.py: the kernels did not compile; valve_node compiles them at its first start',
               file=sys.stderr)
