@@ -283,25 +283,17 @@ def run_scenario(scenario, folder, rate=None, wait_topics=(), progress=print,
     record = record or RunRecord(scenario, folder)
     if flow_topic is not None and flow_topic not in wait_topics:
         wait_topics = (*wait_topics, flow_topic)  # each tick waits for the reply too
-    driver, status, failed = None, None, True  # failed until the run gets through
-    if valve is None:  # the driver first: the nodes' participants then hear of it at once
+    processes = start_nodes(scenario, folder) if valve is None else valve.start(scenario, folder)
+    if valve is None:
         context = rclpy.Context()
         rclpy.init(context=context)
-        try:
-            driver = Lockstep(context, rate=rate, tank='tank_pressure' in scenario.inputs)
-            processes = start_nodes(scenario, folder)
-        except BaseException:
-            if driver is not None:
-                driver.close()
-            context.try_shutdown()
-            raise
-    else:
-        processes = valve.start(scenario, folder)
+    driver, status, failed = None, None, True  # failed until the run gets through
     try:
         progress('waiting for valve_node and analyser_node (valve_node loads or compiles its '
                  'kernels first)')
         if valve is None:
-            driver.processes = processes
+            driver = Lockstep(context, processes=processes, rate=rate,
+                              tank='tank_pressure' in scenario.inputs)
             driver.connect(wait_topics, READY_TIMEOUT)
         else:  # the suite's driver, connected once; both nodes at the scenario's start
             driver = valve.connect()
