@@ -47,16 +47,13 @@ from mcap.writer import CompressionType, Writer
 from valve_sim.core.errors import InputFileError, OutputFileError
 from valve_sim.core.output_files import create_new, named_file
 from valve_sim.recording import rosbag2_metadata
-from valve_sim.recording.mcap_scan import Scan
+from valve_sim.recording.mcap_scan import INDEX_FIXED, MESSAGE_FIXED, Scan
 import yaml
 
 
-MCAP_MAGIC = b'\x89MCAP0\r\n'
 LIBRARY = 'valve_sim (mcap-python writer, rosbag2 storage layout)'
 CHUNK_SIZE = 768 * 1024  # [bytes] rosbag2's (libmcap's) default chunk size
 SEPARATOR = '=' * 80
-# A Message record's opcode, length, channel id, sequence, log time and publish time
-MESSAGE_HEADER = struct.Struct('<BQHIQQ')
 PRIMITIVE_TYPES = frozenset(
     (
         'bool',
@@ -100,7 +97,7 @@ class PackedMessageIndex(MessageIndex):
 
     def write(self, stream):
         entries = [value for entry in self.records for value in entry]
-        stream.write(struct.pack(f'<BQHI{len(entries)}Q', Opcode.MESSAGE_INDEX,
+        stream.write(struct.pack(f'{INDEX_FIXED.format}{len(entries)}Q', Opcode.MESSAGE_INDEX,
                                  6 + 8 * len(entries), self.channel_id, 8 * len(entries),
                                  *entries))
 
@@ -122,7 +119,7 @@ def message_adder(writer):
         chunk.record_writer._buffer.write, chunk.num_messages, chunk.message_start_time  # used
     except AttributeError:
         return writer.add_message
-    pack, message_opcode = MESSAGE_HEADER.pack, int(Opcode.MESSAGE)
+    pack, message_opcode = MESSAGE_FIXED.pack, int(Opcode.MESSAGE)
 
     def add(channel_id, log_time, data, publish_time):
         if statistics.message_count == 0 or log_time < statistics.message_start_time:

@@ -29,7 +29,6 @@ is wrong with the file.
 """
 
 from io import BytesIO
-import struct
 import zlib
 
 from mcap.data_stream import ReadDataStream
@@ -39,12 +38,8 @@ from mcap.records import Chunk
 from mcap.stream_reader import get_chunk_data_stream
 import numpy as np
 from valve_sim.core.input_files import MCAP_FILE, open_regular
-from valve_sim.recording.mcap_scan import RECORD_ERRORS, RECORD_HEADER
-
-
-# a message record: opcode, length, channel id, sequence, log time, publish time, data
-MESSAGE_FIXED = struct.Struct('<BQHIQQ')
-INDEX_FIXED = struct.Struct('<BQHI')  # a message index: opcode, length, channel id, bytes
+from valve_sim.recording.mcap_scan import (
+    INDEX_FIXED, MESSAGE_FIXED, RECORD_ERRORS, RECORD_HEADER)
 
 
 class Rows:

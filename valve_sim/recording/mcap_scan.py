@@ -52,6 +52,9 @@ from valve_sim.core.input_files import MCAP_FILE, open_regular
 
 MAGIC = b'\x89MCAP0\r\n'
 RECORD_HEADER = struct.Struct('<BQ')  # opcode, content length
+# a message record: opcode, length, channel id, sequence, log time, publish time, data
+MESSAGE_FIXED = struct.Struct('<BQHIQQ')
+INDEX_FIXED = struct.Struct('<BQHI')  # a message index: opcode, length, channel id, bytes
 CHUNK_FIXED = struct.Struct('<QQQI')  # message start and end time, uncompressed size and crc
 FOOTER = struct.Struct('<QQI')  # summary start, summary offset start, summary crc
 RESYNC_BLOCK = 1024 * 1024  # [bytes] read at a time looking for the next intact chunk
