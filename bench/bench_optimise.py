@@ -35,6 +35,9 @@
 # 10 % of A's runs and wall time (the workers' CPU seconds are reported too: on a
 # shared machine the load decides the wall time). Without --population/--generations
 # each problem runs at its docs/optimise.md budget (an hour or more per search on 2 cores).
+# --earlier FILE takes the searches not run now from an earlier run's --json (same
+# problem, sizes and seeds checked), so the two full-sample searches of a problem can run
+# once and be compared with several versions of N; their load is reported beside.
 
 import argparse
 import json
@@ -212,17 +215,36 @@ def report(name, runs, checks):
             print(f"   {design['label']:<15} P_1 {p_1:.4f} %  T_s {t_s:.2f} ms  yield "
                   f'{100 * design["yield"]:.1f} % ({100 * low:.1f}-{100 * high:.1f})  '
                   f'nearest in A at {distance:.4f}')
-    for label in ('A', 'B') if 'B' in runs else ('A',):
+    for label in [label for label in ('A', 'B') if label in runs]:
         for first, replayed in runs[label]['replayed'].items():
             print(f"the rule replayed on {label}'s full samples, first round {first}: "
                   f"{replayed['decisions']}, {replayed['runs']:,} of {replayed['full_runs']:,} "
                   f"runs; {replayed['differ']} early verdicts differ from the full sample's")
+    if not checks:
+        return
     a, n = runs['A'], runs['N']
     print(f"N against A: {100 * n['search_runs'] / a['search_runs']:.1f} % of the runs, "
           f"{100 * n['search_s'] / full_seconds(runs):.1f} % of the mean wall time of "
           f"{' and '.join(label for label in ('A', 'B') if label in runs)}'s searches, "
           f"{100 * n['search_cpu_s'] / a['search_cpu_s']:.1f} % of A's workers' CPU; "
           f'checks {checks}')
+
+
+def taken_over(earlier, name, label, population, generations, args):
+    """Return search label of problem name from an earlier run's JSON, its sizes checked."""
+    settings, problem = earlier['settings'], earlier[name]
+    asked = (population, generations, args.samples, args.confirm_samples)
+    found = (problem['population'], problem['generations'], settings['samples'],
+             settings['confirm_samples'])
+    if asked != found:
+        sys.exit(f'--earlier: {name} {label} ran at {found} (population, generations, '
+                 f'samples, confirm samples), not {asked}')
+    run = dict(problem['runs'][label])
+    run['earlier'] = {'file': args.earlier, 'load_start': earlier['load_start'],
+                      'load_end': earlier['load_end']}
+    print(f"{name} {label}: taken from {args.earlier} (load {earlier['load_start']:.1f} "
+          f"at its start, {earlier['load_end']:.1f} at its end)", file=sys.stderr)
+    return run
 
 
 def main():
@@ -233,14 +255,18 @@ def main():
     parser.add_argument('--samples', type=int, default=256)
     parser.add_argument('--confirm-samples', type=int, default=1024)
     parser.add_argument('--searches', default='A,N,B',
-                        help='which searches, in this order (A and N at least; without B '
-                        'no same-Pareto-set check)')
+                        help='which searches, in this order (without A and N no check, '
+                        'without B no same-Pareto-set check)')
     parser.add_argument('--json', metavar='FILE')
+    parser.add_argument('--earlier', metavar='FILE',
+                        help="an earlier run's --json: the searches not run now are taken "
+                        'from it')
     parser.add_argument('--keep', metavar='DIR', help="keep every search's results files here")
     args = parser.parse_args()
     params = load_parameters().params
     cores = os.cpu_count() or 1
     result = {'cores': cores, 'load_start': os.getloadavg()[0], 'settings': vars(args)}
+    earlier = json.loads(Path(args.earlier).read_text()) if args.earlier else {}
     backend = DaskBackend(workers=cores).start()
     try:
         with tempfile.TemporaryDirectory() as scratch:
@@ -262,22 +288,26 @@ def main():
                 for label, seed, sequential in searches:
                     problem = problem_of(params, spec, args.samples, args.confirm_samples,
                                          seed, sequential)
+                    if label in earlier.get(name, {}).get('runs', {}):
+                        runs[label] = taken_over(earlier, name, label, population,
+                                                 generations, args)
+                        continue
                     print(f'{name} {label}: {generations} x {population} x {args.samples}',
                           file=sys.stderr, flush=True)
                     runs[label] = one_search(problem, backend, Path(folder) / name / label,
                                              population, generations)
                 compare(runs)
-                checks = verdict(runs)
+                checks = verdict(runs) if 'A' in runs and 'N' in runs else {}
                 report(name, runs, checks)
                 result[name] = {'population': population, 'generations': generations,
                                 'runs': runs, 'checks': checks}
+                result['load_end'] = os.getloadavg()[0]
+                if args.json:  # after each problem: a later one's failure loses nothing
+                    Path(args.json).write_text(json.dumps(result, indent=2) + '\n')
     finally:
         backend.close()
-    result['load_end'] = os.getloadavg()[0]
     print(f"load average {result['load_start']:.1f} at the start, {result['load_end']:.1f} at "
           'the end')
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=2) + '\n')
 
 
 if __name__ == '__main__':
