@@ -31,8 +31,10 @@ from valve_sim.analysis.design import robust_yield
 from valve_sim.analysis.design.optimisation import (
     outcome_of,
     pareto_front,
+    pareto_set,
     parse_design,
     parse_objectives,
+    resolve,
     RobustProblem,
     search,
 )
@@ -44,6 +46,7 @@ from valve_sim.analysis.design.sequential_yield import (
     rounds,
     runs_of,
     STOP_ALPHA,
+    verdict,
 )
 from valve_sim.analysis.studies.backend import DaskBackend, SerialBackend
 from valve_sim.analysis.studies.cases import preset_protocol
@@ -86,13 +89,16 @@ def test_the_optimiser_finds_a_known_robust_optimum(reference, tmp_path):
     optimum = limit_at / (0.99 + 0.02 * unit_samples(8, 1, 0, 'sobol').max())
     records = search(problem, SerialBackend(), tmp_path, population=8, generations=8,
                      stream=None)
-    values = [(row['design'][D_C], problem.feasible(row)) for _, row in records]
+    values = [(row['design'][D_C], problem.feasible(row)) for _, row in records
+              if not problem.undecided(row)]
     assert all(feasible == (d <= optimum) for d, feasible in values), 'the yield decides'
     assert any(d > optimum for d, _ in values), 'the search must try beyond the optimum'
     (best,) = outcome_of(problem, records, SerialBackend(), tmp_path, False)['pareto']
     found = best[1]['design'][D_C]
     assert optimum - 0.25 * (limit_at - optimum) < found <= optimum
     assert best[1]['yield'] == 1.0 and best[1]['pass'] == '1' * 8
+    # left undecided: only designs of a higher P_1 (a smaller d_c) than the one found
+    assert all(row['design'][D_C] < found for _, row in records if problem.undecided(row))
 
 
 def test_the_confirmed_yields_of_two_pareto_designs_match_tolerance(reference, tmp_path):
@@ -161,11 +167,76 @@ def test_the_stopping_rule_and_the_common_draws(reference):
     problem, out = sequential_candidate(reference, [f'P_1_percent<={nominal - 0.1!r}'], 0.3)
     assert (out['decision'], out['samples'], out['runs']) == ('nominal', 0, 1)
     assert not problem.feasible(out)
-    # dominated by a design already feasible: stopped undecided, not counted as feasible
+    # dominated by a promising design: no samples, undecided, not counted as feasible,
+    # ranked as meeting the yield (behind the design that dominates it)
     problem, behind = sequential_candidate(reference, ['P_1_percent<=99'], 0.99,
                                            front=[[nominal - 0.01]])
-    assert (behind['decision'], behind['samples']) == ('dominated', 4)
-    assert behind['yield'] == 1.0 and not problem.feasible(behind)
+    assert (behind['decision'], behind['samples'], behind['runs']) == ('dominated', 0, 1)
+    assert problem.undecided(behind) and not problem.feasible(behind)
+    assert problem.scores(behind)[1] == [0.0, 0.0]
+    # still undecided after defer_after valves: left open, its estimate so far for the
+    # optimiser; resolved, it runs on to the same verdict and valves as without deferral
+    problem, left = sequential_candidate(reference, half, mixed['yield'], defer_after=5)
+    assert (left['decision'], left['pass']) == ('open', mixed['pass'][:8])
+    assert problem.undecided(left) and not problem.feasible(left)
+    resolved = evaluate_candidate(problem.case(0, 'c', {D_C: 1.02e-3}, resolving=True))
+    assert (resolved['decision'], resolved['pass']) == ('full', mixed['pass'])
+
+
+def test_curtailment_is_the_full_samples_verdict_early():
+    # 3 failures in 128 rule out 254 passes of 256 (99 %): below, though the interval at
+    # that look still reaches above 99 %; 2 failures leave it open, as does 1 of 4 at 75 %
+    assert look(125, 128, 0.99, STOP_ALPHA, 4) is None
+    assert verdict(125, 128, 256, 0.99, STOP_ALPHA, 4) == 'below'
+    assert verdict(126, 128, 256, 0.99, STOP_ALPHA, 4) is None
+    assert verdict(3, 4, 16, 0.75, STOP_ALPHA, 2) is None
+    assert verdict(3, 8, 16, 0.75, STOP_ALPHA, 2) == 'below'
+
+
+def test_the_pareto_set_is_resolved_as_deciding_every_candidate_would(reference, tmp_path):
+    # Five candidates (P_1, T_s; the search's decision -> what resolving it decides):
+    # 0 (1, 1) open -> misses; 1 (2, 2) dominated -> meets; 2 (3, 0.5) open -> meets;
+    # 3 (4, 4) meets, decided; 4 (0.5, 3) below. The front of the feasible and undecided
+    # ones is {0, 2}, then {1, 2}: 0, 2 and then 1 are resolved, 3 and 4 never are; the
+    # Pareto set {1, 2} is the one deciding every candidate gives.
+    problem = problem_of(reference, ['d_c=±10%'], ['P_1_percent', 'T_s_ms'], ['r_d<=2'],
+                         ['d_c=±7um'], samples=4, required_yield=0.9)
+    template = evaluate_candidate(problem.case(0, 'template', {}))
+    table = {0: ((1, 1), 'open', 0.5), 1: ((2, 2), 'dominated', 1.0),
+             2: ((3, 0.5), 'open', 1.0), 3: ((4, 4), 'full', 1.0), 4: ((0.5, 3), 'below', 0.0)}
+
+    def row(index, decision, passed, samples=4):
+        (p_1, t_s), _, _ = table[index]
+        nominal = {**template['nominal'], 'measures': {
+            **template['nominal']['measures'], 'P_1_percent': p_1, 'T_s_ms': t_s}}
+        return {**template, 'index': index, 'label': f'c{index}', 'nominal': nominal,
+                'decision': decision, 'samples': samples, 'runs': samples + 1,
+                'passed': passed, 'yield': passed / samples if samples else 0.0,
+                'pass': '1' * passed + '0' * (samples - passed)}
+
+    resolved = []
+
+    def resolving(cases):
+        assert all(c['defer_after'] is None and c['front'] == [] for c in cases)
+        resolved.extend(case['index'] for case in cases)
+        return [row(case['index'], 'full', round(4 * table[case['index']][2])) for case in cases]
+
+    searched = [(1, row(i, decision, {'open': 4, 'dominated': 0}.get(decision, round(4 * y)),
+                        0 if decision == 'dominated' else 4))
+                for i, (_, decision, y) in table.items()]
+    records = resolve(problem, searched, SerialBackend(), tmp_path, evaluate=resolving,
+                      stream=None)
+    assert resolved == [0, 2, 1]
+    assert [row['label'] for _, row in pareto_set(problem, records)] == ['c1', 'c2']
+    every = [(1, row(i, 'full', round(4 * y))) for i, (_, _, y) in table.items()]
+    assert pareto_set(problem, records) == [
+        (g, {**r, 'runs': r['runs'] + searched[r['index']][1]['runs'], 'resolution_runs':
+             r['runs'], 'search_decision': searched[r['index']][1]['decision']})
+        for g, r in pareto_set(problem, every)]
+    assert len(list(tmp_path.glob('resolve_*.jsonl'))) == 2
+    resolved.clear()
+    assert resolve(problem, searched, SerialBackend(), tmp_path, True, resolving, None) == records
+    assert resolved == [], 'resumed: read from its files'
 
 
 class Recording(SerialBackend):

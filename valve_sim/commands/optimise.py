@@ -19,7 +19,9 @@ NSGA-II (pymoo) over the designed parameters (--design); each candidate's nomina
 measures are the objectives (--minimise, --maximise), and its yield, the share of
 valves made within --tolerance that meet --limits (and whose modes decay), comes from
 a quasi-random Monte Carlo on the Dask runner, sampled in rounds and stopped once
-decided (--sequential, analysis.design.sequential_yield; --budget caps the runs). The
+decided (--sequential, analysis.design.sequential_yield; a candidate still undecided
+after --defer-after valves is left open, and run on only if the Pareto set needs it;
+--budget caps the runs). The
 Pareto designs and the baselines (the reference valve, Table 2) are then confirmed
 with more, independent samples. See valve_sim.analysis.design.optimisation. Writes into --out:
   evaluations/     the runner's results, one file per generation (--resume)
@@ -36,7 +38,7 @@ from pathlib import Path
 import sys
 
 from valve_sim.analysis.design.robust_yield import MIN_DECAY_RATE
-from valve_sim.analysis.design.sequential_yield import FIRST_ROUND, STOP_ALPHA
+from valve_sim.analysis.design.sequential_yield import DEFER_AFTER, FIRST_ROUND, STOP_ALPHA
 from valve_sim.analysis.steps.measures import MEASURE_NAMES
 from valve_sim.analysis.studies.backend import check_fits, MAX_RUNS, open_backend
 from valve_sim.analysis.studies.cases import preset_protocol
@@ -96,6 +98,13 @@ def alpha_value(text):
     return number_or_off(text, lambda value: 0.0 < value < 1.0, 'a chance in (0, 1), or off')
 
 
+def defer_value(text):
+    """'64' -> 64 valves; 'off' -> None (argparse type)."""
+    value = number_or_off(text, lambda value: value >= 1 and value == int(value),
+                          'a whole number of valves >= 1, or off')
+    return None if value is None else int(value)
+
+
 def add_arguments(parser):
     add_options(parser, '--params', '--set', '--preset-pressure', '--out')
     parser.add_argument('--design', action='append', required=True, metavar='NAME=LO:HI,...',
@@ -132,6 +141,11 @@ def add_arguments(parser):
     parser.add_argument('--first-round', default=FIRST_ROUND, metavar='N',
                         type=number('a sample count', '', 1, MAX_RUNS, integer=True),
                         help=f'valves in the first round, doubling after (default {FIRST_ROUND})')
+    parser.add_argument('--defer-after', type=defer_value, default=DEFER_AFTER, metavar='N',
+                        help='with --sequential: a candidate still undecided after the round '
+                        'that reaches N valves is left open, ranked on its estimate; the open '
+                        'candidates the Pareto set needs run on to a verdict at the end '
+                        f"(default {DEFER_AFTER}; off: every candidate's rule to a verdict)")
     parser.add_argument('--budget', default=None, metavar='RUNS',
                         type=number('a run budget', '', 1, 10**12, integer=True),
                         help='runs the search may spend: no generation starts that would pass '
@@ -186,6 +200,7 @@ def problem_from(args):
         confirm_samples=args.confirm_samples,
         stop_alpha=args.sequential,
         first_round=args.first_round,
+        defer_after=args.defer_after,
         min_decay_rate=args.min_decay_rate,
         step_size=settings['step_size'],
     )
@@ -288,8 +303,11 @@ def run(args):
         ])
     print_outcome(problem, summary)
     search, confirmation = summary['runs']['search'], summary['runs']['confirmation']
+    resolution = search['resolution']
     print(f"runs: search {search['runs']:,} ({search['saved']:,} saved against full samples: "
-          f"{100 * search['runs'] / max(1, search['full_sample_runs']):.0f} %), confirmation "
-          f"{confirmation['runs']:,} ({confirmation['designs']} designs)")
+          f"{100 * search['runs'] / max(1, search['full_sample_runs']):.0f} %; of them "
+          f"{resolution['runs']:,} resolving {resolution['candidates']} open candidates of the "
+          f"Pareto set), confirmation {confirmation['runs']:,} ({confirmation['designs']} "
+          'designs)')
     print(f'wrote {out}/pareto.csv, {out}/pareto.json, {out}/params/ and figures')
     return 0 if summary['chosen'] is not None else 1

@@ -55,11 +55,14 @@ from valve_sim.analysis.design.robust_yield import (
     nominal_stage,
 )
 from valve_sim.analysis.design.sequential_yield import (
+    DEFER_AFTER,
     dominated,
     FIRST_ROUND,
     longest_first,
     RunTally,
+    runs_of,
     STOP_ALPHA,
+    UNDECIDED,
 )
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP, TABLE2_CHANGES
 from valve_sim.analysis.steps.measures import MEASURE_NAMES
@@ -210,11 +213,14 @@ class RobustProblem:
     confirm_samples: int = 1024
     stop_alpha: float = STOP_ALPHA  # the sequential rule's (None: every valve of a candidate)
     first_round: int = FIRST_ROUND
+    defer_after: int = DEFER_AFTER  # valves after which a search leaves a candidate open (None)
     min_decay_rate: float = MIN_DECAY_RATE  # [1/s], or None: no stability requirement
     step_size: float = 1e-5
 
     def check(self):
         """Raise ParameterError if a sample count does not suit the sampler, or alpha (0, 1)."""
+        if self.defer_after is not None and self.defer_after < 1:
+            raise ParameterError(f'--defer-after {self.defer_after!r}: at least 1 valve')
         if self.stop_alpha is not None and not 0.0 < self.stop_alpha < 1.0:
             raise ParameterError(f'--sequential {self.stop_alpha!r}: alpha must be in (0, 1)')
         if self.sampler not in SAMPLERS:
@@ -228,12 +234,13 @@ class RobustProblem:
         """Return the design {name: value} at a point of the unit cube of the bounds."""
         return {b.name: float(b.values(u)) for b, u in zip(self.design, unit)}
 
-    def case(self, index, label, design, confirming=False, front=()):
+    def case(self, index, label, design, confirming=False, front=(), resolving=False):
         """
         Return the runner case of a design; confirming: more samples, every row kept.
 
-        front: the objective points of the designs found feasible so far (a candidate
-        they dominate stops sampling); the confirmation samples every valve.
+        front: the objective points of the promising designs so far (a candidate they
+        dominate runs no sample); the confirmation samples every valve; resolving: the
+        sequential rule alone, to a verdict (no front, nothing left open).
         """
         return {
             'index': index,
@@ -256,6 +263,7 @@ class RobustProblem:
             'required_yield': self.required_yield,
             'objectives': [[o.measure, o.sense] for o in self.objectives],
             'front': [] if confirming else [list(point) for point in front],
+            'defer_after': None if confirming or resolving else self.defer_after,
         }
 
     def nominal_ok(self, row):
@@ -271,18 +279,34 @@ class RobustProblem:
         """
         Tell whether a candidate meets everything asked: a nominal valve in spec, the yield.
 
-        A candidate left undecided because a feasible design dominates it is not.
+        A candidate whose yield was left undecided (dominated, open) is not.
         """
         return (self.nominal_ok(row) and row['yield'] >= self.required_yield
-                and row.get('decision') != 'dominated')
+                and row.get('decision') not in UNDECIDED)
+
+    def undecided(self, row):
+        """Tell whether a candidate with its nominal valve in spec has its yield undecided."""
+        return self.nominal_ok(row) and row.get('decision') in UNDECIDED
+
+    def promising(self, row):
+        """Tell whether a candidate is feasible, or open with an estimate meeting the yield."""
+        return self.nominal_ok(row) and row['samples'] > 0 and (
+            row['yield'] >= self.required_yield and row.get('decision') != 'dominated')
 
     def scores(self, row):
-        """Return (objective values to minimise, constraint values <= 0 when met) for pymoo."""
+        """
+        Return (objective values to minimise, constraint values <= 0 when met) for pymoo.
+
+        A candidate dominated before any valve ran is ranked as meeting the yield: it
+        ranks behind the design that dominates it anyway.
+        """
         measures = (row.get('nominal') or {}).get('measures', {})
         values = [o.signed(measures) for o in self.objectives]
+        presumed = row.get('decision') == 'dominated' and not row['samples']
         return (
             [UNDEFINED if v is None else v for v in values],
-            [self.required_yield - row['yield'], 0.0 if self.nominal_ok(row) else 1.0],
+            [0.0 if presumed else self.required_yield - row['yield'],
+             0.0 if self.nominal_ok(row) else 1.0],
         )
 
     def baselines(self):
@@ -335,7 +359,7 @@ def search(problem, backend, folder, population, generations, resume=False,
         progress.total -= population - len(offspring)
         tally.generation = f'optimise: generation {generation}/{generations}'
         tally.add([])
-        front = feasible_front(problem, records)
+        front = promising_front(problem, records)
         cases = [
             problem.case(len(records) + i, f'candidate {len(records) + i}', problem.values(x),
                          front=front)
@@ -360,7 +384,7 @@ def search(problem, backend, folder, population, generations, resume=False,
     if on_file:
         _say(stream, f'optimise: resumed: {on_file} of {len(records)} candidates read from '
              f'{folder}, {len(records) - on_file} computed')
-    return records
+    return resolve(problem, records, backend, folder, resume, evaluate, stream, batch_size)
 
 
 def pareto_front(points):
@@ -369,9 +393,55 @@ def pareto_front(points):
     return [i for i, point in enumerate(points) if not dominated(point, points)]
 
 
-def feasible_front(problem, records):
-    """Return the objective points (to minimise) of the feasible, non-dominated records."""
-    return [problem.scores(row)[0] for _, row in pareto_set(problem, records)]
+def promising_front(problem, records):
+    """Return the objective points (to minimise) of the promising, non-dominated records."""
+    promising = [problem.scores(row)[0] for _, row in records if problem.promising(row)]
+    return [promising[i] for i in pareto_front(promising)]
+
+
+def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_candidates,
+            stream=sys.stderr, batch_size=1):
+    """
+    Return records with the undecided candidates the Pareto set needs decided.
+
+    While the front of the feasible and the undecided (dominated, open) candidates
+    holds undecided ones, those run the sequential rule alone to a verdict (from their
+    first valve: the same valves and verdicts as before, then on), a study of the
+    runner in folder/resolve_<fingerprint>.jsonl each time. A resolved row keeps the
+    search's runs in its own and its search decision as search_decision. The feasible
+    Pareto set is then the one deciding every candidate would give.
+    """
+    records, spent = list(records), 0
+    while True:
+        pending = _undecided_on_front(problem, records)
+        if not pending:
+            break
+        cases = [problem.case(records[i][1]['index'], records[i][1]['label'],
+                              records[i][1]['design'], resolving=True) for i in pending]
+        path = Path(folder) / f'resolve_{fingerprint(cases)}.jsonl'
+        progress = Progress('optimise: resolving the Pareto set', len(cases), 0, stream,
+                            unit='candidates')
+        staged = evaluate if resume else nominal_stage(evaluate, cases, backend)
+        rows, _ = _run(cases, path, backend, resume, batch_size, staged, progress,
+                       'while resolving the Pareto set')
+        for i, case in zip(pending, cases):
+            generation, searched = records[i]
+            resolved = rows[case['index']]
+            spent += runs_of(resolved)
+            records[i] = (generation, {**resolved, 'runs': runs_of(searched) + runs_of(resolved),
+                                       'resolution_runs': runs_of(resolved),
+                                       'search_decision': searched['decision']})
+    if spent:
+        _say(stream, f'optimise: the Pareto set resolved with {spent:,} runs')
+    return records
+
+
+def _undecided_on_front(problem, records):
+    """Return the indices in records of the undecided candidates on the front."""
+    open_or_feasible = [i for i, (_, row) in enumerate(records)
+                        if problem.feasible(row) or problem.undecided(row)]
+    front = pareto_front([problem.scores(records[i][1])[0] for i in open_or_feasible])
+    return [open_or_feasible[i] for i in front if problem.undecided(records[open_or_feasible[i]][1])]
 
 
 def pareto_set(problem, records):

@@ -42,14 +42,15 @@ def plot_pareto_front(path, problem, records, outcome):
     Every candidate's nominal objectives, the Pareto designs and the baselines.
 
     One panel per pair of objectives (one objective: against the candidate number).
-    Grey: candidates that miss the yield or the limits; light brown: stopped with the
-    yield undecided, dominated by a feasible design; blue: feasible; black ringed:
+    Grey: candidates that miss the yield or the limits; light brown: left with the
+    yield undecided (dominated by a promising design, or open and not needed by the
+    Pareto set); blue: feasible; black ringed:
     the Pareto set; green: the chosen design; red star: Table 2; black cross: the
     reference valve.
     """
     rows = [row for _, row in records]
     feasible = np.array([problem.feasible(row) for row in rows], dtype=bool)
-    undecided = np.array([row.get('decision') == 'dominated' for row in rows], dtype=bool)
+    undecided = np.array([problem.undecided(row) for row in rows], dtype=bool)
     pareto = [row for _, row, _ in outcome['pareto']]
     chosen = outcome['chosen']
     count = len(problem.objectives)
@@ -69,7 +70,7 @@ def plot_pareto_front(path, problem, records, outcome):
                   label='misses yield or limits')
         if undecided.any():
             axis.plot(x[undecided], y[undecided], '.', color='tan', markersize=4,
-                      label='dominated, yield undecided')
+                      label='yield undecided')
         axis.plot(x[feasible], y[feasible], '.', color='tab:blue', markersize=5,
                   label=f'meets yield {100 * problem.required_yield:g} %')
         px, py = coordinates(pareto)

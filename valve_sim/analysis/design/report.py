@@ -113,11 +113,14 @@ def problem_statement(problem, population, generations):
         'sequential': None if problem.stop_alpha is None else {
             'alpha': problem.stop_alpha,
             'first_round': problem.first_round,
+            'defer_after': problem.defer_after,
             'rule': 'rounds doubling from first_round to samples, prefixes of the one draw; '
-            'at each interim look a two-sided Clopper-Pearson interval at 1 - alpha / looks '
+            'at each interim look: below once the failures rule out the full sample meeting '
+            'the yield, else a two-sided Clopper-Pearson interval at 1 - alpha / looks '
             '(Bonferroni): stop below or above the required yield, each wrong at most '
-            'alpha / 2; a nominal valve out of spec takes no samples; a candidate a '
-            'feasible design dominates stops undecided',
+            'alpha / 2; a nominal valve out of spec takes no samples, nor one a promising '
+            'design dominates (undecided); one undecided after defer_after valves is left '
+            'open; the undecided candidates on the front run on to a verdict at the end',
         },
     }
 
@@ -127,11 +130,17 @@ def runs_statement(records, outcome):
     rows = [row for _, row in records]
     spent = sum(map(runs_of, rows))
     full = sum(map(planned_runs_of, rows))
-    decisions = Counter(row.get('decision', 'full') for row in rows)
+    decisions = Counter(row.get('search_decision', row.get('decision', 'full')) for row in rows)
+    resolved = [row for row in rows if 'search_decision' in row]
     confirmed = [c for _, _, c in outcome['pareto'] if c] + list(outcome['baselines'].values())
     return {
         'search': {'runs': spent, 'full_sample_runs': full, 'saved': full - spent,
-                   'decisions': dict(sorted(decisions.items()))},
+                   'decisions': dict(sorted(decisions.items())),
+                   'resolution': {
+                       'candidates': len(resolved),
+                       'runs': sum(row['resolution_runs'] for row in resolved),
+                       'decisions': dict(sorted(Counter(row['decision']
+                                                        for row in resolved).items()))}},
         'confirmation': {'designs': len(confirmed), 'runs': sum(map(runs_of, confirmed))},
     }
 

@@ -30,7 +30,9 @@ Monte Carlo of one design:
   stop_alpha       the sequential rule's alpha (analysis.design.sequential_yield), or None:
                    every valve runs, as in the confirmation
   first_round, required_yield, objectives ([measure, sense] pairs), front (the
-                   objective points, to minimise, of the designs found feasible so far)
+                   objective points, to minimise, of the promising designs so far:
+                   a candidate they dominate runs no sample), defer_after (valves after
+                   which an undecided candidate is left open, or None)
 
 evaluate_candidates(cases) -> rows is the work unit. For each candidate it loads the
 nominal valve as `valve-sim ... --params FILE` loads the design's parameter file
@@ -67,9 +69,9 @@ import sys
 from valve_sim.analysis.design.sequential_yield import (
     DECISIONS,
     dominated,
-    look,
     objective_point,
     rounds,
+    verdict,
 )
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP
 from valve_sim.analysis.steps.measures import WINDOW
@@ -227,19 +229,24 @@ def evaluate_candidate(case, nominal_run=None):
     alpha = case.get('stop_alpha')
     point = objective_point(case, nominal_row)
     sample_rows, decision, values = [], 'nominal', []
-    if alpha is None or (nominal_row['pass'] and point is not None):
+    if alpha is not None and nominal_row['pass'] and point is not None and dominated(
+            point, case['front']):
+        decision = 'dominated'
+    elif alpha is None or (nominal_row['pass'] and point is not None):
         values = draw(distributions, planned, case['seed'], case['sampler'])
         cases = sample_cases(nominal, names, values, preset, case['step_size'])
         counts = rounds(planned, case['first_round']) if alpha is not None else [planned]
+        defer_after = case.get('defer_after')
         for number, count in enumerate(counts):
             sample_rows += _runs(case, limits, cases[len(sample_rows):count])
             decision = 'full'
             if number == len(counts) - 1:
                 break
             passed = sum(run['pass'] for run in sample_rows)
-            decision = look(passed, count, case['required_yield'], alpha, len(counts) - 1)
-            if decision is None and dominated(point, case['front']):
-                decision = 'dominated'
+            decision = verdict(passed, count, planned, case['required_yield'], alpha,
+                               len(counts) - 1)
+            if decision is None and defer_after is not None and count >= defer_after:
+                decision = 'open'
             if decision is not None:
                 break
     verdicts = [run['pass'] for run in sample_rows]

@@ -21,23 +21,37 @@ rounds are the first rounds[k] of the full sample, so a valve is the same whethe
 it runs in one round or several. Rounds double from `first` (16) up to the full
 sample; with Sobol points a power-of-two prefix is itself a balanced Sobol sample.
 
-At each interim look (every round but the last) the yield's two-sided Clopper-Pearson
-interval is taken at confidence 1 - alpha / looks (Bonferroni over the looks):
-  'below'  its upper end is below the required yield: the candidate misses it;
-  'above'  its lower end is at or above the required yield: it meets it;
+After each round but the last (verdict):
+  'below'  the failures so far already exceed those the full sample may have
+           (passed / samples < required however the rest go): the full sample's
+           own verdict, reached early (curtailment, no error of its own); or
+           the yield's two-sided Clopper-Pearson interval, taken at confidence
+           1 - alpha / looks (Bonferroni over the looks), lies below the required
+           yield;
+  'above'  that interval's lower end is at or above the required yield;
 otherwise the next round runs. With the samples taken as independent, the chance
-that a candidate whose true yield meets the target is stopped 'below' at any look
-is at most alpha / 2, and that one whose true yield misses it is stopped 'above' at
-most alpha / 2 (the union bound over the looks). A candidate that no look decides
-runs its full sample and is judged as without rounds: passed / samples against the
-required yield. Two more verdicts come before or between the rounds, and neither
-decides a yield:
+that a candidate whose true yield meets the target is stopped 'below' by an
+interval is at most alpha / 2, and that one whose true yield misses it is stopped
+'above' at most alpha / 2 (the union bound over the looks). A candidate that no look
+decides runs its full sample and is judged as without rounds: passed / samples
+against the required yield. In a search three more verdicts leave the yield
+undecided or need none:
   'nominal'    the nominal valve breaks a limit, decays too slowly, lacks an
                objective or cannot be set: infeasible whatever its yield, no sample runs;
-  'dominated'  after a look, its nominal objectives are dominated by a design already
-               found feasible: it cannot enter the Pareto set, so its yield is left
-               undecided (the estimate so far guides the optimiser; the report does not
-               count it as meeting the yield).
+  'dominated'  its nominal objectives are dominated by a promising design before it
+               (one found feasible, or left open with a yield estimate that meets the
+               target): it cannot enter the Pareto set while that design stands, so
+               no sample runs;
+  'open'       still undecided after the round that reaches `defer_after` valves:
+               its sample continues only if the Pareto set needs it.
+The optimiser ranks an open candidate on its estimate so far and a dominated one as
+meeting the yield (it ranks behind the design that dominates it anyway). Neither
+counts as meeting the yield: at the end of the search the Pareto set is resolved
+(optimisation.resolve): the open and dominated candidates on the front of the
+feasible and undecided ones run their rule to a verdict, without a front or a
+deferral, until every design on that front is decided. So the Pareto set is the one
+a search deciding every candidate would find among the same candidates, but for the
+intervals' errors above.
 A generation's candidates go to the workers longest first (longest_first): those whose
 nominal valve passes with the widest margin to its limits, the likeliest to run every
 round, start before the short ones, which fill the workers around them.
@@ -49,7 +63,12 @@ from valve_sim.analysis.studies.tolerances import parse_limits, yield_interval
 
 FIRST_ROUND = 16  # valves in a candidate's first round
 STOP_ALPHA = 0.05  # the chance of a wrong early stop, split over the looks
-DECISIONS = ('nominal', 'below', 'above', 'dominated', 'full')
+# Valves after which a search leaves an undecided candidate open: enough that an estimate
+# meeting a 99 % target says a yield above 95 % (64 of 64: its one-sided 95 % bound), a
+# quarter of the default 256.
+DEFER_AFTER = 64
+DECISIONS = ('nominal', 'below', 'above', 'dominated', 'open', 'full')
+UNDECIDED = ('dominated', 'open')  # left for the resolution of the Pareto set
 
 
 def rounds(samples, first=FIRST_ROUND):
@@ -69,6 +88,18 @@ def look(passed, total, required_yield, alpha, looks):
     if low >= required_yield:
         return 'above'
     return None
+
+
+def verdict(passed, total, samples, required_yield, alpha, looks):
+    """
+    Return 'below', 'above' or None after an interim look at total of samples valves.
+
+    'below' without an interval when the failures so far already rule out the full
+    sample's passed / samples >= required_yield.
+    """
+    if (samples - (total - passed)) / samples < required_yield:
+        return 'below'
+    return look(passed, total, required_yield, alpha, looks)
 
 
 def dominated(point, front):
@@ -164,17 +195,17 @@ def _expected_rounds(nominals, batch):
 
 
 def _candidate_key(case, nominal):
-    """(2 sampled and not dominated, 1 dominated, 0 no samples; then the nominal's margin)."""
+    """(1 sampled, 0 no samples: out of spec or dominated; then the nominal's margin)."""
     row = nominal[1] if nominal else None
     point = objective_point(case, row) if row and row['pass'] else None
-    if point is None:
+    if point is None or dominated(point, case['front']):
         return (0, 0.0)
     margins = []
     for limit in parse_limits(','.join(case['limits'])):
         value, scale = row['measures'][limit.measure], abs(limit.value) or 1.0
         margins.append((limit.value - value if '<' in limit.operator else value - limit.value)
                        / scale)
-    return (1 if dominated(point, case['front']) else 2, min(margins, default=0.0))
+    return (1, min(margins, default=0.0))
 
 
 class _Ordered(_Wrapped):
