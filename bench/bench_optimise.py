@@ -105,13 +105,16 @@ def one_search(problem, backend, folder, population, generations):
                if confirm is not None and problem.feasible(confirm)]
     decisions = {}
     for row in rows:
-        decisions[row.get('decision', 'full')] = decisions.get(row.get('decision', 'full'), 0) + 1
+        decision = row.get('search_decision', row.get('decision', 'full'))
+        decisions[decision] = decisions.get(decision, 0) + 1
+    resolved = [row for row in rows if 'search_decision' in row]
     return {
         'search_s': searched - start, 'confirm_s': confirmed - searched, 'search_cpu_s': cpu,
         'search_runs': sum(map(runs_of, rows)), 'full_runs': sum(map(planned_runs_of, rows)),
         'confirm_runs': sum(runs_of(c) for _, _, c in outcome['pareto'] if c)
         + sum(map(runs_of, outcome['baselines'].values())),
         'decisions': decisions, 'pareto_searched': len(outcome['pareto']),
+        'resolved': len(resolved), 'resolution_runs': sum(r['resolution_runs'] for r in resolved),
         'replayed': {first: replay(rows, problem.required_yield, first)
                      for first in (16, 32)} if problem.stop_alpha is None else None,
         'designs': [{'label': row['label'], 'design': row['design'],
@@ -203,7 +206,9 @@ def report(name, runs, checks):
         share = 100 * run['search_runs'] / run['full_runs']
         print(f"{label}: search {run['search_runs']:,} runs ({share:.1f} % of full "
               f"samples), {run['search_s']:.0f} s ({run['search_cpu_s']:.0f} s of the "
-              f"workers' CPU); confirmation {run['confirm_runs']:,} runs, "
+              f"workers' CPU; {run.get('resolution_runs', 0):,} runs of it resolving "
+              f"{run.get('resolved', 0)} open candidates); confirmation "
+              f"{run['confirm_runs']:,} runs, "
               f"{run['confirm_s']:.0f} s; decisions {run['decisions']}; "
               f"{len(run['designs'])} of {run['pareto_searched']} Pareto designs meet the yield "
               f"on confirmation; hypervolume {run.get('hypervolume', 0):.4f}; furthest nearest "

@@ -211,8 +211,11 @@ def print_outcome(problem, summary):
     """Print the Pareto set, then the chosen design against Table 2, measure by measure."""
     names = [bound.name for bound in problem.design]
     objectives = [o.measure for o in problem.objectives]
+    undecided = summary['candidates_undecided']
     print(f"{summary['candidates_evaluated']} candidates, {summary['candidates_feasible']} "
-          f"meet the limits and the yield; Pareto set of {len(summary['pareto'])}:")
+          'meet the limits and the yield'
+          + (f', {undecided} left with it undecided (the Pareto set does not need them)'
+             if undecided else '') + f"; Pareto set of {len(summary['pareto'])}:")
     print(f'{"design":<15}' + ''.join(f'{n[:13]:>14}' for n in names + objectives)
           + f'{"yield (95 % interval)":>28}')
     for entry in summary['pareto']:

@@ -59,8 +59,8 @@ from valve_sim.analysis.design.sequential_yield import (
     dominated,
     FIRST_ROUND,
     longest_first,
-    RunTally,
     runs_of,
+    RunTally,
     STOP_ALPHA,
     UNDECIDED,
 )
@@ -438,10 +438,11 @@ def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_c
 
 def _undecided_on_front(problem, records):
     """Return the indices in records of the undecided candidates on the front."""
-    open_or_feasible = [i for i, (_, row) in enumerate(records)
-                        if problem.feasible(row) or problem.undecided(row)]
-    front = pareto_front([problem.scores(records[i][1])[0] for i in open_or_feasible])
-    return [open_or_feasible[i] for i in front if problem.undecided(records[open_or_feasible[i]][1])]
+    candidates = [i for i, (_, row) in enumerate(records)
+                  if problem.feasible(row) or problem.undecided(row)]
+    front = [candidates[i] for i in pareto_front([problem.scores(records[i][1])[0]
+                                                  for i in candidates])]
+    return [i for i in front if problem.undecided(records[i][1])]
 
 
 def pareto_set(problem, records):

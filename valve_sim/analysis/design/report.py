@@ -183,6 +183,7 @@ def write_outputs(out, problem, outcome, records, population, generations):
         'problem': problem_statement(problem, population, generations),
         'candidates_evaluated': len(records),
         'candidates_feasible': sum(problem.feasible(row) for _, row in records),
+        'candidates_undecided': sum(problem.undecided(row) for _, row in records),
         'runs': runs_statement(records, outcome),
         'pareto': pareto,
         'baselines': baselines,
