@@ -78,6 +78,7 @@ OPTIONS = [  # (command and its other arguments, option, values that mean nothin
     (OPTIMISE, '--population', ('1', '0', 'nan', '100000')),
     (OPTIMISE, '--generations', ('0', '-1', 'inf', '100000')),
     (OPTIMISE, '--min-decay-rate', ('nan', '-1', 'inf', '1e300')),
+    (OPTIMISE, '--defer-after', ('0', '-1', 'nan', 'inf', '1.5', '1e300')),
     (['tolerance', '--vary', 'd_c=±2%', '--out', 'o'], '--dashboard',
      ('127.0.0.1:99999', 'nohost', ':80', '127.0.0.1:-1')),
     (['demo'], '--foxglove', ('-1', '65536', 'nan')),

@@ -100,8 +100,8 @@ def alpha_value(text):
 
 def defer_value(text):
     """'64' -> 64 valves; 'off' -> None (argparse type)."""
-    value = number_or_off(text, lambda value: value >= 1 and value == int(value),
-                          'a whole number of valves >= 1, or off')
+    value = number_or_off(text, lambda value: 1 <= value <= MAX_RUNS and value == int(value),
+                          f'a whole number of valves, 1 to {MAX_RUNS:,}, or off')
     return None if value is None else int(value)
 
 

@@ -290,8 +290,8 @@ class RobustProblem:
 
     def promising(self, row):
         """Tell whether a candidate is feasible, or open with an estimate meeting the yield."""
-        return self.nominal_ok(row) and row['samples'] > 0 and (
-            row['yield'] >= self.required_yield and row.get('decision') != 'dominated')
+        return self.feasible(row) or (self.nominal_ok(row) and row.get('decision') == 'open'
+                                      and row['yield'] >= self.required_yield)
 
     def scores(self, row):
         """
