@@ -25,7 +25,8 @@
 # d_c, k_p, V_c; the worked answer: six parameters), three searches:
 #   A  full samples (--sequential off, today's search), seed 0
 #   B  full samples, seed 1: how far two full-budget searches differ
-#   N  the sequential search (the defaults), seed 0
+#   N  the sequential search (the defaults), seed 0; its search stage includes the
+#      resolution of the Pareto set's open candidates (their runs also said apart)
 # each followed by its confirmation (reported apart). The Pareto designs that meet the
 # yield on confirmation are compared on their nominal objectives, scaled to [0, 1]
 # over the union of the three sets: hypervolume (reference point 1.1 in each
