@@ -99,7 +99,8 @@ def plot_pareto_front(path, problem, records, outcome):
     figure.suptitle(
         f'{len(rows)} candidates, nominal measures;\n{int(feasible.sum())} meet the limits and '
         f"the yield (Monte Carlo of {'' if problem.stop_alpha is None else 'up to '}"
-        f'{problem.samples} valves)', fontsize=10)
+        f'{problem.samples} valves)'
+        + (f', {int(undecided.sum())} undecided' if undecided.any() else ''), fontsize=10)
     save_figure(figure, path, dpi=110)
 
 
