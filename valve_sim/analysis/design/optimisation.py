@@ -29,18 +29,21 @@ unit cube of the bounds and a Latin-hypercube first generation. Each generation'
 nominal valves run first, a batch per worker (robust_yield.nominal_stage); its
 candidates then go to the runner as one study, the likeliest long ones first
 (sequential_yield.longest_first), OUT/generation_NNN.jsonl, each sampled only
-as far as its verdict needs (analysis.design.sequential_yield: rounds, the nominal screen, a
-stop once a feasible design before it dominates it). The optimiser is
-seeded, and the candidates of a generation follow only from the rows of the ones
-before, so --resume replays it: every generation on file is read (the runner checks
-that its fingerprint, hence every design and setting, is the same), only missing
-candidates are computed. confirm() re-runs the Pareto designs and the two baselines
+as far as its verdict needs (analysis.design.sequential_yield: rounds, the nominal screen,
+no sample where a promising design before it dominates it, left open after defer_after
+valves). The optimiser is seeded, and the candidates of a generation follow only from
+the rows of the ones before, so --resume replays it: every generation on file is read
+(the runner checks that its fingerprint, hence every design and setting, is the same),
+only missing candidates are computed. resolve() then decides the undecided candidates
+the Pareto set needs, so that it is the set deciding every candidate would give, and
+confirm() re-runs the Pareto designs and the two baselines
 (the reference valve and the paper's Table 2) with more samples and an independent
 seed, keeping every valve's row: the yield of a design picked for passing a Monte
 Carlo is biased upward by that choice, a fresh sample is not.
 
 Over 400 lines on purpose: the options of a robust design (design, objectives,
-tolerances) are parsed beside the RobustProblem they define and its search and confirmation.
+tolerances) are parsed beside the RobustProblem they define, its search, resolution and
+confirmation.
 """
 
 from dataclasses import dataclass
