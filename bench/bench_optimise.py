@@ -59,11 +59,11 @@ from valve_sim.analysis.design.optimisation import (
 from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
 from valve_sim.analysis.design.sequential_yield import (
     FIRST_ROUND,
-    look,
     planned_runs_of,
     rounds,
     runs_of,
     STOP_ALPHA,
+    verdict,
 )
 from valve_sim.analysis.studies.backend import DaskBackend
 from valve_sim.analysis.studies.cases import preset_protocol
@@ -131,7 +131,7 @@ def workers_cpu(backend):
 
 def replay(rows, required_yield, first_round=FIRST_ROUND, alpha=STOP_ALPHA):
     """
-    Replay the stopping rule on full-sample rows' pass strings (dominance left out).
+    Replay the stopping rule on full-sample rows' pass strings (dominance, deferral left out).
 
     Return {decision: count}, the runs it would take against the full samples', and the
     candidates whose early verdict differs from their full sample's.
@@ -147,8 +147,8 @@ def replay(rows, required_yield, first_round=FIRST_ROUND, alpha=STOP_ALPHA):
         for number, count in enumerate(counts if decision is None else []):
             used = count
             decision = ('full' if number == len(counts) - 1 else
-                        look(verdicts[:count].count('1'), count, required_yield, alpha,
-                             len(counts) - 1))
+                        verdict(verdicts[:count].count('1'), count, len(verdicts),
+                                required_yield, alpha, len(counts) - 1))
             if decision is not None:
                 break
         decisions[decision] = decisions.get(decision, 0) + 1
@@ -248,6 +248,11 @@ def taken_over(earlier, name, label, population, generations, args):
     run = dict(problem['runs'][label])
     run['earlier'] = {'file': args.earlier, 'load_start': earlier['load_start'],
                       'load_end': earlier['load_end']}
+    kept = Path(settings['keep'] or '/nonexistent') / name / label
+    rows = [json.loads(line) for path in sorted(kept.glob('generation_*.jsonl'))
+            for line in path.read_text().splitlines()[1:]]
+    if rows and run['replayed'] is not None:  # the rule of this version, on its kept rows
+        run['replayed'] = {first: replay(rows, 0.99, first) for first in (16, 32)}
     print(f"{name} {label}: taken from {args.earlier} (load {earlier['load_start']:.1f} "
           f"at its start, {earlier['load_end']:.1f} at its end)", file=sys.stderr)
     return run
