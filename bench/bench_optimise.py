@@ -183,7 +183,7 @@ def compare(runs):
             float(np.min(np.linalg.norm(scaled[label] - p, axis=1))) for p in scaled['A']])
 
 
-def verdict(runs):
+def checks_of(runs):
     """Return the checks of N against A and B: same Pareto set, at most 10 % of the search."""
     a, b, n = runs['A'], runs.get('B'), runs['N']
     return {
@@ -308,7 +308,7 @@ def main():
                     runs[label] = one_search(problem, backend, Path(folder) / name / label,
                                              population, generations)
                 compare(runs)
-                checks = verdict(runs) if 'A' in runs and 'N' in runs else {}
+                checks = checks_of(runs) if 'A' in runs and 'N' in runs else {}
                 report(name, runs, checks)
                 result[name] = {'population': population, 'generations': generations,
                                 'runs': runs, 'checks': checks}
