@@ -38,7 +38,8 @@
 # each problem runs at its docs/optimise.md budget (an hour or more per search on 2 cores).
 # --earlier FILE takes the searches not run now from an earlier run's --json (same
 # problem, sizes and seeds checked), so the two full-sample searches of a problem can run
-# once and be compared with several versions of N; their load is reported beside.
+# once and be compared with several versions of N; their load is reported beside (a
+# problem's own load_start, load_end and keep, where files of several runs were merged).
 
 import argparse
 import json
@@ -246,15 +247,15 @@ def taken_over(earlier, name, label, population, generations, args):
         sys.exit(f'--earlier: {name} {label} ran at {found} (population, generations, '
                  f'samples, confirm samples), not {asked}')
     run = dict(problem['runs'][label])
-    run['earlier'] = {'file': args.earlier, 'load_start': earlier['load_start'],
-                      'load_end': earlier['load_end']}
-    kept = Path(settings['keep'] or '/nonexistent') / name / label
+    load = {key: problem.get(key, earlier[key]) for key in ('load_start', 'load_end')}
+    run['earlier'] = {'file': args.earlier, **load}
+    kept = Path(problem.get('keep', settings['keep']) or '/nonexistent') / name / label
     rows = [json.loads(line) for path in sorted(kept.glob('generation_*.jsonl'))
             for line in path.read_text().splitlines()[1:]]
     if rows and run['replayed'] is not None:  # the rule of this version, on its kept rows
         run['replayed'] = {first: replay(rows, 0.99, first) for first in (16, 32)}
-    print(f"{name} {label}: taken from {args.earlier} (load {earlier['load_start']:.1f} "
-          f"at its start, {earlier['load_end']:.1f} at its end)", file=sys.stderr)
+    print(f"{name} {label}: taken from {args.earlier} (load {load['load_start']:.1f} "
+          f"at its start, {load['load_end']:.1f} at its end)", file=sys.stderr)
     return run
 
 
