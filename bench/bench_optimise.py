@@ -185,11 +185,18 @@ def compare(runs):
 
 
 def checks_of(runs):
-    """Return the checks of N against A and B: same Pareto set, at most 10 % of the search."""
+    """
+    Return the checks of N against A and B: same Pareto set, at most 10 % of the search.
+
+    hypervolume and nearest_matches: N differs from A by no more than B does, either
+    way; not_worse: N's hypervolume falls short of A's by no more than B's differs.
+    """
     a, b, n = runs['A'], runs.get('B'), runs['N']
+    spread = None if b is None else abs(b['hypervolume'] - a['hypervolume'])
     return {
         'hypervolume': None if b is None else abs(n['hypervolume'] - a['hypervolume'])
-        <= abs(b['hypervolume'] - a['hypervolume']),
+        <= spread,
+        'not_worse': None if b is None else n['hypervolume'] >= a['hypervolume'] - spread,
         'nearest_matches': None if b is None else n['furthest_from'] <= b['furthest_from'],
         'runs_10_percent': n['search_runs'] <= 0.10 * a['search_runs'],
         'wall_10_percent': n['search_s'] <= 0.10 * full_seconds(runs),

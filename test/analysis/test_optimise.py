@@ -46,6 +46,7 @@ from valve_sim.analysis.design.sequential_yield import (
     rounds,
     runs_of,
     STOP_ALPHA,
+    suspects,
     verdict,
 )
 from valve_sim.analysis.studies.backend import DaskBackend, SerialBackend
@@ -181,6 +182,31 @@ def test_the_stopping_rule_and_the_common_draws(reference):
     assert problem.undecided(left) and not problem.feasible(left)
     resolved = evaluate_candidate(problem.case(0, 'c', {D_C: 1.02e-3}, resolving=True))
     assert (resolved['decision'], resolved['pass']) == ('full', mixed['pass'])
+
+
+def test_suspected_valves_first_decide_a_failing_candidate_exactly(reference):
+    # The valves that failed elsewhere run first when resolving: a candidate they
+    # already fail is 'below' on them alone, as its full sample says; one they do not
+    # fail goes on as without them, its rows the same, their runs spent.
+    nominal = sequential_candidate(reference, ['P_1_percent<=99'], 0.3)[1]['nominal']
+    half = [f"P_1_percent<={nominal['measures']['P_1_percent']!r}"]
+    _, every = sequential_candidate(reference, half, 0.3, stop_alpha=None)
+    failing = [i for i, verdict in enumerate(every['pass']) if verdict == '0']
+    passing = [i for i, verdict in enumerate(every['pass']) if verdict == '1']
+    assert suspects([every, {'valves': [failing[-1], 3], 'pass': '01'}]) == failing
+    assert suspects([every], count=2) == failing[:2]
+    required = (every['passed'] + 1) / 16  # just above what the full sample gives
+    problem = problem_of(reference, ['d_c=±20%'], ['P_1_percent'], half, ['d_c=±2%,k_p=±5%'],
+                         samples=16, seed=3, first_round=4, required_yield=required)
+    case = problem.case(0, 'c', {D_C: 1.02e-3}, resolving=True)
+    plain = evaluate_candidate(case)
+    assert not problem.feasible(plain)
+    found = evaluate_candidate({**case, 'suspects': failing})
+    assert (found['decision'], found['valves'], found['pass']) == (
+        'below', failing, '0' * len(failing))
+    assert found['runs'] == len(failing) + 1 and not problem.feasible(found)
+    spent = evaluate_candidate({**case, 'suspects': passing[:3]})
+    assert {**spent, 'runs': spent['runs'] - 3} == plain
 
 
 def test_curtailment_is_the_full_samples_verdict_early():

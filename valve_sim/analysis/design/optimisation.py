@@ -65,6 +65,7 @@ from valve_sim.analysis.design.sequential_yield import (
     runs_of,
     RunTally,
     STOP_ALPHA,
+    suspects,
     UNDECIDED,
 )
 from valve_sim.analysis.paper import REFERENCE_FLOW_STEP, TABLE2_CHANGES
@@ -410,7 +411,10 @@ def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_c
     While the front of the feasible and the undecided (dominated, open) candidates
     holds undecided ones, those run the sequential rule alone to a verdict (from their
     first valve: the same valves and verdicts as before, then on), a study of the
-    runner in folder/resolve_<fingerprint>.jsonl each time. A resolved row keeps the
+    runner in folder/resolve_<fingerprint>.jsonl each time. The valves that failed
+    most often in the candidates so far run first (sequential_yield.suspects): a
+    candidate they already fail is decided 'below' by them alone, exactly as its full
+    sample would decide it. A resolved row keeps the
     search's runs in its own and its search decision as search_decision. The feasible
     Pareto set is then the one deciding every candidate would give.
     """
@@ -419,8 +423,10 @@ def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_c
         pending = _undecided_on_front(problem, records)
         if not pending:
             break
-        cases = [problem.case(records[i][1]['index'], records[i][1]['label'],
-                              records[i][1]['design'], resolving=True) for i in pending]
+        first = suspects([row for _, row in records])
+        cases = [{**problem.case(records[i][1]['index'], records[i][1]['label'],
+                                 records[i][1]['design'], resolving=True), 'suspects': first}
+                 for i in pending]
         path = Path(folder) / f'resolve_{fingerprint(cases)}.jsonl'
         progress = Progress('optimise: resolving the Pareto set', len(cases), 0, stream,
                             unit='candidates')

@@ -67,6 +67,7 @@ from functools import partial
 import sys
 
 from valve_sim.analysis.design.sequential_yield import (
+    curtailed,
     DECISIONS,
     dominated,
     objective_point,
@@ -209,7 +210,10 @@ def evaluate_candidate(case, nominal_run=None):
     failures (per limit, failed runs, slow decay), percentiles of the measures over
     the valves run, and sample_rows (every sampled valve's row, with its sampled
     values) when keep_samples. Without stop_alpha every valve runs, whatever the
-    nominal valve does. nominal_run: (nominal valve, its row) from nominal_rows, or
+    nominal valve does. With suspects (valve numbers, resolving) those valves run
+    first: if their failures already rule out the yield the row is theirs ('below',
+    valves: their numbers, pass in that order), else they are runs spent and the
+    rounds go on as without them. nominal_run: (nominal valve, its row) from nominal_rows, or
     None: it is set and runs here.
     """
     planned = case['samples']
@@ -228,7 +232,7 @@ def evaluate_candidate(case, nominal_run=None):
         (nominal_row,) = _runs(case, limits, [_nominal_run(case, nominal, planned)])
     alpha = case.get('stop_alpha')
     point = objective_point(case, nominal_row)
-    sample_rows, decision, values = [], 'nominal', []
+    sample_rows, decision, values, tried, counts = [], 'nominal', [], [], []
     if alpha is not None and nominal_row['pass'] and point is not None and dominated(
             point, case['front']):
         decision = 'dominated'
@@ -237,6 +241,13 @@ def evaluate_candidate(case, nominal_run=None):
         cases = sample_cases(nominal, names, values, preset, case['step_size'])
         counts = rounds(planned, case['first_round']) if alpha is not None else [planned]
         defer_after = case.get('defer_after')
+        suspects = case.get('suspects') or []
+        tried = _runs(case, limits, [cases[i] for i in suspects]) if suspects else []
+        if tried and curtailed(sum(run['pass'] for run in tried), len(tried), planned,
+                               case['required_yield']):
+            sample_rows, decision, counts = tried, 'below', []
+            values = [values[i] for i in suspects]
+            row['valves'] = list(suspects)
         for number, count in enumerate(counts):
             sample_rows += _runs(case, limits, cases[len(sample_rows):count])
             decision = 'full'
@@ -259,7 +270,7 @@ def evaluate_candidate(case, nominal_run=None):
         preset_pressure=preset,
         nominal=nominal_row,
         samples=count,
-        runs=count + 1,
+        runs=count + 1 + (len(tried) if counts else 0),
         decision=decision,
         passed=passed,
         ci95=yield_interval(passed, count) if count else [0.0, 1.0],
@@ -371,6 +382,9 @@ def check_candidate_row(row):
     for key in ('failures', 'percentiles'):
         if not isinstance(row.get(key), dict):
             raise InputFileError(f"key '{key}' must be a JSON object, got {shown(row.get(key))}")
+    valves = row.get('valves', [])
+    if not (isinstance(valves, list) and all(type(v) is int and v >= 0 for v in valves)):
+        raise InputFileError("key 'valves' must list valve numbers (integers >= 0)")
     sample_rows = row.get('sample_rows', [])
     if not isinstance(sample_rows, list):
         raise InputFileError("key 'sample_rows' must list the sampled valves' rows")

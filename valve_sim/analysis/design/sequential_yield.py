@@ -57,6 +57,7 @@ nominal valve passes with the widest margin to its limits, the likeliest to run 
 round, start before the short ones, which fill the workers around them.
 """
 
+from collections import Counter
 from functools import partial
 
 from valve_sim.analysis.studies.tolerances import parse_limits, yield_interval
@@ -97,9 +98,29 @@ def verdict(passed, total, samples, required_yield, alpha, looks):
     'below' without an interval when the failures so far already rule out the full
     sample's passed / samples >= required_yield.
     """
-    if (samples - (total - passed)) / samples < required_yield:
+    if curtailed(passed, total, samples, required_yield):
         return 'below'
     return look(passed, total, required_yield, alpha, looks)
+
+
+def curtailed(passed, total, samples, required_yield):
+    """Tell whether total valves of samples, passed of them, rule out the yield required."""
+    return (samples - (total - passed)) / samples < required_yield
+
+
+def suspects(rows, count=FIRST_ROUND):
+    """
+    Return the numbers of the count valves that failed most often in rows (fewer if fewer did).
+
+    All candidates share their valves' unit-cube points, and a design near a limit fails
+    on the same few points as its neighbours: run first, they find its failures soonest.
+    Rows give their valves' numbers (valves) or run a prefix (pass in sample order).
+    """
+    failed = Counter()
+    for row in rows:
+        numbers = row.get('valves') or range(len(row['pass']))
+        failed.update(number for number, verdict in zip(numbers, row['pass']) if verdict == '0')
+    return sorted(sorted(failed, key=lambda number: (-failed[number], number))[:count])
 
 
 def dominated(point, front):
