@@ -100,7 +100,8 @@ def plot_pareto_front(path, problem, records, outcome):
         f'{len(rows)} candidates, nominal measures;\n{int(feasible.sum())} meet the limits and '
         f"the yield (Monte Carlo of {'' if problem.stop_alpha is None else 'up to '}"
         f'{problem.samples} valves)'
-        + (f', {int(undecided.sum())} undecided' if undecided.any() else ''), fontsize=10)
+        + (f';\n{int(undecided.sum())} left undecided, not needed by the Pareto set'
+           if undecided.any() else ''), fontsize=10)
     save_figure(figure, path, dpi=110)
 
 
