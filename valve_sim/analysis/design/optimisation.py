@@ -397,10 +397,16 @@ def pareto_front(points):
     return [i for i, point in enumerate(points) if not dominated(point, points)]
 
 
+def front_of(problem, records, kept):
+    """Return the indices in records of those kept(row) that no other kept one dominates."""
+    chosen = [i for i, (_, row) in enumerate(records) if kept(row)]
+    return [chosen[i] for i in pareto_front([problem.scores(records[i][1])[0] for i in chosen])]
+
+
 def promising_front(problem, records):
     """Return the objective points (to minimise) of the promising, non-dominated records."""
-    promising = [problem.scores(row)[0] for _, row in records if problem.promising(row)]
-    return [promising[i] for i in pareto_front(promising)]
+    return [problem.scores(records[i][1])[0]
+            for i in front_of(problem, records, problem.promising)]
 
 
 def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_candidates,
@@ -414,13 +420,15 @@ def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_c
     runner in folder/resolve_<fingerprint>.jsonl each time. The valves that failed
     most often in the candidates so far run first (sequential_yield.suspects): a
     candidate they already fail is decided 'below' by them alone, exactly as its full
-    sample would decide it. A resolved row keeps the
-    search's runs in its own and its search decision as search_decision. The feasible
-    Pareto set is then the one deciding every candidate would give.
+    sample would decide it. A resolved row keeps the search's runs in its own and its
+    search decision as search_decision. The feasible Pareto set is then the one deciding
+    every candidate would give.
     """
     records, spent = list(records), 0
     while True:
-        pending = _undecided_on_front(problem, records)
+        on_front = front_of(problem, records,
+                            lambda row: problem.feasible(row) or problem.undecided(row))
+        pending = [i for i in on_front if problem.undecided(records[i][1])]
         if not pending:
             break
         first = suspects([row for _, row in records])
@@ -445,20 +453,10 @@ def resolve(problem, records, backend, folder, resume=False, evaluate=evaluate_c
     return records
 
 
-def _undecided_on_front(problem, records):
-    """Return the indices in records of the undecided candidates on the front."""
-    candidates = [i for i, (_, row) in enumerate(records)
-                  if problem.feasible(row) or problem.undecided(row)]
-    front = [candidates[i] for i in pareto_front([problem.scores(records[i][1])[0]
-                                                  for i in candidates])]
-    return [i for i in front if problem.undecided(records[i][1])]
-
-
 def pareto_set(problem, records):
     """Return [(generation, row)] of the feasible candidates no other feasible one dominates."""
-    feasible = [record for record in records if problem.feasible(record[1])]
-    front = pareto_front([problem.scores(row)[0] for _, row in feasible])
-    return sorted((feasible[i] for i in front), key=lambda record: problem.scores(record[1])[0])
+    front = [records[i] for i in front_of(problem, records, problem.feasible)]
+    return sorted(front, key=lambda record: problem.scores(record[1])[0])
 
 
 def confirm(problem, designs, backend, folder, resume=False, evaluate=evaluate_candidates,
