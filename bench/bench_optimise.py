@@ -57,12 +57,11 @@ from valve_sim.analysis.design.optimisation import (
     RobustProblem,
     search,
 )
+from valve_sim.analysis.design.report import runs_statement
 from valve_sim.analysis.design.robust_yield import evaluate_candidate, evaluate_candidates
 from valve_sim.analysis.design.sequential_yield import (
     FIRST_ROUND,
-    planned_runs_of,
     rounds,
-    runs_of,
     STOP_ALPHA,
     verdict,
 )
@@ -72,6 +71,7 @@ from valve_sim.analysis.studies.runner import run_cases
 from valve_sim.core.parameters import load_parameters
 
 LIMITS = 'r_d<=0.85,P_o_percent<=0.2'
+REQUIRED_YIELD = 0.99
 PROBLEMS = {
     'first': {'design': 'd_c=0.8e-3:1.2e-3,k_p=±20%,V_c=±20%',
               'tolerances': 'd_c=±7um,k_p=±10%,V_c=±5%', 'population': 24, 'generations': 20},
@@ -90,7 +90,7 @@ def problem_of(params, spec, samples, confirm_samples, seed, sequential):
         params=params, design=tuple(parse_design([spec['design']], params)),
         objectives=tuple(parse_objectives(['P_1_percent,T_s_ms'], None)),
         limits=tuple(LIMITS.split(',')), tolerances=tuple(spec['tolerances'].split(',')),
-        required_yield=0.99, preset_pressure=preset, samples=samples, seed=seed,
+        required_yield=REQUIRED_YIELD, preset_pressure=preset, samples=samples, seed=seed,
         confirm_samples=confirm_samples, **extra,
     ).check()
 
@@ -105,18 +105,14 @@ def one_search(problem, backend, folder, population, generations):
     rows = [row for _, row in records]
     designs = [(row, confirm) for _, row, confirm in outcome['pareto']
                if confirm is not None and problem.feasible(confirm)]
-    decisions = {}
-    for row in rows:
-        decision = row.get('search_decision', row.get('decision', 'full'))
-        decisions[decision] = decisions.get(decision, 0) + 1
-    resolved = [row for row in rows if 'search_decision' in row]
+    runs = runs_statement(records, outcome)  # as pareto.json states them
+    resolution = runs['search']['resolution']
     return {
         'search_s': searched - start, 'confirm_s': confirmed - searched, 'search_cpu_s': cpu,
-        'search_runs': sum(map(runs_of, rows)), 'full_runs': sum(map(planned_runs_of, rows)),
-        'confirm_runs': sum(runs_of(c) for _, _, c in outcome['pareto'] if c)
-        + sum(map(runs_of, outcome['baselines'].values())),
-        'decisions': decisions, 'pareto_searched': len(outcome['pareto']),
-        'resolved': len(resolved), 'resolution_runs': sum(r['resolution_runs'] for r in resolved),
+        'search_runs': runs['search']['runs'], 'full_runs': runs['search']['full_sample_runs'],
+        'confirm_runs': runs['confirmation']['runs'],
+        'decisions': runs['search']['decisions'], 'pareto_searched': len(outcome['pareto']),
+        'resolved': resolution['candidates'], 'resolution_runs': resolution['runs'],
         'replayed': {first: replay(rows, problem.required_yield, first)
                      for first in (16, 32)} if problem.stop_alpha is None else None,
         'designs': [{'label': row['label'], 'design': row['design'],
@@ -260,7 +256,7 @@ def taken_over(earlier, name, label, population, generations, args):
     rows = [json.loads(line) for path in sorted(kept.glob('generation_*.jsonl'))
             for line in path.read_text().splitlines()[1:]]
     if rows and run['replayed'] is not None:  # the rule of this version, on its kept rows
-        run['replayed'] = {first: replay(rows, 0.99, first) for first in (16, 32)}
+        run['replayed'] = {first: replay(rows, REQUIRED_YIELD, first) for first in (16, 32)}
     print(f"{name} {label}: taken from {args.earlier} (load {load['load_start']:.1f} "
           f"at its start, {load['load_end']:.1f} at its end)", file=sys.stderr)
     return run
